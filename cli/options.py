@@ -1,0 +1,27 @@
+"""Options shared by the stages that read recordings."""
+
+from __future__ import annotations
+
+import click
+
+from nlsid.errors import InputError
+
+map_option = click.option(
+    "--map", "mapping", multiple=True, metavar="SIGNAL=/topic:field",
+    help="Read a foreign MCAP file: take SIGNAL (u, y or r) from a field of a JSON topic. Repeat per signal.",
+)
+
+
+def parse_map(items: tuple[str, ...]) -> dict[str, str] | None:
+    """Parse ``--map u=/topic:field`` options into ``{"u": "/topic:field"}``."""
+    if not items:
+        return None
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, source = item.partition("=")
+        if not sep or name not in ("u", "y", "r") or ":" not in source:
+            raise InputError("--map", f"expected SIGNAL=/topic:field with SIGNAL one of u, y, r, got {item!r}")
+        if name in out:
+            raise InputError("--map", f"signal {name} is mapped twice")
+        out[name] = source
+    return out

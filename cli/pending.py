@@ -1,0 +1,55 @@
+"""Stages whose implementation has not landed yet: they refuse clearly instead of pretending.
+
+Each entry keeps its final help text and example so ``nlsid --help`` shows the whole pipeline.
+When a stage lands, its entry moves out of here into its own module.
+"""
+
+from __future__ import annotations
+
+import click
+
+from nlsid.errors import InputError
+
+_STAGES = {
+    "simulate": (
+        "Run a model on an excitation and write a recording in the measured-data format.",
+        "nlsid simulate configs/stage_model.yaml --excitation excitation.h5 -o recording.h5",
+    ),
+    "bla": (
+        "Best Linear Approximation with noise and nonlinear distortion levels (odd/even).",
+        "nlsid bla recording.h5 -o bla.h5 --plots figures/",
+    ),
+    "hosidf": (
+        "Higher Order Sinusoidal Input Describing Functions from single-sine runs.",
+        "nlsid hosidf recording.h5 -o hosidf.h5 --plots figures/",
+    ),
+    "fit": (
+        "Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.",
+        "nlsid fit bla.h5 --order 2/2 -o model.yaml",
+    ),
+    "diagnose": (
+        "Show what a simulation model gets wrong on measured data, name the cause and fix it.",
+        "nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/",
+    ),
+    "report": (
+        "Render a diagnosis, BLA, HOSIDF or model as one self-contained HTML page.",
+        "nlsid report diagnosis/ -o report.html",
+    ),
+}
+
+
+def _pending(name: str, summary: str, example: str) -> click.Command:
+    def callback(args: tuple[str, ...]) -> None:
+        raise InputError(f"nlsid {name}", "this stage is not available yet in this version")
+
+    return click.Command(
+        name,
+        callback=callback,
+        params=[click.Argument(["args"], nargs=-1, type=click.UNPROCESSED)],
+        help=f"{summary}\n\n(Not available yet in this version.)\n\nExample:\n\n\b\n  {example}",
+        short_help=summary,
+        context_settings={"ignore_unknown_options": True},
+    )
+
+
+PENDING_COMMANDS = [_pending(name, *text) for name, text in _STAGES.items()]

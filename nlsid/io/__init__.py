@@ -1,0 +1,1 @@
+"""Files in and out: recordings (HDF5, MCAP), configs and their validation, provenance."""

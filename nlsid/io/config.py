@@ -1,0 +1,151 @@
+"""YAML configs: a strict loader and validation against a pydantic schema, with line numbers.
+
+PyYAML implements YAML 1.1, which silently turns ``1e3`` into a string, ``on``/``yes``/``no`` into
+booleans and accepts duplicate keys. This loader follows YAML 1.2 instead: ``1e3`` is a float,
+only ``true``/``false`` are booleans, and a duplicate key is an error. Every value keeps the line
+it came from, so a validation error reads::
+
+    configs/stage.yaml:14: multisine.rms_levels[2]: must be > 0
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any, Type, TypeVar
+
+import yaml
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from nlsid.errors import InputError
+
+T = TypeVar("T", bound=BaseModel)
+
+
+class StrictModel(BaseModel):
+    """Base of every config schema: unknown keys are errors and types are not coerced."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 core-schema booleans and floats."""
+
+
+_Loader.yaml_implicit_resolvers = {
+    first: [(tag, regex) for tag, regex in resolvers if tag not in ("tag:yaml.org,2002:bool", "tag:yaml.org,2002:float")]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver("tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"),
+    list("-+0123456789."),
+)
+# Integers keep PyYAML's resolver (it is tried first); a plain digit string stays an int.
+
+
+def load_yaml(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
+    """Load a YAML file; return the data and a map from key path (tuple) to 1-based line number."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(str(path), "config file not found")
+    text = path.read_text(encoding="utf-8")
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        lines: dict[tuple, int] = {}
+        data = _construct(loader, node, (), lines, str(path)) if node is not None else None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f":{mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise InputError(f"{path}{line}", f"invalid YAML: {problem}") from None
+    finally:
+        loader.dispose()
+    return data, lines
+
+
+def _construct(loader: _Loader, node: yaml.Node, key_path: tuple, lines: dict, where: str) -> Any:
+    lines[key_path] = node.start_mark.line + 1
+    if isinstance(node, yaml.MappingNode):
+        loader.flatten_mapping(node)
+        out: dict[str, Any] = {}
+        for key_node, value_node in node.value:
+            key = loader.construct_object(key_node, deep=True)
+            if not isinstance(key, str):
+                raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path) or 'top level'}: keys must be text, got {key!r}")
+            if key in out:
+                raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path + (key,))}: duplicate key")
+            out[key] = _construct(loader, value_node, key_path + (key,), lines, where)
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        return [_construct(loader, item, key_path + (i,), lines, where) for i, item in enumerate(node.value)]
+    return loader.construct_object(node, deep=True)
+
+
+def _dotted(key_path: tuple) -> str:
+    """Render a key path as ``a.b[2].c``."""
+    out = ""
+    for part in key_path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _line_of(lines: dict[tuple, int], key_path: tuple) -> int | None:
+    for end in range(len(key_path), -1, -1):
+        if key_path[:end] in lines:
+            return lines[key_path[:end]]
+    return None
+
+
+def _message(error: dict) -> str:
+    kind, ctx, value = error["type"], error.get("ctx", {}), error.get("input")
+    comparisons = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}
+    if kind in comparisons:
+        bound = next(iter(ctx.values()))
+        return f"must be {comparisons[kind]} {bound}, got {value!r}"
+    if kind == "missing":
+        return "required key is missing"
+    if kind == "extra_forbidden":
+        return "unknown key"
+    if kind in ("float_type", "int_type", "bool_type", "string_type", "list_type", "dict_type", "model_type", "int_from_float"):
+        expected = {"float_type": "a number", "int_type": "an integer", "int_from_float": "an integer",
+                    "bool_type": "true or false", "string_type": "text", "list_type": "a list",
+                    "dict_type": "a mapping", "model_type": "a mapping"}[kind]
+        return f"expected {expected}, got {value!r}"
+    if kind == "literal_error":
+        return f"expected {ctx.get('expected')}, got {value!r}"
+    if kind in ("too_short", "too_long"):
+        return f"expected {'at least' if kind == 'too_short' else 'at most'} " \
+               f"{ctx.get('min_length', ctx.get('max_length'))} items, got {ctx.get('actual_length')}"
+    if kind == "value_error":
+        return str(ctx.get("error", error["msg"]))
+    return error["msg"]
+
+
+def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tuple, int] | None = None) -> T:
+    """Validate loaded data against ``schema``; raise one :class:`InputError` naming file, line and key."""
+    try:
+        return schema.model_validate(data if data is not None else {})
+    except ValidationError as exc:
+        errors = exc.errors()
+        first = errors[0]
+        key_path = tuple(part for part in first["loc"] if not _is_union_tag(part, schema))
+        line = _line_of(lines or {}, key_path)
+        where = f"{path}:{line}" if line is not None else str(path)
+        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+        return_message = f"{_dotted(key_path) or 'top level'}: {_message(first)}{more}"
+        raise InputError(where, return_message) from None
+
+
+def _is_union_tag(part: Any, schema: type) -> bool:
+    """Pydantic puts the tag of a discriminated union member in the error location; drop it."""
+    return isinstance(part, str) and part.startswith("tagged-union[")
+
+
+def load_config(path: str | os.PathLike, schema: Type[T]) -> T:
+    """Load a YAML config file and validate it against ``schema``."""
+    data, lines = load_yaml(path)
+    return validate(data, schema, path, lines)

@@ -1,0 +1,152 @@
+"""The recording format in HDF5 (``docs/formats.md``): read with validation, write atomically.
+
+Layout::
+
+    /                 attrs nlsid_format ("recording" or "excitation"), nlsid_format_version=1, provenance
+    /runs/<run-id>/   attrs fs, kind, period, transient_periods, realization, level, frequency,
+                      excited_bins, params; datasets u, y, r (attr unit)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Iterator
+
+import h5py
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.atomic import atomic_path
+from nlsid.io.run import SIGNALS, Run, make_run
+
+FORMAT_VERSION = 1
+FORMATS = ("recording", "excitation")
+
+
+def _open(path: Path) -> h5py.File:
+    if not path.exists():
+        raise InputError(str(path), "file not found")
+    if path.is_dir():
+        raise InputError(str(path), "is a folder, expected an HDF5 file")
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        reason = "truncated or not an HDF5 file"
+        if not h5py.is_hdf5(path):
+            reason = "not an HDF5 file (no HDF5 signature)"
+        raise InputError(str(path), f"cannot open: {reason} ({str(exc).splitlines()[0]})") from None
+
+
+class HDF5Recording:
+    """An open HDF5 recording whose runs are read one at a time (memory does not grow with runs).
+
+    Opening checks the root attributes and the run list; :meth:`load` validates one run fully.
+    Use as a context manager.
+    """
+
+    def __init__(self, path: str | os.PathLike, require_y: bool = True):
+        self.path = Path(path)
+        self.require_y = require_y
+        self._file = _open(self.path)
+        try:
+            self.format, self.provenance = self._check_root()
+            self.run_ids = self._list_runs()
+        except Exception:
+            self._file.close()
+            raise
+
+    def _check_root(self) -> tuple[str, dict]:
+        attrs = self._file.attrs
+        fmt = attrs.get("nlsid_format")
+        fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+        if fmt not in FORMATS:
+            raise InputError(f"{self.path}:/", f"attribute nlsid_format must be 'recording', got {fmt!r}")
+        version = attrs.get("nlsid_format_version")
+        if version is None or int(np.asarray(version).reshape(-1)[0]) != FORMAT_VERSION:
+            raise InputError(f"{self.path}:/", f"attribute nlsid_format_version must be {FORMAT_VERSION}, got {version!r}")
+        if self.require_y and fmt == "excitation":
+            raise InputError(str(self.path), "is an excitation file without measured output y; run `nlsid simulate` or measure first")
+        text = attrs.get("provenance")
+        prov = json.loads(text.decode() if isinstance(text, bytes) else text) if text is not None else {}
+        return fmt, prov
+
+    def _list_runs(self) -> list[str]:
+        runs = self._file.get("runs")
+        if not isinstance(runs, h5py.Group):
+            raise InputError(f"{self.path}:/runs", "missing group 'runs'")
+        ids = [name for name, obj in runs.items() if isinstance(obj, h5py.Group)]
+        if not ids:
+            raise InputError(f"{self.path}:/runs", "holds no runs")
+        return sorted(ids)
+
+    def load(self, run_id: str) -> Run:
+        """Read and validate one run."""
+        where = f"{self.path}:/runs/{run_id}"
+        group = self._file["runs"][run_id]
+        signals, units = {}, {}
+        for name in SIGNALS:
+            if name in group:
+                dataset = group[name]
+                if not isinstance(dataset, h5py.Dataset):
+                    raise InputError(f"{where}/{name}", "expected a dataset")
+                try:
+                    signals[name] = dataset[()]
+                except OSError as exc:
+                    raise InputError(f"{where}/{name}", f"cannot read data: {exc}") from None
+                unit = dataset.attrs.get("unit")
+                if unit is not None:
+                    units[name] = unit.decode() if isinstance(unit, bytes) else str(unit)
+        return make_run(run_id, dict(group.attrs), signals, where, self.require_y, units)
+
+    def __iter__(self) -> Iterator[Run]:
+        for run_id in self.run_ids:
+            yield self.load(run_id)
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> "HDF5Recording":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def write_hdf5_recording(
+    path: str | os.PathLike,
+    runs: list[Run],
+    provenance: dict | None = None,
+    force: bool = False,
+    fmt: str | None = None,
+) -> Path:
+    """Write runs in the recording format, atomically.
+
+    ``fmt`` defaults to ``"excitation"`` when no run has ``y`` and ``"recording"`` otherwise.
+    Floats are stored uncompressed float64 (measurement floats compress about 1.1x only).
+    """
+    if fmt is None:
+        fmt = "recording" if all(run.y is not None for run in runs) else "excitation"
+    with atomic_path(path, force) as tmp:
+        with h5py.File(tmp, "w") as handle:
+            handle.attrs["nlsid_format"] = fmt
+            handle.attrs["nlsid_format_version"] = FORMAT_VERSION
+            if provenance is not None:
+                handle.attrs["provenance"] = json.dumps(provenance, sort_keys=True)
+            group = handle.create_group("runs")
+            for run in runs:
+                _write_run(group, run)
+    return Path(path)
+
+
+def _write_run(parent: h5py.Group, run: Run) -> None:
+    group = parent.create_group(run.run_id)
+    for key, value in run.attrs().items():
+        group.attrs[key] = value
+    for name in SIGNALS:
+        signal = getattr(run, name)
+        if signal is not None:
+            dataset = group.create_dataset(name, data=np.asarray(signal, dtype=np.float64))
+            if name in run.units:
+                dataset.attrs["unit"] = run.units[name]
