@@ -41,7 +41,8 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
         emit_json({"file": recording, "format": fmt, "runs": runs})
         return
     table = Table(title=f"{recording} ({fmt}, {len(runs)} runs)")
-    for column in ("run", "kind", "fs", "period", "periods", "level", "frequency", "signals"):
+    table.add_column("run", no_wrap=True)
+    for column in ("kind", "fs", "period", "periods", "level", "frequency", "signals"):
         table.add_column(column)
     for row in runs:
         table.add_row(*[_cell(row[c]) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")],

@@ -29,6 +29,19 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
 
+class ConfigValueError(Exception):
+    """A check across keys that a schema cannot express (e.g. a band above Nyquist).
+
+    Raised by a schema's ``check()`` method with the key path it concerns, so the message gets the
+    file and line like any other validation error.
+    """
+
+    def __init__(self, key_path: tuple, message: str):
+        super().__init__(message)
+        self.key_path = tuple(key_path)
+        self.message = message
+
+
 class _Loader(yaml.SafeLoader):
     """SafeLoader with YAML 1.2 core-schema booleans and floats."""
 
@@ -126,23 +139,28 @@ def _message(error: dict) -> str:
 
 
 def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tuple, int] | None = None) -> T:
-    """Validate loaded data against ``schema``; raise one :class:`InputError` naming file, line and key."""
+    """Validate loaded data against ``schema`` (and its ``check()``, if any).
+
+    Raises one :class:`InputError` naming the file, the line, the key path and what was expected.
+    """
+    if data is not None and not isinstance(data, dict):
+        raise InputError(str(path), f"top level: expected a mapping of keys, got {type(data).__name__}")
     try:
-        return schema.model_validate(data if data is not None else {})
+        config = schema.model_validate(data if data is not None else {})
+        check = getattr(config, "check", None)
+        if check is not None:
+            check()
+        return config
     except ValidationError as exc:
         errors = exc.errors()
-        first = errors[0]
-        key_path = tuple(part for part in first["loc"] if not _is_union_tag(part, schema))
-        line = _line_of(lines or {}, key_path)
-        where = f"{path}:{line}" if line is not None else str(path)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-        return_message = f"{_dotted(key_path) or 'top level'}: {_message(first)}{more}"
-        raise InputError(where, return_message) from None
-
-
-def _is_union_tag(part: Any, schema: type) -> bool:
-    """Pydantic puts the tag of a discriminated union member in the error location; drop it."""
-    return isinstance(part, str) and part.startswith("tagged-union[")
+        key_path, message = tuple(errors[0]["loc"]), _message(errors[0])
+        if len(errors) > 1:
+            message += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
+    except ConfigValueError as exc:
+        key_path, message = exc.key_path, exc.message
+    line = _line_of(lines or {}, key_path)
+    where = f"{path}:{line}" if line is not None else str(path)
+    raise InputError(where, f"{_dotted(key_path) or 'top level'}: {message}")
 
 
 def load_config(path: str | os.PathLike, schema: Type[T]) -> T:

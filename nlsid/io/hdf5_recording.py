@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
@@ -116,27 +116,26 @@ class HDF5Recording:
 
 def write_hdf5_recording(
     path: str | os.PathLike,
-    runs: list[Run],
+    runs: Iterable[Run],
     provenance: dict | None = None,
     force: bool = False,
-    fmt: str | None = None,
 ) -> Path:
-    """Write runs in the recording format, atomically.
+    """Write runs in the recording format, atomically, one run at a time (runs may be a generator).
 
-    ``fmt`` defaults to ``"excitation"`` when no run has ``y`` and ``"recording"`` otherwise.
+    The file is an ``"excitation"`` when some run lacks ``y`` and a ``"recording"`` otherwise.
     Floats are stored uncompressed float64 (measurement floats compress about 1.1x only).
     """
-    if fmt is None:
-        fmt = "recording" if all(run.y is not None for run in runs) else "excitation"
     with atomic_path(path, force) as tmp:
         with h5py.File(tmp, "w") as handle:
-            handle.attrs["nlsid_format"] = fmt
             handle.attrs["nlsid_format_version"] = FORMAT_VERSION
             if provenance is not None:
                 handle.attrs["provenance"] = json.dumps(provenance, sort_keys=True)
             group = handle.create_group("runs")
+            complete = True
             for run in runs:
                 _write_run(group, run)
+                complete = complete and run.y is not None
+            handle.attrs["nlsid_format"] = "recording" if complete else "excitation"
     return Path(path)
 
 

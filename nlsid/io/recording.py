@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Iterable
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import HDF5Recording, write_hdf5_recording
@@ -57,7 +58,7 @@ def read_runs(path: str | os.PathLike, require_y: bool = True, mapping: dict[str
         return list(recording)
 
 
-def write_recording(path: str | os.PathLike, runs: list[Run], provenance: dict | None = None, force: bool = False) -> Path:
+def write_recording(path: str | os.PathLike, runs: Iterable[Run], provenance: dict | None = None, force: bool = False) -> Path:
     """Write runs atomically, in MCAP when ``path`` ends in ``.mcap`` and in HDF5 otherwise."""
     if Path(path).suffix.lower() == ".mcap":
         from nlsid.io.mcap_recording import write_mcap_recording

@@ -1,0 +1,109 @@
+"""Excitation design: turn a validated design config into runs of the recording format.
+
+Multisine runs are ``ms_l<level>_m<realization>``: one per rms level and realization, each with
+independent random phases (or the Schroeder phases), all on the same excited lines. Sine runs are
+``sine_f<frequency>_a<amplitude>_r<repeat>``, u(n) = a sin(2 pi k n / N) with k the sine's bin
+(seed 000 Eq. 10), so every sine is leakage-free. Each run holds ``transient_periods + periods``
+whole periods. Randomness comes only from the config's seed, through independent streams per run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from nlsid.io.design_config import DesignConfig, MultisineConfig, SinesConfig
+from nlsid.io.run import Run
+from nlsid.signals import multisine as ms
+from nlsid.signals.lines import band_bins, log_bins, random_grid
+
+_LINES_STREAM, _MULTISINE_STREAM = 0, 1
+
+
+@dataclass
+class LinePlan:
+    """The lines of a multisine design: excited bins and the detection lines left in the band."""
+
+    excited: np.ndarray
+    detection: np.ndarray
+
+
+def plan_lines(config: MultisineConfig, fs: float, seed: int) -> LinePlan:
+    """Choose the excited bins: a linear or quasi-log grid, then the random grid if asked for.
+
+    The random selection (book 6.1.2.B) is drawn once, so every realization and level uses the same
+    lines.
+    """
+    odd = config.lines in ("odd", "random-odd")
+    band = (config.band[0], config.band[1])
+    if config.grid == "log":
+        candidates = log_bins(config.period, fs, band, config.log_ratio, odd)
+    else:
+        candidates = band_bins(config.period, fs, band, odd)
+    if config.lines.startswith("random"):
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_LINES_STREAM,)))
+        excited, detection = random_grid(candidates, config.group_size, rng)
+    else:
+        excited, detection = candidates, np.zeros(0, dtype=np.int64)
+    return LinePlan(excited=excited, detection=detection)
+
+
+def multisine_runs(config: MultisineConfig, plan: LinePlan, fs: float, seed: int, unit: str) -> Iterator[Run]:
+    """The multisine runs of a design, one per level and realization, on the planned lines."""
+    n_lines = plan.excited.size
+    for li, level in enumerate(config.levels()):
+        amplitudes = ms.flat_amplitudes(n_lines, float(level))
+        for m in range(config.realizations):
+            if config.phases == "schroeder":
+                phases = ms.schroeder_phases(n_lines)
+            else:
+                rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_MULTISINE_STREAM, li, m)))
+                phases = ms.random_phases(n_lines, rng)
+            if config.crest_factor_iterations:
+                phases = ms.reduce_crest_factor(config.period, plan.excited, amplitudes, phases,
+                                                config.crest_factor_iterations)
+            one_period = ms.synthesize(config.period, plan.excited, amplitudes, phases)
+            yield Run(
+                run_id=f"ms_l{li:02d}_m{m:02d}", fs=fs, kind="multisine",
+                u=np.tile(one_period, config.transient_periods + config.periods),
+                period=config.period, transient_periods=config.transient_periods,
+                realization=m, level=float(level), excited_bins=plan.excited.copy(), units={"u": unit},
+            )
+
+
+def sine_runs(config: SinesConfig, fs: float, unit: str) -> Iterator[Run]:
+    """The single-sine runs: frequencies x amplitudes x repeats, u(n) = a sin(2 pi k n / N)."""
+    n = np.arange(config.period)
+    for fi, (frequency, k) in enumerate(zip(config.frequency_values(), config.bins(fs))):
+        unit_sine = np.sin(2.0 * np.pi * k * n / config.period)
+        for ai, amplitude in enumerate(config.amplitude_values()):
+            u = np.tile(amplitude * unit_sine, config.transient_periods + config.periods)
+            for r in range(config.repeats):
+                yield Run(
+                    run_id=f"sine_f{fi:03d}_a{ai:02d}_r{r:02d}", fs=fs, kind="sine", u=u.copy(),
+                    period=config.period, transient_periods=config.transient_periods,
+                    level=float(amplitude), frequency=float(k * fs / config.period),
+                    excited_bins=np.array([k], dtype=np.int64), units={"u": unit},
+                )
+
+
+def run_count(config: DesignConfig) -> int:
+    """How many runs :func:`design_runs` yields."""
+    count = 0
+    if config.multisine is not None:
+        count += config.multisine.levels().size * config.multisine.realizations
+    if config.sines is not None:
+        s = config.sines
+        count += s.frequency_values().size * s.amplitude_values().size * s.repeats
+    return count
+
+
+def design_runs(config: DesignConfig) -> Iterator[Run]:
+    """Every run a design config asks for, multisines first."""
+    if config.multisine is not None:
+        plan = plan_lines(config.multisine, config.fs, config.seed)
+        yield from multisine_runs(config.multisine, plan, config.fs, config.seed, config.unit)
+    if config.sines is not None:
+        yield from sine_runs(config.sines, config.fs, config.unit)

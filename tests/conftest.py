@@ -1,0 +1,31 @@
+"""Shared test helpers: run the CLI in-process and read its outputs."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from nlsid.cli.main import cli
+
+
+class CliResult:
+    def __init__(self, result):
+        self.exit_code = result.exit_code
+        self.stdout = result.stdout
+        self.stderr = result.stderr
+        self.exception = result.exception
+
+    def json(self) -> dict:
+        return json.loads(self.stdout)
+
+
+@pytest.fixture
+def run_cli():
+    """Invoke ``nlsid ARGS`` in-process; returns exit code, stdout and stderr separately."""
+
+    def invoke(*args: str) -> CliResult:
+        return CliResult(CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=True))
+
+    return invoke
