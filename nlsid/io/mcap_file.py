@@ -1,0 +1,94 @@
+"""Opening an MCAP file safely: signature and truncation checks, and library errors as InputError.
+
+An MCAP file starts and ends with the 8 magic bytes ``\\x89MCAP0\\r\\n``. A file that lacks them at
+the start is not MCAP; one that lacks them at the end was cut short (a logger that crashed, an
+incomplete copy). Both kinds of file are refused here with one clear line, before the ``mcap``
+package raises its own, less readable errors (``get_summary()`` raises on a truncated file).
+Nothing is recovered from a truncated file: the MCAP command-line tool (``mcap recover``) writes
+the readable part into a new, complete file, which nlsid then reads.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+import zstandard
+from mcap.exceptions import McapError
+from mcap.reader import SeekingReader
+from mcap.records import Channel
+from mcap.stream_reader import StreamReader
+
+from nlsid.errors import InputError
+
+MAGIC = b"\x89MCAP0\r\n"
+
+# What the mcap package raises on damaged content: its own errors, short reads inside a record
+# (struct.error), CRC mismatches (a ValueError) and broken compressed chunks.
+LIBRARY_ERRORS = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError)
+
+TRUNCATED = (
+    "truncated: the MCAP file does not end with the MCAP magic bytes (a crashed logger or an "
+    "incomplete copy?); `mcap recover FILE -o FIXED.mcap` (MCAP CLI) saves the readable part"
+)
+
+
+def damaged(where: str, exc: Exception) -> InputError:
+    """The InputError for an MCAP file the ``mcap`` package could not parse."""
+    return InputError(where, f"damaged MCAP file ({type(exc).__name__}: {exc})")
+
+
+def open_mcap(path: Path) -> tuple[BinaryIO, SeekingReader]:
+    """Open ``path`` after checking its MCAP signature at both ends; read its header and summary.
+
+    Returns the open binary handle (the caller closes it) and a CRC-validating seeking reader.
+    """
+    if not path.exists():
+        raise InputError(str(path), "file not found")
+    if path.is_dir():
+        raise InputError(str(path), "is a folder, expected an MCAP file")
+    handle = open(path, "rb")
+    try:
+        if handle.read(len(MAGIC)) != MAGIC:
+            raise InputError(str(path), "not an MCAP file (no MCAP magic bytes at the start)")
+        handle.seek(0, 2)
+        if handle.tell() < 2 * len(MAGIC):
+            raise InputError(str(path), TRUNCATED)
+        handle.seek(-len(MAGIC), 2)
+        if handle.read(len(MAGIC)) != MAGIC:
+            raise InputError(str(path), TRUNCATED)
+        handle.seek(0)
+        reader = SeekingReader(handle, validate_crcs=True)
+        try:
+            reader.get_header()
+            reader.get_summary()
+        except LIBRARY_ERRORS as exc:
+            raise damaged(str(path), exc) from None
+    except BaseException:
+        handle.close()
+        raise
+    return handle, reader
+
+
+def checked(items: Iterator, where: str) -> Iterator:
+    """Iterate over a reader's generator, turning the library's parse errors into InputError."""
+    while True:
+        try:
+            item = next(items)
+        except StopIteration:
+            return
+        except LIBRARY_ERRORS as exc:
+            raise damaged(where, exc) from None
+        yield item
+
+
+def channels_by_topic(handle: BinaryIO, reader: SeekingReader, where: str) -> dict[str, Channel]:
+    """The file's channels by topic, from the summary section or, without one, a linear scan."""
+    summary = reader.get_summary()
+    if summary is not None:
+        found = summary.channels.values()
+    else:
+        handle.seek(0)
+        found = [r for r in checked(iter(StreamReader(handle).records), where) if isinstance(r, Channel)]
+    return {channel.topic: channel for channel in found}

@@ -1,0 +1,124 @@
+"""Read a foreign MCAP file (ROS 2 / Foxglove style JSON topics) as one arbitrary run.
+
+A mapping names where each signal lives: ``{"u": "/cmd:effort", "y": "/joint:state.position"}``,
+a topic and a dotted path into the JSON object of each message. A message holds one sample (a
+number) or several (a list of numbers) taken at its log time, then at the sample interval. The
+timestamps must be uniformly sampled (:func:`nlsid.io.timestamps.uniform_sampling`), the rate
+``fs`` comes from them, and all signals must be sampled at the same instants. Nothing is known of
+the excitation, so the run is of kind ``"arbitrary"`` (no period, no excited lines).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.reader import SeekingReader
+
+from nlsid.errors import InputError
+from nlsid.io.mcap_file import channels_by_topic, checked
+from nlsid.io.run import SIGNALS, Run, make_run
+from nlsid.io.timestamps import check_aligned, uniform_sampling
+
+
+def parse_source(signal: str, source: str) -> tuple[str, list[str]]:
+    """Split ``/topic:field.sub`` into the topic and the field path ``["field", "sub"]``."""
+    topic, sep, field = source.rpartition(":")
+    path = field.split(".")
+    if not sep or not topic or not all(path):
+        raise InputError(f"--map {signal}", f"expected /topic:field (field may be a dotted path a.b), got {source!r}")
+    return topic, path
+
+
+def _lookup(obj: Any, path: list[str], where: str) -> Any:
+    """Follow a dotted field path into a decoded JSON object; name the fields that exist if absent."""
+    for depth, key in enumerate(path):
+        if not isinstance(obj, dict):
+            inside = ".".join(path[:depth]) or "the message"
+            raise InputError(where, f"field {'.'.join(path)!r} not found: {inside} is a {type(obj).__name__}, not an object")
+        if key not in obj:
+            inside = f"in {'.'.join(path[:depth])}" if depth else "at the top level"
+            raise InputError(where, f"field {'.'.join(path)!r} not found: fields {inside} are {', '.join(sorted(obj)) or '(none)'}")
+        obj = obj[key]
+    return obj
+
+
+def _samples(value: Any, where: str) -> list[float]:
+    """One number, or a non-empty list of numbers, as a list of samples."""
+    items = value if isinstance(value, list) else [value]
+    if not items or not all(type(v) in (int, float) for v in items):
+        raise InputError(where, f"expected a number or a non-empty list of numbers, got {json.dumps(value)[:60]}")
+    return items
+
+
+class _Collected:
+    """The samples of one mapped signal: message log times, samples per message, values."""
+
+    def __init__(self) -> None:
+        self.times: list[int] = []
+        self.counts: list[int] = []
+        self.values: list[float] = []
+
+    def add(self, log_time: int, samples: list[float]) -> None:
+        self.times.append(log_time)
+        self.counts.append(len(samples))
+        self.values.extend(samples)
+
+
+def read_foreign_run(
+    path: Path, handle: BinaryIO, reader: SeekingReader, mapping: dict[str, str], require_y: bool
+) -> tuple[Run, dict]:
+    """Read the mapped signals of a foreign MCAP file into one ``"arbitrary"`` run.
+
+    Returns the run (named after the file) and a provenance record naming the source and mapping.
+    """
+    if "u" not in mapping:
+        raise InputError("--map", "map the input too: --map u=/topic:field")
+    if require_y and "y" not in mapping:
+        raise InputError("--map", "map the measured output too: --map y=/topic:field")
+    sources = {name: parse_source(name, mapping[name]) for name in SIGNALS if name in mapping}
+    channels = channels_by_topic(handle, reader, str(path))
+    for name, (topic, _) in sources.items():
+        channel = channels.get(topic)
+        if channel is None:
+            raise InputError(f"{path}: --map {name}", f"no topic {topic!r}; topics in the file: {', '.join(sorted(channels)) or '(none)'}")
+        if channel.message_encoding != "json":
+            json_topics = sorted(t for t, c in channels.items() if c.message_encoding == "json")
+            raise InputError(
+                f"{path}:{topic}",
+                f"messages are {channel.message_encoding!r}-encoded; --map reads JSON topics only "
+                f"(JSON topics here: {', '.join(json_topics) or 'none'})",
+            )
+    collected = {name: _Collected() for name in sources}
+    topics = sorted({topic for topic, _ in sources.values()})
+    for _, channel, message in checked(reader.iter_messages(topics=topics, log_time_order=True), str(path)):
+        where = f"{path}:{channel.topic} message at log_time {message.log_time} ns"
+        try:
+            obj = json.loads(message.data)
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(where, f"not JSON ({exc})") from None
+        for name, (topic, field) in sources.items():
+            if topic == channel.topic:
+                collected[name].add(message.log_time, _samples(_lookup(obj, field, where), f"{where}: {'.'.join(field)}"))
+    sampling = {}
+    for name, data in collected.items():
+        where = f"{path}:{mapping[name]}"
+        if not data.times:
+            raise InputError(where, "topic holds no messages")
+        sampling[name] = uniform_sampling(np.array(data.times), np.array(data.counts), where)
+    for name in sampling:
+        if name != "u":
+            check_aligned(sampling["u"], sampling[name], ("u", name), f"{path}: --map {mapping['u']} and {mapping[name]}")
+    signals = {name: np.asarray(data.values, dtype=np.float64) for name, data in collected.items()}
+    run = make_run(path.stem, {"fs": sampling["u"].fs, "kind": "arbitrary"}, signals, str(path), require_y)
+    header = reader.get_header()
+    provenance = {
+        "source": str(path),
+        "mapping": dict(mapping),
+        "start_time_ns": sampling["u"].t0_ns,
+        "mcap_library": header.library,
+        "mcap_profile": header.profile,
+    }
+    return run, provenance
