@@ -81,7 +81,8 @@ def load_yaml(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
 
 
 def _construct(loader: _Loader, node: yaml.Node, key_path: tuple, lines: dict, where: str) -> Any:
-    lines[key_path] = node.start_mark.line + 1
+    """Build Python data from a node tree, recording the line of every key and list item."""
+    lines.setdefault(key_path, node.start_mark.line + 1)
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)
         out: dict[str, Any] = {}
@@ -91,6 +92,7 @@ def _construct(loader: _Loader, node: yaml.Node, key_path: tuple, lines: dict, w
                 raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path) or 'top level'}: keys must be text, got {key!r}")
             if key in out:
                 raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path + (key,))}: duplicate key")
+            lines[key_path + (key,)] = key_node.start_mark.line + 1
             out[key] = _construct(loader, value_node, key_path + (key,), lines, where)
         return out
     if isinstance(node, yaml.SequenceNode):

@@ -39,6 +39,11 @@ def _open(path: Path) -> h5py.File:
         raise InputError(str(path), f"cannot open: {reason} ({str(exc).splitlines()[0]})") from None
 
 
+def _text(value) -> str | None:
+    """An HDF5 string attribute as str (h5py returns bytes or str depending on how it was written)."""
+    return value.decode("utf-8", errors="replace") if isinstance(value, bytes) else (None if value is None else str(value))
+
+
 class HDF5Recording:
     """An open HDF5 recording whose runs are read one at a time (memory does not grow with runs).
 
@@ -59,18 +64,20 @@ class HDF5Recording:
 
     def _check_root(self) -> tuple[str, dict]:
         attrs = self._file.attrs
-        fmt = attrs.get("nlsid_format")
-        fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+        where = f"{self.path}:/"
+        fmt = _text(attrs.get("nlsid_format"))
         if fmt not in FORMATS:
-            raise InputError(f"{self.path}:/", f"attribute nlsid_format must be 'recording', got {fmt!r}")
+            found = "is missing" if fmt is None else f"is {fmt!r}"
+            raise InputError(where, f"attribute nlsid_format {found}, expected 'recording' (see docs/formats.md)")
         version = attrs.get("nlsid_format_version")
-        if version is None or int(np.asarray(version).reshape(-1)[0]) != FORMAT_VERSION:
-            raise InputError(f"{self.path}:/", f"attribute nlsid_format_version must be {FORMAT_VERSION}, got {version!r}")
+        if version is None or np.asarray(version).reshape(-1)[0] != FORMAT_VERSION:
+            found = "is missing" if version is None else f"is {np.asarray(version).reshape(-1)[0]}"
+            raise InputError(where, f"attribute nlsid_format_version {found}, expected {FORMAT_VERSION}")
         if self.require_y and fmt == "excitation":
-            raise InputError(str(self.path), "is an excitation file without measured output y; run `nlsid simulate` or measure first")
-        text = attrs.get("provenance")
-        prov = json.loads(text.decode() if isinstance(text, bytes) else text) if text is not None else {}
-        return fmt, prov
+            raise InputError(str(self.path), "is an excitation without measured output y: "
+                                             "run `nlsid simulate` on it or measure the machine first")
+        text = _text(attrs.get("provenance"))
+        return fmt, json.loads(text) if text else {}
 
     def _list_runs(self) -> list[str]:
         runs = self._file.get("runs")
@@ -95,9 +102,9 @@ class HDF5Recording:
                     signals[name] = dataset[()]
                 except OSError as exc:
                     raise InputError(f"{where}/{name}", f"cannot read data: {exc}") from None
-                unit = dataset.attrs.get("unit")
+                unit = _text(dataset.attrs.get("unit"))
                 if unit is not None:
-                    units[name] = unit.decode() if isinstance(unit, bytes) else str(unit)
+                    units[name] = unit
         return make_run(run_id, dict(group.attrs), signals, where, self.require_y, units)
 
     def __iter__(self) -> Iterator[Run]:
