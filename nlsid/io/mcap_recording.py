@@ -172,7 +172,8 @@ class MCAPRecording:
     def _read_signals(self, run_id: str, names: list[str], n_samples: int, start: int, end: int | None) -> dict[str, np.ndarray]:
         blocks: dict[str, list[tuple[int, bytes]]] = {name: [] for name in names}
         topic_names = {SIGNAL_TOPICS[name]: name for name in names}
-        messages = self._reader.iter_messages(topics=sorted(topic_names), starting_at=start, ending_before=end)
+        messages = self._reader.iter_messages(
+            topics=sorted(topic_names), starting_at=start, ending_before=end, log_time_order=False)
         for _, channel, message in checked(messages, str(self.path)):
             where = f"{self.path}:{channel.topic} message at log_time {message.log_time} ns"
             block = _json_object(message.data, where)
