@@ -1,0 +1,109 @@
+"""``nlsid bla``: Best Linear Approximation, noise and nonlinear distortion levels of a recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from rich.table import Table
+
+from nlsid.analysis.levels import METHOD_CHOICES
+from nlsid.errors import InputError
+from nlsid.io.atomic import atomic_path, check_writable
+
+from .common import LOGGER, emit_json, force_option, json_option, progress, settings
+from .options import map_option, parse_map
+
+
+@click.command()
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Result file (HDF5), e.g. bla.h5.")
+@click.option("--method", type=click.Choice(METHOD_CHOICES), default="auto", show_default=True,
+              help="Robust-method variant: frf (known input), io (noisy input, no reference), reference "
+                   "(project on r, for closed loops); auto uses reference when the runs carry r, else io.")
+@click.option("--confidence", type=float, default=0.95, show_default=True, metavar="P",
+              help="Probability of the confidence bounds on |G_BLA| and its phase.")
+@click.option("--plots", type=click.Path(file_okay=False), metavar="DIR",
+              help="Write PNG figures (spectrum, BLA with bounds, BLA versus level) into DIR.")
+@map_option
+@force_option
+@json_option
+def bla(recording: str, output: str, method: str, confidence: float, plots: str | None,
+        mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+    """Best Linear Approximation with noise and nonlinear distortion levels (odd/even).
+
+    Runs are grouped by their level attribute; the runs of a level are realizations of a
+    random-phase multisine (same period and excited lines). Per level: the robust method
+    (M realizations x P periods), the fast method (detection lines of a random grid), the output
+    spectrum by line class, and confidence bounds; across levels: the BLA versus rms.
+
+    Example:
+
+    \b
+      nlsid bla recording.h5 -o bla.h5 --plots figures/
+    """
+    from nlsid.analysis.levels import across_levels, analyse_runs, recording_runs
+    from nlsid.io.bla_file import write_bla
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import open_recording
+
+    if not 0 < confidence < 1:
+        raise InputError("--confidence", f"expected a probability in (0, 1), got {confidence:g}")
+    check_writable(output, force)
+    plot_dir = _plot_dir(plots)
+    with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
+        with progress("bla", len(rec.run_ids)) as step:
+            levels, warnings = analyse_runs(recording_runs(rec, recording), method, confidence,
+                                            on_run=lambda run: step())
+    across = across_levels(levels)
+    figures = {}
+    if plot_dir is not None:
+        from nlsid.report.bla_plots import render_figures
+
+        figures = render_figures(levels)
+        plot_dir.mkdir(exist_ok=True)
+        for name in figures:
+            check_writable(plot_dir / name, force)
+    write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force)
+    for name, data in figures.items():
+        with atomic_path(plot_dir / name, force) as tmp:
+            tmp.write_bytes(data)
+    for message in warnings + [f"level {i:02d}: {w}" for i, level in enumerate(levels) for w in level.warnings]:
+        LOGGER.warning(message)
+    summaries = [level.summary() for level in levels]
+    if as_json:
+        emit_json({"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
+                   "levels": summaries, "across_levels": across, "warnings": warnings})
+        return
+    _print_table(output, summaries)
+
+
+def _plot_dir(plots: str | None) -> Path | None:
+    if plots is None:
+        return None
+    folder = Path(plots)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(plots, "--plots expects a folder, this is a file")
+    if not folder.parent.exists():
+        raise InputError(plots, f"folder {folder.parent} does not exist")
+    return folder
+
+
+def _cell(value: float, fmt: str = ".1f") -> str:
+    return "-" if value is None or value != value else format(value, fmt)
+
+
+def _print_table(output: str, summaries: list[dict]) -> None:
+    table = Table(title=f"{output}: BLA per level (dB; variances relative to |G_BLA|^2)")
+    for column in ("level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var",
+                   "odd-even", "odd-noise", "even-noise"):
+        table.add_column(column)
+    for row in summaries:
+        spectrum = row["spectrum"]
+        table.add_row(
+            "-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
+            f"{row['realizations']} x {row['periods']}", row["method"], _cell(row["bla_db"]),
+            _cell(row["nl_var_db"]), _cell(row["noise_var_db"]), _cell(spectrum["odd_above_even_db"]),
+            _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
+        )
+    settings().console.print(table)

@@ -1,0 +1,208 @@
+"""The robust method: BLA, noise and nonlinear variances from M realizations x P periods.
+
+Book Section 6.1.1 (Exercises 88.a-c) and seed 000 Eqs. (3)-(6). Every realization m arrives as the
+P-averaged spectra and noise (co)variances of :mod:`nlsid.analysis.period_stats` ((6-2), (6-12),
+(6-31)); the realizations are combined on the fly (Welford updates), so memory does not grow with M.
+Variances are "of the final estimate" unless named otherwise.
+
+Methods:
+
+``frf``  known input, noisy output (6-1)-(6-7): ``G^[m] = Y^[m]/U^[m]``, noise variance of one
+         realization ``sigma^2_{G^[m]} = sigma^2_{Y^[m]}/|U^[m]|^2`` ((6-2) with G^[m,p] = Y^[m,p]/U0).
+``io``   noisy input and output, no reference (6-10)-(6-25): the same G^[m] (6-13); the noise
+         variance of one realization is the first-order errors-in-variables form (6-49)::
+
+             sigma^2_{G^[m],n} = (sigma^2_Y + |G^[m]|^2 sigma^2_U - 2 Re(sigma^2_YU conj(G^[m]))) / |U^[m]|^2
+
+         (Note: (6-16) divides by power spectra averaged over the realizations, whose S_Y0Y0 holds
+         var(Y_S) as well (6-17) and underestimates the noise when the distortion is large; the
+         per-realization form avoids that bias and reduces to ``frf`` without input noise.)
+``reference``  noisy input and output with the reference r (6-26)-(6-39), closed-loop data: the
+         spectra are projected on the phase of the reference, ``U_R = U exp(-j angle R)``,
+         ``Y_R = Y exp(-j angle R)`` ((6-28), which keeps physical units), averaged over periods
+         and realizations (6-32) and ``G_BLA = Y_R/U_R`` (6-34): the BLA from r to y over the BLA
+         from r to u.
+
+Common to all methods:
+
+- total variance (6-3)/(6-14): ``sigma^2_G = sum_m |G^[m] - G_BLA|^2 / (M (M-1))``
+  (for ``reference`` the first-order ratio form of (6-34));
+- noise variance (6-4): ``sigma^2_{G,n} = (1/M^2) sum_m sigma^2_{G^[m],n}``;
+- nonlinear variance of one realization and one period (6-7)/(6-22)/(6-39):
+  ``var(G_S) = M (sigma^2_G - sigma^2_{G,n})`` (can be negative for finite M: it is stored as is);
+- noise variance of one period (6-21)/(6-39): ``var(N_G) = M P sigma^2_{G,n}``;
+- output distortion variance (6-22): ``var(Y_S) = S_U0U0 var(G_S)`` with the bias-corrected input
+  power ``S_U0U0 = (1/M) sum_m |U^[m]|^2 - sigma^2_{U,n}`` (6-17).
+
+Expected values ((6-5), (6-19), (6-37)): ``E sigma^2_{G,n} = var(N_G)/(M P)``,
+``E sigma^2_G = var(G_S)/M + var(N_G)/(M P)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nlsid.analysis.confidence import Bounds, circle_bounds
+from nlsid.analysis.period_stats import PeriodStats
+
+METHODS = ("frf", "io", "reference")
+
+
+@dataclass
+class RobustBLA:
+    """Robust-method results at the excited bins of one excitation level."""
+
+    method: str
+    bins: np.ndarray
+    n_realizations: int
+    n_periods: int
+    G: np.ndarray
+    var_total: np.ndarray
+    var_noise: np.ndarray
+    var_nl: np.ndarray
+    var_noise_period: np.ndarray
+    var_ys: np.ndarray
+    bounds: Bounds
+    var_input_nl: np.ndarray | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+class _Welford:
+    """Running mean and centred second moments of complex vectors (x, and optionally y)."""
+
+    def __init__(self, size: int):
+        self.n = 0
+        self.mean_x = np.zeros(size, complex)
+        self.mean_y = np.zeros(size, complex)
+        self.sxx = np.zeros(size)
+        self.syy = np.zeros(size)
+        self.syx = np.zeros(size, complex)
+
+    def add(self, x: np.ndarray, y: np.ndarray | None = None) -> None:
+        self.n += 1
+        dx = x - self.mean_x
+        self.mean_x += dx / self.n
+        self.sxx += (dx * np.conj(x - self.mean_x)).real
+        if y is not None:
+            dy = y - self.mean_y
+            self.mean_y += dy / self.n
+            self.syy += (dy * np.conj(y - self.mean_y)).real
+            self.syx += dy * np.conj(x - self.mean_x)
+
+    def variance_of_mean(self, second_moment: np.ndarray) -> np.ndarray:
+        """``sum_m |x^[m] - x_bar|^2 / (M (M-1))`` (NaN for M = 1)."""
+        if self.n < 2:
+            return np.full(second_moment.shape, np.nan, dtype=second_moment.dtype)
+        return second_moment / (self.n * (self.n - 1))
+
+
+def eiv_variance(G: np.ndarray, U: np.ndarray, var_y: np.ndarray, var_u: np.ndarray, cov_yu: np.ndarray) -> np.ndarray:
+    """First-order variance of ``G = Y/U`` from the (co)variances of Y and U ((6-34), (6-49), (6-53)).
+
+    ``|G|^2 (s_Y/|Y|^2 + s_U/|U|^2 - 2 Re(s_YU/(Y conj U)))``, written without dividing by Y so that
+    it holds where G vanishes: ``(s_Y + |G|^2 s_U - 2 Re(s_YU conj(G))) / |U|^2``.
+    """
+    return (var_y + np.abs(G) ** 2 * var_u - 2 * (cov_yu * np.conj(G)).real) / np.abs(U) ** 2
+
+
+class RobustAccumulator:
+    """Combine realizations one at a time with :meth:`add`, then call :meth:`result`."""
+
+    def __init__(self, bins: np.ndarray, method: str):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        self.bins = np.asarray(bins)
+        self.method = method
+        self.n_periods: int | None = None
+        size = self.bins.size
+        self._spectra = _Welford(size)
+        self._noise = np.zeros(size)
+        self._noise_u = np.zeros(size)
+        self._noise_y = np.zeros(size)
+        self._noise_yu = np.zeros(size, complex)
+        self._power_u = np.zeros(size)
+
+    def add(self, stats: PeriodStats) -> None:
+        """Add one realization (its P-averaged spectra and noise (co)variances)."""
+        if self.n_periods is not None and stats.n_periods != self.n_periods:
+            raise ValueError("all realizations must hold the same number of periods")
+        self.n_periods = stats.n_periods
+        k = self.bins
+        U, Y = stats.U[k], stats.Y[k]
+        var_u, var_y, cov_yu = stats.var_u[k], stats.var_y[k], stats.cov_yu[k]
+        if self.method == "reference":
+            rotation = np.exp(-1j * np.angle(stats.R[k]))
+            self._spectra.add(U * rotation, Y * rotation)
+        else:
+            G = Y / U
+            self._spectra.add(G)
+            if self.method == "frf":
+                self._noise += var_y / np.abs(U) ** 2
+            else:
+                self._noise += eiv_variance(G, U, var_y, var_u, cov_yu)
+        self._noise_u += var_u
+        self._noise_y += var_y
+        self._noise_yu += cov_yu
+        self._power_u += np.abs(U) ** 2 - (0.0 if self.method == "frf" else var_u)
+
+    def result(self, probability: float = 0.95) -> RobustBLA:
+        """The BLA and its variances; bounds are 100p% circles on the total variance, R = M (Table 6-1)."""
+        acc, M, P = self._spectra, self._spectra.n, self.n_periods
+        if M == 0:
+            raise ValueError("no realization was added")
+        warnings = _sample_size_warnings(M, P)
+        var_input_nl = None
+        if self.method == "reference":
+            U_R, Y_R = acc.mean_x, acc.mean_y
+            G = Y_R / U_R
+            var_total = eiv_variance(G, U_R, acc.variance_of_mean(acc.syy), acc.variance_of_mean(acc.sxx),
+                                     acc.variance_of_mean(acc.syx))
+            var_noise = eiv_variance(G, U_R, self._noise_y / M**2, self._noise_u / M**2, self._noise_yu / M**2)
+            var_input_nl = M * (acc.variance_of_mean(acc.sxx) - self._noise_u / M**2)
+            warnings += _actuator_warning(acc.variance_of_mean(acc.sxx), self._noise_u / M**2)
+        else:
+            G = acc.mean_x
+            var_total = acc.variance_of_mean(acc.sxx)
+            var_noise = self._noise / M**2
+        var_nl = M * (var_total - var_noise)
+        return RobustBLA(
+            method=self.method,
+            bins=self.bins,
+            n_realizations=M,
+            n_periods=P,
+            G=G,
+            var_total=var_total,
+            var_noise=var_noise,
+            var_nl=var_nl,
+            var_noise_period=M * P * var_noise,
+            var_ys=self._power_u / M * var_nl,
+            bounds=circle_bounds(G, var_total, probability, M),
+            var_input_nl=var_input_nl,
+            warnings=warnings,
+        )
+
+
+def _sample_size_warnings(M: int, P: int) -> list[str]:
+    out = []
+    if M < 2:
+        out.append("one realization (M = 1): the total and nonlinear variances of the robust method "
+                   "cannot be estimated (book Section 6.1.1); use several realizations or the fast method")
+    if P < 2:
+        out.append("one period per realization (P = 1): the noise variance cannot be estimated, so noise "
+                   "and nonlinear distortion are not separated (var_total holds both)")
+    return out
+
+
+def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray) -> list[str]:
+    """Nonlinear actuator test (6-40)-(6-43): sigma^2_{U_R} significantly above sigma^2_{U_R,n}.
+
+    Without actuator distortion both estimate var(N_U)/(M P) and their band means agree within
+    about sqrt(1/((M-1) F)); a factor 2 (3 dB) keeps false alarms negligible for (M-1) F >= 50.
+    """
+    total, noise = float(np.mean(var_total_u)), float(np.mean(var_noise_u))
+    if not total > 2 * noise:
+        return []
+    return [f"the projected input varies over realizations {10 * np.log10(total / noise):.1f} dB more than its noise: "
+            "the actuator is nonlinear (book (6-40)-(6-43)) and the BLA from r is H_BLA/A_BLA"]

@@ -1,0 +1,122 @@
+"""Figures of the ``bla`` stage (PNG, rendered off-screen with matplotlib's Agg canvas).
+
+- ``spectrum_<level>.png``: the output spectrum as seed 000 Fig. 3: excited lines, odd and even
+  detection lines, non-harmonic lines and the noise level, distinguished by marker and colour.
+- ``bla_<level>.png``: |G_BLA| and its phase with the 95% confidence bounds (book Ex. 92) and the
+  standard deviations of the estimate due to noise and to the stochastic nonlinear distortions
+  (seed 000 Fig. 5), plus the fast method's odd and even levels when available.
+- ``bla_vs_level.png``: |G_BLA| of every level and the band-mean distortion versus the rms input
+  (seed 000 Figs. 4-5).
+
+matplotlib is imported inside the functions so that importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from nlsid.analysis.levels import LevelResult, across_levels
+from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
+
+
+def _db(power: np.ndarray) -> np.ndarray:
+    power = np.asarray(power, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(power > 0, 10 * np.log10(power), np.nan)
+
+
+def _figure(rows: int = 1):
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(8, 3.2 * rows), layout="constrained")
+    return figure, [figure.add_subplot(rows, 1, i + 1) for i in range(rows)]
+
+
+def _png(figure) -> bytes:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110)
+    return buffer.getvalue()
+
+
+def _title(level: LevelResult) -> str:
+    name = "no level" if level.level is None else f"level {level.level:g}"
+    return f"{name}, u rms {level.u_rms:.3g}, M = {level.n_realizations}, P = {level.n_periods}"
+
+
+def spectrum_figure(level: LevelResult):
+    """Output spectrum (rms over realizations) with the line classes distinguished (seed 000 Fig. 3)."""
+    figure, (axis,) = _figure()
+    lines, spectrum = level.lines, level.spectrum
+    styles = ((EXCITED, "excited", "k", "o"), (ODD, "odd detection", "tab:red", "v"),
+              (EVEN, "even detection", "tab:blue", "^"), (NONHARMONIC, "non-harmonic", "tab:gray", "."))
+    for kind, label, colour, marker in styles:
+        bins = np.flatnonzero(lines.kind == kind)
+        if bins.size:
+            axis.plot(lines.frequency(bins), _db(spectrum.y_power[bins]), linestyle="none", marker=marker,
+                      markersize=3, color=colour, label=label)
+    bins = lines.bins
+    axis.plot(lines.frequency(bins), _db(spectrum.y_noise[bins]), color="tab:green", linewidth=1,
+              label="noise (variance of the P-mean)")
+    axis.set_xlabel("frequency [Hz]")
+    axis.set_ylabel("output power [dB]")
+    axis.set_title(f"Output spectrum: {_title(level)}")
+    axis.legend(fontsize="small", loc="best")
+    return figure
+
+
+def bla_figure(level: LevelResult):
+    """|G_BLA| and phase with confidence bounds and noise / nonlinear standard deviations."""
+    figure, (magnitude, phase) = _figure(2)
+    robust, f = level.robust, level.lines.frequency(level.lines.excited)
+    M = robust.n_realizations
+    magnitude.plot(f, _db(np.abs(robust.G) ** 2), color="k", label="|G_BLA|")
+    magnitude.fill_between(f, _db(robust.bounds.mag_lo**2), _db(robust.bounds.mag_hi**2), color="k", alpha=0.15,
+                           label="95% bounds")
+    magnitude.plot(f, _db(robust.var_nl / M), "--", color="tab:red", label="std nonlinear (of the estimate)")
+    magnitude.plot(f, _db(robust.var_noise), ":", color="tab:green", label="std noise (of the estimate)")
+    if level.fast is not None:
+        magnitude.plot(f, _db(level.fast.var_nl / level.fast.n_runs), "-.", color="tab:orange",
+                       label="fast method: std nonlinear" + (" (odd)" if level.lines.odd_grid else ""))
+        if level.fast.var_nl_even is not None:
+            magnitude.plot(f, _db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
+                           label="fast method: std nonlinear (even)")
+    magnitude.set_ylabel("[dB]")
+    magnitude.set_title(f"BLA ({robust.method}): {_title(level)}")
+    magnitude.legend(fontsize="small", loc="best")
+    phase.plot(f, np.degrees(np.angle(robust.G)), color="k")
+    phase.fill_between(f, np.degrees(robust.bounds.phase_lo), np.degrees(robust.bounds.phase_hi), color="k",
+                       alpha=0.15)
+    phase.set_xlabel("frequency [Hz]")
+    phase.set_ylabel("phase [deg]")
+    return figure
+
+
+def levels_figure(levels: list[LevelResult]):
+    """|G_BLA| per level, and band-mean nonlinear and noise variances versus the rms input."""
+    figure, (curves, trend) = _figure(2)
+    for level in levels:
+        curves.plot(level.lines.frequency(level.lines.excited), _db(np.abs(level.robust.G) ** 2),
+                    label=f"u rms {level.u_rms:.3g}")
+    curves.set_xlabel("frequency [Hz]")
+    curves.set_ylabel("|G_BLA| [dB]")
+    curves.legend(fontsize="small", loc="best")
+    rows = across_levels(levels)["levels"]
+    rms = [row["u_rms"] for row in rows]
+    trend.semilogx(rms, [row["nl_var_db"] for row in rows], "o--", color="tab:red", label="nonlinear variance")
+    trend.semilogx(rms, [row["noise_var_db"] for row in rows], "s:", color="tab:green", label="noise variance")
+    trend.set_xlabel("u rms")
+    trend.set_ylabel("band mean, relative to |G_BLA|^2 [dB]")
+    trend.legend(fontsize="small", loc="best")
+    return figure
+
+
+def render_figures(levels: list[LevelResult]) -> dict[str, bytes]:
+    """Every figure of the stage as PNG bytes, keyed by file name (render first, write later)."""
+    out = {}
+    for index, level in enumerate(levels):
+        out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level))
+        out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level))
+    out["bla_vs_level.png"] = _png(levels_figure(levels))
+    return out
