@@ -9,10 +9,12 @@ import click
 from nlsid import __version__
 from nlsid.errors import NlsidError
 
+from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
 from .info import info
 from .pending import PENDING_COMMANDS
+from .simulate import simulate
 
 
 class NlsidGroup(click.Group):
@@ -57,7 +59,9 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 
 cli.add_command(design)
+cli.add_command(bla)
 cli.add_command(info)
+cli.add_command(simulate)
 for command in PENDING_COMMANDS:
     cli.add_command(command)
 

@@ -11,14 +11,6 @@ import click
 from nlsid.errors import InputError
 
 _STAGES = {
-    "simulate": (
-        "Run a model on an excitation and write a recording in the measured-data format.",
-        "nlsid simulate configs/stage_model.yaml --excitation excitation.h5 -o recording.h5",
-    ),
-    "bla": (
-        "Best Linear Approximation with noise and nonlinear distortion levels (odd/even).",
-        "nlsid bla recording.h5 -o bla.h5 --plots figures/",
-    ),
     "hosidf": (
         "Higher Order Sinusoidal Input Describing Functions from single-sine runs.",
         "nlsid hosidf recording.h5 -o hosidf.h5 --plots figures/",

@@ -1,0 +1,67 @@
+"""Digital controllers and feed-forward of the closed loop (seed 003, Fig. 1).
+
+The controller runs once per sample on e[k] = r[k] - y[k]; its output is held by the DAC (ZOH)
+together with the feed-forward. A continuous controller C(s) is implemented through its Tustin
+(bilinear) equivalent, s = (2/Ts) (z - 1)/(z + 1), the usual digital implementation; its frequency
+response at the sample rate is C(j (2/Ts) tan(w Ts / 2)). A discrete controller is used as given.
+
+PID with a first-order filter on the derivative:
+
+    C(s) = kp + ki / s + kd s / (tau s + 1)
+         = ((kp tau + kd) s^2 + (kp + ki tau) s + ki) / (tau s^2 + s).
+
+Feed-forward (added to the controller output):
+
+    u_ff[k] = K_fc sign(r'(t_k)) + K_v r'(t_k)
+
+with the reference velocity r' from the central difference (r[k+1] - r[k-1]) fs / 2, taken
+periodically for periodic runs (a record of whole periods) and one-sided at the ends otherwise.
+sign(0) = 0. The reference is known in advance (a set-point), so using r[k+1] is causal in practice.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlsid.models.lti import StateSpace, from_transfer_function
+
+
+def pid(kp: float, ki: float, kd: float, tau: float) -> StateSpace:
+    """The continuous PID of the module docstring as a state-space model."""
+    if kd > 0:
+        num, den = [kp * tau + kd, kp + ki * tau, ki], [tau, 1.0, 0.0]
+    elif ki > 0:
+        num, den = [kp, ki], [1.0, 0.0]
+    else:
+        num, den = [kp], [1.0]
+    return from_transfer_function(num, den, False, 0.0, "closed_loop.controller")
+
+
+def tustin(ss: StateSpace, ts: float) -> StateSpace:
+    """Bilinear (Tustin) discretisation of a continuous model: exact map of s = (2/Ts)(z-1)/(z+1)."""
+    if ss.discrete:
+        return ss
+    n = ss.order
+    if n == 0:
+        return StateSpace(ss.A, ss.B, ss.C, ss.D, True)
+    eye = np.eye(n)
+    q = np.linalg.inv(eye - ss.A * ts / 2)
+    A = q @ (eye + ss.A * ts / 2)
+    B = q @ ss.B * ts
+    # C (zI - A_d)^-1 B_d + D_d = C (sI - A)^-1 B + D with the state scaled so that C_d = C q.
+    C = ss.C @ q
+    D = ss.D + ss.C @ q @ ss.B * ts / 2
+    return StateSpace(A, B, C, float(D), True)
+
+
+def reference_velocity(r: np.ndarray, fs: float, periodic: bool) -> np.ndarray:
+    """Central-difference velocity of the reference (periodic wrap for a record of whole periods)."""
+    if periodic:
+        return (np.roll(r, -1) - np.roll(r, 1)) * fs / 2
+    return np.gradient(r, 1.0 / fs)
+
+
+def feedforward(r: np.ndarray, fs: float, periodic: bool, coulomb: float, velocity: float) -> np.ndarray:
+    """u_ff = K_fc sign(r') + K_v r' (seed 003, Fig. 1 for the Coulomb term)."""
+    v = reference_velocity(r, fs, periodic)
+    return coulomb * np.sign(v) + velocity * v

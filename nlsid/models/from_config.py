@@ -1,0 +1,158 @@
+"""Build the simulation objects from a validated model config (:mod:`nlsid.io.model_config`).
+
+Two kinds of model come out:
+
+* :class:`Plant`: a linear state-space plant, optionally with nonlinear forces fed back from an
+  internal signal (mechanical templates). It runs open loop or in a closed loop.
+* :class:`Structure`: a block-structured model (Wiener, Hammerstein, Wiener-Hammerstein, the
+  parallel LPL of seed 002 Definition 1): branches of LTI blocks and nonlinear blocks in series,
+  summed. Open loop only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Union
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io import model_config as mc
+from nlsid.models import forces
+from nlsid.models.blocks import static_map
+from nlsid.models.controller import pid
+from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
+from nlsid.models.mechanical import MechanicalPlant, mass_spring_damper, two_mass_stage
+
+
+@dataclass(frozen=True)
+class Force:
+    """A nonlinear force: its kernel encoding, the column it enters by and the row it reads."""
+
+    kind: int
+    params: np.ndarray
+    column: np.ndarray
+    row: np.ndarray
+
+
+@dataclass(frozen=True)
+class Plant:
+    ss: StateSpace
+    x0: np.ndarray
+    forces: list[Force] = field(default_factory=list)
+
+
+Stage = Union[StateSpace, Callable[[np.ndarray], np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Structure:
+    """Sum over branches of the series connection of each branch's stages (applied left to right)."""
+
+    branches: list[list[Stage]]
+
+
+@dataclass(frozen=True)
+class ClosedLoop:
+    controller: StateSpace
+    coulomb: float
+    velocity: float
+
+
+def lti(config, where: str) -> StateSpace:
+    """A generic LTI config (transfer function, zpk, state space) as a state-space model."""
+    discrete = config.domain == "discrete"
+    if config.type == "transfer_function":
+        return from_transfer_function(config.num, config.den, discrete, config.delay, where)
+    if config.type == "zpk":
+        return from_zpk(config.zeros, config.poles, config.gain, discrete, config.delay, where)
+    return from_matrices(config.A, config.B, config.C, config.D, discrete, config.delay, where)
+
+
+def _mechanical(config) -> MechanicalPlant:
+    if config.type == "mass_spring_damper":
+        return mass_spring_damper(config.mass, config.damping, config.stiffness, config.gain, config.output,
+                                  config.initial.position, config.initial.velocity, config.delay)
+    return two_mass_stage(config.motor_mass, config.load_mass, config.stiffness, config.damping,
+                          config.motor_damping, config.load_damping, config.gain, config.output,
+                          config.output_at, config.delay)
+
+
+def _force(config, plant: MechanicalPlant, where: str) -> Force:
+    at = config.at or plant.masses[0]
+    if at not in plant.force_columns:
+        raise InputError(f"{where}.at", f"expected one of {', '.join(plant.masses)}, got {at!r}")
+    kind, params = forces.encode(config)
+    rows = plant.position_rows if kind in forces.POSITION_KINDS else plant.velocity_rows
+    return Force(kind, params, plant.force_columns[at], rows[at])
+
+
+def plant(config, closed: bool) -> Plant:
+    """The plant of an LTI or mechanical config; a pure LTI plant in open loop must be stable."""
+    where = "model"
+    if config.type in ("mass_spring_damper", "two_mass_stage"):
+        mech = _mechanical(config)
+        elements = [_force(f, mech, f"{where}.nonlinearities[{i}]") for i, f in enumerate(config.nonlinearities)]
+        result = Plant(mech.ss, mech.x0, elements)
+    else:
+        ss = lti(config, where)
+        result = Plant(ss, np.zeros(ss.order))
+    if not closed and not result.forces:
+        check_stable(result.ss, where)
+    return result
+
+
+def _stage_lti(config, where: str) -> StateSpace:
+    ss = lti(config, where)
+    check_stable(ss, where)
+    return ss
+
+
+def structure(config) -> Structure:
+    """The block structure of a wiener / hammerstein / wiener_hammerstein / lpl config."""
+    where = "model"
+    if config.type == "wiener":
+        return Structure([[_stage_lti(config.linear, f"{where}.linear"), static_map(config.nonlinear)]])
+    if config.type == "hammerstein":
+        return Structure([[static_map(config.nonlinear), _stage_lti(config.linear, f"{where}.linear")]])
+    if config.type == "wiener_hammerstein":
+        return Structure([[_stage_lti(config.first, f"{where}.first"), static_map(config.nonlinear),
+                           _stage_lti(config.second, f"{where}.second")]])
+    branches = []
+    for i, branch in enumerate(config.branches):
+        stages: list[Stage] = []
+        if branch.before is not None:
+            stages.append(_stage_lti(branch.before, f"{where}.branches[{i}].before"))
+        stages.append(static_map(branch.nonlinear))
+        if branch.after is not None:
+            stages.append(_stage_lti(branch.after, f"{where}.branches[{i}].after"))
+        branches.append(stages)
+    return Structure(branches)
+
+
+STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
+
+
+def model(config: mc.SimulateConfig) -> Union[Plant, Structure]:
+    """The plant or structure of a whole config."""
+    if config.model.type in STRUCTURES:
+        if config.closed_loop is not None:
+            raise InputError("closed_loop", f"a closed loop needs an LTI or mechanical plant, not a {config.model.type} structure")
+        return structure(config.model)
+    return plant(config.model, closed=config.closed_loop is not None)
+
+
+def closed_loop(config: mc.SimulateConfig) -> ClosedLoop | None:
+    """The controller and feed-forward gains of a closed-loop config (None in open loop)."""
+    loop = config.closed_loop
+    if loop is None:
+        return None
+    where = "closed_loop.controller"
+    c = loop.controller
+    if c.type == "pid":
+        controller = pid(c.kp, c.ki, c.kd, c.tau)
+    else:
+        if c.delay:
+            raise InputError(f"{where}.delay", "a controller has no dead time; put the delay on the plant")
+        controller = lti(c, where)
+    return ClosedLoop(controller, loop.feedforward.coulomb, loop.feedforward.velocity)

@@ -1,0 +1,187 @@
+"""Linear time-invariant models: SISO state space, built from transfer functions, zeros/poles/gain
+or matrices, continuous or discrete, with an optional dead time.
+
+A continuous model is run on sampled data through its zero-order-hold (ZOH) equivalent: with the
+input held constant over a step h (a DAC), the state at the end of the step is exactly
+
+    x(t + h) = Phi x(t) + Gamma u(t),   Phi = e^{A h},   Gamma = int_0^h e^{A s} ds B,
+
+computed from one matrix exponential of the augmented matrix [[A, B], [0, 0]] h (Van Loan 1978).
+Its frequency response at the sample instants is G_zoh(e^{j w Ts}) = C (zI - Phi)^{-1} Gamma + D,
+which equals (1 - z^-1) Z{G(s)/s}. A discrete model is used as it is, one step per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.errors import InputError
+
+
+@dataclass(frozen=True)
+class StateSpace:
+    """x' = A x + B u (continuous) or x[k+1] = A x[k] + B u[k] (discrete); y = C x + D u.
+
+    ``B`` and ``C`` are 1-D (SISO); ``delay`` is a dead time in seconds on the input.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: float
+    discrete: bool = False
+    delay: float = 0.0
+
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+    def poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
+
+    def frequency_response(self, s_or_z: np.ndarray) -> np.ndarray:
+        """C (xI - A)^{-1} B + D at the complex points ``s_or_z`` (s = j w or z = e^{j w Ts}); no delay."""
+        points = np.atleast_1d(np.asarray(s_or_z, dtype=complex))
+        out = np.full(points.shape, complex(self.D))
+        eye = np.eye(self.order)
+        for i, p in enumerate(points):
+            if self.order:
+                out[i] += self.C @ np.linalg.solve(p * eye - self.A, self.B)
+        return out
+
+
+def delay_samples(delay: float, fs: float, where: str) -> int:
+    """A dead time in seconds as a whole number of samples at ``fs`` (else an InputError)."""
+    samples = delay * fs
+    whole = int(round(samples))
+    if abs(samples - whole) > 1e-6 * max(1.0, samples):
+        raise InputError(where, f"delay {delay:g} s is {samples:g} samples at fs = {fs:g} Hz; "
+                                "it must be a whole number of samples")
+    return whole
+
+
+def _trim(coefficients: list[float]) -> np.ndarray:
+    arr = np.asarray(coefficients, dtype=float)
+    nonzero = np.flatnonzero(arr)
+    return arr[nonzero[0]:] if nonzero.size else arr[:1] * 0
+
+
+def from_transfer_function(num: list[float], den: list[float], discrete: bool, delay: float, where: str) -> StateSpace:
+    """State space of a transfer function.
+
+    Continuous: num/den in descending powers of s; proper means deg num <= deg den.
+    Discrete: num/den in ascending powers of z^-1, b0 + b1 z^-1 + ... over a0 + a1 z^-1 + ...
+    (causal when a0 != 0).
+    """
+    if discrete:
+        b = np.asarray(num, dtype=float)
+        a = np.asarray(den, dtype=float)
+        if a[0] == 0:
+            raise InputError(f"{where}.den", "den[0] (the z^0 coefficient) must be nonzero, else the model is not causal")
+        n = max(len(a), len(b))
+        b = np.pad(b, (0, n - len(b)))
+        a = np.pad(a, (0, n - len(a)))
+    else:
+        b, a = _trim(num), _trim(den)
+        if not a.any():
+            raise InputError(f"{where}.den", "the denominator is zero")
+        if len(b) > len(a):
+            raise InputError(where, f"improper transfer function: numerator degree {len(b) - 1} > "
+                                    f"denominator degree {len(a) - 1}")
+        b = np.pad(b, (len(a) - len(b), 0))
+    return _controllable_form(b / a[0], a / a[0], discrete, delay)
+
+
+def _controllable_form(b: np.ndarray, a: np.ndarray, discrete: bool, delay: float) -> StateSpace:
+    """Controller canonical form of (b0 x^n + ... + bn) / (x^n + a1 x^(n-1) + ... + an), with a0 = 1."""
+    n = len(a) - 1
+    d = b[0]
+    A = np.zeros((n, n))
+    if n:
+        A[0, :] = -a[1:]
+        A[1:, :-1] = np.eye(n - 1)
+    B = np.zeros(n)
+    if n:
+        B[0] = 1.0
+    C = b[1:] - d * a[1:]
+    return StateSpace(A, B, C, float(d), discrete, delay)
+
+
+def _roots(entries: list) -> np.ndarray:
+    out = []
+    for entry in entries:
+        if isinstance(entry, list):
+            re, im = entry
+            out.extend([complex(re, im), complex(re, -im)] if im != 0 else [complex(re, 0)])
+        else:
+            out.append(complex(entry, 0))
+    return np.asarray(out, dtype=complex)
+
+
+def from_zpk(zeros: list, poles: list, gain: float, discrete: bool, delay: float, where: str) -> StateSpace:
+    """State space of gain * prod(x - z_i) / prod(x - p_i), x = s or z; [re, im] is a conjugate pair."""
+    z, p = _roots(zeros), _roots(poles)
+    if len(z) > len(p):
+        raise InputError(where, f"improper model: {len(z)} zeros > {len(p)} poles")
+    num = np.real(gain * np.poly(z)) if len(z) else np.array([float(gain)])
+    den = np.real(np.poly(p)) if len(p) else np.array([1.0])
+    num = np.pad(num, (len(den) - len(num), 0))
+    return _controllable_form(num, den, discrete, delay)
+
+
+def from_matrices(A: list, B: list, C: list, D: float, discrete: bool, delay: float, where: str) -> StateSpace:
+    """State space from matrices, with their shapes checked."""
+    a = np.asarray(A, dtype=float).reshape(len(A), -1) if len(A) else np.zeros((0, 0))
+    n = a.shape[0]
+    if a.shape != (n, n):
+        raise InputError(f"{where}.A", f"expected a square matrix, got shape {a.shape}")
+    b, c = np.asarray(B, dtype=float), np.asarray(C, dtype=float)
+    for name, vec in (("B", b), ("C", c)):
+        if vec.shape != (n,):
+            raise InputError(f"{where}.{name}", f"expected {n} entries (A is {n}x{n}), got {vec.size}")
+    return StateSpace(a, b, c, float(D), discrete, delay)
+
+
+def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ZOH discretisation over a step h: Phi = e^{A h}, Gamma = int_0^h e^{A s} ds B.
+
+    ``B`` may be a vector or a matrix of input columns.
+    """
+    from scipy.linalg import expm
+
+    B2 = B.reshape(A.shape[0], -1)
+    n, m = B2.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n] = A * h
+    M[:n, n:] = B2 * h
+    E = expm(M)
+    return E[:n, :n], E[:n, n:].reshape(B.shape)
+
+
+def stepped(ss: StateSpace, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Phi, Gamma) of one step of length h: ZOH for a continuous model, (A, B) for a discrete one."""
+    if ss.discrete:
+        return ss.A, ss.B
+    return zoh(ss.A, ss.B, h)
+
+
+def check_stable(ss: StateSpace, where: str) -> None:
+    """Refuse a model with a pole in the open right half plane (continuous) or outside the unit circle.
+
+    Poles on the boundary (integrators, e.g. a free mass) are accepted: the response to a zero-mean
+    excitation stays bounded for a single integrator.
+    """
+    poles = ss.poles()
+    if not poles.size:
+        return
+    if ss.discrete:
+        worst = np.max(np.abs(poles))
+        if worst > 1 + 1e-9:
+            raise InputError(where, f"unstable model: pole with |z| = {worst:.6g} > 1")
+    else:
+        scale = max(1.0, float(np.max(np.abs(poles))))
+        worst = np.max(poles.real)
+        if worst > 1e-9 * scale:
+            raise InputError(where, f"unstable model: pole with real part {worst:.6g} > 0")

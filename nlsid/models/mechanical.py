@@ -1,0 +1,88 @@
+"""Mechanical plant templates: a mass with viscous damping and a spring, and a two-mass stage.
+
+Both are linear state-space models driven by an actuator force ``gain * u``; nonlinear forces
+(friction, cubic stiffness, see :mod:`nlsid.models.forces`) act on a named mass as a feedback on
+that mass's velocity or position. A template therefore exposes, per mass, the state-space column
+through which a force enters and the rows that read its position and velocity.
+
+Mass-spring-damper, state x = [p, v]:
+
+    m p'' + c p' + k p = gain u - F_nl,    A = [[0, 1], [-k/m, -c/m]],  B = [0, gain/m].
+
+Two-mass stage, state x = [p1, v1, p2, v2] (1 = motor, driven; 2 = load), coupling spring k and
+damper c, ground dampers c1, c2:
+
+    m1 p1'' = gain u - k (p1 - p2) - c (v1 - v2) - c1 v1 - F_nl,1
+    m2 p2'' =          k (p1 - p2) + c (v1 - v2) - c2 v2 - F_nl,2
+
+Its transfer function from force to load position, for c1 = c2 = 0, is
+(c s + k) / (s^2 (m1 m2 s^2 + c (m1 + m2) s + k (m1 + m2))): a rigid-body double integrator and a
+flexible mode at w = sqrt(k (m1 + m2) / (m1 m2)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nlsid.models.lti import StateSpace
+
+
+@dataclass(frozen=True)
+class MechanicalPlant:
+    """A linear mechanical model with force inputs and position/velocity read-outs per mass."""
+
+    ss: StateSpace                      # actuator input u -> measured output
+    x0: np.ndarray                      # initial state
+    force_columns: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> dx'/dF
+    position_rows: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> p = row . x
+    velocity_rows: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> v = row . x
+
+    @property
+    def masses(self) -> list[str]:
+        return list(self.force_columns)
+
+
+def _unit(n: int, i: int) -> np.ndarray:
+    out = np.zeros(n)
+    out[i] = 1.0
+    return out
+
+
+def mass_spring_damper(mass: float, damping: float, stiffness: float, gain: float, output: str,
+                       position0: float = 0.0, velocity0: float = 0.0, delay: float = 0.0) -> MechanicalPlant:
+    """m p'' + c p' + k p = gain u; output position or velocity; one mass named ``mass``."""
+    A = np.array([[0.0, 1.0], [-stiffness / mass, -damping / mass]])
+    B = np.array([0.0, gain / mass])
+    rows = {"position": _unit(2, 0), "velocity": _unit(2, 1)}
+    ss = StateSpace(A, B, rows[output], 0.0, False, delay)
+    return MechanicalPlant(
+        ss, np.array([position0, velocity0]),
+        force_columns={"mass": np.array([0.0, 1.0 / mass])},
+        position_rows={"mass": rows["position"]},
+        velocity_rows={"mass": rows["velocity"]},
+    )
+
+
+def two_mass_stage(motor_mass: float, load_mass: float, stiffness: float, damping: float,
+                   motor_damping: float, load_damping: float, gain: float, output: str, output_at: str,
+                   delay: float = 0.0) -> MechanicalPlant:
+    """Motor mass driven by the actuator, coupled to a load mass by a spring and damper."""
+    m1, m2, k, c, c1, c2 = motor_mass, load_mass, stiffness, damping, motor_damping, load_damping
+    A = np.array([
+        [0.0, 1.0, 0.0, 0.0],
+        [-k / m1, -(c + c1) / m1, k / m1, c / m1],
+        [0.0, 0.0, 0.0, 1.0],
+        [k / m2, c / m2, -k / m2, -(c + c2) / m2],
+    ])
+    B = np.array([0.0, gain / m1, 0.0, 0.0])
+    positions = {"motor": _unit(4, 0), "load": _unit(4, 2)}
+    velocities = {"motor": _unit(4, 1), "load": _unit(4, 3)}
+    C = (positions if output == "position" else velocities)[output_at]
+    return MechanicalPlant(
+        StateSpace(A, B, C, 0.0, False, delay), np.zeros(4),
+        force_columns={"motor": np.array([0.0, 1.0 / m1, 0.0, 0.0]), "load": np.array([0.0, 0.0, 0.0, 1.0 / m2])},
+        position_rows=positions,
+        velocity_rows=velocities,
+    )

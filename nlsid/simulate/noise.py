@@ -1,0 +1,61 @@
+"""Measurement and process noise of a simulated run: white Gaussian, seeded, independent per run.
+
+Each run gets its own stream, ``SeedSequence(seed).spawn(n_runs)[index]`` keyed by the run's index
+in the output, and each of the three sequences (u, y, process) its own child of that stream. The
+same seed gives the same numbers, whatever the number of worker threads, and switching one noise
+source on or off does not change the others.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.errors import InputError
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Noise sequences of one run: on the measured u, on the measured y, and on the plant input."""
+
+    u: np.ndarray
+    y: np.ndarray
+    process: np.ndarray
+
+    @staticmethod
+    def zero(n: int) -> "Noise":
+        z = np.zeros(n)
+        return Noise(z, z, z)
+
+
+@dataclass(frozen=True)
+class NoiseLevels:
+    """Standard deviations of the white noise on the measured u, the measured y and the plant input."""
+
+    u: float = 0.0
+    y: float = 0.0
+    process: float = 0.0
+
+    @property
+    def any(self) -> bool:
+        return self.u > 0 or self.y > 0 or self.process > 0
+
+
+def run_streams(seed: int | None, levels: NoiseLevels, n_runs: int) -> list[np.random.SeedSequence | None]:
+    """One seed sequence per run (None when there is no noise); noise without a seed is refused."""
+    if not levels.any:
+        return [None] * n_runs
+    if seed is None:
+        raise InputError("disturbances.seed", "noise needs a seed: set disturbances.seed or pass --seed")
+    return np.random.SeedSequence(seed).spawn(n_runs)
+
+
+def draw(levels: NoiseLevels, stream: np.random.SeedSequence | None, n: int) -> Noise:
+    """The three noise sequences of one run from its stream."""
+    if stream is None:
+        return Noise.zero(n)
+    children = [np.random.SeedSequence(stream.entropy, spawn_key=stream.spawn_key + (i,)) for i in range(3)]
+    sequences = [np.random.default_rng(child).standard_normal(n) * level
+                 for child, level in zip(children, (levels.u, levels.y, levels.process))]
+    return Noise(*sequences)
