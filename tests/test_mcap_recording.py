@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
+from mcap.writer import IndexType, Writer
 
 from nlsid.errors import InputError
 from nlsid.io.mcap_recording import BLOCK_SAMPLES, RUN_SCHEMA, run_message
@@ -148,10 +148,15 @@ def test_write_refuses_existing_output_and_duplicate_ids(tmp_path):
 # ----------------------------------------------------------------------------------------- foreign
 
 
-def _write_foreign(path, messages, schema: bool = True) -> None:
-    """Write JSON messages ``(topic, log_time_ns, object)`` with the mcap Writer, as a logger would."""
+def _write_foreign(path, messages, schema: bool = True, summary: bool = True) -> None:
+    """Write JSON messages ``(topic, log_time_ns, object)`` with the mcap Writer, as a logger would.
+
+    ``summary=False`` writes no summary section (no index), as some streaming loggers do.
+    """
+    options = {} if summary else dict(index_types=IndexType.NONE, repeat_channels=False, repeat_schemas=False,
+                                      use_statistics=False, use_summary_offsets=False)
     with open(path, "wb") as handle:
-        writer = Writer(handle)
+        writer = Writer(handle, **options)
         writer.start(profile="", library="test-logger")
         schema_id = writer.register_schema("Sample", "jsonschema", b'{"type": "object"}') if schema else 0
         channels = {}
@@ -191,6 +196,17 @@ def test_foreign_scalar_per_message(tmp_path):
     assert run.kind == "arbitrary" and run.period is None and run.excited_bins is None
     # JSON text of a Python float round-trips exactly (repr is the shortest exact decimal).
     assert run.u.tobytes() == u.tobytes() and run.y.tobytes() == y.tobytes()
+
+
+def test_foreign_file_without_summary_section(tmp_path):
+    messages, u, y = _scalar_log(FS, 300)
+    _write_foreign(tmp_path / "stream.mcap", messages, summary=False)
+    with open(tmp_path / "stream.mcap", "rb") as handle:
+        assert make_reader(handle).get_summary() is None  # the case under test
+    (run,) = read_runs(tmp_path / "stream.mcap", mapping=MAP)
+    assert run.fs == 1000.0 and run.u.tobytes() == u.tobytes() and run.y.tobytes() == y.tobytes()
+    with pytest.raises(InputError, match=r"no topic '/x'; topics in the file: /cmd, /joint"):
+        read_runs(tmp_path / "stream.mcap", mapping={"u": "/x:effort", "y": "/joint:state.position"})
 
 
 def test_foreign_rate_not_a_whole_number_of_ns(tmp_path):
@@ -283,6 +299,8 @@ def test_foreign_missing_topic_field_and_mapping(tmp_path):
         read_runs(tmp_path / "log.mcap", mapping={"u": "/cmd:effort", "y": "/joint:state.pos"})
     with pytest.raises(InputError, match=r"fields at the top level are effort, seq"):
         read_runs(tmp_path / "log.mcap", mapping={"u": "/cmd:force", "y": "/joint:state.position"})
+    with pytest.raises(InputError, match="signals are u, y and r, got x"):
+        read_runs(tmp_path / "log.mcap", mapping={**MAP, "x": "/cmd:seq"})
     with pytest.raises(InputError, match="map the measured output too"):
         read_runs(tmp_path / "log.mcap", mapping={"u": "/cmd:effort"})
     (run,) = read_runs(tmp_path / "log.mcap", require_y=False, mapping={"u": "/cmd:effort"})

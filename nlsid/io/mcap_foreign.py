@@ -90,6 +90,9 @@ def read_foreign_run(
 
     Returns the run (named after the file) and a provenance record naming the source and mapping.
     """
+    unknown = sorted(set(mapping) - set(SIGNALS))
+    if unknown:
+        raise InputError("--map", f"signals are u, y and r, got {', '.join(unknown)}")
     if "u" not in mapping:
         raise InputError("--map", "map the input too: --map u=/topic:field")
     if require_y and "y" not in mapping:
