@@ -38,8 +38,9 @@ def test_bad_config_fails_cleanly_and_writes_nothing(run_cli, tmp_path, config):
 
 @pytest.mark.parametrize("name", sorted(RECORDINGS))
 def test_bad_recording_fails_cleanly(run_cli, name):
-    result = run_cli("info", BAD / "recordings" / name)
-    assert_one_clear_line(result, RECORDINGS[name], name)
+    case = RECORDINGS[name]
+    result = run_cli("info", BAD / "recordings" / name, *case["args"])
+    assert_one_clear_line(result, case["expect"], name)
 
 
 def test_missing_files_are_named(run_cli, tmp_path):

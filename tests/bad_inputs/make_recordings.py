@@ -1,7 +1,8 @@
 """Write the deliberately broken recordings of tests/bad_inputs/recordings/ (run to regenerate).
 
 Each case is a small file that breaks one rule of the recording format (docs/formats.md), and
-``expected.json`` maps its file name to a fragment the one-line error message must contain.
+``expected.json`` maps its file name to a fragment the one-line error message must contain and to
+the extra command-line arguments it is read with (``--map`` for foreign MCAP files).
 Usage: ``python tests/bad_inputs/make_recordings.py``.
 """
 
@@ -12,10 +13,11 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from mcap.writer import Writer
 
 HERE = Path(__file__).parent / "recordings"
 N = 64
-CASES: dict[str, str] = {}
+CASES: dict[str, dict] = {}
 
 
 def good_run(group: h5py.Group, name: str = "ms_00", periods: int = 3) -> h5py.Group:
@@ -29,9 +31,9 @@ def good_run(group: h5py.Group, name: str = "ms_00", periods: int = 3) -> h5py.G
     return run
 
 
-def case(name: str, expect: str):
+def case(name: str, expect: str, args: tuple[str, ...] = ()):
     def register(build):
-        CASES[name] = expect
+        CASES[name] = {"expect": expect, "args": list(args)}
         build(HERE / name)
         return build
     return register
@@ -47,6 +49,22 @@ def recording(path: Path) -> h5py.File:
 def with_run(path: Path, edit) -> None:
     with recording(path) as f:
         edit(good_run(f.create_group("runs")))
+
+
+def foreign_mcap(path: Path, topics: dict[str, str], times: np.ndarray, both: bool = False) -> None:
+    """A foreign MCAP log: one JSON message per sample on each topic (field u and, if ``both``, y)."""
+    with open(path, "wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        schema = writer.register_schema("sample", "jsonschema", b"{}")
+        for topic, field in topics.items():
+            channel = writer.register_channel(topic, "json", schema)
+            for i, t in enumerate(times):
+                message = {field: float(np.sin(0.1 * i))}
+                if both:
+                    message["y"] = 0.5 * message[field]
+                writer.add_message(channel, int(t), json.dumps(message).encode(), int(t))
+        writer.finish()
 
 
 def main() -> None:
@@ -174,6 +192,26 @@ def main() -> None:
     @case("negative_transient.h5", "transient_periods: must be >= 0")
     def _(path):
         with_run(path, lambda run: run.attrs.__setitem__("transient_periods", -1))
+
+    @case("mcap_missing_topic.mcap", "no topic '/joint'; topics in the file: /cmd", ("--map", "u=/cmd:effort", "--map", "y=/joint:position"))
+    def _(path):
+        foreign_mcap(path, {"/cmd": "effort"}, np.arange(50) * 1_000_000)
+
+    @case("mcap_non_uniform.mcap", "not uniformly sampled", ("--map", "u=/log:u", "--map", "y=/log:y"))
+    def _(path):
+        times = np.arange(50) * 1_000_000
+        times[25:] += 400_000  # one interval 40% too long: a dropped or late sample
+        foreign_mcap(path, {"/log": "u"}, times, both=True)
+
+    @case("mcap_no_nlsid_layout.mcap", "not an nlsid recording")
+    def _(path):
+        foreign_mcap(path, {"/log": "u"}, np.arange(10) * 1_000_000)
+
+    @case("mcap_truncated.mcap", "truncated")
+    def _(path):
+        foreign_mcap(path, {"/log": "u"}, np.arange(200) * 1_000_000)
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) * 2 // 3])
 
     (HERE / "expected.json").write_text(json.dumps(CASES, indent=1, sort_keys=True) + "\n")
 
