@@ -12,13 +12,14 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable
 
 import h5py
 import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
+from nlsid.io.reader import RecordingReader
 from nlsid.io.run import SIGNALS, Run, make_run
 
 FORMAT_VERSION = 1
@@ -44,7 +45,7 @@ def _text(value) -> str | None:
     return value.decode("utf-8", errors="replace") if isinstance(value, bytes) else (None if value is None else str(value))
 
 
-class HDF5Recording:
+class HDF5Recording(RecordingReader):
     """An open HDF5 recording whose runs are read one at a time (memory does not grow with runs).
 
     Opening checks the root attributes and the run list; :meth:`load` validates one run fully.
@@ -107,18 +108,8 @@ class HDF5Recording:
                     units[name] = unit
         return make_run(run_id, dict(group.attrs), signals, where, self.require_y, units)
 
-    def __iter__(self) -> Iterator[Run]:
-        for run_id in self.run_ids:
-            yield self.load(run_id)
-
     def close(self) -> None:
         self._file.close()
-
-    def __enter__(self) -> "HDF5Recording":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def write_hdf5_recording(

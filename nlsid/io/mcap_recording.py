@@ -27,7 +27,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
@@ -37,6 +37,7 @@ from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
 from nlsid.io.mcap_file import channels_by_topic, checked, open_mcap
 from nlsid.io.mcap_foreign import read_foreign_run
+from nlsid.io.reader import RecordingReader
 from nlsid.io.run import SIGNALS, Run, make_run
 
 FORMAT_VERSION = 1
@@ -86,7 +87,7 @@ BLOCK_SCHEMA = {
 _OWN_KEYS = ("run", "n_samples", "signals", "units")
 
 
-class MCAPRecording:
+class MCAPRecording(RecordingReader):
     """An open MCAP recording whose runs are read one at a time (same interface as HDF5Recording).
 
     Without ``mapping`` the file must be in the nlsid layout above. With ``mapping`` (signal name
@@ -185,18 +186,8 @@ class MCAPRecording:
             blocks[topic_names[channel.topic]].append((first, _decode_samples(block.get("data"), where)))
         return {name: _assemble(parts, n_samples, f"{self.path}:{SIGNAL_TOPICS[name]}[{run_id}]") for name, parts in blocks.items()}
 
-    def __iter__(self) -> Iterator[Run]:
-        for run_id in self.run_ids:
-            yield self.load(run_id)
-
     def close(self) -> None:
         self._handle.close()
-
-    def __enter__(self) -> "MCAPRecording":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def _json_object(data: bytes | str, where: str) -> dict:
