@@ -12,6 +12,7 @@ from nlsid.errors import NlsidError
 from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
+from .hosidf import hosidf
 from .info import info
 from .pending import PENDING_COMMANDS
 from .simulate import simulate
@@ -59,6 +60,7 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 
 cli.add_command(design)
+cli.add_command(hosidf)
 cli.add_command(bla)
 cli.add_command(info)
 cli.add_command(simulate)

@@ -11,10 +11,6 @@ import click
 from nlsid.errors import InputError
 
 _STAGES = {
-    "hosidf": (
-        "Higher Order Sinusoidal Input Describing Functions from single-sine runs.",
-        "nlsid hosidf recording.h5 -o hosidf.h5 --plots figures/",
-    ),
     "fit": (
         "Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.",
         "nlsid fit bla.h5 --order 2/2 -o model.yaml",

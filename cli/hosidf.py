@@ -1,0 +1,151 @@
+"""``nlsid hosidf``: measured HOSIDFs over a frequency x amplitude grid, or a linearity-cost sweep."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from nlsid.errors import InputError
+from nlsid.io.atomic import check_writable
+from nlsid.io.provenance import provenance
+from nlsid.io.recording import open_recording
+
+from .common import emit_json, force_option, json_option, progress, settings
+from .options import map_option, parse_map
+
+
+def _plot_folder(plots: str | None) -> Path | None:
+    if plots is None:
+        return None
+    folder = Path(plots)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(str(folder), "--plots must name a folder")
+    if not folder.parent.exists():
+        raise InputError(str(folder), f"folder {folder.parent} does not exist")
+    return folder
+
+
+def _runs(recording):
+    with progress("reading runs", len(recording.run_ids)) as step:
+        for run_id in recording.run_ids:
+            yield recording.load(run_id)
+            step()
+
+
+def _analytic(branches, grid):
+    import numpy as np
+
+    from nlsid.analysis.hosidf_analytic import lpl_hosidf
+
+    out = np.full((grid.frequencies.size, grid.levels.size, grid.harmonics + 1), np.nan, dtype=complex)
+    for fi, ai in grid.cells:
+        out[fi, ai] = lpl_hosidf(branches, 2 * np.pi * grid.frequencies[fi], grid.levels[ai], grid.harmonics)
+    return out
+
+
+@click.command()
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The hosidf.h5 file to write.")
+@click.option("--harmonics", default=5, show_default=True, type=int, help="Highest harmonic K (k = 0..K).")
+@click.option("--variance", type=click.Choice(["both", "repeats", "periods"]), default="both", show_default=True,
+              help="Variances that must be available: over repeats (>= 2 per cell), periods (>= 2 per run).")
+@click.option("--input", "input_choice", type=click.Choice(["auto", "u", "r"]), default="auto", show_default=True,
+              help="Signal whose tone normalises the HOSIDFs (auto: r when the runs have a reference).")
+@click.option("--sweep", "parameter", metavar="PARAM",
+              help="Linearity cost over runs that differ in run parameter PARAM (seed 003), e.g. K_fc.")
+@click.option("--model", type=click.Path(dir_okay=False),
+              help="Model config (polynomial block structure): add its analytic HOSIDFs (seed 002 Lemma 2).")
+@click.option("--plots", type=click.Path(file_okay=True), help="Write figures (PNG) into this folder.")
+@map_option
+@force_option
+@json_option
+def hosidf(recording: str, output: str, harmonics: int, variance: str, input_choice: str, parameter: str | None,
+           model: str | None, plots: str | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+    """Higher Order Sinusoidal Input Describing Functions from single-sine runs.
+
+    Without --sweep: HOSIDFs H_k = Y(k w0)/U(w0)^k (and the |Y|/|U| form) for every frequency x
+    amplitude cell, mean and variance over repeats and periods, and the noise bound that marks
+    each harmonic significant. With --sweep PARAM: the linearity cost per value of PARAM, its
+    optimum, and the time-domain tracking error with its optimum (friction feed-forward tuning).
+
+    Examples:
+
+    \b
+      nlsid hosidf recording.h5 -o hosidf.h5 --plots figures/
+      nlsid hosidf lpl_recording.h5 -o hosidf.h5 --model configs/lpl.yaml
+      nlsid hosidf kfc_sweep.h5 -o sweep.h5 --sweep K_fc --harmonics 9 --plots figures/
+    """
+    from nlsid.analysis.hosidf import measured_hosidf, run_spectra
+    from nlsid.analysis.linearity_cost import sweep
+    from nlsid.io.hosidf_file import write_hosidf
+
+    check_writable(output, force)
+    folder = _plot_folder(plots)
+    if parameter is not None and model is not None:
+        raise InputError("--model", "analytic HOSIDFs apply to a frequency x amplitude grid, not to --sweep")
+    grid = analytic = result = None
+    with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
+        first = rec.load(rec.run_ids[0])
+        signal = input_choice if input_choice != "auto" else ("r" if first.r is not None else "u")
+        if parameter is None:
+            branches = None
+            if model is not None:
+                from nlsid.analysis.hosidf_model import branches_from_config
+
+                branches = branches_from_config(model, first.fs)
+            grid = measured_hosidf(_runs(rec), harmonics, variance, signal, recording)
+            spectrum_of = (first.periods("y"), run_spectra(first, harmonics, signal, recording), first.fs)
+            if branches is not None:
+                analytic = _analytic(branches, grid)
+        else:
+            result = sweep(_runs(rec), parameter, harmonics, signal, recording)
+    prov = provenance(config_paths=[model] if model else [], input_paths=[recording])
+    write_hosidf(output, harmonics, signal, prov, grid=grid, analytic=analytic, sweep=result, force=force)
+    figures = []
+    if folder is not None:
+        from nlsid.report import hosidf_plots
+
+        folder.mkdir(exist_ok=True)
+        figures = (hosidf_plots.grid_figures(grid, spectrum_of, folder, analytic) if grid is not None
+                   else hosidf_plots.sweep_figures(result, folder))
+    summary = _summary(output, signal, grid, result, figures)
+    if as_json:
+        emit_json(summary)
+    else:
+        _print(summary)
+
+
+def _summary(output: str, signal: str, grid, result, figures) -> dict:
+    summary: dict = {"output": output, "input_signal": signal, "plots": [str(p) for p in figures]}
+    if grid is not None:
+        significant = grid.stat("significant")
+        summary["grid"] = {
+            "frequencies": grid.frequencies, "levels": grid.levels, "harmonics": grid.harmonics,
+            "cells": len(grid.cells),
+            "significant_cells_per_harmonic": significant.sum(axis=(0, 1)),
+        }
+    if result is not None:
+        summary["sweep"] = {
+            "parameter": result.parameter, "frequency": result.frequency, "level": result.level,
+            "values": result.values("value"), "cost": result.values("cost"), "time_error": result.values("time_error"),
+            "optimum": result.optimum, "time_optimum": result.time_optimum,
+        }
+    return summary
+
+
+def _print(summary: dict) -> None:
+    console = settings().console
+    if "grid" in summary:
+        g = summary["grid"]
+        console.print(f"HOSIDFs of {g['cells']} cells ({len(g['frequencies'])} frequencies x {len(g['levels'])} "
+                      f"amplitudes, k = 0..{g['harmonics']}) -> {summary['output']}")
+        counts = ", ".join(f"k={k}: {int(n)}" for k, n in enumerate(g["significant_cells_per_harmonic"]))
+        console.print(f"cells where the harmonic clears its noise bound: {counts}")
+    if "sweep" in summary:
+        s = summary["sweep"]
+        console.print(f"linearity cost over {len(s['values'])} values of {s['parameter']} -> {summary['output']}")
+        console.print(f"optimum {s['parameter']} = {s['optimum']:g} (frequency domain), "
+                      f"{s['time_optimum']:g} (time-domain error)")
+    for path in summary["plots"]:
+        console.print(f"figure {path}")
