@@ -1,5 +1,8 @@
 """Nonlinear forces acting on a mass of a mechanical plant, and their update over one sub-step.
 
+The laws are implemented in :func:`nlsid.simulate.kernels.force` (kept in the kernel's module so
+that numba's on-disk cache, which watches only the compiled function's own file, stays current).
+
 Each force is a feedback from the mass's velocity v (friction) or position p (cubic stiffness) to
 a force F that opposes the actuator (``m v' = ... - F``). Over a sub-step of length h the linear
 plant is propagated exactly with F held constant (ZOH), so the mass's velocity and position at the
@@ -17,15 +20,21 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   stick/slip transitions and zero while sticking.
 * ``stribeck`` F = (fc + (fs - fc) e^{-|v/vs|^delta}) sign(v) + fv v: sticks while
   |v_free| <= g_v fs (break-away force fs); in slip the same implicit equation is solved by
-  fixed-point iteration on the Stribeck curve (a contraction since g_v |dF/dv| << 1).
+  fixed-point iteration on the Stribeck curve (a contraction since g_v |dF/dv| << 1); if the
+  iterate changes sign the mass sticks instead.
 * ``lugre`` (Canudas de Wit, Olsson, Astrom, Lischinsky 1995): bristle state z,
 
       z' = v - sigma0 |v| z / s(v),   s(v) = fc + (fs - fc) e^{-(v/vs)^2},
       F = sigma0 z + sigma1 z' + sigma2 v.
 
-  Linearly implicit step: z+ = a (z + h v+), a = 1 / (1 + h sigma0 |v_free| / s(v_free)), so
-  F = F0 + F1 v+ is affine in v+ and v+ = (v_free - g_v F0) / (1 + g_v F1) follows in closed form.
-  Stable for any h (the stiff bristle stiffness sigma0 and damping sigma1 are implicit).
+  Implicit (backward Euler) step: z+ = a (z + h v+), a = 1 / (1 + h sigma0 |v+| / s(v+)). For a
+  given a, F = F0 + F1 v+ is affine in v+ and v+ = (v_free - g_v F0) / (1 + g_v F1) follows in
+  closed form; a is then updated from the new v+ (fixed-point iteration from v+ = v_free until
+  the change is below TOLERANCE (|v+| + vs); a contraction with factor about
+  g_v |F| (sigma0 h + sigma1) / s, about 0.1 for the example stage).
+  Stable for any h (bristle stiffness sigma0 and damping sigma1 are implicit). Using |v+| rather
+  than |v_free| in a matters at standstill: v_free - v+ = g_v F is not small against v+ = 0, and
+  an explicit a would let the bristles relax, an artificial creep of about g_v F^2 / s.
 * ``cubic_stiffness`` F = k3 p^3, evaluated at the sub-step midpoint estimate (p + p_free) / 2:
   second order for this smooth force (the Duffing oscillator of the book's Exercise 79, Eq. 5-12,
   is a unit mass with damping 1, stiffness -10 and k3 = 100).
@@ -38,13 +47,12 @@ Kinds and parameter vectors (the numba kernel's encoding):
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit
 
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
+MAX_ITERATIONS = 60   # fixed-point iterations of the Stribeck and LuGre laws: at most
+TOLERANCE = 1e-13     # until the velocity changes by less than TOLERANCE (|v| + vs)
 POSITION_KINDS = (CUBIC,)
 
 
@@ -60,52 +68,3 @@ def encode(config) -> tuple[int, np.ndarray]:
     vals = values(config)
     params[: len(vals)] = vals
     return kind, params
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
-    return abs(v_free) <= g * breakaway
-
-
-@njit(cache=True, nogil=True)
-def force(kind: int, p: np.ndarray, state: np.ndarray, i: int, s_free: float, s_now: float,
-          g: float, h: float) -> float:
-    """The force held over one sub-step; updates the element's internal state ``state[i]``.
-
-    ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
-    sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
-    force held over the sub-step, ``h`` the sub-step length.
-    """
-    if kind == COULOMB:
-        fc, fv = p[0], p[1]
-        if _stick_or_slip(s_free, g, fc):
-            return s_free / g
-        s = 1.0 if s_free > 0 else -1.0
-        v = (s_free - g * fc * s) / (1.0 + g * fv)
-        return fc * s + fv * v
-    if kind == STRIBECK:
-        fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
-        if _stick_or_slip(s_free, g, fs):
-            return s_free / g
-        s = 1.0 if s_free > 0 else -1.0
-        v = s_free
-        level = fs
-        for _ in range(4):
-            level = fc + (fs - fc) * math.exp(-((abs(v) / vs) ** delta))
-            v = (s_free - g * level * s) / (1.0 + g * fv)
-            if v * s <= 0.0:
-                return s_free / g
-        return level * s + fv * v
-    if kind == LUGRE:
-        sigma0, sigma1, sigma2, fc, fs, vs = p[0], p[1], p[2], p[3], p[4], p[5]
-        z = state[i]
-        level = fc + (fs - fc) * math.exp(-((s_free / vs) ** 2))
-        a = 1.0 / (1.0 + h * sigma0 * abs(s_free) / level)
-        f0 = (sigma0 + sigma1 / h) * a * z - sigma1 * z / h
-        f1 = (sigma0 * h + sigma1) * a + sigma2
-        v = (s_free - g * f0) / (1.0 + g * f1)
-        state[i] = a * (z + h * v)
-        return f0 + f1 * v
-    # CUBIC
-    mid = 0.5 * (s_now + s_free)
-    return p[0] * mid * mid * mid

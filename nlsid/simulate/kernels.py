@@ -9,8 +9,9 @@ One call simulates one run, sample by sample (k = 0 .. N-1, t_k = k Ts):
    process noise n_p) is held constant over [t_k, t_k+1) (the DAC's zero-order hold).
 3. the output recorded is y[k] = C x(t_k) + D p[k] + n_y[k].
 4. the plant state is advanced over ``substeps`` sub-steps of h = Ts / substeps: exact ZOH
-   propagation x+ = Phi x + Gamma p, then each nonlinear force in turn (``forces.force``) is
-   held over the sub-step, x+ -= Gamma_F F.
+   propagation x+ = Phi x + Gamma p, then each nonlinear force in turn (:func:`force`) is
+   held over the sub-step, x+ -= Gamma_F F (the laws and their numerical treatment are in
+   :mod:`nlsid.models.forces`).
 
 Without nonlinear forces the result at the sample instants is exact for any number of sub-steps
 (up to rounding): the ZOH propagation is the exact solution for a held input.
@@ -18,10 +19,73 @@ Without nonlinear forces the result at the sample instants is exact for any numb
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-from nlsid.models.forces import force
+from nlsid.models import forces
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
+    return abs(v_free) <= g * breakaway
+
+
+@njit(cache=True, nogil=True)
+def force(kind: int, p: np.ndarray, state: np.ndarray, i: int, s_free: float, s_now: float,
+          g: float, h: float) -> float:
+    """The force held over one sub-step; updates the element's internal state ``state[i]``.
+
+    ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
+    sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
+    force held over the sub-step, ``h`` the sub-step length.
+    """
+    if kind == forces.COULOMB:
+        fc, fv = p[0], p[1]
+        if _stick_or_slip(s_free, g, fc):
+            return s_free / g
+        s = 1.0 if s_free > 0 else -1.0
+        v = (s_free - g * fc * s) / (1.0 + g * fv)
+        return fc * s + fv * v
+    if kind == forces.STRIBECK:
+        fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
+        if _stick_or_slip(s_free, g, fs):
+            return s_free / g
+        s = 1.0 if s_free > 0 else -1.0
+        v = s_free
+        level = fs
+        for _ in range(forces.MAX_ITERATIONS):
+            level = fc + (fs - fc) * math.exp(-((abs(v) / vs) ** delta))
+            v_new = (s_free - g * level * s) / (1.0 + g * fv)
+            if v_new * s <= 0.0:
+                return s_free / g
+            done = abs(v_new - v) <= forces.TOLERANCE * (abs(v_new) + vs)
+            v = v_new
+            if done:
+                break
+        return level * s + fv * v
+    if kind == forces.LUGRE:
+        sigma0, sigma1, sigma2, fc, fs, vs = p[0], p[1], p[2], p[3], p[4], p[5]
+        z = state[i]
+        v = s_free
+        a = 1.0
+        f0 = f1 = 0.0
+        for _ in range(forces.MAX_ITERATIONS):
+            level = fc + (fs - fc) * math.exp(-((v / vs) ** 2))
+            a = 1.0 / (1.0 + h * sigma0 * abs(v) / level)
+            f0 = (sigma0 + sigma1 / h) * a * z - sigma1 * z / h
+            f1 = (sigma0 * h + sigma1) * a + sigma2
+            v_new = (s_free - g * f0) / (1.0 + g * f1)
+            done = abs(v_new - v) <= forces.TOLERANCE * (abs(v_new) + vs)
+            v = v_new
+            if done:
+                break
+        state[i] = a * (z + h * v)
+        return f0 + f1 * v
+    # CUBIC
+    mid = 0.5 * (s_now + s_free)
+    return p[0] * mid * mid * mid
 
 
 @njit(cache=True, nogil=True)

@@ -1,0 +1,219 @@
+"""Mechanical plants with nonlinear forces against independent reference solutions.
+
+References are computed with scipy's solve_ivp at tight tolerances (rtol 1e-12 or better), with the
+same zero-order-hold input (the force is constant over each sample interval, so each interval is
+integrated separately) and, for Coulomb friction, with event location at v = 0 and an explicit
+stick/slip decision. They are accurate far below the tolerances asserted here, so the measured
+differences are the simulator's discretisation error. The tolerances follow from the order of the
+method (nlsid.models.forces): first order at stick/slip transitions, second order for a smooth
+position-dependent force. Each test also checks that order by refining the sub-step 4x.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from nlsid.io.run import Run
+from nlsid.models import forces
+from nlsid.models.from_config import Force, Plant
+from nlsid.models.mechanical import mass_spring_damper
+from nlsid.simulate.engine import simulate_run
+
+
+def force_element(kind, params, mech, signal="velocity"):
+    p = np.zeros(forces.MAX_PARAMS)
+    p[: len(params)] = params
+    rows = mech.velocity_rows if signal == "velocity" else mech.position_rows
+    return Force(kind, p, mech.force_columns["mass"], rows["mass"])
+
+
+def simulate(mech, elements, u, fs, substeps, output_mech=None):
+    run = Run("r", fs, "arbitrary", np.asarray(u, dtype=float))
+    ss = (output_mech or mech).ss
+    return simulate_run(Plant(ss, mech.x0, elements), None, run, substeps).y
+
+
+def coulomb_reference(m, c, k, fc, force, fs):
+    """Sampled (x, v) of m x'' + c x' + k x = F - fc sign(x'), F held per sample, from rest."""
+    x, v = 0.0, 0.0
+    xs, vs = np.empty(len(force)), np.empty(len(force))
+    for i, F in enumerate(force):
+        xs[i], vs[i] = x, v
+        t, t_end = 0.0, 1.0 / fs
+        while t < t_end:
+            if v == 0.0:
+                net = F - k * x
+                if abs(net) <= fc:
+                    break  # stuck: the net force stays constant until the next sample
+                s = math.copysign(1.0, net)
+            else:
+                s = math.copysign(1.0, v)
+
+            def rhs(_, z, s=s, F=F):
+                return [z[1], (F - c * z[1] - k * z[0] - fc * s) / m]
+
+            def stops(_, z, s=s):
+                return z[1] * s
+
+            stops.terminal, stops.direction = True, -1
+            sol = solve_ivp(rhs, (t, t_end), [x, v], method="DOP853", rtol=1e-13, atol=1e-16, events=stops)
+            if sol.status == 1:
+                t = sol.t_events[0][0]
+                x, v = sol.y_events[0][0][0], 0.0
+            else:
+                t, x, v = t_end, sol.y[0, -1], sol.y[1, -1]
+    return xs, vs
+
+
+def test_coulomb_mass_under_a_sine_matches_event_based_reference():
+    # m = 1, c = 2, k = 400 (20 rad/s), fc = 0.5 N, force 1.5 sin(2 pi t): stick-slip twice a period.
+    m, c, k, fc, fs = 1.0, 2.0, 400.0, 0.5, 1000.0
+    u = 1.5 * np.sin(2 * np.pi * np.arange(2000) / 1000)
+    x_ref, v_ref = coulomb_reference(m, c, k, fc, u, fs)
+    assert np.sum(v_ref == 0.0) > 200  # the reference does stick for part of each period
+    pos = mass_spring_damper(m, c, k, 1.0, "position")
+    vel = mass_spring_damper(m, c, k, 1.0, "velocity")
+    coulomb = [force_element(forces.COULOMB, [fc, 0.0], pos)]
+    errors = {}
+    for substeps in (4, 16):
+        h = 1.0 / (fs * substeps)
+        x = simulate(pos, coulomb, u, fs, substeps)
+        v = simulate(pos, coulomb, u, fs, substeps, output_mech=vel)
+        errors[substeps] = np.max(np.abs(x - x_ref))
+        # A stick/slip transition located within one sub-step h misplaces the friction force
+        # fc for at most h: velocity error <= (fc/m) h, position error <= (fc/m) h^2 per transition;
+        # 8 transitions in the record, each later damped. Bound with all 8 added up:
+        assert errors[substeps] <= 8 * (fc / m) * h**2
+        assert np.max(np.abs(v - v_ref)) <= 8 * (fc / m) * h
+    # At least first order: refining h by 4 divides the error by >= 4 (second order would be 16).
+    assert errors[4] / errors[16] >= 4
+
+
+def duffing_reference(A, fs, n, x0, v0):
+    """y'' + y' - 10 y + 100 y^3 = u, u = A cos(2 pi k / 1024) held per sample (book Eq. 5-12)."""
+    u = A * np.cos(2 * np.pi * np.arange(n) / 1024)
+    state = np.array([x0, v0])
+    out = np.empty(n)
+    for i, F in enumerate(u):
+        out[i] = state[0]
+        sol = solve_ivp(lambda _, s, F=F: [s[1], F - s[1] + 10 * s[0] - 100 * s[0] ** 3], (0, 1 / fs), state,
+                        method="DOP853", rtol=1e-12, atol=1e-14)
+        state = sol.y[:, -1]
+    return u, out
+
+
+def duffing(initial=(0.2, -0.2)):
+    # The book's Exercise 79: the unstable 1/(s^2 + s - 10) with the static feedback 100 y^3.
+    mech = mass_spring_damper(1.0, 1.0, -10.0, 1.0, "position", *initial)
+    return mech, [force_element(forces.CUBIC, [100.0], mech, "position")]
+
+
+DUFFING_FS = 1024 * 3.5 / (2 * np.pi)  # N = 1024 samples per period of 3.5 rad/s (book Ex 79)
+
+
+def test_duffing_matches_reference_with_second_order_convergence():
+    u, y_ref = duffing_reference(0.67, DUFFING_FS, 2048, 0.2, -0.2)
+    mech, cubic = duffing()
+    errors = {m: np.max(np.abs(simulate(mech, cubic, u, DUFFING_FS, m) - y_ref)) for m in (2, 8)}
+    # Second order in h for a smooth force held at its midpoint estimate: refining 4x divides the
+    # error by about 16; >= 10 leaves room for the higher-order terms.
+    assert errors[2] / errors[8] >= 10
+    # Absolute level: the local error is about h^3 |d^2 F/dt^2| / 12 with |F''| <= 100 * 6 |y||y'|^2
+    # + 300 y^2 |y''|; with |y| < 0.5, |y'| < 1, |y''| < 10 that is < 1e3, accumulated over
+    # 2048 * 8 sub-steps of an orbit that does not amplify errors (period-1 attractor): bound 1e-6.
+    assert errors[8] < 1e-6
+
+
+def output_lines(y: np.ndarray, periods: int) -> np.ndarray:
+    spectrum = np.abs(np.fft.rfft(y[-periods * 1024:]))
+    return spectrum / spectrum[8]
+
+
+@pytest.mark.parametrize("A, subharmonic", [(0.67, False), (0.81, True)])
+def test_duffing_regimes_of_exercise_79(A, subharmonic):
+    # Book Ex 79.a (digest 5.2): 100 periods, analyse the last 8 (input on line 8). A = 0.67 is
+    # period 1 (lines 0, 8, 16, ... only); A = 0.81 doubles the period (adds lines 4, 12, 20, ...).
+    mech, cubic = duffing()
+    u = A * np.cos(2 * np.pi * np.arange(100 * 1024) / 1024)
+    lines = output_lines(simulate(mech, cubic, u, DUFFING_FS, 4), 8)
+    if subharmonic:
+        # A period-doubled orbit puts a clear line at 4: more than 1% of the fundamental.
+        assert lines[4] > 1e-2 and lines[12] > 1e-3
+    else:
+        # Period 1: lines other than multiples of 8 hold only leakage of the decayed transient
+        # (decay e^{-t/2}: after 92 periods of 1.8 s it is below 1e-30) and rounding.
+        assert np.max(np.delete(lines[:200], np.arange(0, 200, 8))) < 1e-8
+
+
+LUGRE = dict(sigma0=1e5, sigma1=300.0, sigma2=0.0, fc=1.0, fs=1.5, vs=1e-3)
+
+
+def lugre_reference(F, m, t):
+    """A free mass pushed by a constant force F against LuGre friction, from rest (stiff ODE)."""
+    p = LUGRE
+
+    def rhs(_, s):
+        x, v, z = s
+        level = p["fc"] + (p["fs"] - p["fc"]) * math.exp(-((v / p["vs"]) ** 2))
+        dz = v - p["sigma0"] * abs(v) * z / level
+        return [v, (F - p["sigma0"] * z - p["sigma1"] * dz - p["sigma2"] * v) / m, dz]
+
+    return solve_ivp(rhs, (0, t[-1]), [0.0, 0.0, 0.0], t_eval=t, method="LSODA", rtol=1e-11, atol=1e-16).y[0]
+
+
+def lugre_element(mech):
+    p = LUGRE
+    return [force_element(forces.LUGRE, [p["sigma0"], p["sigma1"], p["sigma2"], p["fc"], p["fs"], p["vs"]], mech)]
+
+
+def test_lugre_presliding_matches_reference_and_does_not_creep():
+    # F = 0.5 N < fc: the bristles deflect and the mass stops (presliding); no steady sliding.
+    fs, n, F = 1000.0, 1000, 0.5
+    t = np.arange(n) / fs
+    x_ref = lugre_reference(F, 1.0, t)
+    mech = mass_spring_damper(1.0, 0.0, 0.0, 1.0, "position")
+    errors = {}
+    for m in (16, 64):
+        x = simulate(mech, lugre_element(mech), np.full(n, F), fs, m)
+        errors[m] = np.max(np.abs(x - x_ref)) / np.max(np.abs(x_ref))
+        # Standstill is held: the presliding oscillation (316 rad/s, damping ratio 0.47) has decayed
+        # by e^{-148 * 0.5} ~ 1e-32 after 0.5 s, so the last 0.5 s may move by rounding only
+        # (an explicit bristle update would creep at about g F^2 / s ~ 1e-6 m/s here).
+        assert abs(x[-1] - x[-500]) < 1e-15
+    # First order (the stick/slip-like start of the motion): error ratio about 4 for 4x finer h.
+    assert 2.5 <= errors[16] / errors[64] <= 6
+    # Relative error ~ h / (time scale of the bristle mode, 1/316 s): at h = 1/64 ms about 0.5%.
+    assert errors[64] < 5e-3
+
+
+def test_lugre_steady_sliding_force_is_the_stribeck_curve():
+    # Steady sliding: z' = 0 gives sigma0 z = s(v), so F_friction = s(v) + sigma2 v. With viscous
+    # damping c on the mass and a constant push F, the steady velocity solves F = c v + s(v).
+    from scipy.optimize import brentq
+
+    p, c, F = LUGRE, 200.0, 1.6
+    v_star = brentq(lambda v: c * v + p["fc"] + (p["fs"] - p["fc"]) * math.exp(-((v / p["vs"]) ** 2)) - F, 1e-9, 1.0)
+    vel = mass_spring_damper(1.0, c, 0.0, 1.0, "velocity")
+    v = simulate(vel, lugre_element(vel), np.full(2000, F), 1000.0, 8)
+    # At the fixed point of the implicit step z = s(v)/sigma0 exactly; the level s is evaluated at
+    # the end-of-sub-step velocity, which is the steady velocity itself: agreement to rounding,
+    # after the transient (time constant m/c = 5 ms, 2 s simulated).
+    assert v[-1] == pytest.approx(v_star, rel=1e-9)
+
+
+def test_stribeck_breaks_away_at_the_static_level():
+    # A held force ramp F_k = 0.002 k + 0.0005 N on a free mass: the mass stays at rest until the
+    # force exceeds fs = 1.5 N, first on the interval starting at k = 750 (F = 1.5005 N), so the
+    # velocity, read at the start of each interval, is first nonzero at k = 751.
+    fs = 1000.0
+    k = np.arange(1500)
+    mech = mass_spring_damper(1.0, 0.0, 0.0, 1.0, "velocity")
+    stribeck = [force_element(forces.STRIBECK, [1.0, 1.5, 1e-3, 2.0, 0.0], mech)]
+    v = simulate(mech, stribeck, 0.002 * k + 0.0005, fs, 8)
+    moving = np.flatnonzero(v != 0.0)
+    assert moving[0] == 751
+    # Just after break-away the force (1.5 N) exceeds the sliding level (-> fc = 1 N): the mass
+    # accelerates at about (F - s(v)) / m >= 0.5 m/s^2, so it never sticks again.
+    assert np.all(v[moving[0]:] > 0)
