@@ -28,8 +28,10 @@ from nlsid.models.lti import StateSpace, from_transfer_function
 
 def pid(kp: float, ki: float, kd: float, tau: float) -> StateSpace:
     """The continuous PID of the module docstring as a state-space model."""
-    if kd > 0:
+    if kd > 0 and ki > 0:
         num, den = [kp * tau + kd, kp + ki * tau, ki], [tau, 1.0, 0.0]
+    elif kd > 0:  # PD: the common factor s of the PID form cancels (no integrator state)
+        num, den = [kp * tau + kd, kp], [tau, 1.0]
     elif ki > 0:
         num, den = [kp, ki], [1.0, 0.0]
     else:
