@@ -133,5 +133,9 @@ def test_bad_input_is_reported():
     with pytest.raises(InputError, match="1 repeat; the variance over repeats"):
         measured_hosidf([good], harmonics=3, variance="repeats", source="rec.h5")
     measured_hosidf([good], harmonics=3, variance="periods")  # two periods suffice for this one
+    no_level = sine_run("nolevel", 3, 1.0, two_branch)
+    no_level.level = None
+    with pytest.raises(InputError, match="missing attribute 'level'"):
+        measured_hosidf([no_level], harmonics=3, variance="periods")
     with pytest.raises(InputError, match="Nyquist"):
         measured_hosidf([sine_run("hi", 40, 1.0, two_branch)] * 2, harmonics=3)

@@ -99,13 +99,15 @@ def run_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str =
             f"harmonic {harmonics} of bin {line} ({run.frequency:g} Hz) lies at or above Nyquist of the "
             f"{run.period}-sample period; use at most {top} harmonics",
         )
+    if run.level is None:
+        raise InputError(where, "missing attribute 'level' (the amplitude of the sine)")
     if getattr(run, input_signal) is None:
         raise InputError(where, f"run has no input signal '{input_signal}'")
     u1 = harmonic_phasors(run.periods(input_signal), line, 1)[:, 1]
     if np.any(np.abs(u1) == 0):
         raise InputError(where, f"input '{input_signal}' has no content at {run.frequency:g} Hz")
     y = harmonic_phasors(run.periods("y"), line, harmonics)
-    return RunSpectra(run.run_id, line, float(run.frequency), float(run.level or abs(u1).mean()), u1, y)
+    return RunSpectra(run.run_id, line, float(run.frequency), float(run.level), u1, y)
 
 
 @dataclass
@@ -226,12 +228,12 @@ class HOSIDFGrid:
         return out
 
     def stat(self, name: str) -> np.ndarray:
-        """Stack a Table I field (``mean``, ``var_mean``, ``bound``, ``significant``, ...) likewise."""
-        shape = (self.frequencies.size, self.levels.size)
+        """Stack a Table I field (``mean``, ``var_mean``, ``avg_var``, ``bound``, ``significant``...) likewise."""
         values = {key: np.asarray(getattr(cell.stats, name)) for key, cell in self.cells.items()}
         sample = next(iter(values.values()))
-        fill = False if sample.dtype == bool else np.nan
-        out = np.full(shape + sample.shape, fill, dtype=sample.dtype if sample.dtype == bool else np.result_type(sample, float))
+        dtype = bool if sample.dtype == bool else np.result_type(sample, float)
+        out = np.full((self.frequencies.size, self.levels.size) + sample.shape, dtype(0) if dtype is bool else np.nan,
+                      dtype=dtype)
         for key, value in values.items():
             out[key] = value
         return out
