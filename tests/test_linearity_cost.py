@@ -104,3 +104,35 @@ def test_bad_sweeps_are_reported():
     runs[1].level = 2 * GAMMA
     with pytest.raises(InputError, match="one sine"):
         sweep(runs, "K_fc", harmonics=5, reference="r", source="rec.h5")
+
+
+@pytest.mark.parametrize("damping", [5.0, 0.0])
+def test_pipeline_with_project_simulator(run_cli, tmp_path, damping):
+    """design -> simulate (the project's closed loop, K_fc swept) -> hosidf --sweep: seed 003's claim.
+
+    Same loop and grid as above (F_c = 0.93, PD 1e4/100 with a 0.5 ms derivative filter, sine of
+    10 mm at 1 Hz). Frequency optimum within 5 % of F_c; with damping the time optimum lies in
+    (1.05 F_c, F_c + c GAMMA w pi/4 + one step] (see the first test), without it the two coincide.
+    """
+    (tmp_path / "design.yaml").write_text(
+        f"fs: {FS}\nseed: 1\nsines:\n  period: {N}\n  frequencies: [{F0}]\n  amplitudes: [{GAMMA}]\n"
+        "  repeats: 1\n  periods: 3\n  transient_periods: 2\n")
+    (tmp_path / "stage.yaml").write_text(
+        f"model:\n  type: mass_spring_damper\n  mass: 1.0\n  damping: {damping}\n"
+        f"  nonlinearities:\n    - {{type: coulomb, fc: {FC}}}\n"
+        "closed_loop:\n  controller: {type: pid, kp: 10000.0, kd: 100.0, tau: 0.0005}\n"
+        "disturbances: {y_noise: 1.0e-7, seed: 3}\n"
+        "sweep:\n  parameter: closed_loop.feedforward.coulomb\n  name: K_fc\n"
+        f"  linspace: {{start: 0.0, stop: 1.6, num: {KFC.size}}}\n")
+    for args in (("design", tmp_path / "design.yaml", "-o", tmp_path / "exc.h5"),
+                 ("simulate", tmp_path / "stage.yaml", "--excitation", tmp_path / "exc.h5", "-o", tmp_path / "rec.h5",
+                  "--workers", 1)):
+        assert run_cli(*args).exit_code == 0
+    result = run_cli("hosidf", tmp_path / "rec.h5", "-o", tmp_path / "s.h5", "--sweep", "K_fc", "--harmonics", 9, "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()["sweep"]
+    assert abs(summary["optimum"] - FC) <= 0.05 * FC
+    if damping:
+        assert FC * 1.05 < summary["time_optimum"] <= FC + damping * GAMMA * 2 * np.pi * F0 * np.pi / 4 + 0.04
+    else:
+        assert summary["time_optimum"] == summary["optimum"]
