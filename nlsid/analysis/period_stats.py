@@ -35,30 +35,49 @@ class PeriodStats:
     u_rms: float = float("nan")
 
 
-def _mean_and_deviation(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    mean = x.mean(axis=0)
-    return mean, x - mean
+#: Periods transformed at once: about 2 MB of spectra per signal, so the products of a block are
+#: taken while it is still in cache (the whole run's spectra would be 2x its samples in memory).
+_BLOCK_BYTES = 1 << 21
+
+
+def _real_products(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``sum_p Re(a_p conj(b_p))`` per column of complex (P, K) arrays, on their contiguous real views."""
+    pairs = np.einsum("pk,pk->k", a.view(np.float64), b.view(np.float64))
+    return pairs[0::2] + pairs[1::2]
+
+
+def _cross_products(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``sum_p a_p conj(b_p)`` per column of complex (P, K) arrays (no conjugate copies)."""
+    imag = np.einsum("pk,pk->k", a.imag, b.real) - np.einsum("pk,pk->k", a.real, b.imag)
+    return _real_products(a, b) + 1j * imag
 
 
 def period_stats(u_periods: np.ndarray, y_periods: np.ndarray, r_periods: np.ndarray | None = None) -> PeriodStats:
-    """Statistics (6-12)/(6-48) of (P, N) arrays of steady-state periods of u and y (and r)."""
-    n_periods = u_periods.shape[0]
-    U_mean, dU = _mean_and_deviation(spectra(u_periods))
-    Y_mean, dY = _mean_and_deviation(spectra(y_periods))
+    """Statistics (6-12)/(6-48) of (P, N) arrays of steady-state periods of u and y (and r).
+
+    The mean over periods commutes with the DFT, so it is taken in the time domain and the
+    deviations from it are transformed block by block: no (P, N) complex arrays are kept.
+    """
+    n_periods, n = u_periods.shape
+    u_mean, y_mean = u_periods.mean(axis=0), y_periods.mean(axis=0)
+    n_lines = n // 2 + 1
+    var_u, var_y, cov_yu = np.zeros(n_lines), np.zeros(n_lines), np.zeros(n_lines, complex)
+    rows = max(1, _BLOCK_BYTES // (16 * n_lines))
+    for start in range(0, n_periods, rows):
+        dU = np.fft.rfft(u_periods[start:start + rows] - u_mean, axis=-1)
+        dY = np.fft.rfft(y_periods[start:start + rows] - y_mean, axis=-1)
+        var_u += _real_products(dU, dU)
+        var_y += _real_products(dY, dY)
+        cov_yu += _cross_products(dY, dU)
     if n_periods > 1:
-        scale = 1.0 / (n_periods * (n_periods - 1))
-        var_u = np.einsum("pk,pk->k", dU.real, dU.real) + np.einsum("pk,pk->k", dU.imag, dU.imag)
-        var_y = np.einsum("pk,pk->k", dY.real, dY.real) + np.einsum("pk,pk->k", dY.imag, dY.imag)
-        cov_yu = np.einsum("pk,pk->k", dY, dU.conj())
+        scale = 1.0 / (n_periods * (n_periods - 1) * n * n)
         var_u, var_y, cov_yu = var_u * scale, var_y * scale, cov_yu * scale
     else:
-        var_u = np.full(U_mean.shape, np.nan)
-        var_y = np.full(U_mean.shape, np.nan)
-        cov_yu = np.full(U_mean.shape, np.nan, dtype=complex)
-    R_mean = None if r_periods is None else spectra(r_periods).mean(axis=0)
+        var_u, var_y, cov_yu = var_u * np.nan, var_y * np.nan, cov_yu * np.nan
+    R_mean = None if r_periods is None else spectra(r_periods.mean(axis=0))
     flat = u_periods.reshape(-1)
     u_rms = float(np.sqrt(np.dot(flat, flat) / flat.size))
-    return PeriodStats(n_periods, U_mean, Y_mean, var_u, var_y, cov_yu, R_mean, u_rms)
+    return PeriodStats(n_periods, spectra(u_mean), spectra(y_mean), var_u, var_y, cov_yu, R_mean, u_rms)
 
 
 def run_period_stats(run: Run, use_reference: bool) -> PeriodStats:
