@@ -15,8 +15,10 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
+from nlsid.errors import InputError
+from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
 
 Positive = Annotated[float, Field(gt=0)]
@@ -297,15 +299,13 @@ class SweepConfig(StrictModel):
 
     parameter: str = Field(min_length=1)
     name: Optional[str] = None
-    values: Optional[list[float]] = None
+    values: Optional[list[float]] = Field(default=None, min_length=1)
     linspace: Optional[LinspaceConfig] = None
 
     @model_validator(mode="after")
     def _one_source(self):
         if (self.values is None) == (self.linspace is None):
             raise ValueError("give exactly one of 'values' or 'linspace'")
-        if self.values is not None and not self.values:
-            raise ValueError("values: the sweep has no values")
         return self
 
 
@@ -321,3 +321,38 @@ class SimulateConfig(StrictModel):
     disturbances: DisturbancesConfig = DisturbancesConfig()
     sweep: Optional[SweepConfig] = None
     simulation: SimulationConfig = SimulationConfig()
+
+
+def _untagged(loc: tuple, data) -> tuple:
+    """The error location without the discriminator values pydantic inserts (``model.lpl.branches``
+    -> ``model.branches``): a part that is not a key of the mapping at hand but its ``type`` is dropped."""
+    out, node = [], data
+    for part in loc:
+        if isinstance(node, dict) and part not in node and node.get("type") == part:
+            continue
+        out.append(part)
+        if isinstance(node, dict):
+            node = node.get(part)
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            node = node[part]
+        else:
+            node = None
+    return tuple(out)
+
+
+def validate_simulate_config(data, path, lines: dict) -> SimulateConfig:
+    """Validate a loaded model config; errors name the file, line and key path without union tags.
+
+    (:func:`nlsid.io.config.validate` keeps pydantic's discriminator values in the key path and
+    so misses the line of keys inside a ``type``-tagged block.)
+    """
+    try:
+        return SimulateConfig.model_validate(data if data is not None else {})
+    except ValidationError as exc:
+        errors = exc.errors()
+        key_path = _untagged(errors[0]["loc"], data)
+        line = config_loader._line_of(lines, key_path)
+        where = f"{path}:{line}" if line is not None else str(path)
+        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+        raise InputError(where, f"{config_loader._dotted(key_path) or 'top level'}: "
+                                f"{config_loader._message(errors[0])}{more}") from None

@@ -12,6 +12,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
+from nlsid.errors import InputError
 from nlsid.io.run import Run
 from nlsid.models import from_config
 from nlsid.simulate.engine import simulate_run
@@ -31,20 +32,33 @@ def _levels(point: SweepPoint) -> NoiseLevels:
     return NoiseLevels(d.u_noise, d.y_noise, d.process_noise)
 
 
+def _build(point: SweepPoint):
+    try:
+        return from_config.model(point.config), from_config.closed_loop(point.config)
+    except InputError as exc:
+        raise point.locate(exc) from None
+
+
 def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = None, workers: int | None = None,
                  step: Callable[[], None] | None = None) -> list[Run]:
     """Simulate each excitation run for each sweep point; ``seed`` overrides the config's seed."""
-    models = [(from_config.model(p.config), from_config.closed_loop(p.config)) for p in points]
+    models = [_build(p) for p in points]
     jobs = [(run, i * len(points) + j, j) for i, run in enumerate(runs) for j in range(len(points))]
     levels = [_levels(p) for p in points]
-    streams = [run_streams(p.config.disturbances.seed if seed is None else seed, levels[j], len(jobs))
-               for j, p in enumerate(points)]
+    try:
+        streams = [run_streams(p.config.disturbances.seed if seed is None else seed, levels[j], len(jobs))
+                   for j, p in enumerate(points)]
+    except InputError as exc:
+        raise points[0].locate(exc) from None
 
     def one(job) -> Run:
         run, index, j = job
         model, loop = models[j]
         noise = draw(levels[j], streams[j][index], run.n_samples)
-        out = simulate_run(model, loop, run, points[j].config.simulation.substeps, noise)
+        try:
+            out = simulate_run(model, loop, run, points[j].config.simulation.substeps, noise)
+        except InputError as exc:
+            raise points[j].locate(exc) from None
         out = dataclasses.replace(out, run_id=run_id(run.run_id, j, len(points)), params={**run.params, **points[j].params})
         if step is not None:
             step()

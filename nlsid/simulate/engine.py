@@ -66,7 +66,7 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
 
 def _check_finite(y: np.ndarray, run_id: str) -> None:
     if not np.all(np.isfinite(y)) or np.max(np.abs(y)) > 1e150:
-        raise InputError(run_id, "the simulation diverged (unstable model or loop?)")
+        raise InputError("model", f"run {run_id}: the simulation diverged (an unstable model or loop?)")
 
 
 def closed_loop_poles(plant: Plant, controller: StateSpace, fs: float, delay: int) -> np.ndarray:

@@ -10,37 +10,60 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.config import load_yaml, validate
-from nlsid.io.model_config import SimulateConfig
+from nlsid.io.config import load_yaml
+from nlsid.io.model_config import SimulateConfig, validate_simulate_config
 
 _PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
 
 
 @dataclass(frozen=True)
 class SweepPoint:
-    """One configuration to simulate and the parameters it adds to each run's ``params``."""
+    """One configuration to simulate and the parameters it adds to each run's ``params``.
+
+    ``source`` (the file) and ``lines`` (key path -> line) let errors found while building or
+    running the model name the file, line and key like the config loader does.
+    """
 
     params: dict
     config: SimulateConfig
+    source: str = ""
+    lines: dict = field(default_factory=dict)
+
+    def locate(self, error: InputError) -> InputError:
+        """Re-address an error whose ``where`` is a config key (``closed_loop.controller``) to the file."""
+        keys = _keys(error.where)
+        if not self.source or keys is None or keys[0] not in SimulateConfig.model_fields:
+            return error
+        line = next((self.lines[keys[:end]] for end in range(len(keys), 0, -1) if keys[:end] in self.lines), None)
+        where = f"{self.source}:{line}" if line is not None else self.source
+        return InputError(where, f"{error.where}: {error.what}")
 
 
-def _set(data: dict, path: str, value: float) -> None:
+def _keys(path: str) -> tuple | None:
+    """``a.b[2].c`` -> ("a", "b", 2, "c"); None when ``path`` is not a dotted key path."""
     keys: list = []
     for part in path.split("."):
         match = _PART.fullmatch(part)
         if match is None:
-            raise InputError("sweep.parameter", f"expected a dotted key path such as closed_loop.feedforward.coulomb, got {path!r}")
+            return None
         keys.append(match.group(1))
         keys.extend(int(i) for i in re.findall(r"\[(\d+)\]", match.group(2)))
+    return tuple(keys)
+
+
+def _set(data: dict, path: str, value: float) -> None:
+    keys = _keys(path)
+    if keys is None:
+        raise InputError("sweep.parameter", f"expected a dotted key path such as closed_loop.feedforward.coulomb, got {path!r}")
     if keys[0] == "sweep":
         raise InputError("sweep.parameter", "a sweep cannot sweep itself")
     node = data
-    for depth, key in enumerate(keys[:-1]):
+    for key in keys[:-1]:
         if isinstance(key, int):
             if not isinstance(node, list) or key >= len(node):
                 raise InputError("sweep.parameter", f"{path}: no item [{key}] in the config")
@@ -65,16 +88,19 @@ def sweep_values(config: SimulateConfig) -> np.ndarray:
 def load_points(path: str | os.PathLike) -> list[SweepPoint]:
     """The configs to simulate: the file itself, or one per value of its sweep."""
     data, lines = load_yaml(path)
-    config = validate(data, SimulateConfig, path, lines)
+    config = validate_simulate_config(data, path, lines)
     if config.sweep is None:
-        return [SweepPoint({}, config)]
+        return [SweepPoint({}, config, str(path), lines)]
     name = config.sweep.name or config.sweep.parameter
     points = []
     for value in sweep_values(config):
         copy = _deep_copy(data)
-        _set(copy, config.sweep.parameter, float(value))
         try:
-            points.append(SweepPoint({name: float(value)}, validate(copy, SimulateConfig, path, lines)))
+            _set(copy, config.sweep.parameter, float(value))
+        except InputError as exc:
+            raise SweepPoint({}, config, str(path), lines).locate(exc) from None
+        try:
+            points.append(SweepPoint({name: float(value)}, validate_simulate_config(copy, path, lines), str(path), lines))
         except InputError as exc:
             raise InputError(exc.where, f"sweep value {value:g}: {exc.what}") from None
     return points
