@@ -239,3 +239,13 @@ def test_levels_are_grouped_and_sorted():
     # Bussgang with the O(1/F) term for 1 + 0.1 u^3: G = 1 + 0.3 s^2 (1 - 1/(2F)), grows with level.
     means = [float(np.mean(lvl.robust.G.real)) for lvl in levels]
     assert means[1] > means[0]
+
+
+def test_excited_bin_without_input_is_an_input_error():
+    rng = np.random.default_rng(13)
+    bins = np.arange(3, 40, 2)
+    runs = runs_of_level(2, 256, bins, 1.0, lambda u: u, 2, rng)
+    for run in runs:
+        run.excited_bins = np.append(bins, 41)
+    with pytest.raises(InputError, match="excited bin 41 carries no input"):
+        analyse(runs)

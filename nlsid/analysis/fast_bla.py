@@ -179,7 +179,7 @@ class FastAccumulator:
         for name in self._SUMMED:
             value = getattr(run, name)
             if value is not None:
-                self._sums[name] = self._sums.get(name, 0) + np.asarray(value, dtype=float if value.dtype == bool else None)
+                self._sums[name] = self._sums.get(name, 0) + value.astype(complex if np.iscomplexobj(value) else float)
         for key, value in run.bias_checks.items():
             self._checks[key] = self._checks.get(key, 0.0) + 10 ** (value / 10)
 

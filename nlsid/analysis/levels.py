@@ -114,7 +114,8 @@ class _LevelAccumulator:
         U = np.abs(stats.U[self.lines.excited])
         if np.any(U <= 1e-12 * U.max()) or (self.use_reference and np.any(stats.R[self.lines.excited] == 0)):
             bad = int(self.lines.excited[np.argmin(U)])
-            raise InputError(f"{where}/u", f"excited bin {bad} carries no input; excited_bins does not match the signal")
+            raise InputError(f"{where}/u", f"excited bin {bad} carries no input; "
+                                           "excited_bins does not match the signal")
         self.run_ids.append(run.run_id)
         self.rms2 += stats.u_rms**2
         self.robust.add(stats)
@@ -207,7 +208,8 @@ def across_levels(levels: list[LevelResult]) -> dict:
     rows = []
     for level in levels:
         row = {key: value for key, value in level.summary().items() if key not in ("spectrum", "warnings")}
-        if np.array_equal(level.lines.excited, reference.lines.excited) and level.lines.period == reference.lines.period:
+        same_lines = level.lines.period == reference.lines.period
+        if same_lines and np.array_equal(level.lines.excited, reference.lines.excited):
             change = 20 * np.log10(np.abs(level.robust.G) / np.abs(reference.robust.G))
             row["bla_change_mean_db"] = float(np.mean(change))
             row["bla_change_max_db"] = float(change[np.argmax(np.abs(change))])
