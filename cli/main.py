@@ -12,6 +12,7 @@ from nlsid.errors import NlsidError
 from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
+from .import_ import import_
 from .hosidf import hosidf
 from .info import info
 from .pending import PENDING_COMMANDS
@@ -29,7 +30,7 @@ class NlsidGroup(click.Group):
             ctx.exit(exc.exit_code)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        order = ["design", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "info"]
+        order = ["design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "info"]
         return [name for name in order if name in self.commands] + sorted(set(self.commands) - set(order))
 
 
@@ -60,6 +61,7 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 
 cli.add_command(design)
+cli.add_command(import_)
 cli.add_command(hosidf)
 cli.add_command(bla)
 cli.add_command(info)

@@ -390,6 +390,8 @@ def infer_excitation(x: np.ndarray, fs: float, period: int | None = None, split:
         result.notes.append("the input is constant or too short to show any excitation")
         return result
     found = period
+    if period is not None and not _local_best(x, period, result):
+        return result
     if found is None:
         fit = fit_sine(x, fs)
         if fit.power_fraction >= SINE_POWER_FRACTION:
@@ -424,6 +426,20 @@ def _sine_on_bin(x: np.ndarray, fit: SineFit, fs: float, result: Inference) -> i
     else:
         result.measures["sine_on_bin"] = True
     return n_period
+
+
+def _local_best(x: np.ndarray, period: int, result: Inference) -> bool:
+    """A given period must repeat the input at least as well as its neighbours ``period +- 1``."""
+    if 2 * period > x.size:
+        result.notes.append(f"the record of {x.size} samples holds fewer than two periods of {period} samples")
+        return False
+    residual = repeat_residual(x, period)
+    better = [lag for lag in (period - 1, period + 1) if 2 <= lag and 2 * lag <= x.size
+              and repeat_residual(x, lag) < residual]
+    if better:
+        result.notes.append(f"not periodic with the given period of {period} samples: a lag of {better[0]} "
+                            "samples repeats the input better")
+    return not better
 
 
 def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> None:

@@ -1,0 +1,94 @@
+"""``nlsid import``: bring your own data (CSV, MATLAB, HDF5, MCAP) into the recording format."""
+
+from __future__ import annotations
+
+import click
+
+from .common import emit_json, force_option, json_option, settings
+
+
+@click.command("import")
+@click.argument("source", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Recording to write (.h5 or .mcap).")
+@click.option("--u", "u", metavar="NAME", help="Input: CSV column (header or number from 1), MAT variable (struct.field), "
+                                                "HDF5 dataset path, or MCAP /topic:field. Default: u.")
+@click.option("--y", "y", metavar="NAME", help="Measured output, named like --u. Default: y, if the file has it.")
+@click.option("--r", "r", metavar="NAME", help="Reference of a closed loop, named like --u. Default: r, if the file has it.")
+@click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5); fs is derived and checked uniform.")
+@click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors and MCAP log times).")
+@click.option("--period", type=click.IntRange(min=2), help="Samples per period (skips the period search; must fit the data).")
+@click.option("--transient-periods", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Further periods to discard at the start of each realization (the output settling).")
+@click.option("--split-realizations/--no-split-realizations", "split", default=True, show_default=True,
+              help="Split back-to-back realizations into runs (else such a record is imported as arbitrary).")
+@click.option("--matrix", "layout", type=click.Choice(["realizations", "periods"]), default="realizations", show_default=True,
+              help="What the records of a matrix are: separate realizations, or consecutive periods of one.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "mat", "hdf5", "mcap"]), help="Source format (default: from the file).")
+@force_option
+@json_option
+def import_(source: str, output: str, u: str | None, y: str | None, r: str | None, time: str | None, fs: float | None,
+            period: int | None, transient_periods: int, split: bool, layout: str, fmt: str | None, force: bool,
+            as_json: bool) -> None:
+    """Import measured data from CSV/TSV, MATLAB .mat, plain HDF5 or foreign MCAP files.
+
+    When the file says nothing about the excitation, its period, lead-in, realizations, excited
+    lines and grid (or single-sine frequency) are inferred from the input (from r when given) and
+    reported with how sure they are; a record that is not periodic becomes one arbitrary run.
+    The provenance of the output records the source, its SHA-256, and what was inferred or overridden.
+
+    Examples:
+
+    \b
+      nlsid import scope.csv --u CH1 --y CH2 -o recording.h5
+      nlsid import old_toolbox.mat --u data.u --y data.y --fs 2048 -o recording.h5
+      nlsid import log.mcap --u /cmd:effort --y /joint_states:position -o recording.h5
+    """
+    from nlsid.io.atomic import check_writable
+    from nlsid.io.importers.convert import ImportOptions, import_file, provenance_record
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import write_recording
+
+    check_writable(output, force)
+    names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
+    options = ImportOptions(names=names, time=time, fs=fs, period=period, transient_periods=transient_periods,
+                            split=split, layout=layout, format=fmt)
+    imported = import_file(source, options)
+    record = provenance(input_paths=[source])
+    record["import"] = provenance_record(imported, options)
+    write_recording(output, imported.runs, provenance=record, force=force)
+    summary = {
+        "output": output, "source": source, "format": imported.source.format, "fs": imported.fs,
+        "fs_from": imported.fs_from, "signals": sorted(imported.source.arrays), "records": imported.records,
+        "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
+    }
+    if as_json:
+        emit_json(summary)
+    else:
+        _print(summary)
+
+
+def _print(summary: dict) -> None:
+    console = settings().console
+    console.print(f"{summary['source']} ({summary['format']}, fs = {summary['fs']:.9g} Hz from {summary['fs_from']}, "
+                  f"signals {', '.join(summary['signals'])}) -> {summary['output']}: {summary['runs']} run(s)")
+    for record in summary["records"]:
+        inf = record["inference"]
+        console.print(f"  {record['record']}: {_headline(inf)} (inferred from {record['inferred_from']})")
+        for note in inf["notes"]:
+            console.print(f"    - {note}")
+
+
+def _headline(inf: dict) -> str:
+    m = inf["measures"]
+    if inf["kind"] == "arbitrary":
+        return "arbitrary (no periodic excitation recognised)"
+    reals = inf["realizations"]
+    bins = reals[0]["excited_bins"]
+    text = (f"{inf['kind']} ({inf['grid']}), period {inf['period']} samples ({inf['frequency_resolution']:g} Hz), "
+            f"{len(reals)} realization(s) x {', '.join(str(r['periods']) for r in reals)} period(s)")
+    if inf["kind"] == "sine":
+        text += f", {inf['frequency']:.6g} Hz on bin {bins[0]}, amplitude {inf['level']:.4g}"
+    else:
+        text += f", {len(bins)} lines on bins {bins[0]}..{bins[-1]}"
+    return (text + f"; input SNR {m['input_snr_db']:.1f} dB, weakest line {m['weakest_excited_line_db']:.1f} dB "
+                   f"above its noise floor (threshold {m['line_threshold_db']:.1f} dB)")

@@ -1,0 +1,136 @@
+"""What every importer returns: named arrays from a foreign file, cut into records, with a sample rate.
+
+A foreign file gives, for each selected signal (u, y, r), a vector or a matrix. A matrix holds
+several records side by side; time runs along its longer axis (a 4096 x 4 matrix holds 4 records
+of 4096 samples, as does a 4 x 4096 one). ``layout="realizations"`` makes each record its own
+run(s); ``layout="periods"`` says the records are consecutive periods of one experiment, joined in
+order into one record whose period is their length.
+
+The sample rate comes from ``--fs`` or from a time vector (seconds, checked uniform by
+:func:`nlsid.io.timestamps.uniform_sampling`, i.e. every interval within 1e-3 of the median).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.timestamps import NS, uniform_sampling
+
+LAYOUTS = ("realizations", "periods")
+
+
+class NotFound(InputError):
+    """A named column, variable or dataset that the file does not hold (the message lists those it does)."""
+
+
+def pick(wanted: dict[str, str], optional: set[str], read: Callable[[str, str], np.ndarray]) -> dict[str, np.ndarray]:
+    """``read(key, name)`` for each wanted signal; optional ones the file does not hold are left out."""
+    out = {}
+    for key, name in wanted.items():
+        try:
+            out[key] = read(key, name)
+        except NotFound:
+            if key not in optional:
+                raise
+    return out
+
+
+@dataclass
+class Source:
+    """Arrays read from a foreign file: ``arrays`` by signal name, ``where`` names each one's origin."""
+
+    path: str
+    format: str
+    arrays: dict[str, np.ndarray]
+    where: dict[str, str]
+    fs: float | None = None
+    fs_from: str | None = None
+    time: np.ndarray | None = None
+    time_where: str | None = None
+    details: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Record:
+    """One continuous record of every selected signal, with its period when the layout gives it."""
+
+    name: str
+    signals: dict[str, np.ndarray]
+    period: int | None = None
+
+
+def source_from(path: Path, fmt: str, wanted: dict[str, str], values: dict[str, np.ndarray], details: dict) -> Source:
+    """A Source from the values read for ``wanted`` (signal or ``time`` -> name in the file)."""
+    label = {key: f"{path}:{wanted[key]}" for key in values}
+    signals = {key: value for key, value in values.items() if key != "time"}
+    return Source(path=str(path), format=fmt, arrays=signals, where={k: label[k] for k in signals},
+                  time=values.get("time"), time_where=label.get("time"), details=details)
+
+
+def as_matrix(value: np.ndarray, where: str) -> np.ndarray:
+    """A numeric vector or matrix as a (records, samples) float64 array."""
+    arr = np.asarray(value)
+    if arr.dtype.kind == "c":
+        raise InputError(where, "holds complex numbers; expected real samples")
+    if arr.dtype.kind not in "biuf":
+        raise InputError(where, f"expected numbers, got {arr.dtype} data")
+    arr = np.squeeze(arr)
+    if arr.ndim == 0 or arr.size < 2:
+        raise InputError(where, f"expected a vector or a matrix of samples, got {arr.size} value(s)")
+    if arr.ndim > 2:
+        raise InputError(where, f"expected a vector or a 2-D matrix, got shape {'x'.join(map(str, arr.shape))}")
+    arr = np.atleast_2d(arr.astype(np.float64))
+    if arr.shape[0] > arr.shape[1]:
+        arr = arr.T
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        raise InputError(where, f"{int(bad.sum())} NaN or Inf samples")
+    return np.ascontiguousarray(arr)
+
+
+def sample_rate(time: np.ndarray, where: str) -> float:
+    """The rate of a time vector in seconds, checked uniform."""
+    t = np.squeeze(np.asarray(time, dtype=np.float64))
+    if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
+        raise InputError(where, "expected a time vector of at least 2 finite values in seconds")
+    ticks = np.round((t - t[0]) * NS).astype(np.int64)
+    return uniform_sampling(ticks, np.ones(t.size, dtype=np.int64), where).fs
+
+
+def records_of(source: Source, layout: str) -> tuple[list[Record], float, str]:
+    """Cut the arrays into records; return them with the sample rate and where it came from."""
+    matrices = {name: as_matrix(arr, source.where[name]) for name, arr in source.arrays.items()}
+    shapes = {name: m.shape for name, m in matrices.items()}
+    if len(set(shapes.values())) > 1:
+        detail = ", ".join(f"{source.where[n]} is {s[1]} samples x {s[0]} record(s)" for n, s in shapes.items())
+        raise InputError(source.path, f"matrices of inconsistent size: {detail}")
+    n_records, n_samples = next(iter(shapes.values()))
+    fs, fs_from = _rate(source, n_samples, n_records, layout)
+    stem = _stem(source.path)
+    if layout == "periods":
+        joined = {name: m.reshape(-1) for name, m in matrices.items()}
+        return [Record(stem, joined, period=n_samples)], fs, fs_from
+    if n_records == 1:
+        return [Record(stem, {name: m[0] for name, m in matrices.items()})], fs, fs_from
+    return [Record(f"{stem}_c{c:02d}", {name: m[c] for name, m in matrices.items()}) for c in range(n_records)], fs, fs_from
+
+
+def _rate(source: Source, n_samples: int, n_records: int, layout: str) -> tuple[float, str]:
+    if source.fs is not None:
+        return source.fs, source.fs_from or "--fs"
+    if source.time is None:
+        raise InputError(source.path, "no sample rate: pass --fs HZ or --time NAME (a time vector in seconds)")
+    lengths = (n_samples, n_samples * n_records) if layout == "periods" else (n_samples,)
+    if np.squeeze(source.time).size not in lengths:
+        raise InputError(source.time_where, f"time vector has {np.squeeze(source.time).size} values, "
+                                            f"the signals {n_samples} samples per record")
+    return sample_rate(source.time, source.time_where), f"time vector {source.time_where}"
+
+
+def _stem(path: str) -> str:
+    return Path(path).stem or "record"
