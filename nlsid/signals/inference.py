@@ -9,7 +9,7 @@ four steps; every step states how sure it is.
      least squares (the maximum-likelihood frequency in white noise) is found by a bounded search
      around the periodogram peak. When it carries at least ``SINE_POWER_FRACTION`` of the AC power,
      its period is the smallest ``N`` with ``w = 2 pi k / N``: the simplest fraction ``k/N`` within
-     ``6`` standard deviations of ``w / 2 pi`` (Cramer-Rao bound of a real sine,
+     ``6`` standard deviations (or the search tolerance) of ``w / 2 pi`` (Cramer-Rao bound of a real sine,
      ``var(w) = 24 s^2 / (A^2 L (L^2 - 1))``, Kay 1993, Eq. 3.41), accepted only if the likelihood-ratio
      statistic ``(RSS(2 pi k/N) - RSS(w)) / s^2 ~ chi2(1)`` stays below its 0.999 quantile 10.83.
      A sine on no bin of a period that fits twice in the record is not periodic: ``arbitrary``.
@@ -196,6 +196,12 @@ def _sine_rss(x: np.ndarray, omega: float) -> tuple[float, np.ndarray]:
     return float(residual @ residual), coef
 
 
+def search_tolerance(n: int) -> float:
+    """Tolerance (rad/sample) of the frequency search: 1e-3 / n^2, far below the 4 / n^2 cycles that
+    separate two fractions k/N with N <= n/2, so it never hides which bin a sine sits on."""
+    return 1e-3 / n**2
+
+
 def fit_sine(x: np.ndarray, fs: float) -> SineFit:
     """Least-squares single sine (maximum likelihood in white noise) with its frequency uncertainty."""
     from scipy.optimize import minimize_scalar
@@ -208,7 +214,7 @@ def fit_sine(x: np.ndarray, fs: float) -> SineFit:
     step = 2 * np.pi / pad
     lo, hi = max(peak - 1, 1e-3) * step, min(peak + 1, pad / 2 - 1e-3) * step
     found = minimize_scalar(lambda w: _sine_rss(x, w)[0], bounds=(lo, hi), method="bounded",
-                            options={"xatol": 1e-3 / n**2, "maxiter": 200})
+                            options={"xatol": search_tolerance(n), "maxiter": 200})
     omega = float(found.x)
     rss, (offset, a, b) = _sine_rss(x, omega)
     amplitude = float(np.hypot(a, b))
@@ -233,7 +239,7 @@ def sine_period(x: np.ndarray, fit: SineFit, fs: float) -> tuple[int | None, int
     """``(N, k)``: the smallest period on whose bin ``k`` the fitted sine sits, or ``(None, None)``."""
     n = x.size
     cycles = fit.frequency / fs
-    width = max(6 * fit.frequency_std / fs, 1e-9 / n)
+    width = max(6 * fit.frequency_std / fs, search_tolerance(n) / (2 * np.pi))
     ratio = simplest_fraction(Fraction(max(cycles - width, 0.0)), Fraction(cycles + width))
     if ratio.numerator == 0 or not 2 <= ratio.denominator <= n // 2:
         return None, None
