@@ -52,7 +52,7 @@ import numpy as np
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
 MAX_ITERATIONS = 60   # fixed-point iterations of the Stribeck and LuGre laws: at most
-TOLERANCE = 1e-13     # until the velocity changes by less than TOLERANCE (|v| + vs)
+TOLERANCE = 1e-10     # until the velocity changes by less than TOLERANCE (|v| + vs)
 POSITION_KINDS = (CUBIC,)
 
 

@@ -26,6 +26,8 @@ from numba import njit
 
 from nlsid.models import forces
 
+SLIDING = 6.5  # |v| / vs above which e^{-(v/vs)^2} < 5e-19: the Stribeck term is below rounding
+
 
 @njit(cache=True, nogil=True, inline="always")
 def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
@@ -33,23 +35,101 @@ def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def force(kind: int, p: np.ndarray, state: np.ndarray, i: int, s_free: float, s_now: float,
-          g: float, h: float) -> float:
-    """The force held over one sub-step; updates the element's internal state ``state[i]``.
+def _derived(kinds: np.ndarray, p: np.ndarray, h: float) -> np.ndarray:
+    """Per-element constants of the LuGre step for sub-step h (computed once per run):
+    sigma0 + sigma1/h, sigma0 h + sigma1, sigma1/h, 1/vs, h sigma0/fc."""
+    d = np.zeros((p.shape[0], 5))
+    for e in range(p.shape[0]):
+        if kinds[e] == forces.LUGRE:
+            d[e, 0] = p[e, 0] + p[e, 1] / h
+            d[e, 1] = p[e, 0] * h + p[e, 1]
+            d[e, 2] = p[e, 1] / h
+            d[e, 3] = 1.0 / p[e, 5]
+            d[e, 4] = h * p[e, 0] / p[e, 3]
+    return d
+
+
+@njit(cache=True, nogil=True)
+def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float, g: float,
+           h: float) -> float:
+    """LuGre force over a sub-step: the implicit step of nlsid.models.forces solved for v+.
+
+    The residual R(v) = v (1 + g F1(v)) + g F0(v) - v_free is increasing in v (the a(v) coupling is
+    a contraction), so the root has the sign of -R(0), where a = 1 and F0 = sigma0 z. On that side
+    R is smooth and Newton's method converges quadratically (safeguarded: an iterate that crosses
+    zero is replaced by half the previous one). ``d[e]`` holds the constants of :func:`_derived`.
+    """
+    sigma0, sigma2, fc, fs, vs = p[e, 0], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
+    k1, k2, s1h, inv_vs, beta0 = d[e, 0], d[e, 1], d[e, 2], d[e, 3], d[e, 4]
+    z = state[e]
+    r0 = g * sigma0 * z - s_free
+    if r0 == 0.0:
+        warm[e] = 0.0
+        return sigma0 * z
+    sd = -1.0 if r0 > 0.0 else 1.0
+    v = warm[e]  # warm start: the previous sub-step's velocity, when on the root's side
+    if v * sd <= 0.0:
+        v = -r0 / (1.0 + g * (k2 + sigma2))
+    hs = h * sigma0 * sd
+    # Sliding fast (|v| >= SLIDING vs, Stribeck term below rounding): level = fc and, with
+    # a = 1 / (1 + beta v), the step equation times (1 + beta v) is a quadratic in v.
+    beta = beta0 * sd
+    a0 = 1.0 + g * sigma2
+    s = s_free + g * s1h * z
+    qa = a0 * beta
+    qb = a0 - s * beta + g * k2
+    qc = g * k1 * z - s
+    disc = qb * qb - 4.0 * qa * qc
+    if disc >= 0.0:
+        root = -0.5 * (qb + math.copysign(math.sqrt(disc), qb))  # no cancellation
+        for v_q in (root / qa, qc / root if root != 0.0 else 0.0):
+            if v_q * sd * inv_vs >= SLIDING:
+                a = 1.0 / (1.0 + beta * v_q)
+                state[e] = a * (z + h * v_q)
+                warm[e] = v_q
+                return k1 * a * z - s1h * z + (k2 * a + sigma2) * v_q
+    a = 1.0
+    for _ in range(forces.MAX_ITERATIONS):
+        w = v * inv_vs
+        ex = math.exp(-w * w) if w * w < SLIDING * SLIDING else 0.0
+        inv_level = 1.0 / (fc + (fs - fc) * ex)
+        dlevel = -2.0 * (fs - fc) * ex * w * inv_vs
+        c = hs * v * inv_level
+        a = 1.0 / (1.0 + c)
+        da = -a * a * (hs * inv_level - c * dlevel * inv_level)
+        f1 = k2 * a + sigma2
+        res = v * (1.0 + g * f1) + g * (k1 * a * z - s1h * z) - s_free
+        step = res / (1.0 + g * f1 + g * (v * k2 + k1 * z) * da)
+        if abs(step) <= forces.TOLERANCE * (abs(v) + vs):
+            break  # v and a are consistent; the remaining error is about step^2 (Newton)
+        v_new = v - step
+        v = v_new if v_new * sd > 0.0 else 0.5 * v
+    state[e] = a * (z + h * v)
+    warm[e] = v
+    return k1 * a * z - s1h * z + (k2 * a + sigma2) * v
+
+
+@njit(cache=True, nogil=True)
+def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float,
+          s_now: float, g: float, h: float) -> float:
+    """The force of element ``e`` held over one sub-step; updates its internal state ``state[e]``
+    (and ``warm[e]``, the last velocity, a starting point for the next sub-step's iteration).
 
     ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
     sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
     force held over the sub-step, ``h`` the sub-step length.
     """
+    if kind == forces.LUGRE:
+        return _lugre(p, d, e, state, warm, s_free, g, h)
     if kind == forces.COULOMB:
-        fc, fv = p[0], p[1]
+        fc, fv = p[e, 0], p[e, 1]
         if _stick_or_slip(s_free, g, fc):
             return s_free / g
         s = 1.0 if s_free > 0 else -1.0
         v = (s_free - g * fc * s) / (1.0 + g * fv)
         return fc * s + fv * v
     if kind == forces.STRIBECK:
-        fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
+        fc, fs, vs, delta, fv = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4]
         if _stick_or_slip(s_free, g, fs):
             return s_free / g
         s = 1.0 if s_free > 0 else -1.0
@@ -65,27 +145,9 @@ def force(kind: int, p: np.ndarray, state: np.ndarray, i: int, s_free: float, s_
             if done:
                 break
         return level * s + fv * v
-    if kind == forces.LUGRE:
-        sigma0, sigma1, sigma2, fc, fs, vs = p[0], p[1], p[2], p[3], p[4], p[5]
-        z = state[i]
-        v = s_free
-        a = 1.0
-        f0 = f1 = 0.0
-        for _ in range(forces.MAX_ITERATIONS):
-            level = fc + (fs - fc) * math.exp(-((v / vs) ** 2))
-            a = 1.0 / (1.0 + h * sigma0 * abs(v) / level)
-            f0 = (sigma0 + sigma1 / h) * a * z - sigma1 * z / h
-            f1 = (sigma0 * h + sigma1) * a + sigma2
-            v_new = (s_free - g * f0) / (1.0 + g * f1)
-            done = abs(v_new - v) <= forces.TOLERANCE * (abs(v_new) + vs)
-            v = v_new
-            if done:
-                break
-        state[i] = a * (z + h * v)
-        return f0 + f1 * v
     # CUBIC
     mid = 0.5 * (s_now + s_free)
-    return p[0] * mid * mid * mid
+    return p[e, 0] * mid * mid * mid
 
 
 @njit(cache=True, nogil=True)
@@ -100,6 +162,8 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
     xc = np.zeros(nc)
     xcn = np.empty(nc)
     state = np.zeros(n_el)
+    warm = np.zeros(n_el)
+    derived = _derived(kinds, params, h)
     gains = np.empty(n_el)
     for e in range(n_el):
         acc = 0.0
@@ -145,7 +209,7 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
                 for i in range(n):
                     s_now += rows[e, i] * x[i]
                     s_free += rows[e, i] * xn[i]
-                f = force(kinds[e], params[e], state, e, s_free, s_now, gains[e], h)
+                f = force(kinds[e], params, derived, e, state, warm, s_free, s_now, gains[e], h)
                 for i in range(n):
                     xn[i] -= cols[e, i] * f
             x[:] = xn
