@@ -85,13 +85,11 @@ class Realization:
 
 @dataclass(frozen=True)
 class SineFit:
-    """Least-squares sine ``offset + amplitude cos(2 pi frequency n / fs + phase)`` and its quality."""
+    """Least-squares sine ``c + amplitude cos(2 pi frequency n / fs + phase)``: frequency, amplitude, quality."""
 
     frequency: float
     frequency_std: float
     amplitude: float
-    phase: float
-    offset: float
     noise_var: float
     power_fraction: float
 
@@ -216,14 +214,14 @@ def fit_sine(x: np.ndarray, fs: float) -> SineFit:
     found = minimize_scalar(lambda w: _sine_rss(x, w)[0], bounds=(lo, hi), method="bounded",
                             options={"xatol": search_tolerance(n), "maxiter": 200})
     omega = float(found.x)
-    rss, (offset, a, b) = _sine_rss(x, omega)
+    rss, (_, a, b) = _sine_rss(x, omega)
     amplitude = float(np.hypot(a, b))
     noise_var = rss / max(n - 4, 1)
     ac = float(np.var(x))
     omega_std = math.sqrt(24 * noise_var / (amplitude**2 * n * (n * n - 1))) if amplitude > 0 else math.inf
     return SineFit(
         frequency=omega * fs / (2 * np.pi), frequency_std=omega_std * fs / (2 * np.pi), amplitude=amplitude,
-        phase=float(np.arctan2(-b, a)), offset=float(offset), noise_var=noise_var,
+        noise_var=noise_var,
         power_fraction=amplitude**2 / 2 / ac if ac > 0 else 0.0)
 
 
@@ -262,8 +260,6 @@ class Slots:
 
     phase: int
     same: np.ndarray
-    noise_level: float
-    signal_level: float
     phase_margin: float
 
 
@@ -300,8 +296,7 @@ def compare_slots(x: np.ndarray, period: int) -> Slots | None:
     phase = 0 if np.all(diffs[0][valid0] <= cap) else int(order[0])
     margin = float(cost[order[1]] - cost[order[0]]) if phase and cost.size > 1 else math.inf
     row = diffs[phase]
-    return Slots(phase=phase, same=row[~np.isnan(row)] <= cap, noise_level=noise, signal_level=signal,
-                 phase_margin=margin)
+    return Slots(phase=phase, same=row[~np.isnan(row)] <= cap, phase_margin=margin)
 
 
 def realizations_of(slots: Slots) -> list[tuple[int, int, int]]:
@@ -449,13 +444,12 @@ def _local_best(x: np.ndarray, period: int, result: Inference) -> bool:
 
 
 def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> None:
-    ratio = repeat_residual(x, lag) / (2 * float(np.var(x)))
+    residual = db(repeat_residual(x, lag) / (2 * float(np.var(x))))
     how = "the given period" if given else "the best lag"
-    result.measures["repeat_residual_db"] = 10 * math.log10(max(ratio, 1e-300))
+    result.measures["repeat_residual_db"] = residual
     result.notes.append(
-        f"not periodic: at {how} of {lag} samples the period-to-period difference keeps "
-        f"{10 * math.log10(max(ratio, 1e-300)):.1f} dB of the input power (periodic needs below "
-        f"{-10 * math.log10(PERIODIC_SNR):.0f} dB)")
+        f"not periodic: at {how} of {lag} samples the period-to-period difference keeps {residual:.1f} dB "
+        f"of the input power (periodic needs below {-db(PERIODIC_SNR):.0f} dB)")
 
 
 def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inference) -> None:
@@ -482,7 +476,13 @@ def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inf
     _classify(excited, amplitudes, result)
 
 
-def _measure(x, blocks, slots, tests, threshold, excited, result: Inference) -> None:
+def db(value: float) -> float:
+    """10 log10 of a power ratio (-3000 dB for zero)."""
+    return 10 * math.log10(max(value, 1e-300))
+
+
+def _measure(x: np.ndarray, blocks: list[np.ndarray], slots: Slots, tests: list[np.ndarray], threshold: float,
+             excited: list[np.ndarray], result: Inference) -> None:
     period = result.period
     noise = sum(float(np.sum((b - b.mean(axis=0)) ** 2)) for b in blocks) / sum((b.shape[0] - 1) * period for b in blocks)
     signal = float(np.var(np.concatenate([b.mean(axis=0) for b in blocks])))
@@ -490,7 +490,6 @@ def _measure(x, blocks, slots, tests, threshold, excited, result: Inference) -> 
     unexcited = [np.delete(t, b - 1) for t, b in zip(tests, excited)]
     strongest_off = max((float(u.max()) for u in unexcited if u.size), default=0.0)
     last = result.realizations[-1].stop(period)
-    db = lambda v: 10 * math.log10(max(v, 1e-300))  # noqa: E731
     result.measures.update({
         "input_snr_db": db(signal / noise) if noise > 0 else math.inf,
         "line_threshold_db": db(threshold),
