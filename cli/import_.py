@@ -36,7 +36,7 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
     reported with how sure they are; a record that is not periodic becomes one arbitrary run.
     The provenance of the output records the source, its SHA-256, and what was inferred or overridden.
 
-    Examples:
+    Example:
 
     \b
       nlsid import scope.csv --u CH1 --y CH2 -o recording.h5
