@@ -13,6 +13,7 @@ which equals (1 - z^-1) Z{G(s)/s}. A discrete model is used as it is, one step p
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -147,17 +148,28 @@ def from_matrices(A: list, B: list, C: list, D: float, discrete: bool, delay: fl
 def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact ZOH discretisation over a step h: Phi = e^{A h}, Gamma = int_0^h e^{A s} ds B.
 
-    ``B`` may be a vector or a matrix of input columns.
+    ``B`` may be a vector or a matrix of input columns. Results are cached by value: a sweep
+    simulates the same plant at the same step many times, and a small matrix exponential costs
+    milliseconds when the BLAS threads compete with the simulation threads for the cores.
     """
+    return _zoh_cached(A.tobytes(), A.shape[0], B.tobytes(), B.shape, float(h))
+
+
+@functools.lru_cache(maxsize=256)
+def _zoh_cached(a_bytes: bytes, n: int, b_bytes: bytes, b_shape: tuple, h: float) -> tuple[np.ndarray, np.ndarray]:
     from scipy.linalg import expm
 
-    B2 = B.reshape(A.shape[0], -1)
+    A = np.frombuffer(a_bytes).reshape(n, n)
+    B = np.frombuffer(b_bytes).reshape(b_shape)
+    B2 = B.reshape(n, -1)
     n, m = B2.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n] = A * h
     M[:n, n:] = B2 * h
     E = expm(M)
-    return E[:n, :n], E[:n, n:].reshape(B.shape)
+    Phi, Gamma = E[:n, :n].copy(), E[:n, n:].reshape(b_shape).copy()
+    Phi.flags.writeable = Gamma.flags.writeable = False  # shared by every caller of the cache
+    return Phi, Gamma
 
 
 def stepped(ss: StateSpace, h: float) -> tuple[np.ndarray, np.ndarray]:

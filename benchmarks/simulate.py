@@ -1,0 +1,189 @@
+"""Speed of nlsid's simulator against scipy on the same models and inputs; prints JSON.
+
+    python benchmarks/simulate.py [--samples 1000000] [--ivp-samples 1024]
+
+Cases:
+
+* ``lugre_closed_loop``: the closed-loop two-mass stage with LuGre friction of
+  configs/model_stage_lugre.yaml (K_fc = 0.2 V), a 6 mm, 0.5 Hz sine reference at 2048 Hz.
+  nlsid runs the whole record (after a warm-up run that compiles or loads the kernels). The
+  reference is scipy.integrate.solve_ivp (LSODA: the bristle dynamics are stiff) integrating the
+  plant + LuGre ODE over each sample interval with the same discrete controller and ZOH input; it
+  runs ``--ivp-samples`` samples and its time is extrapolated per sample. Accuracy of both is
+  measured on those samples against a tight solve_ivp solution (rtol 1e-10); the solve_ivp
+  figure quoted is for the loosest rtol whose error is no worse than nlsid's.
+* ``linear_lsim``: the same stage without friction, open loop, under a random-phase multisine:
+  nlsid against scipy.signal.lsim (ZOH input) on the whole record, and their difference.
+* ``sweep_parallel``: the 80-value K_fc sweep of the config on 2 periods each, with 1 worker
+  and with all cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nlsid.io.run import Run
+from nlsid.models import from_config
+from nlsid.models.controller import feedforward, tustin
+from nlsid.models.from_config import Plant
+from nlsid.simulate.batch import simulate_all
+from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.sweep import load_points
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "model_stage_lugre.yaml"
+FS, N = 2048.0, 4096
+
+
+def sine_run(samples: int) -> Run:
+    n = np.arange((samples // N) * N)
+    r = 6e-3 * np.cos(2 * np.pi * n / N + 0.1)
+    return Run("sine", FS, "sine", r, period=N, transient_periods=0, frequency=FS / N)
+
+
+def timed(fn, repeat: int = 3) -> tuple[float, object]:
+    best, out = math.inf, None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, out
+
+
+def stage_point():
+    points = load_points(CONFIG)
+    values = np.array([p.params["K_fc"] for p in points])
+    return points[int(np.argmin(np.abs(values - 0.2)))]
+
+
+def ivp_closed_loop(point, run: Run, samples: int, rtol: float) -> np.ndarray:
+    """The closed loop with solve_ivp between samples (same controller, feed-forward and ZOH)."""
+    from scipy.integrate import solve_ivp
+
+    m = point.config.model
+    lug = m.nonlinearities[0]
+    loop = from_config.closed_loop(point.config)
+    ctrl = tustin(loop.controller, 1 / FS)
+    ff = feedforward(run.u, FS, True, loop.coulomb, loop.velocity)
+    m1, m2, k, c, c1, c2, gain = m.motor_mass, m.load_mass, m.stiffness, m.damping, m.motor_damping, m.load_damping, m.gain
+
+    def rhs(_, s, force):
+        p1, v1, p2, v2, z = s
+        level = lug.fc + (lug.fs - lug.fc) * math.exp(-((v1 / lug.vs) ** 2))
+        dz = v1 - lug.sigma0 * abs(v1) * z / level
+        friction = lug.sigma0 * z + lug.sigma1 * dz + lug.sigma2 * v1
+        spring = k * (p1 - p2) + c * (v1 - v2)
+        return [v1, (force - spring - c1 * v1 - friction) / m1, v2, (spring - c2 * v2) / m2, dz]
+
+    state, xc = np.zeros(5), np.zeros(ctrl.order)
+    y = np.empty(samples)
+    for i in range(samples):
+        y[i] = state[2]
+        err = run.u[i] - y[i]
+        u = ctrl.C @ xc + ctrl.D * err + ff[i]
+        xc = ctrl.A @ xc + ctrl.B * err
+        sol = solve_ivp(rhs, (0, 1 / FS), state, method="LSODA", rtol=rtol, atol=rtol * 1e-6, args=(gain * u,))
+        state = sol.y[:, -1]
+    return y
+
+
+def lugre_closed_loop(samples: int, ivp_samples: int) -> dict:
+    point = stage_point()
+    model, loop = from_config.model(point.config), from_config.closed_loop(point.config)
+    substeps = point.config.simulation.substeps
+    run = sine_run(samples)
+    simulate_run(model, loop, sine_run(2 * N), substeps)  # warm-up: load/compile the kernels
+    seconds, out = timed(lambda: simulate_run(model, loop, run, substeps))
+    seconds_1, _ = timed(lambda: simulate_run(model, loop, run, 1))
+
+    short = Run("sine", FS, "sine", run.u[:N], period=N, transient_periods=0, frequency=FS / N)
+    reference = ivp_closed_loop(point, short, ivp_samples, 1e-10)
+    scale = np.max(np.abs(reference))
+    nlsid_error = float(np.max(np.abs(simulate_run(model, loop, short, substeps).y[:ivp_samples] - reference)) / scale)
+    ivp = {}
+    for rtol in (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
+        t, y = timed(lambda: ivp_closed_loop(point, short, ivp_samples, rtol), repeat=1)
+        ivp = {"rtol": rtol, "error": float(np.max(np.abs(y - reference)) / scale), "seconds_per_sample": t / ivp_samples}
+        if ivp["error"] <= nlsid_error:
+            break
+    nlsid_per_sample = seconds / run.n_samples
+    return {
+        "samples": run.n_samples,
+        "substeps": substeps,
+        "nlsid_seconds": seconds,
+        "nlsid_samples_per_second": run.n_samples / seconds,
+        "nlsid_samples_per_second_substeps_1": run.n_samples / seconds_1,
+        "nlsid_relative_error": nlsid_error,
+        "solve_ivp_rtol": ivp["rtol"],
+        "solve_ivp_relative_error": ivp["error"],
+        "solve_ivp_seconds_extrapolated": ivp["seconds_per_sample"] * run.n_samples,
+        "solve_ivp_measured_samples": ivp_samples,
+        "speedup_vs_solve_ivp": ivp["seconds_per_sample"] / nlsid_per_sample,
+        "final_y": float(out.y[-1]),
+    }
+
+
+def linear_lsim(samples: int) -> dict:
+    from scipy.signal import lsim
+
+    point = stage_point()
+    plant = from_config.model(point.config)
+    linear = Plant(plant.ss, plant.x0, [])
+    rng = np.random.default_rng(0)
+    bins = np.arange(1, 400)
+    n = np.arange((samples // N) * N)
+    u = np.zeros(n.size)
+    for k, phase in zip(bins, rng.uniform(0, 2 * np.pi, bins.size)):
+        u += np.cos(2 * np.pi * k * n / N + phase)
+    run = Run("ms", FS, "multisine", u / np.std(u), period=N, transient_periods=0, excited_bins=bins)
+    simulate_run(linear, None, Run("ms", FS, "multisine", run.u[:N], period=N, excited_bins=bins), None)
+    seconds, out = timed(lambda: simulate_run(linear, None, run, None))
+    t = n / FS
+    ss = plant.ss
+    start = time.perf_counter()
+    _, y_lsim, _ = lsim((ss.A, ss.B[:, None], ss.C[None, :], np.array([[ss.D]])), run.u, t, interp=False)
+    lsim_seconds = time.perf_counter() - start
+    return {
+        "samples": run.n_samples,
+        "nlsid_seconds": seconds,
+        "nlsid_samples_per_second": run.n_samples / seconds,
+        "lsim_seconds": lsim_seconds,
+        "speedup_vs_lsim": lsim_seconds / seconds,
+        "max_relative_difference": float(np.max(np.abs(out.y - y_lsim)) / np.max(np.abs(y_lsim))),
+    }
+
+
+def sweep_parallel() -> dict:
+    points = load_points(CONFIG)
+    runs = [sine_run(2 * N)]
+    simulate_all(points[:2], runs, workers=1)
+    out = {"runs": len(points), "samples_per_run": runs[0].n_samples}
+    for workers in sorted({1, os.cpu_count() or 1}):
+        seconds, _ = timed(lambda: simulate_all(points, runs, workers=workers), repeat=2)
+        out[f"seconds_workers_{workers}"] = seconds
+        out[f"samples_per_second_workers_{workers}"] = len(points) * runs[0].n_samples / seconds
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--ivp-samples", type=int, default=1024)
+    args = parser.parse_args()
+    result = {
+        "cpu_count": os.cpu_count(),
+        "lugre_closed_loop": lugre_closed_loop(args.samples, args.ivp_samples),
+        "linear_lsim": linear_lsim(args.samples),
+        "sweep_parallel": sweep_parallel(),
+    }
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
