@@ -67,6 +67,16 @@ def test_open_loop_recording_keeps_runs_and_has_the_stated_noise(run_cli, tmp_pa
     assert abs(np.corrcoef(noise_u[0], noise_u[1])[0, 1]) < 4 / np.sqrt(n)
 
 
+def test_mcap_output_holds_the_same_numbers_as_hdf5(run_cli, tmp_path):
+    exc = write_excitation(tmp_path / "sine.h5", [sine("s", 1024.0, 1024, 5, 0.8, 2, 1)])
+    paths = [tmp_path / "rec.h5", tmp_path / "rec.mcap"]
+    for path in paths:
+        assert run_cli("simulate", CONFIGS / "model_lpl.yaml", "--excitation", exc, "-o", path).exit_code == 0
+    h5, mcap = (read_runs(p)[0] for p in paths)
+    np.testing.assert_array_equal(mcap.y, h5.y)
+    np.testing.assert_array_equal(mcap.u, h5.u)
+
+
 def test_same_seed_same_numbers_other_seed_other_numbers(run_cli, tmp_path, multisine_file):
     paths = {}
     for name, seed in (("a", 5), ("b", 5), ("c", 6)):

@@ -10,7 +10,7 @@ Static maps y = f(x), applied sample by sample:
 
 ``backlash`` is a block with memory (the play operator of width w): the output stays where it is
 while |x - y| <= w/2 and otherwise is dragged along, y[k] = x[k] -+ w/2. It starts at y = 0
-(centred play), so its first output is x[0] clipped into [-w/2, w/2] of it.
+(the play centred on the first input when |x[0]| <= w/2).
 """
 
 from __future__ import annotations

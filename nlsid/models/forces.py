@@ -28,13 +28,14 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
       F = sigma0 z + sigma1 z' + sigma2 v.
 
   Implicit (backward Euler) step: z+ = a (z + h v+), a = 1 / (1 + h sigma0 |v+| / s(v+)). For a
-  given a, F = F0 + F1 v+ is affine in v+ and v+ = (v_free - g_v F0) / (1 + g_v F1) follows in
-  closed form; a is then updated from the new v+ (fixed-point iteration from v+ = v_free until
-  the change is below TOLERANCE (|v+| + vs); a contraction with factor about
-  g_v |F| (sigma0 h + sigma1) / s, about 0.1 for the example stage).
-  Stable for any h (bristle stiffness sigma0 and damping sigma1 are implicit). Using |v+| rather
-  than |v_free| in a matters at standstill: v_free - v+ = g_v F is not small against v+ = 0, and
-  an explicit a would let the bristles relax, an artificial creep of about g_v F^2 / s.
+  given a, F = F0 + F1 v+ is affine in v+ (F0 = (sigma0 + sigma1/h) a z - sigma1 z / h,
+  F1 = (sigma0 h + sigma1) a + sigma2), and v+ = v_free - g_v F closes the equation in v+ alone.
+  It is solved by Newton's method on the side of zero where the root lies, from the previous
+  sub-step's velocity, until the step is below TOLERANCE (|v+| + vs); while sliding fast
+  (|v| > 6.5 vs, where the Stribeck term is below rounding) it is a quadratic with a closed-form
+  root. Stable for any h (bristle stiffness sigma0 and damping sigma1 are implicit). Using |v+|
+  rather than |v_free| in a matters at standstill: v_free - v+ = g_v F is not small against
+  v+ = 0, and an explicit a would let the bristles relax, an artificial creep of about g_v F^2 / s.
 * ``cubic_stiffness`` F = k3 p^3, evaluated at the sub-step midpoint estimate (p + p_free) / 2:
   second order for this smooth force (the Duffing oscillator of the book's Exercise 79, Eq. 5-12,
   is a unit mass with damping 1, stiffness -10 and k3 = 100).
@@ -51,8 +52,8 @@ import numpy as np
 
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
-MAX_ITERATIONS = 60   # fixed-point iterations of the Stribeck and LuGre laws: at most
-TOLERANCE = 1e-10     # until the velocity changes by less than TOLERANCE (|v| + vs)
+MAX_ITERATIONS = 60   # iterations (Stribeck fixed point, LuGre Newton) at most, stopping
+TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
 POSITION_KINDS = (CUBIC,)
 
 
