@@ -77,6 +77,45 @@ def test_mcap_output_holds_the_same_numbers_as_hdf5(run_cli, tmp_path):
     np.testing.assert_array_equal(mcap.u, h5.u)
 
 
+def noise_config(tmp_path, text: str) -> Path:
+    path = tmp_path / "noise.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_process_noise_enters_the_plant_input(run_cli, tmp_path, multisine_file):
+    # Static plant y = 2 (u + n_p): y - 2 u is the process noise times 2, white with std 2 * 0.05.
+    config = noise_config(tmp_path, "model: {type: transfer_function, num: [2.0], den: [1.0]}\n"
+                                    "disturbances: {process_noise: 0.05, seed: 3}\n")
+    out = tmp_path / "rec.h5"
+    assert run_cli("simulate", config, "--excitation", multisine_file, "-o", out).exit_code == 0
+    for run in read_runs(out):
+        e = run.y - 2 * run.u
+        # sample std within 4 standard errors (std / sqrt(2 n)) of 0.1
+        assert abs(np.std(e) - 0.1) < 4 * 0.1 / np.sqrt(2 * e.size)
+
+
+def test_sensor_noise_is_fed_back_in_closed_loop(run_cli, tmp_path):
+    # Plant y[k] = u[k-1] (discrete z^-1), P controller u = 0.5 (r - y - n_y). The noise part of u
+    # obeys du[k] = -0.5 du[k-1] - 0.5 n[k]: AR(1) with variance 0.25 s^2 / (1 - 0.25) = s^2 / 3.
+    # Compared with the same loop without noise. The std estimate of an AR(1) with rho = -0.5 has
+    # a relative standard error sqrt((1 + rho^2) / (1 - rho^2) / (2 n)): 4 of them allowed.
+    text = ("model: {type: transfer_function, domain: discrete, num: [0.0, 1.0], den: [1.0]}\n"
+            "closed_loop: {controller: {type: pid, kp: 0.5}}\n")
+    exc = write_excitation(tmp_path / "ms.h5", [multisine("ms", 1000.0, 1000, np.arange(1, 200, 2), 20, 1, 0)])
+    paths = []
+    for name, extra in (("clean", ""), ("noisy", "disturbances: {y_noise: 0.1, seed: 4}\n")):
+        paths.append(tmp_path / f"{name}.h5")
+        cfg = noise_config(tmp_path, text + extra)
+        assert run_cli("simulate", cfg, "--excitation", exc, "-o", paths[-1]).exit_code == 0
+    clean, noisy = (read_runs(p)[0] for p in paths)
+    du = noisy.u - clean.u
+    expected = 0.1 / np.sqrt(3)
+    rel_se = np.sqrt((1 + 0.25) / (1 - 0.25) / (2 * du.size))
+    assert abs(np.std(du) / expected - 1) < 4 * rel_se
+    np.testing.assert_array_equal(noisy.r, clean.r)
+
+
 def test_same_seed_same_numbers_other_seed_other_numbers(run_cli, tmp_path, multisine_file):
     paths = {}
     for name, seed in (("a", 5), ("b", 5), ("c", 6)):
@@ -176,6 +215,13 @@ BAD = {
     "unstable_loop": ("model: {type: mass_spring_damper, mass: 1.0}\n"
                       "closed_loop:\n  controller: {type: pid, kp: -5.0}\n",
                       ":2: closed_loop: the linear closed loop is unstable"),
+    "ragged_matrix": ("model: {type: state_space, A: [[0.0, 1.0], [-1.0]], B: [0.0, 1.0], C: [1.0, 0.0]}\n",
+                      "model.A: expected a square matrix"),
+    "derivative_without_filter": ("model: {type: mass_spring_damper, mass: 1.0}\n"
+                                  "closed_loop:\n  controller: {type: pid, kp: 1.0, kd: 0.1}\n",
+                                  ":3: closed_loop.controller: a derivative action (kd > 0) needs a filter"),
+    "unknown_block": ("model:\n  type: wiener\n  linear: {type: transfer_function, num: [1.0], den: [1.0, 1.0]}\n"
+                      "  nonlinear: {type: cubic, a: 1.0}\n", ":4: model.nonlinear"),
     "swept_value_bad": ("model: {type: mass_spring_damper, mass: 1.0, stiffness: 1.0}\n"
                         "sweep: {parameter: model.mass, values: [1.0, -2.0]}\n",
                         "sweep value -2: model.mass: must be > 0"),

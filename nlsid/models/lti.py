@@ -134,10 +134,11 @@ def from_zpk(zeros: list, poles: list, gain: float, discrete: bool, delay: float
 
 def from_matrices(A: list, B: list, C: list, D: float, discrete: bool, delay: float, where: str) -> StateSpace:
     """State space from matrices, with their shapes checked."""
-    a = np.asarray(A, dtype=float).reshape(len(A), -1) if len(A) else np.zeros((0, 0))
-    n = a.shape[0]
-    if a.shape != (n, n):
-        raise InputError(f"{where}.A", f"expected a square matrix, got shape {a.shape}")
+    n = len(A)
+    if any(len(row) != n for row in A):
+        raise InputError(f"{where}.A", f"expected a square matrix: {n} rows of {n} numbers, got row lengths "
+                                       f"{[len(row) for row in A]}")
+    a = np.asarray(A, dtype=float).reshape(n, n)
     b, c = np.asarray(B, dtype=float), np.asarray(C, dtype=float)
     for name, vec in (("B", b), ("C", c)):
         if vec.shape != (n,):
@@ -152,6 +153,8 @@ def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]
     simulates the same plant at the same step many times, and a small matrix exponential costs
     milliseconds when the BLAS threads compete with the simulation threads for the cores.
     """
+    if A.shape[0] == 0:  # a static gain has no state
+        return A.copy(), B.copy()
     return _zoh_cached(A.tobytes(), A.shape[0], B.tobytes(), B.shape, float(h))
 
 
