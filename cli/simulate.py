@@ -31,7 +31,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     Example:
 
     \b
-      nlsid simulate configs/stage_model.yaml --excitation excitation.h5 -o recording.h5
+      nlsid simulate configs/model_stage_lugre.yaml --excitation excitation.h5 -o recording.h5
     """
     from nlsid.io.atomic import check_writable
     from nlsid.io.provenance import provenance

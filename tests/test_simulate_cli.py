@@ -67,6 +67,20 @@ def test_open_loop_recording_keeps_runs_and_has_the_stated_noise(run_cli, tmp_pa
     assert abs(np.corrcoef(noise_u[0], noise_u[1])[0, 1]) < 4 / np.sqrt(n)
 
 
+def test_chains_after_nlsid_design(run_cli, tmp_path):
+    # The excitation file written by `nlsid design` is read as it is; every run comes back with y.
+    exc = tmp_path / "excitation.h5"
+    assert run_cli("-q", "design", CONFIGS / "stage_design.yaml", "-o", exc).exit_code == 0
+    out = tmp_path / "rec.h5"
+    result = run_cli("simulate", CONFIGS / "model_lpl.yaml", "--excitation", exc, "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    excitation, recording = read_runs(exc, require_y=False), read_runs(out)
+    assert [r.run_id for r in recording] == [r.run_id for r in excitation]
+    for e, r in zip(excitation, recording):
+        np.testing.assert_array_equal(r.u, e.u)
+        assert r.y is not None and r.kind == e.kind and r.period == e.period
+
+
 def test_mcap_output_holds_the_same_numbers_as_hdf5(run_cli, tmp_path):
     exc = write_excitation(tmp_path / "sine.h5", [sine("s", 1024.0, 1024, 5, 0.8, 2, 1)])
     paths = [tmp_path / "rec.h5", tmp_path / "rec.mcap"]
