@@ -45,6 +45,12 @@ _EMPTY_2 = np.zeros((0, 0))
 _EMPTY_1 = np.zeros(0)
 
 
+def _f64(a) -> np.ndarray:
+    """A writable C-ordered float64 copy: one kernel signature whatever the source (cached
+    discretisations are read-only), so numba compiles and caches the kernel once."""
+    return np.array(a, dtype=np.float64, order="C")
+
+
 def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, delay: int,
                 controller: StateSpace | None, r, ff, u, process, y_noise) -> tuple[np.ndarray, np.ndarray]:
     n_el = len(forces_)
@@ -57,10 +63,9 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
     c = controller if closed else StateSpace(_EMPTY_2, _EMPTY_1, _EMPTY_1, 0.0, True)
     length = (r if closed else u).shape[0]
     u_out, y_out = np.empty(length), np.empty(length)
-    simulate_loop(np.ascontiguousarray(Phi), np.ascontiguousarray(Gu), np.ascontiguousarray(ss.C), float(ss.D),
-                  np.asarray(x0, dtype=float), kinds, params, cols, rows, int(substeps), float(h), int(delay),
-                  closed, np.ascontiguousarray(c.A), np.ascontiguousarray(c.B), np.ascontiguousarray(c.C), float(c.D),
-                  r, ff, u, process, y_noise, u_out, y_out)
+    simulate_loop(_f64(Phi), _f64(Gu), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params), _f64(cols), _f64(rows),
+                  int(substeps), float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
+                  _f64(r), _f64(ff), _f64(u), _f64(process), _f64(y_noise), u_out, y_out)
     return u_out, y_out
 
 
