@@ -49,7 +49,7 @@ def _derived(kinds: np.ndarray, p: np.ndarray, h: float) -> np.ndarray:
     return d
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float, g: float,
            h: float) -> float:
     """LuGre force over a sub-step: the implicit step of nlsid.models.forces solved for v+.
@@ -80,7 +80,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.nda
     qb = a0 - s * beta + g * k2
     qc = g * k1 * z - s
     disc = qb * qb - 4.0 * qa * qc
-    if disc >= 0.0:
+    if disc >= 0.0 and v * sd * inv_vs >= SLIDING:  # tried when the start value slides fast
         root = -0.5 * (qb + math.copysign(math.sqrt(disc), qb))  # no cancellation
         for v_q in (root / qa, qc / root if root != 0.0 else 0.0):
             if v_q * sd * inv_vs >= SLIDING:
@@ -100,16 +100,17 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.nda
         f1 = k2 * a + sigma2
         res = v * (1.0 + g * f1) + g * (k1 * a * z - s1h * z) - s_free
         step = res / (1.0 + g * f1 + g * (v * k2 + k1 * z) * da)
-        if abs(step) <= forces.TOLERANCE * (abs(v) + vs):
-            break  # v and a are consistent; the remaining error is about step^2 (Newton)
         v_new = v - step
+        if abs(step) <= forces.TOLERANCE * (abs(v) + vs) and v_new * sd > 0.0:
+            v = v_new  # remaining error about step^2 (Newton); a is off by |da| step
+            break
         v = v_new if v_new * sd > 0.0 else 0.5 * v
     state[e] = a * (z + h * v)
     warm[e] = v
     return k1 * a * z - s1h * z + (k2 * a + sigma2) * v
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float,
           s_now: float, g: float, h: float) -> float:
     """The force of element ``e`` held over one sub-step; updates its internal state ``state[e]``
