@@ -17,7 +17,7 @@ from typing import BinaryIO, Iterator
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
-from mcap.records import Channel
+from mcap.records import Channel, Schema
 from mcap.stream_reader import StreamReader
 
 from nlsid.errors import InputError
@@ -85,10 +85,14 @@ def checked(items: Iterator, where: str) -> Iterator:
 
 def channels_by_topic(handle: BinaryIO, reader: SeekingReader, where: str) -> dict[str, Channel]:
     """The file's channels by topic, from the summary section or, without one, a linear scan."""
+    return channels_and_schemas(handle, reader, where)[0]
+
+
+def channels_and_schemas(handle: BinaryIO, reader: SeekingReader, where: str) -> tuple[dict[str, Channel], dict[int, Schema]]:
+    """The file's channels by topic and schemas by id, from the summary section or, without one, a linear scan."""
     summary = reader.get_summary()
     if summary is not None:
-        found = summary.channels.values()
-    else:
-        handle.seek(0)
-        found = [r for r in checked(iter(StreamReader(handle).records), where) if isinstance(r, Channel)]
-    return {channel.topic: channel for channel in found}
+        return {c.topic: c for c in summary.channels.values()}, dict(summary.schemas)
+    handle.seek(0)
+    found = [r for r in checked(iter(StreamReader(handle).records), where) if isinstance(r, (Channel, Schema))]
+    return {r.topic: r for r in found if isinstance(r, Channel)}, {r.id: r for r in found if isinstance(r, Schema)}

@@ -1,8 +1,10 @@
-"""Read a foreign MCAP file (ROS 2 / Foxglove style JSON topics) as one arbitrary run.
+"""Read a foreign MCAP file (JSON topics, ROS 2 topics) as one arbitrary run.
 
 A mapping names where each signal lives: ``{"u": "/cmd:effort", "y": "/joint:state.position"}``,
-a topic and a dotted path into the JSON object of each message. A message holds one sample (a
-number) or several (a list of numbers) taken at its log time, then at the sample interval. The
+a topic and a dotted path into each decoded message (a JSON object or a ROS 2 message,
+:mod:`nlsid.io.mcap_messages`); a path element that is a whole number indexes a list
+(``/joint_states:position.0``, joint 0). A message holds one sample (a number) or several (a list
+of numbers) taken at its log time, then at the sample interval. The
 timestamps must be uniformly sampled (:func:`nlsid.io.timestamps.uniform_sampling`), the rate
 ``fs`` comes from them, and all signals must be sampled at the same instants. Nothing is known of
 the excitation, so the run is of kind ``"arbitrary"`` (no period, no excited lines).
@@ -10,7 +12,6 @@ the excitation, so the run is of kind ``"arbitrary"`` (no period, no excited lin
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -18,7 +19,8 @@ import numpy as np
 from mcap.reader import SeekingReader
 
 from nlsid.errors import InputError
-from nlsid.io.mcap_file import channels_by_topic, checked
+from nlsid.io.mcap_file import channels_and_schemas, checked
+from nlsid.io.mcap_messages import READABLE, decoder_for, message_fields, shown, unreadable
 from nlsid.io.run import SIGNALS, Run, make_run
 from nlsid.io.timestamps import check_aligned, uniform_sampling
 
@@ -28,28 +30,36 @@ def parse_source(signal: str, source: str) -> tuple[str, list[str]]:
     topic, sep, field = source.rpartition(":")
     path = field.split(".")
     if not sep or not topic or not all(path):
-        raise InputError(f"--map {signal}", f"expected /topic:field (field may be a dotted path a.b), got {source!r}")
+        raise InputError(f"--map {signal}", f"expected /topic:field (field may be a dotted path a.b, with list indices a.0), got {source!r}")
     return topic, path
 
 
 def _lookup(obj: Any, path: list[str], where: str) -> Any:
-    """Follow a dotted field path into a decoded JSON object; name the fields that exist if absent."""
+    """Follow a dotted field path into a decoded message; name the fields (or list length) if absent."""
     for depth, key in enumerate(path):
-        if not isinstance(obj, dict):
-            inside = ".".join(path[:depth]) or "the message"
-            raise InputError(where, f"field {'.'.join(path)!r} not found: {inside} is a {type(obj).__name__}, not an object")
-        if key not in obj:
-            inside = f"in {'.'.join(path[:depth])}" if depth else "at the top level"
-            raise InputError(where, f"field {'.'.join(path)!r} not found: fields {inside} are {', '.join(sorted(obj)) or '(none)'}")
-        obj = obj[key]
+        inside = ".".join(path[:depth])
+        if isinstance(obj, (list, bytes)):  # ROS 2 uint8[] and byte[] arrays decode to bytes
+            if not (key.isascii() and key.isdigit() and int(key) < len(obj)):
+                prefix = f"{inside}." if inside else ""
+                span = f"indexed {prefix}0 to {prefix}{len(obj) - 1}" if obj else "empty"
+                raise InputError(where, f"field {'.'.join(path)!r} not found: {inside or 'the message'} is a list of {len(obj)} ({span})")
+            obj = obj[int(key)]
+            continue
+        fields = message_fields(obj)
+        if fields is None:
+            raise InputError(where, f"field {'.'.join(path)!r} not found: {inside or 'the message'} is a {type(obj).__name__}, not an object")
+        if key not in fields:
+            at = f"in {inside}" if depth else "at the top level"
+            raise InputError(where, f"field {'.'.join(path)!r} not found: fields {at} are {', '.join(sorted(fields)) or '(none)'}")
+        obj = fields[key]
     return obj
 
 
 def _samples(value: Any, where: str) -> list[float]:
-    """One number, or a non-empty list of numbers, as a list of samples."""
-    items = value if isinstance(value, list) else [value]
+    """One number, or a non-empty list of numbers (ROS 2 ``uint8[]`` arrays come as bytes), as a list of samples."""
+    items = list(value) if isinstance(value, (list, bytes)) else [value]
     if not items or not all(type(v) in (int, float) for v in items):
-        raise InputError(where, f"expected a number or a non-empty list of numbers, got {json.dumps(value)[:60]}")
+        raise InputError(where, f"expected a number or a non-empty list of numbers, got {shown(value)}")
     return items
 
 
@@ -98,26 +108,21 @@ def read_foreign_run(
     if require_y and "y" not in mapping:
         raise InputError("--map", "map the measured output too: --map y=/topic:field")
     sources = {name: parse_source(name, mapping[name]) for name in SIGNALS if name in mapping}
-    channels = channels_by_topic(handle, reader, str(path))
+    channels, schemas = channels_and_schemas(handle, reader, str(path))
     for name, (topic, _) in sources.items():
         channel = channels.get(topic)
         if channel is None:
             raise InputError(f"{path}: --map {name}", f"no topic {topic!r}; topics in the file: {', '.join(sorted(channels)) or '(none)'}")
-        if channel.message_encoding != "json":
-            json_topics = sorted(t for t, c in channels.items() if c.message_encoding == "json")
-            raise InputError(
-                f"{path}:{topic}",
-                f"messages are {channel.message_encoding!r}-encoded; --map reads JSON topics only "
-                f"(JSON topics here: {', '.join(json_topics) or 'none'})",
-            )
+        reason = unreadable(channel, schemas)
+        if reason is not None:
+            readable = sorted(t for t, c in channels.items() if unreadable(c, schemas) is None)
+            raise InputError(f"{path}:{topic}", f"{reason}; --map reads {READABLE} (readable topics here: {', '.join(readable) or 'none'})")
     collected = {name: _Collected() for name in sources}
     topics = sorted({topic for topic, _ in sources.values()})
+    decoders = {topic: decoder_for(channels[topic], schemas, f"{path}:{topic}") for topic in topics}
     for _, channel, message in checked(reader.iter_messages(topics=topics, log_time_order=False), str(path)):
         where = f"{path}:{channel.topic} message at log_time {message.log_time} ns"
-        try:
-            obj = json.loads(message.data)
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(where, f"not JSON ({exc})") from None
+        obj = decoders[channel.topic](message.data, where)
         for name, (topic, field) in sources.items():
             if topic == channel.topic:
                 collected[name].add(message.log_time, _samples(_lookup(obj, field, where), f"{where}: {'.'.join(field)}"))

@@ -1,4 +1,4 @@
-"""Foreign MCAP logs (ROS 2 / Foxglove JSON topics): signals as ``/topic:field``.
+"""Foreign MCAP logs (JSON topics, ROS 2 topics): signals as ``/topic:field``.
 
 Reading, the field lookup, the uniform-sampling check and the sample rate from log times are those
 of ``--map`` (:func:`nlsid.io.mcap_foreign.read_foreign_run`, ``docs/formats.md``).
