@@ -106,6 +106,7 @@ def lugre_closed_loop(samples: int, ivp_samples: int) -> dict:
     reference = ivp_closed_loop(point, short, ivp_samples, 1e-10)
     scale = np.max(np.abs(reference))
     nlsid_error = float(np.max(np.abs(simulate_run(model, loop, short, substeps).y[:ivp_samples] - reference)) / scale)
+    nlsid_error_1 = float(np.max(np.abs(simulate_run(model, loop, short, 1).y[:ivp_samples] - reference)) / scale)
     ivp = {}
     for rtol in (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8):
         t, y = timed(lambda: ivp_closed_loop(point, short, ivp_samples, rtol), repeat=1)
@@ -120,6 +121,7 @@ def lugre_closed_loop(samples: int, ivp_samples: int) -> dict:
         "nlsid_samples_per_second": run.n_samples / seconds,
         "nlsid_samples_per_second_substeps_1": run.n_samples / seconds_1,
         "nlsid_relative_error": nlsid_error,
+        "nlsid_relative_error_substeps_1": nlsid_error_1,
         "solve_ivp_rtol": ivp["rtol"],
         "solve_ivp_relative_error": ivp["error"],
         "solve_ivp_seconds_extrapolated": ivp["seconds_per_sample"] * run.n_samples,

@@ -65,5 +65,7 @@ def reference_velocity(r: np.ndarray, fs: float, periodic: bool) -> np.ndarray:
 
 def feedforward(r: np.ndarray, fs: float, periodic: bool, coulomb: float, velocity: float) -> np.ndarray:
     """u_ff = K_fc sign(r') + K_v r' (seed 003, Fig. 1 for the Coulomb term)."""
+    if coulomb == 0 and velocity == 0:
+        return np.zeros_like(r)
     v = reference_velocity(r, fs, periodic)
     return coulomb * np.sign(v) + velocity * v

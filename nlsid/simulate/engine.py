@@ -51,6 +51,12 @@ def _f64(a) -> np.ndarray:
     return np.array(a, dtype=np.float64, order="C")
 
 
+def _signal(a) -> np.ndarray:
+    """A signal for the kernel: float64, C-ordered, writable (copied only when it is not)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
 def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, delay: int,
                 controller: StateSpace | None, r, ff, u, process, y_noise) -> tuple[np.ndarray, np.ndarray]:
     n_el = len(forces_)
@@ -65,7 +71,7 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
     u_out, y_out = np.empty(length), np.empty(length)
     simulate_loop(_f64(Phi), _f64(Gu), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params), _f64(cols), _f64(rows),
                   int(substeps), float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
-                  _f64(r), _f64(ff), _f64(u), _f64(process), _f64(y_noise), u_out, y_out)
+                  _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise), u_out, y_out)
     return u_out, y_out
 
 
