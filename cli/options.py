@@ -8,7 +8,8 @@ from nlsid.errors import InputError
 
 map_option = click.option(
     "--map", "mapping", multiple=True, metavar="SIGNAL=/topic:field",
-    help="Read a foreign MCAP file: take SIGNAL (u, y or r) from a field of a JSON topic. Repeat per signal.",
+    help="Read a foreign MCAP file: take SIGNAL (u, y or r) from a field of a JSON or ROS 2 topic "
+         "(dotted path, list items as a.0). Repeat per signal.",
 )
 
 
