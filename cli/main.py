@@ -16,6 +16,7 @@ from .import_ import import_
 from .hosidf import hosidf
 from .info import info
 from .pending import PENDING_COMMANDS
+from .report import report
 from .simulate import simulate
 
 
@@ -66,6 +67,7 @@ cli.add_command(hosidf)
 cli.add_command(bla)
 cli.add_command(info)
 cli.add_command(simulate)
+cli.add_command(report)
 for command in PENDING_COMMANDS:
     cli.add_command(command)
 

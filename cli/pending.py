@@ -19,10 +19,6 @@ _STAGES = {
         "Show what a simulation model gets wrong on measured data, name the cause and fix it.",
         "nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/",
     ),
-    "report": (
-        "Render a diagnosis, BLA, HOSIDF or model as one self-contained HTML page.",
-        "nlsid report diagnosis/ -o report.html",
-    ),
 }
 
 

@@ -1,0 +1,43 @@
+"""``nlsid report``: one self-contained HTML page of a result (bla.h5, hosidf.h5, model.yaml)."""
+
+from __future__ import annotations
+
+import click
+
+from nlsid import __version__
+from nlsid.io.atomic import check_writable, write_text_atomic
+
+from .common import emit_json, force_option, json_option, settings
+
+
+@click.command()
+@click.argument("source", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The HTML page to write.")
+@force_option
+@json_option
+def report(source: str, output: str, force: bool, as_json: bool) -> None:
+    """Render a BLA, HOSIDF or model as one self-contained HTML page.
+
+    The page opens with the verdict, then the evidence figures with captions, then the tables of
+    numbers and the provenance. Figures are embedded, so the page can be mailed as it is.
+    With --json, the verdict and the numbers are also printed to stdout.
+
+    Examples:
+
+    \b
+      nlsid report bla.h5 -o bla_report.html
+      nlsid report hosidf.h5 -o hosidf_report.html --json
+      nlsid report configs/model_resonance.yaml -o model.html
+    """
+    from nlsid.report.html import render_html
+    from nlsid.report.render import render
+
+    check_writable(output, force)
+    page = render(source)
+    write_text_atomic(output, render_html(page, f"nlsid {__version__} report"), force=force)
+    if as_json:
+        emit_json({"output": output, **page.summary()})
+        return
+    console = settings().console
+    console.print(page.headline, style="bold", markup=False)
+    console.print(f"{len(page.figures)} figures, {len(page.tables)} tables -> {output}", markup=False)

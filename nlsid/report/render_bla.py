@@ -1,0 +1,218 @@
+"""The report page of a ``bla.h5`` file: the distortion verdict, the BLA figures and the level tables.
+
+Verdict (computed from the numbers stored in the file, ``LevelResult.summary`` and
+``across_levels``; see ``docs/drafts/bla.md``), at the highest excitation level, where the
+distortion is largest:
+
+- Output spectrum at the in-band detection lines (seed 000 Fig. 3 and Eq. 7; book Section 6.2):
+  ``odd_above_noise_db`` and ``even_above_noise_db`` compare the band-mean power at the odd and at
+  the even detection lines with the band-mean noise variance of the P-averaged output spectrum,
+  on the same scale. A class of distortion is *detected* when it is more than
+  :data:`DETECTED_DB` = 3 dB above the noise. Justification: without distortion a detection line
+  holds only noise, ``|Y(k)|^2`` is exponentially distributed around the noise variance, so the
+  band mean over L lines and M realizations has a relative standard deviation ``1/sqrt(L M)``,
+  and the noise estimate (P - 1 degrees of freedom per line) ``1/sqrt(L M (P - 1))``; with the
+  smallest useful experiment (L >= 10 lines, M = 2, P = 2) the ratio scatters by about 0.27 in
+  linear terms (about 1 dB), so 3 dB (a factor 2) is more than three standard deviations.
+- On an odd grid the odd and even detection lines separate odd from even distortion (book Section
+  6.1.2, Ex. 89.c): the headline gives ``odd_above_even_db``. On a full grid both classes of
+  detection line carry odd and even contributions, so only their maximum above the noise is given.
+- Without detection lines the robust method still separates the nonlinear variance of the BLA
+  from the noise variance (book (6-7), (6-21)): ``nl_var_db - noise_var_db`` plays the same role.
+- Across levels (seed 000 Figs. 4-5): ``bla_change_max_db``, the largest change of ``|G_BLA|``
+  (20 log10 of the ratio to the lowest level) over the excited lines, for levels that excite the
+  same lines.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from nlsid.analysis.bla import RobustBLA
+from nlsid.analysis.confidence import Bounds
+from nlsid.analysis.fast_bla import FastBLA
+from nlsid.analysis.levels import LevelResult
+from nlsid.analysis.lines import classify_lines
+from nlsid.analysis.output_spectrum import OutputSpectrum
+from nlsid.errors import InputError
+from nlsid.report.html import Figure, Page, Table, number
+
+DETECTED_DB = 3.0
+
+
+def _finite(value) -> bool:
+    return value is not None and math.isfinite(value)
+
+
+def _bounds(group: dict) -> Bounds:
+    return Bounds(*(group[name] for name in ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")))
+
+
+def _level(stored: dict, where: str) -> LevelResult:
+    """A :class:`LevelResult` rebuilt from one ``/levels/level_NN`` group (for the figures).
+
+    The file keeps everything the figures and the summary use; the per-run bias checks of the fast
+    method are not stored (their outcome is in the level's warnings), so ``bias_checks`` is empty.
+    """
+    attrs = stored["attrs"]
+    lines = classify_lines(int(attrs["period"]), float(attrs["fs"]), stored["excited_bins"])
+    if not np.array_equal(lines.kind, stored["lines"]["kind"]):
+        raise InputError(f"{where}/lines/kind", "does not match the line classes of excited_bins and period")
+    robust, fast, per_line = stored["robust"], stored["fast"], stored["lines"]
+    M, P = int(attrs["n_realizations"]), int(attrs["n_periods"])
+    rebuilt_robust = RobustBLA(
+        method=str(attrs["method"]), bins=lines.excited, n_realizations=M, n_periods=P, G=robust["G"],
+        var_total=robust["var_total"], var_noise=robust["var_noise"], var_nl=robust["var_nl"],
+        var_noise_period=robust["var_noise_period"], var_ys=robust["var_ys"], bounds=_bounds(robust),
+        var_input_nl=robust.get("var_input_nl"))
+    rebuilt_fast = None
+    if fast is not None:
+        rebuilt_fast = FastBLA(
+            n_runs=M, G=fast["G"], var_noise=fast["var_noise"], var_total=fast["var_total"], var_nl=fast["var_nl"],
+            var_nl_even=fast.get("var_nl_even"), Yc_power=fast["yc_power"], Yc_noise=fast["yc_noise"],
+            fraction_significant_y=fast["fraction_significant_y"],
+            fraction_significant_u=fast["fraction_significant_u"], bias_checks={}, bounds=_bounds(fast))
+    level = float(attrs["level"])
+    return LevelResult(
+        level=None if math.isnan(level) else level, run_ids=list(attrs["run_ids"]), lines=lines, n_periods=P,
+        u_rms=float(attrs["u_rms"]), robust=rebuilt_robust, fast=rebuilt_fast,
+        spectrum=OutputSpectrum(per_line["u_power"], per_line["u_noise"], per_line["y_power"], per_line["y_noise"]),
+        warnings=list(attrs["warnings"]))
+
+
+def distortion_verdict(summary: dict) -> tuple[str, list[str]]:
+    """Headline and findings on the nonlinear distortion of one level (rules in the module docstring)."""
+    spectrum = summary["spectrum"]
+    odd, even = spectrum["odd_above_noise_db"], spectrum["even_above_noise_db"]
+    findings = []
+    if not (_finite(odd) or _finite(even)):
+        excess = summary["nl_var_db"] - summary["noise_var_db"]
+        if not _finite(excess):
+            return "Nonlinear distortion not measurable (needs M >= 2 realizations and P >= 2 periods)", findings
+        findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
+                        "multisine, book Section 6.1.2)")
+        if excess > DETECTED_DB:
+            return f"Nonlinear distortion {excess:.0f} dB above the noise (robust-method variances)", findings
+        return f"No nonlinear distortion detected: its variance is within {DETECTED_DB:g} dB of the noise", findings
+    if not summary["odd_grid"]:
+        top = float(np.nanmax([odd, even]))
+        findings.append("full grid: the detection lines carry odd and even distortion together")
+        if top > DETECTED_DB:
+            return f"Nonlinear distortion {top:.0f} dB above the noise at the detection lines", findings
+        return f"No nonlinear distortion detected: detection lines within {DETECTED_DB:g} dB of the noise", findings
+    odd_seen, even_seen = _finite(odd) and odd > DETECTED_DB, _finite(even) and even > DETECTED_DB
+    gap = spectrum["odd_above_even_db"]
+    if odd_seen and even_seen:
+        lead = "odd" if gap >= 0 else "even"
+        return (f"Odd and even nonlinear distortion: {lead} dominates by {abs(gap):.0f} dB; odd {odd:.0f} dB, "
+                f"even {even:.0f} dB above the noise"), findings
+    if odd_seen:
+        return f"Odd nonlinear distortion {gap:.0f} dB above even, {odd:.0f} dB above the noise", findings
+    if even_seen:
+        return f"Even nonlinear distortion {-gap:.0f} dB above odd, {even:.0f} dB above the noise", findings
+    return f"No nonlinear distortion detected: odd and even lines within {DETECTED_DB:g} dB of the noise", findings
+
+
+def level_verdict(across: dict) -> str:
+    """The change of |G_BLA| over the levels (seed 000 Figs. 4-5), or why it is not available."""
+    rows = across["levels"]
+    if len(rows) < 2:
+        return "one level: the dependence of the BLA on the level was not measured"
+    changes = [row["bla_change_max_db"] for row in rows[1:] if _finite(row.get("bla_change_max_db"))]
+    if not changes:
+        return "the levels excite different lines: their BLAs are compared in the figure only"
+    largest = max(changes, key=abs)
+    return (f"BLA changes by up to {largest:+.1f} dB over {len(rows)} levels "
+            f"(u rms {rows[0]['u_rms']:.3g} to {rows[-1]['u_rms']:.3g})")
+
+
+def _name(summary: dict, index: int) -> str:
+    return f"level {summary['level']:g}" if summary["level"] is not None else f"level {index:02d}"
+
+
+def _tables(summaries: list[dict], across: dict, probability: float) -> list[Table]:
+    change = {i: row for i, row in enumerate(across["levels"])}
+    bla_rows, spectrum_rows = [], []
+    for i, s in enumerate(summaries):
+        sp = s["spectrum"]
+        bla_rows.append([_name(s, i), number(s["u_rms"]), f"{s['realizations']} x {s['periods']}", s["method"],
+                         str(s["excited_lines"]), number(s["bla_db"], ".1f"), number(s["nl_var_db"], ".1f"),
+                         number(s["noise_var_db"], ".1f"), number(change[i].get("bla_change_mean_db"), "+.2f"),
+                         number(change[i].get("bla_change_max_db"), "+.2f")])
+        spectrum_rows.append([_name(s, i), number(sp["excited_db"], ".1f"), number(sp["odd_db"], ".1f"),
+                              number(sp["even_db"], ".1f"), number(sp["nonharmonic_db"], ".1f"),
+                              number(sp["noise_db"], ".1f"), number(sp["odd_above_even_db"], ".1f"),
+                              number(sp["odd_above_noise_db"], ".1f"), number(sp["even_above_noise_db"], ".1f"),
+                              number(sp["excited_above_odd_db"], ".1f")])
+    return [
+        Table("BLA per level (robust method)",
+              ["level", "u rms", "M x P", "method", "lines", "|G|² dB", "NL var dB", "noise var dB",
+               "ΔG mean dB", "ΔG max dB"], bla_rows,
+              note=(f"|G|²: band mean of |G_BLA|². NL var: var(G_S) of one realization (book 6-7); noise var: "
+                    f"var(N_G) of one period (6-21); both relative to |G|². ΔG: 20 log10 |G/G_first level|, "
+                    f"mean and largest over the lines. Confidence bounds in the figures: {probability:.0%}.")),
+        Table("Output spectrum per level: band means in band (dB)",
+              ["level", "excited", "odd", "even", "non-harm.", "noise", "odd−even", "odd−noise", "even−noise",
+               "excited−odd"], spectrum_rows,
+              note="Powers of the P-averaged output spectrum, rms over realizations (seed 000 Eq. 7); noise: "
+                   "variance of the P-mean on the same scale (book 6-12)."),
+    ]
+
+
+_CAPTIONS = {
+    "bla_vs_level": ("BLA versus excitation level. Top: |G_BLA| of every level; bottom: band-mean nonlinear "
+                     "and noise variances relative to |G_BLA|² versus the rms input (seed 000 Figs. 4-5)."),
+    "spectrum": ("Output spectrum at {name}. Excited lines, odd and even detection lines, non-harmonic lines "
+                 "and the noise variance of the averaged spectrum (seed 000 Fig. 3)."),
+    "bla": ("BLA at {name} with its {p:.0%} confidence bounds. The standard deviations of the estimate due to "
+            "the nonlinear distortion and to the noise are shown with it (seed 000 Fig. 5, book Ex. 92)."),
+}
+
+
+def _figures(levels: list[LevelResult], summaries: list[dict], probability: float) -> list[Figure]:
+    from nlsid.report.bla_plots import render_figures
+
+    rendered = render_figures(levels)
+    order = [len(levels) - 1, *range(len(levels) - 1)]  # the highest level first
+    out = []
+    if len(levels) > 1:
+        out.append(Figure(rendered["bla_vs_level.png"], _CAPTIONS["bla_vs_level"], "bla_vs_level"))
+    for index in order:
+        name = _name(summaries[index], index)
+        for key in ("spectrum", "bla"):
+            caption = _CAPTIONS[key].format(name=name, p=probability)
+            out.append(Figure(rendered[f"{key}_level_{index:02d}.png"], caption, f"{key}_level_{index:02d}"))
+    return out
+
+
+def render_bla(path: Path) -> Page:
+    """The report page of a ``bla.h5`` file (module docstring for the verdict)."""
+    from nlsid.io.bla_file import read_bla
+
+    data = read_bla(path)
+    if not data["levels"]:
+        raise InputError(f"{path}:/levels", "holds no level")
+    levels = [_level(stored, f"{path}:/levels/{stored['name']}") for stored in data["levels"]]
+    summaries = [stored["attrs"]["summary"] for stored in data["levels"]]
+    across = data["attrs"]["across_levels"]
+    probability = float(data["attrs"]["confidence"])
+    top = summaries[-1]
+    distortion, findings = distortion_verdict(top)
+    headline = f"{distortion}; {level_verdict(across)}"
+    spectrum = top["spectrum"]
+    findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, u rms {top['u_rms']:.3g})"] + findings
+    if _finite(spectrum["excited_above_odd_db"]):
+        findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the excited lines")
+    findings.append(f"nonlinear variance of the BLA {number(top['nl_var_db'], '.1f')} dB, noise variance "
+                    f"{number(top['noise_var_db'], '.1f')} dB relative to |G_BLA|² (band means)")
+    warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)
+                                                  for w in s["warnings"]]
+    return Page(
+        kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
+        headline=headline, findings=findings, figures=_figures(levels, summaries, probability),
+        tables=_tables(summaries, across, probability), warnings=warnings, provenance=data["attrs"]["provenance"],
+        numbers={"levels": summaries, "across_levels": across, "confidence": probability,
+                 "detected_threshold_db": DETECTED_DB})

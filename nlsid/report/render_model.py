@@ -1,0 +1,236 @@
+"""The report page of a model YAML (``docs/configs.md``): what the model is, its linear dynamics, its nonlinearities.
+
+Linear part: every LTI element the simulator builds from the config (:mod:`nlsid.models.from_config`)
+is shown by its frequency response ``G(x) = C (xI - A)^{-1} B + D`` (:meth:`StateSpace.frequency_response`)
+at ``x = j 2 pi f`` for continuous elements, with a dead time ``tau`` as ``e^{-j 2 pi f tau}``, and at
+``x = e^{j 2 pi nu}`` over the normalised frequency ``nu = f/fs`` for discrete ones (their sample rate
+is the recording's, so their dead time, a number of samples at that rate, is not drawn). A
+mechanical template contributes its linear plant (the nonlinear forces removed); a block structure
+contributes the LTI blocks of each branch; a closed loop adds the controller and, when plant and
+controller are continuous, the loop gain ``L = C P`` with its crossover frequency (``|L| = 1``) and
+phase margin ``180 deg + angle L`` there.
+
+Poles are summarised as modes: a pole p of a continuous element has the natural frequency
+``|p|/(2 pi)`` Hz and damping ratio ``-Re p/|p|``; a discrete pole z is mapped to ``s = ln z`` per
+sample first (frequency in units of fs). Poles at s = 0 (z = 1) are integrators.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.models.lti import StateSpace
+from nlsid.report.html import Figure, Page, Table, number
+
+_TITLES = {
+    "transfer_function": "Transfer function", "zpk": "Zero-pole-gain model", "state_space": "State-space model",
+    "mass_spring_damper": "Mass-spring-damper", "two_mass_stage": "Two-mass stage", "wiener": "Wiener system",
+    "hammerstein": "Hammerstein system", "wiener_hammerstein": "Wiener-Hammerstein system",
+    "lpl": "Parallel LPL (Wiener-Hammerstein) system",
+}
+
+
+@dataclass(frozen=True)
+class Element:
+    """One LTI element of the model, named as in the config."""
+
+    name: str
+    ss: StateSpace
+
+
+@dataclass(frozen=True)
+class Mode:
+    frequency: float  # Hz (continuous) or cycles per sample (discrete)
+    damping: float
+    count: int  # 1 real pole, 2 a complex pair
+
+
+def modes(ss: StateSpace) -> list[Mode]:
+    """The poles of ``ss`` as modes (module docstring), one entry per real pole or complex pair, by frequency."""
+    out = []
+    for p in ss.poles():
+        if p.imag < -1e-12 * max(1.0, abs(p)):
+            continue
+        s = np.log(p) if ss.discrete else p
+        magnitude = abs(s)
+        damping = -s.real / magnitude if magnitude > 0 else 1.0
+        out.append(Mode(magnitude / (2 * math.pi), float(damping), 2 if abs(s.imag) > 1e-12 * max(1.0, magnitude) else 1))
+    return sorted(out, key=lambda m: m.frequency)
+
+
+def describe_modes(ss: StateSpace) -> str:
+    """Text such as ``2 integrators, mode 39 Hz (zeta 0.25)``."""
+    unit = "× fs" if ss.discrete else "Hz"
+    found = modes(ss)
+    integrators = sum(m.count for m in found if m.frequency < 1e-9)
+    parts = [f"{integrators} integrator{'s' if integrators > 1 else ''}"] if integrators else []
+    for m in found:
+        if m.frequency < 1e-9:
+            continue
+        unstable = "unstable " if m.damping < 0 else ""
+        if m.count == 2:
+            parts.append(f"{unstable}mode {m.frequency:.3g} {unit} (ζ {m.damping:.2g})")
+        else:
+            parts.append(f"{unstable}real pole {m.frequency:.3g} {unit}")
+    return ", ".join(parts) if parts else "static gain"
+
+
+def response(ss: StateSpace, frequency: np.ndarray) -> np.ndarray:
+    """Frequency response at ``frequency`` (Hz, continuous with its dead time; f/fs, discrete without)."""
+    if ss.discrete:
+        return ss.frequency_response(np.exp(2j * math.pi * frequency))
+    return ss.frequency_response(2j * math.pi * frequency) * np.exp(-2j * math.pi * frequency * ss.delay)
+
+
+def frequency_axis(elements: list[Element]) -> np.ndarray:
+    """400 log-spaced points a decade beyond the lowest and highest nonzero mode (Hz); f/fs up to 0.5 if discrete."""
+    if elements[0].ss.discrete:
+        return np.logspace(-4, math.log10(0.5), 400)
+    found = [m.frequency for e in elements for m in modes(e.ss) if m.frequency > 1e-9]
+    low, high = (min(found), max(found)) if found else (1.0, 1.0)
+    return np.logspace(math.floor(math.log10(low)) - 1, math.ceil(math.log10(high)) + 1, 400)
+
+
+def crossover(frequency: np.ndarray, loop: np.ndarray) -> tuple[float, float] | None:
+    """The first frequency where |L| falls through 1 (log-linear interpolation) and the phase margin (deg)."""
+    gain_db = 20 * np.log10(np.abs(loop))
+    phase = np.degrees(np.unwrap(np.angle(loop)))
+    below = np.flatnonzero((gain_db[:-1] >= 0) & (gain_db[1:] < 0))
+    if not below.size:
+        return None
+    i = below[0]
+    t = gain_db[i] / (gain_db[i] - gain_db[i + 1])
+    log_f = math.log10(frequency[i]) + t * (math.log10(frequency[i + 1]) - math.log10(frequency[i]))
+    angle = phase[i] + t * (phase[i + 1] - phase[i])
+    margin = (angle + 180.0) % 360.0
+    return 10**log_f, float(margin - 360.0 if margin > 180.0 else margin)
+
+
+def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
+    """The LTI elements and the nonlinear elements (name, parameters) of a validated config."""
+    from nlsid.models import from_config
+
+    model = config.model
+    if model.type in from_config.STRUCTURES:
+        structure_blocks = {"wiener": [("linear", "nonlinear")], "hammerstein": [("nonlinear", "linear")],
+                            "wiener_hammerstein": [("first", "nonlinear", "second")]}
+        branches = ([(f"branches[{i}]", b, ("before", "nonlinear", "after")) for i, b in enumerate(model.branches)]
+                    if model.type == "lpl" else [("", model, structure_blocks[model.type][0])])
+        linear, nonlinear = [], []
+        for prefix, holder, keys in branches:
+            for key in keys:
+                block = getattr(holder, key)
+                name = f"{prefix}.{key}" if prefix else key
+                if block is None:
+                    continue
+                if key == "nonlinear":
+                    nonlinear.append((name, block.model_dump()))
+                else:
+                    linear.append(Element(name, from_config.lti(block, f"model.{name}")))
+        return linear, nonlinear
+    plant = from_config.plant(model, closed=config.closed_loop is not None)
+    label = "linear plant" + (" (nonlinear forces removed)" if plant.forces else "")
+    nonlinear = [(f"nonlinearities[{i}]", f.model_dump()) for i, f in enumerate(getattr(model, "nonlinearities", []))]
+    return [Element(label, plant.ss)], nonlinear
+
+
+def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarray) -> bytes:
+    from matplotlib.figure import Figure as MplFigure
+
+    from nlsid.report.html import png
+
+    figure = MplFigure(figsize=(8, 6), layout="constrained")
+    magnitude, phase = figure.add_subplot(2, 1, 1), figure.add_subplot(2, 1, 2)
+    curves = [(e.name, response(e.ss, frequency)) for e in elements]
+    if loop is not None:
+        curves.append(("loop gain L = C P", loop))
+    for name, values in curves:
+        magnitude.semilogx(frequency, 20 * np.log10(np.abs(values)), label=name)
+        phase.semilogx(frequency, np.degrees(np.unwrap(np.angle(values))), label=name)
+    unit = "f / fs" if elements[0].ss.discrete else "frequency [Hz]"
+    magnitude.set_ylabel("magnitude [dB]")
+    phase.set_ylabel("phase [deg]")
+    phase.set_xlabel(unit)
+    magnitude.legend(fontsize="small", loc="best")
+    for axis in (magnitude, phase):
+        axis.grid(True, which="both", alpha=0.3)
+    return png(figure)
+
+
+def _parameters(values: dict) -> str:
+    return ", ".join(f"{key} = {value:g}" if isinstance(value, float) else f"{key} = {value}"
+                     for key, value in values.items() if key != "type" and value is not None)
+
+
+def render_model(path: Path) -> Page:
+    """The report page of a model config (module docstring)."""
+    from nlsid.io.config import load_yaml
+    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.models.from_config import closed_loop, model
+
+    data, lines = load_yaml(path)
+    config = validate_simulate_config(data, path, lines)
+    try:
+        model(config)  # the checks of nlsid simulate: stability, structure in open loop only
+        linear, nonlinear = _elements(config)
+        loop_config = closed_loop(config)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc.where}", exc.what) from None
+    if loop_config is not None:
+        linear.append(Element("controller C", loop_config.controller))
+    title = _TITLES[config.model.type]
+    setting = "in closed loop" if loop_config is not None else "in open loop"
+    headline = f"{title} {setting}: {describe_modes(linear[0].ss)}"
+    if nonlinear:
+        headline += "; " + ", ".join(f"{values['type'].replace('_', ' ')} ({name})" for name, values in nonlinear)
+    else:
+        headline += "; linear (no nonlinear element)"
+    findings = [f"{e.name}: {describe_modes(e.ss)}" + (f", dead time {e.ss.delay:g} s" if e.ss.delay else "")
+                for e in linear]
+    figures, numbers = [], {"model": config.model.type, "closed_loop": loop_config is not None, "elements": [],
+                            "nonlinear": [{"name": n, **v} for n, v in nonlinear]}
+    for domain in (False, True):
+        group = [e for e in linear if e.ss.discrete == domain]
+        if not group:
+            continue
+        frequency = frequency_axis(group)
+        loop = None
+        if loop_config is not None and not domain and not linear[0].ss.discrete and not linear[-1].ss.discrete:
+            loop = response(linear[0].ss, frequency) * response(loop_config.controller, frequency)
+            found = crossover(frequency, loop)
+            if found is not None:
+                findings.append(f"loop gain crossover {found[0]:.3g} Hz, phase margin {found[1]:.0f} deg "
+                                "(continuous-time loop)")
+                numbers["crossover_hz"], numbers["phase_margin_deg"] = found
+        figures.append(Figure(_bode(group, loop, frequency),
+                              ("Frequency response of the LTI elements" + (" (discrete, over f/fs; dead time not "
+                               "drawn)" if domain else "") + ". Magnitude and phase of each element as simulated"
+                               + (", and the loop gain" if loop is not None else "") + "."),
+                              "bode_discrete" if domain else "bode"))
+    if config.disturbances.u_noise or config.disturbances.y_noise or config.disturbances.process_noise:
+        d = config.disturbances
+        findings.append(f"noise std: u {d.u_noise:g}, y {d.y_noise:g}, process {d.process_noise:g}")
+    if config.sweep is not None:
+        findings.append(f"sweep of {config.sweep.name or config.sweep.parameter} ({config.sweep.parameter})")
+    pole_rows = []
+    for e in linear:
+        unit = "× fs" if e.ss.discrete else "Hz"
+        item = {"name": e.name, "discrete": e.ss.discrete, "delay": e.ss.delay, "modes": []}
+        for m in modes(e.ss):
+            pole_rows.append([e.name, f"{m.frequency:.4g} {unit}", number(m.damping, ".3g"),
+                              "complex pair" if m.count == 2 else "real"])
+            item["modes"].append({"frequency": m.frequency, "damping": m.damping, "poles": m.count})
+        numbers["elements"].append(item)
+    tables = [Table("Modes of the LTI elements", ["element", "natural frequency", "damping ratio ζ", "poles"],
+                    pole_rows, note="Natural frequency |p|/(2π) and damping ratio −Re p/|p| of each pole p "
+                                    "(discrete: of ln z, in units of the sample rate fs).")]
+    if nonlinear:
+        tables.append(Table("Nonlinear elements", ["element", "type", "parameters"],
+                            [[name, values["type"], _parameters(values)] for name, values in nonlinear]))
+    return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
+                headline=headline, findings=findings, figures=figures, tables=tables, numbers=numbers)
