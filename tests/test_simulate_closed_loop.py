@@ -38,7 +38,7 @@ def config(feedforward=None, nonlinearities=(), delay=0.0, **pid):
 def reference_run(periods=6, transient=5, amplitude=0.01, k0=3) -> Run:
     n = np.arange(N * periods)
     r = amplitude * np.cos(2 * np.pi * k0 * n / N + 0.3)   # the phase keeps samples off r' = 0
-    return Run("s", FS, "sine", r, period=N, transient_periods=transient, frequency=k0 * FS / N)
+    return Run("s", FS, "sine", r, period=N, transient_periods=transient, frequency=k0 * FS / N, units={"u": "m"})
 
 
 def simulate(cfg, run, substeps=None):
@@ -82,6 +82,7 @@ def test_linear_loop_matches_loop_algebra(delay):
     np.testing.assert_allclose(np.fft.fft(out.periods("y")[-1])[lines], Y, rtol=0, atol=1e-9 * scale)
     np.testing.assert_allclose(np.fft.fft(out.periods("u")[-1])[lines], U, rtol=0, atol=1e-9 * np.max(np.abs(U)))
     np.testing.assert_array_equal(out.r, run.u)
+    assert out.units == {"r": "m"}  # the reference keeps the excitation's unit; u is now the plant input
 
 
 def test_feedforward_enters_as_a_known_input():
