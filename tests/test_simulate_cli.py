@@ -236,6 +236,10 @@ BAD = {
                                   ":3: closed_loop.controller: a derivative action (kd > 0) needs a filter"),
     "unknown_block": ("model:\n  type: wiener\n  linear: {type: transfer_function, num: [1.0], den: [1.0, 1.0]}\n"
                       "  nonlinear: {type: cubic, a: 1.0}\n", ":4: model.nonlinear"),
+    "discrete_substeps": ("model: {type: transfer_function, domain: discrete, num: [1.0], den: [1.0, -0.5]}\n"
+                          "simulation: {substeps: 4}\n", ":2: simulation.substeps: a discrete-time model runs one step"),
+    "discrete_causality": ("model: {type: transfer_function, domain: discrete, num: [1.0], den: [0.0, 1.0]}\n",
+                           "model.den: den[0] (the z^0 coefficient) must be nonzero"),
     "swept_value_bad": ("model: {type: mass_spring_damper, mass: 1.0, stiffness: 1.0}\n"
                         "sweep: {parameter: model.mass, values: [1.0, -2.0]}\n",
                         "sweep value -2: model.mass: must be > 0"),
