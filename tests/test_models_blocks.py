@@ -159,3 +159,20 @@ def test_hammerstein_output_does_not_depend_on_substeps():
     one = simulate_run(model, None, run, 1).y
     five = simulate_run(model, None, run, 5).y
     np.testing.assert_allclose(five, one, rtol=0, atol=1e-12 * np.max(np.abs(one)))
+
+
+@pytest.mark.parametrize("b", [0.1, 0.3, 0.6])
+def test_backlash_describing_function(b):
+    # Describing function of backlash with half width b under A sin(w t) (Gelb & Vander Velde 1968):
+    # Re N = 1/2 + (asin(w) + w sqrt(1 - w^2)) / pi with w = 1 - 2b/A, and Im N = -(loop area) /
+    # (pi A^2) = -4 b (A - b) / (pi A^2). The sampled play operator is exact at the samples; the
+    # output's harmonics decay as 1/k^2, so aliasing onto line 1 of a 2^16-sample period is
+    # about 1/N^2 ~ 1e-10: 1e-7 is a wide margin. The second period is analysed (the first
+    # starts from y = 0).
+    N, A = 2**16, 1.0
+    x = A * np.sin(2 * np.pi * np.arange(2 * N) / N)
+    y = play(x, b)[N:]
+    describing = (2 * np.fft.fft(y)[1] / N) / (-1j * A)
+    w = 1 - 2 * b / A
+    expected = 0.5 + (np.arcsin(w) + w * np.sqrt(1 - w * w)) / np.pi - 1j * 4 * b * (A - b) / (np.pi * A * A)
+    assert describing == pytest.approx(expected, abs=1e-7)
