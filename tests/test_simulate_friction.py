@@ -218,3 +218,22 @@ def test_stribeck_breaks_away_at_the_static_level():
     # Just after break-away the force (1.5 N) exceeds the sliding level (-> fc = 1 N): the mass
     # accelerates at about (F - s(v)) / m >= 0.5 m/s^2, so it never sticks again.
     assert np.all(v[moving[0]:] > 0)
+
+
+@pytest.mark.parametrize("vs, substeps", [(1e-3, 8), (1e-5, 1)])
+def test_stribeck_steady_sliding_solves_the_force_balance(vs, substeps):
+    # A constant push F > fs against Stribeck friction and viscous damping c: the steady velocity
+    # solves F = c v + fc + (fs - fc) e^{-(v/vs)^2}. The left side starts below F at v = 0+
+    # (fs < F) and the Stribeck dip only lowers it, so its first crossing, near (F - fc) / c, is
+    # the only root and a stable one (slope ~ c > 0). The implicit step holds exactly at a steady
+    # state, so the match is to the solver's tolerance.
+    # vs = 1e-5 m/s with h = 1 ms makes g |level'| ~ 30 >> 1, where a fixed-point iteration on the
+    # Stribeck curve diverges.
+    from scipy.optimize import brentq
+
+    fc, fs, c, F = 1.0, 1.5, 200.0, 1.6
+    v_star = brentq(lambda v: c * v + fc + (fs - fc) * math.exp(-((v / vs) ** 2)) - F, 1e-6 * vs, 1.0, xtol=1e-15)
+    vel = mass_spring_damper(1.0, c, 0.0, 1.0, "velocity")
+    stribeck = [force_element(forces.STRIBECK, [fc, fs, vs, 2.0, 0.0], vel)]
+    v = simulate(vel, stribeck, np.full(2000, F), 1000.0, substeps)
+    assert v[-1] == pytest.approx(v_star, rel=1e-9)

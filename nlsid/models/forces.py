@@ -19,9 +19,9 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   No chattering around v = 0 and no event location; the error is first order in h at the
   stick/slip transitions and zero while sticking.
 * ``stribeck`` F = (fc + (fs - fc) e^{-|v/vs|^delta}) sign(v) + fv v: sticks while
-  |v_free| <= g_v fs (break-away force fs); in slip the same implicit equation is solved by
-  fixed-point iteration on the Stribeck curve (a contraction since g_v |dF/dv| << 1); if the
-  iterate changes sign the mass sticks instead.
+  |v_free| <= g_v fs (break-away force fs); in slip the same implicit equation in the end speed is
+  bracketed in (0, |v_free|) and solved by Newton's method with bisection fallback (robust also
+  when the Stribeck curve is steeper than 1/g_v, where a fixed-point iteration diverges).
 * ``lugre`` (Canudas de Wit, Olsson, Astrom, Lischinsky 1995): bristle state z,
 
       z' = v - sigma0 |v| z / s(v),   s(v) = fc + (fs - fc) e^{-(v/vs)^2},
@@ -52,7 +52,7 @@ import numpy as np
 
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
-MAX_ITERATIONS = 60   # iterations (Stribeck fixed point, LuGre Newton) at most, stopping
+MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
 TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
 POSITION_KINDS = (CUBIC,)
 

@@ -111,6 +111,44 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.nda
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
+    """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
+
+    Sticks while |v_free| <= g fs. Otherwise the speed w solves
+    psi(w) = w (1 + g fv) + g level(w) - |v_free| = 0 with psi(0) = g fs - |v_free| < 0 and
+    psi(|v_free|) > 0, so a root is bracketed in (0, |v_free|): Newton's method, with bisection
+    whenever a step leaves the bracket (the Stribeck curve's negative slope can make psi
+    non-monotone when g |level'| > 1, where a plain fixed-point iteration would diverge).
+    """
+    fc, fs, vs, delta, fv = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4]
+    if _stick_or_slip(s_free, g, fs):
+        return s_free / g
+    s = 1.0 if s_free > 0 else -1.0
+    target = abs(s_free)
+    lo, hi = 0.0, target
+    w = target
+    level = fs
+    for _ in range(forces.MAX_ITERATIONS):
+        ratio = (w / vs) ** delta
+        ex = math.exp(-ratio)
+        level = fc + (fs - fc) * ex
+        psi = w * (1.0 + g * fv) + g * level - target
+        if psi > 0.0:
+            hi = w
+        else:
+            lo = w
+        slope = 1.0 + g * fv - g * (fs - fc) * ex * delta * ratio / w if w > 0.0 else 1.0 + g * fv
+        w_new = w - psi / slope
+        if not lo < w_new < hi:
+            w_new = 0.5 * (lo + hi)
+        done = abs(w_new - w) <= forces.TOLERANCE * (w_new + vs)
+        w = w_new
+        if done:
+            break
+    return s * (fc + (fs - fc) * math.exp(-((w / vs) ** delta)) + fv * w)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float,
           s_now: float, g: float, h: float) -> float:
     """The force of element ``e`` held over one sub-step; updates its internal state ``state[e]``
@@ -130,22 +168,7 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, wa
         v = (s_free - g * fc * s) / (1.0 + g * fv)
         return fc * s + fv * v
     if kind == forces.STRIBECK:
-        fc, fs, vs, delta, fv = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4]
-        if _stick_or_slip(s_free, g, fs):
-            return s_free / g
-        s = 1.0 if s_free > 0 else -1.0
-        v = s_free
-        level = fs
-        for _ in range(forces.MAX_ITERATIONS):
-            level = fc + (fs - fc) * math.exp(-((abs(v) / vs) ** delta))
-            v_new = (s_free - g * level * s) / (1.0 + g * fv)
-            if v_new * s <= 0.0:
-                return s_free / g
-            done = abs(v_new - v) <= forces.TOLERANCE * (abs(v_new) + vs)
-            v = v_new
-            if done:
-                break
-        return level * s + fv * v
+        return _stribeck(p, e, s_free, g)
     # CUBIC
     mid = 0.5 * (s_now + s_free)
     return p[e, 0] * mid * mid * mid
