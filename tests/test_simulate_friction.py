@@ -227,8 +227,8 @@ def test_stribeck_steady_sliding_solves_the_force_balance(vs, substeps):
     # (fs < F) and the Stribeck dip only lowers it, so its first crossing, near (F - fc) / c, is
     # the only root and a stable one (slope ~ c > 0). The implicit step holds exactly at a steady
     # state, so the match is to the solver's tolerance.
-    # vs = 1e-5 m/s with h = 1 ms makes g |level'| ~ 30 >> 1, where a fixed-point iteration on the
-    # Stribeck curve diverges.
+    # With vs = 1e-5 m/s and h = 1 ms the start of the motion passes through |v| ~ vs, where the
+    # Stribeck curve is steeper than 1/g (g |level'| ~ 40) and the step equation is not monotone.
     from scipy.optimize import brentq
 
     fc, fs, c, F = 1.0, 1.5, 200.0, 1.6
