@@ -50,7 +50,8 @@ def test_distortion_verdict_rules():
     headline, _ = distortion_verdict(_summary(-40.0, -68.0, -70.0))  # even lines 2 dB above noise: not detected
     assert headline == "Odd nonlinear distortion 28 dB above even, 30 dB above the noise"
     headline, _ = distortion_verdict(_summary(-40.0, -60.0, -70.0))  # even lines 10 dB above noise: detected
-    assert headline == "Odd and even nonlinear distortion: odd dominates by 20 dB; odd 30 dB, even 10 dB above the noise"
+    assert headline == ("Odd and even nonlinear distortion: odd dominates by 20 dB; "
+                        "odd 30 dB, even 10 dB above the noise")
     headline, _ = distortion_verdict(_summary(-71.0, -50.0, -70.0))
     assert headline == "Even nonlinear distortion 21 dB above odd, 20 dB above the noise"
     headline, _ = distortion_verdict(_summary(-45.0, -50.0, -70.0))
@@ -204,7 +205,8 @@ def test_model_report_loop_crossover_of_an_integrator(run_cli, tmp_path):
 
 
 def test_page_is_self_contained_and_escaped():
-    png = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAFBQIAX8jx0gAAAABJRU5ErkJggg==")
+    png = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAF"
+                           "BQIAX8jx0gAAAABJRU5ErkJggg==")  # a 1 x 1 PNG
     page = Page(kind="Test", title="A <b> title", source="a&b.h5", headline="<script>alert(1)</script>",
                 findings=["x < y"], figures=[Figure(png, "First part. Second part.", "fig")],
                 tables=[Table("caption", ["a"], [["<i>"]])], warnings=["w > 0"], provenance={"inputs": {"f.h5": "abc"}})
@@ -232,6 +234,9 @@ def test_bad_inputs_fail_cleanly_without_output(run_cli, tmp_path):
     _one_line_error(run_cli("report", tmp_path / "notes.txt", "-o", out), "notes.txt", "expected a bla.h5")
     (tmp_path / "empty").mkdir()
     _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "summary.json")
+    (tmp_path / "empty" / "summary.json").write_text('{"nlsid_format": "diagnosis"}')
+    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "no report for a 'diagnosis'",
+                    "bla, hosidf, model")
     (tmp_path / "bad.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  den: [1.0, -1.0]\n")
     _one_line_error(run_cli("report", tmp_path / "bad.yaml", "-o", out), "bad.yaml", "unstable")
     (tmp_path / "typo.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  denn: [1.0, 1.0]\n")

@@ -117,7 +117,10 @@ def _e(text) -> str:
 def _figure(item: Figure, index: int) -> str:
     data = base64.b64encode(item.png).decode("ascii")
     first, _, rest = item.caption.partition(". ")
-    caption = f"<b>Figure {index}. {_e(first)}.</b> {_e(rest)}" if rest else f"<b>Figure {index}.</b> {_e(item.caption)}"
+    if rest:
+        caption = f"<b>Figure {index}. {_e(first)}.</b> {_e(rest)}"
+    else:
+        caption = f"<b>Figure {index}.</b> {_e(item.caption)}"
     return (f'<figure id="figure-{index}"><img src="data:image/png;base64,{data}" alt="{_e(item.alt)}">'
             f"<figcaption>{caption}</figcaption></figure>")
 
@@ -126,7 +129,8 @@ def _table(item: Table) -> str:
     head = "".join(f"<th>{_e(h)}</th>" for h in item.header)
     body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in item.rows)
     note = f'<p class="note">{_e(item.note)}</p>' if item.note else ""
-    return f"<table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>{note}"
+    return (f"<table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead>"
+            f"<tbody>{body}</tbody></table>{note}")
 
 
 def _provenance(provenance: dict) -> str:

@@ -205,7 +205,8 @@ def render_bla(path: Path) -> Page:
     spectrum = top["spectrum"]
     findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, u rms {top['u_rms']:.3g})"] + findings
     if _finite(spectrum["excited_above_odd_db"]):
-        findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the excited lines")
+        findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the "
+                        "excited lines")
     findings.append(f"nonlinear variance of the BLA {number(top['nl_var_db'], '.1f')} dB, noise variance "
                     f"{number(top['noise_var_db'], '.1f')} dB relative to |G_BLA|² (band means)")
     warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)

@@ -158,7 +158,8 @@ def _grid_tables(grid: dict) -> list[Table]:
     change_rows = [[f"{r['frequency']:g}", f"{r['from_level']:g}", f"{r['to_level']:g}", f"{r['change_db']:+.3f}",
                     number(r["std_db"], ".2g")] for r in h1_change(grid)]
     tables = [Table("Cells: H_1 and each harmonic's level above its noise bound (dB)",
-                    ["frequency Hz", "amplitude", "R x P", "|H_1|", "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
+                    ["frequency Hz", "amplitude", "R x P", "|H_1|", "∠H_1 deg",
+                     *[f"k = {k}" for k in range(2, K + 1)]],
                     rows, note="k columns: 20 log10 |Y(k w0)| / eps_k (seed 003 Table I, Eq. 6); ✓ marks a "
                                "harmonic above its bound. R repeats x P periods per cell.")]
     if change_rows:
@@ -226,8 +227,8 @@ def render_hosidf(path: Path) -> Page:
         grid = data["grid"]
         headline, findings = grid_verdict(grid)
         tables += _grid_tables(grid)
-        numbers["grid"] = {"frequencies": grid["frequency"], "levels": grid["level"], "significance": significance(grid),
-                           "h1_change": h1_change(grid)}
+        numbers["grid"] = {"frequencies": grid["frequency"], "levels": grid["level"],
+                           "significance": significance(grid), "h1_change": h1_change(grid)}
     if "sweep" in data:
         sweep = data["sweep"]
         sweep_headline, sweep_findings = sweep_verdict(sweep)

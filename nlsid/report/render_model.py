@@ -59,7 +59,8 @@ def modes(ss: StateSpace) -> list[Mode]:
         s = np.log(p) if ss.discrete else p
         magnitude = abs(s)
         damping = -s.real / magnitude if magnitude > 0 else 1.0
-        out.append(Mode(magnitude / (2 * math.pi), float(damping), 2 if abs(s.imag) > 1e-12 * max(1.0, magnitude) else 1))
+        pair = abs(s.imag) > 1e-12 * max(1.0, magnitude)
+        out.append(Mode(magnitude / (2 * math.pi), float(damping), 2 if pair else 1))
     return sorted(out, key=lambda m: m.frequency)
 
 
