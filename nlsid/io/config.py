@@ -140,6 +140,24 @@ def _message(error: dict) -> str:
     return error["msg"]
 
 
+def _untagged(loc: tuple, data: Any) -> tuple:
+    """The error location without the discriminator values pydantic inserts for tagged unions
+    (``model.lpl.branches`` -> ``model.branches``): a part that is not a key of the mapping at hand
+    but equals its ``type`` is dropped."""
+    out, node = [], data
+    for part in loc:
+        if isinstance(node, dict) and part not in node and node.get("type") == part:
+            continue
+        out.append(part)
+        if isinstance(node, dict):
+            node = node.get(part)
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            node = node[part]
+        else:
+            node = None
+    return tuple(out)
+
+
 def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tuple, int] | None = None) -> T:
     """Validate loaded data against ``schema`` (and its ``check()``, if any).
 
@@ -155,7 +173,7 @@ def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tu
         return config
     except ValidationError as exc:
         errors = exc.errors()
-        key_path, message = tuple(errors[0]["loc"]), _message(errors[0])
+        key_path, message = _untagged(tuple(errors[0]["loc"]), data), _message(errors[0])
         if len(errors) > 1:
             message += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
     except ConfigValueError as exc:

@@ -15,9 +15,8 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from nlsid.errors import InputError
 from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
 
@@ -323,36 +322,6 @@ class SimulateConfig(StrictModel):
     simulation: SimulationConfig = SimulationConfig()
 
 
-def _untagged(loc: tuple, data) -> tuple:
-    """The error location without the discriminator values pydantic inserts (``model.lpl.branches``
-    -> ``model.branches``): a part that is not a key of the mapping at hand but its ``type`` is dropped."""
-    out, node = [], data
-    for part in loc:
-        if isinstance(node, dict) and part not in node and node.get("type") == part:
-            continue
-        out.append(part)
-        if isinstance(node, dict):
-            node = node.get(part)
-        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
-            node = node[part]
-        else:
-            node = None
-    return tuple(out)
-
-
 def validate_simulate_config(data, path, lines: dict) -> SimulateConfig:
-    """Validate a loaded model config; errors name the file, line and key path without union tags.
-
-    (:func:`nlsid.io.config.validate` keeps pydantic's discriminator values in the key path and
-    so misses the line of keys inside a ``type``-tagged block.)
-    """
-    try:
-        return SimulateConfig.model_validate(data if data is not None else {})
-    except ValidationError as exc:
-        errors = exc.errors()
-        key_path = _untagged(errors[0]["loc"], data)
-        line = config_loader._line_of(lines, key_path)
-        where = f"{path}:{line}" if line is not None else str(path)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-        raise InputError(where, f"{config_loader._dotted(key_path) or 'top level'}: "
-                                f"{config_loader._message(errors[0])}{more}") from None
+    """Validate a loaded model config; errors name the file, line and key path."""
+    return config_loader.validate(data, SimulateConfig, path, lines)
