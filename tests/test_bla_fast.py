@@ -121,25 +121,31 @@ def test_exercise_89c_detection_lines():
 def test_exercise_89c_full_random_grid_has_3_db_more_noise():
     """(6-102): same period, F_group and rms, the full-random BLA has twice the noise variance of the
     odd-random one (half the power per line). The full grid's noise variance is interpolated to the
-    odd grid's lines; each band mean has relative spread 1/sqrt(5 F) (10 dof per line), so the
-    ratio is 2 within 4 x sqrt(2/(5 F))."""
+    odd grid's lines. Each band mean has relative spread 1/sqrt(5 n_eff) (10 dof per line), where
+    n_eff = (sum w)^2 / sum w^2 counts the lines that matter (w: the per-line variances, dominated
+    by the resonance, where |G|^2 amplifies the input noise); the ratio is 2 within
+    4 sqrt(2/(5 n_eff))."""
     rng = np.random.default_rng(102)
     odd = analyse([run_89c(odd_random_bins(1400, 2200, 3, rng), rng)])
     full = analyse([run_89c(full_random_bins(1400, 2200, 3, rng), rng)])
     f_odd = odd.lines.frequency(odd.lines.excited)
     f_full = full.lines.frequency(full.lines.excited)
     ratio = np.mean(np.interp(f_odd, f_full, full.fast.var_noise)) / np.mean(odd.fast.var_noise)
-    assert ratio == pytest.approx(2.0, rel=4 * np.sqrt(2 / (5 * f_odd.size)))
+    w = odd.fast.var_noise
+    n_eff = np.sum(w) ** 2 / np.sum(w**2)
+    assert ratio == pytest.approx(2.0, rel=4 * np.sqrt(2 / (5 * n_eff)))
 
 
 def test_robust_and_fast_agree_on_the_nonlinear_variance():
-    """Ex 91: on the same runs (M = 10, P = 6) the rms-averaged fast estimate of var(G_S) equals the
-    robust one. Band means: robust relative spread ~ 1/sqrt((M-1) F), fast ~ 1/sqrt(M n_det) with
-    about F/2 odd detection lines; 4 combined spreads are about 0.6 dB, we allow 1 dB for the
-    linear interpolation over the resonance."""
+    """Ex 91: on the same runs (M = 20, P = 6, as in the book) the rms-averaged fast estimate of
+    var(G_S) equals the robust one. The band means are dominated by the few lines near the
+    resonance, so their spread is larger than a count of all lines suggests: over 16 seeds at
+    M = 10 the difference was +0.18 dB on average (linear interpolation of the detection-line power
+    over the convex resonance peak) with a standard deviation of 0.22 dB, i.e. about 0.16 dB at
+    M = 20; 1 dB is more than 5 standard deviations."""
     rng = np.random.default_rng(91)
     bins = odd_random_bins(1400, 2200, 3, rng)
-    level = analyse([run_89c(bins, rng, f"r{m}", m) for m in range(10)])
+    level = analyse([run_89c(bins, rng, f"r{m}", m) for m in range(20)])
     robust = np.mean(level.robust.var_nl)
     fast = np.mean(level.fast.var_nl)
     assert 10 * np.log10(fast / robust) == pytest.approx(0.0, abs=1.0)
@@ -164,10 +170,11 @@ def test_exercise_89e_even_distorted_input_biases_the_even_level():
     """Ex 89.e, (6-71)/(6-72): with beta x^3 and no even nonlinearity, even input lines at -20 dB
     (constant amplitude, random phase) make the even output lines carry 3 beta (o^2 - mean o^2) e
     (o, e: odd and even parts of the input), which the impurity correction does not remove: the
-    measured even level equals the power of that term at the even lines (computed here directly
-    from the signals), and the (6-72) check warns. With a pure input the even lines hold noise only.
-    The difference between the two is deterministic, of relative order 3 beta s_e^2 and e^3/o^2 terms
-    (below 1%); we allow 0.5 dB."""
+    measured even level is at least the power of that term at the even lines (computed here
+    directly from the signals), and the (6-72) check warns. With a pure input the even lines hold
+    noise only. The measured level exceeds the mixing term by the incoherent |G_S(l)|^2 |E(l)|^2 of
+    the single-run BLA that the correction (6-52) interpolates: var(G_S) |E|^2 is about 10% of the
+    mixing term here (+0.45 dB, spread 0.06 dB over 12 seeds); we accept 0 to 1 dB."""
     rng = np.random.default_rng(895)
     N, P, M, beta = 4096, 2, 6, 0.05
     bins = odd_random_bins(9, 801, 2, rng)
@@ -195,7 +202,7 @@ def test_exercise_89e_even_distorted_input_biases_the_even_level():
     assert any("even distortion level may be overestimated" in w for w in distorted.warnings)
     measured = np.mean(distorted.fast.Yc_power[even] - distorted.fast.Yc_noise[even])
     expected = np.mean(np.mean(predicted, axis=0)[even])
-    assert 10 * np.log10(measured / expected) == pytest.approx(0.0, abs=0.5)
+    assert 0.0 < 10 * np.log10(measured / expected) < 1.0
     assert np.mean(distorted.fast.fraction_significant_y[even]) > 0.9
 
 
@@ -203,8 +210,8 @@ def test_fast_method_on_a_linear_system_with_input_and_output_noise():
     """A linear system: the corrected detection lines (6-52)/(6-53) hold noise only, so the
     extrapolated total variance (6-55) equals the noise variance (6-49) and var(G_S) (6-56) is not
     significant; the noise variance of the mean of M fast runs is (s_y^2 + |G|^2 s_u^2)/(N |U0|^2 P M).
-    Band means: the noise variance has 2(P-1) dof per line and run; the detection-line powers are
-    exponential (2 dof) per line and run, about F/2 of them per run."""
+    Band means of the ratios to that value: the noise variance has 2(P-1) dof per line and run; the
+    detection-line powers are exponential (2 dof) per line and run, n_det of them per run."""
     rng = np.random.default_rng(31)
     b, a = signal.butter(2, 0.2)
     N, M, P, su, sy = 2048, 6, 4, 0.02, 0.01
@@ -217,7 +224,7 @@ def test_fast_method_on_a_linear_system_with_input_and_output_noise():
     expected = (sy**2 + np.abs(G) ** 2 * su**2) / (N * U2 * P * M)
     assert np.mean(fast.var_noise / expected) == pytest.approx(1.0, abs=4 / np.sqrt((P - 1) * M * F))
     n_det = level.lines.bla_detection().size
-    ratio = np.mean(fast.var_total) / np.mean(fast.var_noise)
-    assert ratio == pytest.approx(1.0, abs=4 / np.sqrt(M * n_det))
-    # var(G_S) of one realization is (total - noise) of one run: zero within the same spread.
-    assert abs(np.mean(fast.var_nl)) < 4 / np.sqrt(M * n_det) * np.mean(fast.var_noise) * M
+    assert np.mean(fast.var_total / expected) == pytest.approx(1.0, abs=4 / np.sqrt(M * n_det))
+    # var(G_S) of one realization is (total - noise) of one run, M times the variances of the mean:
+    # zero within the same spread.
+    assert abs(np.mean(fast.var_nl / (M * expected))) < 4 / np.sqrt(M * n_det)
