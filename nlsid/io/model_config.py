@@ -1,7 +1,7 @@
 """Schemas of the model / simulation YAML read by ``nlsid simulate`` (``docs/configs.md``).
 
 A model config has one required key, ``model``, and optional ``closed_loop``, ``disturbances``,
-``sweep`` and ``simulation``. Every block is a mapping with a ``type`` key (a pydantic
+``sweep``, ``simulation`` and ``free`` (parameters that ``nlsid fit --model`` estimates). Every block is a mapping with a ``type`` key (a pydantic
 discriminated union), so a typo in a type or a key is reported with its line number by
 :func:`nlsid.io.config.load_config`.
 
@@ -55,6 +55,86 @@ class StateSpaceConfig(_LTIBase):
     B: list[float]
     C: list[float]
     D: float = 0.0
+
+
+LTIConfig = Annotated[Union[TransferFunctionConfig, ZPKConfig, StateSpaceConfig], Field(discriminator="type")]
+
+
+class PolynomialConfig(StrictModel):
+    """y = sum_p coefficients[p] x^p, p = 0, 1, 2, ... (any degree, odd and even terms)."""
+
+    type: Literal["polynomial"]
+    coefficients: list[float] = Field(min_length=1)
+
+
+class SaturationConfig(StrictModel):
+    type: Literal["saturation"]
+    lower: float
+    upper: float
+
+    @model_validator(mode="after")
+    def _order(self):
+        if not self.lower < self.upper:
+            raise ValueError(f"lower ({self.lower}) must be < upper ({self.upper})")
+        return self
+
+
+class DeadzoneConfig(StrictModel):
+    type: Literal["deadzone"]
+    lower: float = Field(le=0)
+    upper: float = Field(ge=0)
+
+
+class PiecewiseLinearConfig(StrictModel):
+    """Straight lines through (x[i], y[i]), extended beyond the ends by the end segments."""
+
+    type: Literal["piecewise_linear"]
+    x: list[float] = Field(min_length=2)
+    y: list[float] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _points(self):
+        if len(self.x) != len(self.y):
+            raise ValueError(f"x has {len(self.x)} points and y has {len(self.y)}")
+        if any(b <= a for a, b in zip(self.x, self.x[1:])):
+            raise ValueError("x must be strictly increasing")
+        return self
+
+
+class BacklashConfig(StrictModel):
+    """Play operator: the output stays until the input is more than width/2 away from it."""
+
+    type: Literal["backlash"]
+    width: Positive
+
+
+BlockConfig = Annotated[
+    Union[PolynomialConfig, SaturationConfig, DeadzoneConfig, PiecewiseLinearConfig, BacklashConfig],
+    Field(discriminator="type"),
+]
+
+
+class _PlantBlocks(StrictModel):
+    """Static or hysteretic blocks at a plant's input and output, in open and closed loop.
+
+    ``input_nonlinearity`` maps the plant input (the actuator: the recorded u stays the command, the
+    plant gets f(u)); ``output_nonlinearity`` maps the plant output before it is recorded and fed back.
+    """
+
+    input_nonlinearity: Optional[BlockConfig] = None
+    output_nonlinearity: Optional[BlockConfig] = None
+
+
+class TransferFunctionPlant(TransferFunctionConfig, _PlantBlocks):
+    """A transfer function as the model (``model:``), with optional input and output blocks."""
+
+
+class ZPKPlant(ZPKConfig, _PlantBlocks):
+    """Zeros, poles and gain as the model, with optional input and output blocks."""
+
+
+class StateSpacePlant(StateSpaceConfig, _PlantBlocks):
+    """A state-space model as the model, with optional input and output blocks."""
 
 
 class CoulombConfig(StrictModel):
@@ -116,7 +196,7 @@ class InitialState(StrictModel):
     velocity: float = 0.0
 
 
-class MassSpringDamperConfig(StrictModel):
+class MassSpringDamperConfig(_PlantBlocks):
     """m x'' + c x' + k x = gain u - sum of nonlinear forces."""
 
     type: Literal["mass_spring_damper"]
@@ -130,7 +210,7 @@ class MassSpringDamperConfig(StrictModel):
     delay: NonNegative = 0.0
 
 
-class TwoMassStageConfig(StrictModel):
+class TwoMassStageConfig(_PlantBlocks):
     """Motor mass (driven) coupled to a load mass by a spring and damper (one flexible mode)."""
 
     type: Literal["two_mass_stage"]
@@ -147,61 +227,16 @@ class TwoMassStageConfig(StrictModel):
     delay: NonNegative = 0.0
 
 
-LTIConfig = Annotated[Union[TransferFunctionConfig, ZPKConfig, StateSpaceConfig], Field(discriminator="type")]
+class NonlinearFeedbackConfig(_PlantBlocks):
+    """Forces fed back around a continuous LTI ``linear`` from force to position:
+    p = G(s) (gain u - sum F), each F reading p (cubic stiffness) or v = p' (friction)."""
 
-
-class PolynomialConfig(StrictModel):
-    """y = sum_p coefficients[p] x^p, p = 0, 1, 2, ... (any degree, odd and even terms)."""
-
-    type: Literal["polynomial"]
-    coefficients: list[float] = Field(min_length=1)
-
-
-class SaturationConfig(StrictModel):
-    type: Literal["saturation"]
-    lower: float
-    upper: float
-
-    @model_validator(mode="after")
-    def _order(self):
-        if not self.lower < self.upper:
-            raise ValueError(f"lower ({self.lower}) must be < upper ({self.upper})")
-        return self
-
-
-class DeadzoneConfig(StrictModel):
-    type: Literal["deadzone"]
-    lower: float = Field(le=0)
-    upper: float = Field(ge=0)
-
-
-class PiecewiseLinearConfig(StrictModel):
-    """Straight lines through (x[i], y[i]), extended beyond the ends by the end segments."""
-
-    type: Literal["piecewise_linear"]
-    x: list[float] = Field(min_length=2)
-    y: list[float] = Field(min_length=2)
-
-    @model_validator(mode="after")
-    def _points(self):
-        if len(self.x) != len(self.y):
-            raise ValueError(f"x has {len(self.x)} points and y has {len(self.y)}")
-        if any(b <= a for a, b in zip(self.x, self.x[1:])):
-            raise ValueError("x must be strictly increasing")
-        return self
-
-
-class BacklashConfig(StrictModel):
-    """Play operator: the output stays until the input is more than width/2 away from it."""
-
-    type: Literal["backlash"]
-    width: Positive
-
-
-BlockConfig = Annotated[
-    Union[PolynomialConfig, SaturationConfig, DeadzoneConfig, PiecewiseLinearConfig, BacklashConfig],
-    Field(discriminator="type"),
-]
+    type: Literal["nonlinear_feedback"]
+    linear: LTIConfig
+    gain: float = 1.0
+    output: Literal["position", "velocity"] = "position"
+    nonlinearities: list[ForceConfig] = []
+    delay: NonNegative = 0.0
 
 
 class WienerConfig(StrictModel):
@@ -238,8 +273,8 @@ class LPLConfig(StrictModel):
 
 ModelConfig = Annotated[
     Union[
-        TransferFunctionConfig, ZPKConfig, StateSpaceConfig, MassSpringDamperConfig, TwoMassStageConfig,
-        WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
+        TransferFunctionPlant, ZPKPlant, StateSpacePlant, MassSpringDamperConfig, TwoMassStageConfig,
+        NonlinearFeedbackConfig, WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
     ],
     Field(discriminator="type"),
 ]
@@ -312,6 +347,25 @@ class SimulationConfig(StrictModel):
     substeps: Optional[Annotated[int, Field(ge=1)]] = None
 
 
+class FreeParameterConfig(StrictModel):
+    """A config value that ``nlsid fit --model`` estimates: start value (default: the value written
+    at its key path) and bounds (default: unbounded)."""
+
+    start: Optional[float] = None
+    lower: Optional[float] = None
+    upper: Optional[float] = None
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        lower = -float("inf") if self.lower is None else self.lower
+        upper = float("inf") if self.upper is None else self.upper
+        if not lower < upper:
+            raise ValueError(f"lower ({lower}) must be < upper ({upper})")
+        if self.start is not None and not lower <= self.start <= upper:
+            raise ValueError(f"start ({self.start}) must lie within [lower, upper] = [{lower}, {upper}]")
+        return self
+
+
 class SimulateConfig(StrictModel):
     """The whole model / simulation config file."""
 
@@ -320,6 +374,7 @@ class SimulateConfig(StrictModel):
     disturbances: DisturbancesConfig = DisturbancesConfig()
     sweep: Optional[SweepConfig] = None
     simulation: SimulationConfig = SimulationConfig()
+    free: dict[str, FreeParameterConfig] = {}  # dotted key path -> start and bounds (nlsid fit --model)
 
 
 def validate_simulate_config(data, path, lines: dict) -> SimulateConfig:
