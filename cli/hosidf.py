@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
+from typing import Iterator
 
 import click
 
@@ -10,8 +12,9 @@ from nlsid.errors import InputError
 from nlsid.io.atomic import check_writable
 from nlsid.io.provenance import provenance
 from nlsid.io.recording import open_recording
+from nlsid.io.run import Run
 
-from .common import emit_json, force_option, json_option, progress, settings
+from .common import LOGGER, emit_json, force_option, json_option, progress, settings
 from .options import map_option, parse_map
 
 
@@ -26,11 +29,28 @@ def _plot_folder(plots: str | None) -> Path | None:
     return folder
 
 
-def _runs(recording):
+def _sine_runs(recording) -> Iterator[Run]:
+    """The single-sine runs of a recording, read one at a time; other runs are skipped with a warning."""
+    skipped, found = [], False
     with progress("reading runs", len(recording.run_ids)) as step:
         for run_id in recording.run_ids:
-            yield recording.load(run_id)
+            run = recording.load(run_id)
             step()
+            if run.kind == "sine":
+                found = True
+                yield run
+            else:
+                skipped.append(run_id)
+    if skipped and found:
+        LOGGER.warning("skipped %d runs that are not single sines (%s%s)", len(skipped),
+                       ", ".join(skipped[:5]), ", ..." if len(skipped) > 5 else "")
+
+
+def _first_and_all(runs: Iterator[Run], path: str) -> tuple[Run, Iterator[Run]]:
+    first = next(runs, None)
+    if first is None:
+        raise InputError(path, "holds no single-sine runs (kind 'sine'): design a sine grid (`sines:` in the design config)")
+    return first, itertools.chain([first], runs)
 
 
 def _analytic(branches, grid):
@@ -86,7 +106,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
         raise InputError("--model", "analytic HOSIDFs apply to a frequency x amplitude grid, not to --sweep")
     grid = analytic = result = None
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
-        first = rec.load(rec.run_ids[0])
+        first, runs = _first_and_all(_sine_runs(rec), recording)
         signal = input_choice if input_choice != "auto" else ("r" if first.r is not None else "u")
         if parameter is None:
             branches = None
@@ -94,12 +114,12 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
                 from nlsid.analysis.hosidf_model import branches_from_config
 
                 branches = branches_from_config(model, first.fs)
-            grid = measured_hosidf(_runs(rec), harmonics, variance, signal, recording)
+            grid = measured_hosidf(runs, harmonics, variance, signal, recording)
             spectrum_of = (first.periods("y"), run_spectra(first, harmonics, signal, recording), first.fs)
             if branches is not None:
                 analytic = _analytic(branches, grid)
         else:
-            result = sweep(_runs(rec), parameter, harmonics, signal, recording)
+            result = sweep(runs, parameter, harmonics, signal, recording)
     prov = provenance(config_paths=[model] if model else [], input_paths=[recording])
     write_hosidf(output, harmonics, signal, prov, grid=grid, analytic=analytic, sweep=result, force=force)
     figures = []

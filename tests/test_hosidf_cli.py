@@ -107,8 +107,15 @@ def test_bad_inputs(run_cli, lpl_recording, tmp_path):
     good = cases.sine_run("sine", 2, 1.0, cases.two_branch)
     ms = Run(run_id="ms", fs=cases.FS, kind="multisine", u=good.u, y=good.y, period=cases.N, transient_periods=12,
              excited_bins=np.array([1, 3]))
-    write_recording(tmp_path / "mixed.h5", [good, ms], provenance={})
-    _one_line_error(run_cli("hosidf", tmp_path / "mixed.h5", "-o", out), "runs/ms", "kind 'sine'")
+    write_recording(tmp_path / "multisine_only.h5", [ms], provenance={})
+    _one_line_error(run_cli("hosidf", tmp_path / "multisine_only.h5", "-o", out), "multisine_only.h5",
+                    "holds no single-sine runs")
+    # a mixed recording: the multisine is skipped with a warning, the sine cell is analysed
+    write_recording(tmp_path / "mixed.h5", [good, cases.sine_run("sine2", 2, 1.0, cases.two_branch), ms],
+                    provenance={})
+    mixed = run_cli("hosidf", tmp_path / "mixed.h5", "-o", tmp_path / "mixed_out.h5", "--json")
+    assert mixed.exit_code == 0 and "skipped 1 runs that are not single sines (ms)" in mixed.stderr
+    assert mixed.json()["grid"]["cells"] == 1
     # a sine off its bin
     off = cases.sine_run("off", 2, 1.0, cases.two_branch)
     off.frequency = 2.5 * cases.FS / cases.N
