@@ -48,7 +48,8 @@ def test_info_json(run_cli, tmp_path):
     result = run_cli("info", out, "--json")
     assert result.exit_code == 0
     summary = result.json()
-    assert summary["format"] == "excitation" and len(summary["runs"]) == 39
+    # configs/stage_design.yaml: 3 levels x 3 realizations + 3 frequencies x 3 amplitudes x 3 repeats.
+    assert summary["format"] == "excitation" and len(summary["runs"]) == 3 * 3 + 3 * 3 * 3
     assert summary["runs"][0]["signals"] == ["u"]
 
 
