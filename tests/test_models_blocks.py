@@ -15,7 +15,7 @@ from scipy.special import comb
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
-from nlsid.models.blocks import play, static_map
+from nlsid.models.blocks import static_map
 from nlsid.simulate.engine import simulate_run
 
 N = 1024
@@ -46,7 +46,7 @@ def test_saturation_deadzone_and_piecewise_linear_values():
 def test_backlash_play_operator_by_hand():
     # Half width 0.5, output starts at 0: it moves only when the input is more than 0.5 away.
     x = np.array([0.0, 1.0, 2.0, 1.0, 0.0, -1.0, 0.3])
-    np.testing.assert_allclose(play(x, 0.5), [0.0, 0.5, 1.5, 1.5, 0.5, -0.5, -0.2])
+    np.testing.assert_allclose(block(type="backlash", width=1.0)(x), [0.0, 0.5, 1.5, 1.5, 0.5, -0.5, -0.2])
 
 
 def theorem1(alpha: np.ndarray, gamma: float, phi: float) -> np.ndarray:
@@ -171,7 +171,7 @@ def test_backlash_describing_function(b):
     # starts from y = 0).
     N, A = 2**16, 1.0
     x = A * np.sin(2 * np.pi * np.arange(2 * N) / N)
-    y = play(x, b)[N:]
+    y = block(type="backlash", width=2 * b)(x)[N:]
     describing = (2 * np.fft.fft(y)[1] / N) / (-1j * A)
     w = 1 - 2 * b / A
     expected = 0.5 + (np.arcsin(w) + w * np.sqrt(1 - w * w)) / np.pi - 1j * 4 * b * (A - b) / (np.pi * A * A)

@@ -1,6 +1,7 @@
-"""Nonlinear blocks of block-structured models: static maps and the backlash (play) operator.
+"""Nonlinear blocks: static maps and the backlash (play) operator.
 
-Static maps y = f(x), applied sample by sample:
+They serve as the nonlinear blocks of block-structured models (Wiener, Hammerstein, LPL) and as the
+``input_nonlinearity`` / ``output_nonlinearity`` of a plant. Static maps y = f(x), sample by sample:
 
 * ``polynomial``: y = sum_p a_p x^p, p = 0 .. P (seed 002, Eq. 1, with an optional a_0).
 * ``saturation``: y = min(max(x, lower), upper).
@@ -10,7 +11,18 @@ Static maps y = f(x), applied sample by sample:
 
 ``backlash`` is a block with memory (the play operator of width w): the output stays where it is
 while |x - y| <= w/2 and otherwise is dragged along, y[k] = x[k] -+ w/2. It starts at y = 0
-(the play centred on the first input when |x[0]| <= w/2).
+(the play centred on the first input when |x[0]| <= w/2). On a sampled signal held between
+samples (a DAC's zero-order hold) the play operator's output is itself held, so evaluating it at
+the samples is exact.
+
+The laws are implemented in :func:`nlsid.simulate.kernels.block` (the kernel's module, so that
+numba's on-disk cache stays current); this module encodes a block config for them.
+
+Kinds and parameter vectors:
+
+    0 identity []      1 polynomial [a_0, ..., a_P]      2 saturation [lower, upper]
+    3 deadzone [lower, upper]      4 piecewise_linear [x_0 .. x_{n-1}, y_0 .. y_{n-1}]
+    5 backlash [w / 2]
 """
 
 from __future__ import annotations
@@ -18,47 +30,27 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from numba import njit
+
+IDENTITY, POLYNOMIAL, SATURATION, DEADZONE, PIECEWISE_LINEAR, BACKLASH = range(6)
+
+
+def encode(config) -> tuple[int, np.ndarray]:
+    """(kind, parameter vector) of a block config (:mod:`nlsid.io.model_config`); None is the identity."""
+    if config is None:
+        return IDENTITY, np.zeros(0)
+    kind, values = {
+        "polynomial": (POLYNOMIAL, lambda c: c.coefficients),
+        "saturation": (SATURATION, lambda c: [c.lower, c.upper]),
+        "deadzone": (DEADZONE, lambda c: [c.lower, c.upper]),
+        "piecewise_linear": (PIECEWISE_LINEAR, lambda c: [*c.x, *c.y]),
+        "backlash": (BACKLASH, lambda c: [0.5 * c.width]),
+    }[config.type]
+    return kind, np.array(values(config), dtype=np.float64)
 
 
 def static_map(config) -> Callable[[np.ndarray], np.ndarray]:
-    """The block of ``config`` (a block config from :mod:`nlsid.io.model_config`) as a function of arrays."""
-    kind = config.type
-    if kind == "polynomial":
-        coefficients = np.asarray(config.coefficients, dtype=float)
-        return lambda x: np.polynomial.polynomial.polyval(x, coefficients)
-    if kind == "saturation":
-        return lambda x: np.clip(x, config.lower, config.upper)
-    if kind == "deadzone":
-        return lambda x: np.where(x > config.upper, x - config.upper, np.where(x < config.lower, x - config.lower, 0.0))
-    if kind == "piecewise_linear":
-        return _piecewise_linear(np.asarray(config.x, dtype=float), np.asarray(config.y, dtype=float))
-    if kind == "backlash":
-        return lambda x: play(np.ascontiguousarray(x, dtype=float), 0.5 * config.width)
-    raise ValueError(f"unknown block type {kind!r}")
+    """The block of ``config`` as a function of arrays (a backlash starts from y = 0 on each call)."""
+    from nlsid.simulate.kernels import apply_block
 
-
-def _piecewise_linear(xp: np.ndarray, yp: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    slope_lo = (yp[1] - yp[0]) / (xp[1] - xp[0])
-    slope_hi = (yp[-1] - yp[-2]) / (xp[-1] - xp[-2])
-
-    def apply(x: np.ndarray) -> np.ndarray:
-        y = np.interp(x, xp, yp)
-        y = np.where(x < xp[0], yp[0] + slope_lo * (x - xp[0]), y)
-        return np.where(x > xp[-1], yp[-1] + slope_hi * (x - xp[-1]), y)
-
-    return apply
-
-
-@njit(cache=True, nogil=True)
-def play(x: np.ndarray, half_width: float) -> np.ndarray:
-    """The play (backlash) operator with half width ``half_width``, starting from y = 0."""
-    y = np.empty_like(x)
-    out = 0.0
-    for k in range(x.shape[0]):
-        if x[k] - out > half_width:
-            out = x[k] - half_width
-        elif out - x[k] > half_width:
-            out = x[k] + half_width
-        y[k] = out
-    return y
+    kind, params = encode(config)
+    return lambda x: apply_block(kind, params, np.ascontiguousarray(x, dtype=np.float64))

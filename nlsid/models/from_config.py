@@ -3,7 +3,9 @@
 Two kinds of model come out:
 
 * :class:`Plant`: a linear state-space plant, optionally with nonlinear forces fed back from an
-  internal signal (mechanical templates). It runs open loop or in a closed loop.
+  internal signal (mechanical templates, or ``nonlinear_feedback`` around any LTI from force to
+  position) and with a nonlinear block at its input and at its output. It runs open loop or in a
+  closed loop.
 * :class:`Structure`: a block-structured model (Wiener, Hammerstein, Wiener-Hammerstein, the
   parallel LPL of seed 002 Definition 1): branches of LTI blocks and nonlinear blocks in series,
   summed. Open loop only.
@@ -19,10 +21,11 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.io import model_config as mc
 from nlsid.models import forces
+from nlsid.models import blocks
 from nlsid.models.blocks import static_map
 from nlsid.models.controller import pid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
-from nlsid.models.mechanical import MechanicalPlant, mass_spring_damper, two_mass_stage
+from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage
 
 
 @dataclass(frozen=True)
@@ -37,9 +40,14 @@ class Force:
 
 @dataclass(frozen=True)
 class Plant:
+    """A state-space plant with forces fed back, and the blocks (kind, parameters) of
+    :mod:`nlsid.models.blocks` at its input and output (identity by default)."""
+
     ss: StateSpace
     x0: np.ndarray
     forces: list[Force] = field(default_factory=list)
+    input_block: tuple[int, np.ndarray] = field(default_factory=lambda: blocks.encode(None))
+    output_block: tuple[int, np.ndarray] = field(default_factory=lambda: blocks.encode(None))
 
 
 Stage = Union[StateSpace, Callable[[np.ndarray], np.ndarray]]
@@ -69,7 +77,9 @@ def lti(config, where: str) -> StateSpace:
     return from_matrices(config.A, config.B, config.C, config.D, discrete, config.delay, where)
 
 
-def _mechanical(config) -> MechanicalPlant:
+def _mechanical(config, where: str) -> MechanicalPlant:
+    if config.type == "nonlinear_feedback":
+        return force_feedback(lti(config.linear, f"{where}.linear"), config.gain, config.output, config.delay, where)
     if config.type == "mass_spring_damper":
         return mass_spring_damper(config.mass, config.damping, config.stiffness, config.gain, config.output,
                                   config.initial.position, config.initial.velocity, config.delay)
@@ -84,19 +94,26 @@ def _force(config, plant: MechanicalPlant, where: str) -> Force:
         raise InputError(f"{where}.at", f"expected one of {', '.join(plant.masses)}, got {at!r}")
     kind, params = forces.encode(config)
     rows = plant.position_rows if kind in forces.POSITION_KINDS else plant.velocity_rows
+    if at not in rows:
+        raise InputError(where, f"a {config.type} force reads the velocity, which needs a linear part of "
+                                "relative degree >= 2 (force to position; C B = 0)")
     return Force(kind, params, plant.force_columns[at], rows[at])
 
 
+MECHANICAL = ("mass_spring_damper", "two_mass_stage", "nonlinear_feedback")
+
+
 def plant(config, closed: bool) -> Plant:
-    """The plant of an LTI or mechanical config; a pure LTI plant in open loop must be stable."""
+    """The plant of an LTI or mechanical config; a plant without forces in open loop must be stable."""
     where = "model"
-    if config.type in ("mass_spring_damper", "two_mass_stage"):
-        mech = _mechanical(config)
+    io = dict(input_block=blocks.encode(config.input_nonlinearity), output_block=blocks.encode(config.output_nonlinearity))
+    if config.type in MECHANICAL:
+        mech = _mechanical(config, where)
         elements = [_force(f, mech, f"{where}.nonlinearities[{i}]") for i, f in enumerate(config.nonlinearities)]
-        result = Plant(mech.ss, mech.x0, elements)
+        result = Plant(mech.ss, mech.x0, elements, **io)
     else:
         ss = lti(config, where)
-        result = Plant(ss, np.zeros(ss.order))
+        result = Plant(ss, np.zeros(ss.order), **io)
     if not closed and not result.forces:
         check_stable(result.ss, where)
     return result

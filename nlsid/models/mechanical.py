@@ -18,6 +18,16 @@ damper c, ground dampers c1, c2:
 Its transfer function from force to load position, for c1 = c2 = 0, is
 (c s + k) / (s^2 (m1 m2 s^2 + c (m1 + m2) s + k (m1 + m2))): a rigid-body double integrator and a
 flexible mode at w = sqrt(k (m1 + m2) / (m1 m2)).
+
+Nonlinear feedback around a general linear system (the same structure for any mechanics): a
+continuous state space G(s) = C (sI - A)^-1 B from force to position, strictly proper (D = 0, else
+a position force would form an algebraic loop), driven by gain u - F:
+
+    x' = A x + B (gain u - F),   p = C x,   v = p' = C A x + C B (gain u - F).
+
+The velocity is a state read-out v = (C A) x exactly when C B = 0, i.e. G has relative degree >= 2
+(a force then accelerates, as in Newton's law); only then can a friction force or a velocity
+output be fed back. The single point where the forces act is named ``plant``.
 """
 
 from __future__ import annotations
@@ -26,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
 
 
@@ -85,4 +96,26 @@ def two_mass_stage(motor_mass: float, load_mass: float, stiffness: float, dampin
         force_columns={"motor": np.array([0.0, 1.0 / m1, 0.0, 0.0]), "load": np.array([0.0, 0.0, 0.0, 1.0 / m2])},
         position_rows=positions,
         velocity_rows=velocities,
+    )
+
+
+def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:
+    """Forces fed back around a continuous, strictly proper G from force to position (module docstring)."""
+    if G.discrete:
+        raise InputError(f"{where}.linear.domain", "forces act in continuous time: the linear part must be continuous")
+    if G.delay:
+        raise InputError(f"{where}.linear.delay", f"put the actuator dead time on {where}.delay")
+    if G.D != 0 or G.order == 0:
+        raise InputError(f"{where}.linear", "the linear part (force to position) must be strictly proper (D = 0)")
+    C_velocity = G.C @ G.A
+    velocity_rows = {}
+    if abs(G.C @ G.B) <= 1e-12 * np.linalg.norm(G.C) * np.linalg.norm(G.B):
+        velocity_rows["plant"] = C_velocity
+    elif output == "velocity":
+        raise InputError(f"{where}.output", "a velocity output needs a linear part of relative degree >= 2 "
+                                            "(force to position; C B = 0)")
+    C = G.C if output == "position" else C_velocity
+    return MechanicalPlant(
+        StateSpace(G.A, gain * G.B, C, 0.0, False, delay), np.zeros(G.order),
+        force_columns={"plant": G.B}, position_rows={"plant": G.C}, velocity_rows=velocity_rows,
     )

@@ -14,6 +14,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
+from nlsid.models import blocks
 from nlsid.models.controller import feedforward, tustin
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
@@ -43,6 +44,7 @@ def _delay(ss: StateSpace, fs: float, n: int, where: str) -> int:
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 _EMPTY_2 = np.zeros((0, 0))
 _EMPTY_1 = np.zeros(0)
+_IDENTITY = blocks.encode(None)
 
 
 def _f64(a) -> np.ndarray:
@@ -58,7 +60,8 @@ def _signal(a) -> np.ndarray:
 
 
 def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, delay: int,
-                controller: StateSpace | None, r, ff, u, process, y_noise) -> tuple[np.ndarray, np.ndarray]:
+                controller: StateSpace | None, r, ff, u, process, y_noise,
+                input_block=_IDENTITY, output_block=_IDENTITY) -> tuple[np.ndarray, np.ndarray]:
     n_el = len(forces_)
     n = ss.order
     kinds = np.array([f.kind for f in forces_], dtype=np.int64) if n_el else _EMPTY_I
@@ -71,7 +74,8 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
     u_out, y_out = np.empty(length), np.empty(length)
     simulate_loop(_f64(Phi), _f64(Gu), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params), _f64(cols), _f64(rows),
                   int(substeps), float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
-                  _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise), u_out, y_out)
+                  _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),
+                  int(input_block[0]), _f64(input_block[1]), int(output_block[0]), _f64(output_block[1]), u_out, y_out)
     return u_out, y_out
 
 
@@ -81,7 +85,8 @@ def _check_finite(y: np.ndarray, run_id: str) -> None:
 
 
 def closed_loop_poles(plant: Plant, controller: StateSpace, fs: float, delay: int) -> np.ndarray:
-    """Poles (z) of the linear part of the sampled closed loop: plant (ZOH), dead time, controller.
+    """Poles (z) of the linear part of the sampled closed loop: plant (ZOH), dead time, controller
+    (forces and blocks left out).
 
     State [x, q_1..q_d, xc]; with r = 0: u = Cc xc - Dc C x, the plant gets q_d (or u if d = 0).
     """
@@ -126,7 +131,7 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
         r = run.u
         ff = feedforward(r, run.fs, run.period is not None, loop.coulomb, loop.velocity)
     u_out, y_out = _run_kernel(Phi, Gu, ss, plant.x0, plant.forces, m, h, delay, controller, r, ff,
-                               run.u, noise.process, noise.y)
+                               run.u, noise.process, noise.y, plant.input_block, plant.output_block)
     _check_finite(y_out, run.run_id)
     if loop is None:
         return dataclasses.replace(run, u=u_out + noise.u, y=y_out, r=None)

@@ -5,16 +5,19 @@ One call simulates one run, sample by sample (k = 0 .. N-1, t_k = k Ts):
 1. closed loop: the controller (discrete state space, Ac, Bc, Cc, Dc) reads the measured output
    y_m[k] = C x(t_k) + n_y[k] and the reference r[k], and outputs u[k] = Cc xc + Dc e + ff[k],
    e = r[k] - y_m[k]; open loop: u[k] is the given input.
-2. the plant input p[k] = u[k - d] + n_p[k] (dead time of d samples, zero before the start,
-   process noise n_p) is held constant over [t_k, t_k+1) (the DAC's zero-order hold).
-3. the output recorded is y[k] = C x(t_k) + D p[k] + n_y[k].
+2. the plant input p[k] = f_in(u[k - d] + n_p[k]) (dead time of d samples, zero before the start,
+   process noise n_p, input block f_in, :func:`block`) is held constant over [t_k, t_k+1) (the
+   DAC's zero-order hold).
+3. the output recorded is y[k] = f_out(C x(t_k) + D p[k]) + n_y[k] (output block f_out; in closed
+   loop D = 0 and the controller reads this y[k]).
 4. the plant state is advanced over ``substeps`` sub-steps of h = Ts / substeps: exact ZOH
    propagation x+ = Phi x + Gamma p, then each nonlinear force in turn (:func:`force`) is
    held over the sub-step, x+ -= Gamma_F F (the laws and their numerical treatment are in
    :mod:`nlsid.models.forces`).
 
 Without nonlinear forces the result at the sample instants is exact for any number of sub-steps
-(up to rounding): the ZOH propagation is the exact solution for a held input.
+(up to rounding): the ZOH propagation is the exact solution for a held input. The input and output
+blocks act on held (or sampled) signals, so evaluating them once per sample is exact as well.
 """
 
 from __future__ import annotations
@@ -24,9 +27,54 @@ import math
 import numpy as np
 from numba import njit
 
-from nlsid.models import forces
+from nlsid.models import blocks, forces
 
 SLIDING = 6.5  # |v| / vs above which e^{-(v/vs)^2} < 5e-19: the Stribeck term is below rounding
+
+
+@njit(cache=True, nogil=True, inline="always")
+def block(kind: int, p: np.ndarray, x: float, memory: float) -> float:
+    """Output of a nonlinear block (laws and parameter encoding in :mod:`nlsid.models.blocks`) for
+    input ``x``; ``memory`` is the block's previous output (used by the backlash only)."""
+    if kind == blocks.IDENTITY:
+        return x
+    if kind == blocks.POLYNOMIAL:  # Horner
+        y = 0.0
+        for i in range(p.shape[0] - 1, -1, -1):
+            y = y * x + p[i]
+        return y
+    if kind == blocks.SATURATION:
+        return min(max(x, p[0]), p[1])
+    if kind == blocks.DEADZONE:
+        return x - p[1] if x > p[1] else (x - p[0] if x < p[0] else 0.0)
+    if kind == blocks.PIECEWISE_LINEAR:
+        n = p.shape[0] // 2
+        i = 0  # segment (x_i, x_{i+1}); the end segments extend beyond the first and last point
+        hi = n - 2
+        while i < hi:  # bisection for the last x_i <= x, clamped to 0 .. n - 2
+            mid = (i + hi + 1) // 2
+            if p[mid] <= x:
+                i = mid
+            else:
+                hi = mid - 1
+        return p[n + i] + (p[n + i + 1] - p[n + i]) * (x - p[i]) / (p[i + 1] - p[i])
+    # BACKLASH: play operator of half width p[0]
+    if x - memory > p[0]:
+        return x - p[0]
+    if memory - x > p[0]:
+        return x + p[0]
+    return memory
+
+
+@njit(cache=True, nogil=True)
+def apply_block(kind: int, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """:func:`block` along a signal, starting from memory 0."""
+    y = np.empty_like(x)
+    memory = 0.0
+    for k in range(x.shape[0]):
+        memory = block(kind, p, x[k], memory)
+        y[k] = memory
+    return y
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -176,7 +224,8 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, wa
 
 @njit(cache=True, nogil=True)
 def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, delay,
-                  closed, Ac, Bc, Cc, Dc, r, ff, u_in, process, y_noise, u_out, y_out):
+                  closed, Ac, Bc, Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params,
+                  u_out, y_out):
     """Run the loop described in the module docstring; fill ``u_out`` and ``y_out``; return the final state."""
     n = Phi.shape[0]
     nc = Ac.shape[0]
@@ -195,12 +244,15 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
             acc += rows[e, i] * cols[e, i]
         gains[e] = acc
     buf = np.zeros(max(delay, 1))
+    p = 0.0  # plant input: the input block's output (also its memory)
+    y_m = 0.0  # plant output through the output block (also its memory)
     for k in range(y_out.shape[0]):
         y_now = 0.0
         for i in range(n):
             y_now += C[i] * x[i]
-        if closed:
-            err = r[k] - (y_now + y_noise[k])
+        if closed:  # D = 0: the output does not depend on this sample's input
+            y_m = block(out_kind, out_params, y_now, y_m)
+            err = r[k] - (y_m + y_noise[k])
             u = Dc * err + ff[k]
             for i in range(nc):
                 u += Cc[i] * xc[i]
@@ -215,12 +267,14 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
         u_out[k] = u
         if delay > 0:
             slot = k % delay
-            p = buf[slot]
+            command = buf[slot]
             buf[slot] = u
         else:
-            p = u
-        p += process[k]
-        y_out[k] = y_now + D * p + y_noise[k]
+            command = u
+        p = block(in_kind, in_params, command + process[k], p)
+        if not closed:
+            y_m = block(out_kind, out_params, y_now + D * p, y_m)
+        y_out[k] = y_m + y_noise[k]
         for _ in range(substeps):
             for i in range(n):
                 acc = Gu[i] * p
