@@ -1,0 +1,148 @@
+"""The ``diagnose`` stage as a library call: evidence, hypotheses, verdict, extension and gain.
+
+:func:`diagnose` takes a model config (plain data, as loaded from YAML) and the measured runs and
+answers the four questions of the stage: what the simulation gets wrong
+(:mod:`~nlsid.diagnose.evidence`), the cause (:mod:`~nlsid.diagnose.hypotheses` ranked by
+:mod:`~nlsid.diagnose.verdict`), the extension (the winner's extended config), and the gain on
+validation data (:mod:`~nlsid.diagnose.gain`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+from nlsid.diagnose import verdict as rules
+from nlsid.diagnose.evidence import Evidence, error_test, gather
+from nlsid.diagnose.gain import Score, model_errors, score
+from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
+from nlsid.diagnose.simulation import ModelRunner
+from nlsid.diagnose.split import ESTIMATION, VALIDATION, split_runs
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+
+
+@dataclass
+class Outcome:
+    """One hypothesis after estimation and validation (``reason`` set when it was not scored)."""
+
+    hypothesis: Hypothesis
+    estimate: Estimate | None = None
+    score: Score | None = None
+    extended: dict | None = None
+    reason: str = ""
+    errors: list = field(default_factory=list)
+
+    def summary(self) -> dict:
+        h = self.hypothesis
+        out = {"name": h.name, "title": h.title, "family": h.family, "signature": h.signature,
+               "main_parameter": h.main, "unit": h.unit, "scored": self.score is not None, "reason": self.reason}
+        if self.estimate is not None:
+            out.update(values=self.estimate.values, std=self.estimate.std,
+                       explained_on_estimation_db=self.estimate.explained_db, note=self.estimate.note)
+        if self.score is not None:
+            out["validation"] = self.score.summary()
+        return out
+
+
+@dataclass
+class Diagnosis:
+    model_source: str
+    roles: dict[str, str]
+    evidence: Evidence
+    original: Score
+    outcomes: list[Outcome]
+    verdict: rules.Verdict
+
+    @property
+    def winner(self) -> Outcome | None:
+        return next((o for o in self.outcomes if o.hypothesis.name == self.verdict.winner), None)
+
+    def headline(self) -> str:
+        status, ev = self.verdict.status, self.evidence
+        if status == rules.NO_DISCREPANCY:
+            return (f"No significant discrepancy: the simulation error is within the noise "
+                    f"({ev.overall.above_noise_db:+.1f} dB, p = {ev.overall.p_value:.2g})")
+        if status == rules.EXPLAINED:
+            w = self.winner
+            main = w.hypothesis.main
+            return (f"Cause: {w.hypothesis.title} ({main} = {w.estimate.values[main]:.4g} {w.hypothesis.unit}); "
+                    f"the extended model's validation error is {w.score.gain_db:.1f} dB smaller, "
+                    f"{w.score.above_floor_db:.1f} dB above the noise floor")
+        seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
+        if status == rules.AMBIGUOUS:
+            return f"Discrepancy ({seen}); equally good explanations: {', '.join(self.verdict.tied)}"
+        return f"Discrepancy ({seen}); no hypothesis of the library explains it"
+
+    def findings(self) -> list[str]:
+        out = self.evidence.findings()
+        ranked = [o for o in self.outcomes if o.score is not None]
+        for o in ranked[:3]:
+            out.append(f"{o.hypothesis.title}: validation gain {o.score.gain_db:+.1f} dB, "
+                       f"{o.score.above_floor_db:.1f} dB above the noise floor")
+        return out
+
+    def summary(self) -> dict:
+        split = {role: sorted(k for k, v in self.roles.items() if v == role) for role in (ESTIMATION, VALIDATION)}
+        winner = self.winner
+        gain = None
+        if winner is not None:
+            gain = {"original": self.original.summary(), "extended": winner.score.summary(),
+                    "gain_db": winner.score.gain_db, "distortion_explained": winner.score.distortion_explained,
+                    "extended_above_floor_db": winner.score.above_floor_db}
+        return {
+            "headline": self.headline(), "findings": self.findings(), "model": self.model_source,
+            "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
+            "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
+            "gain": gain,
+        }
+
+
+def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list) -> None:
+    try:
+        extended = runner.with_changes(outcome.extended)
+    except InputError as exc:
+        outcome.reason = f"the extended model is not valid: {exc.what}"
+        return
+    outcome.errors = model_errors(extended, val_runs, val_res)
+    outcome.score = score(val_res, outcome.errors)
+
+
+def diagnose(data: dict, source: str, runs: list[Run], where: str,
+             step: Callable[[str], None] | None = None) -> Diagnosis:
+    """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``)."""
+    step = step or (lambda name: None)
+    runner = ModelRunner.from_data(data, source)
+    roles = split_runs(runs, where)
+    evidence, _ = gather(runner, runs, roles)
+    step("evidence")
+    by_id = {run.run_id: run for run in runs}
+    est = [res for res in evidence.residuals if res.role == ESTIMATION]
+    val = [res for res in evidence.residuals if res.role == VALIDATION]
+    est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
+    context = Context(runner, est_runs, [r.residual for r in est], [runner.internal(run) for run in est_runs],
+                      evidence.bla_levels)
+    outcomes = []
+    for hypothesis in LIBRARY:
+        outcome = Outcome(hypothesis)
+        outcomes.append(outcome)
+        reason = hypothesis.applies(runner)
+        if reason is not None:
+            outcome.reason = f"does not apply: {reason}"
+            continue
+        estimate = hypothesis.estimate(context)
+        if isinstance(estimate, str):
+            outcome.reason = estimate
+            continue
+        outcome.estimate = estimate
+        outcome.extended = hypothesis.extend(data, estimate.values)
+        _score(outcome, runner, val_runs, val)
+        step(hypothesis.name)
+    outcomes.sort(key=lambda o: (o.score is None, o.score.error_rms if o.score else math.inf))
+    original = score(val)
+    candidates = [rules.Candidate(o.hypothesis.name, o.hypothesis.family, len(o.hypothesis.parameters),
+                                  o.score.error_rms ** 2) for o in outcomes if o.score is not None]
+    dof = error_test(val).dof
+    verdict = rules.decide(evidence.overall.significant, original.error_rms ** 2, candidates, dof)
+    return Diagnosis(source, roles, evidence, original, outcomes, verdict)

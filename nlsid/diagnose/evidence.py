@@ -1,0 +1,319 @@
+"""What the simulation gets wrong: the measured output against the model's, per line, level and time.
+
+Residual. For every periodic run the model is simulated on the measured excitation
+(:mod:`nlsid.diagnose.simulation`) and the residual ``e = y - y_model`` is taken over the
+steady-state periods. Its P-averaged one-period spectrum ``E(k)`` (DFT scaled by 1/N,
+:mod:`nlsid.analysis.lines`) holds what the model misses plus noise; the noise variance of
+``E(k)``, ``s2(k)``, is the period-to-period variance of the residual (book (6-12), seed 000
+Eq. (3)): the model is noise-free, so this is the noise of the measurement as it reaches the
+residual (output noise, and in open loop the model's response to the input noise).
+
+Size and significance against noise. For a set S of lines (and runs) the residual power relative
+to the noise is ``ratio = sum_S |E|^2 / sum_S s2`` (shown in dB). If the model is right, each
+``|E(k)|^2`` is ``s2(k)`` times a chi-square with 2 degrees of freedom over 2, so the numerator is
+a weighted sum of chi-squares with ``nu = 2 (sum s2)^2 / sum s2^2`` equivalent degrees of freedom
+(Satterthwaite), and the noise estimate has ``nu (P - 1)``: ``ratio ~ F(nu, nu (P - 1))``. A
+discrepancy is *significant* when its p-value is below :data:`ALPHA` = 0.001; so "nothing beyond
+noise" comes out as the answer when it is the truth (with probability 0.999 per test).
+
+At the excited lines of each multisine level the measured BLA (robust method, book Section 6.1.1;
+the reference method in closed loop) is compared with the model's BLA computed in the same way
+from the simulated runs: per line the gain error ``20 log10 |G/G_model|`` (dB), the phase error,
+and the test ``|G - G_model|^2 / var(G) > F_{0.95}(2, 2M - 2)`` of the measured BLA's total
+variance (book (6-88), Exercise 92: the model's BLA lies outside the 95% confidence circle).
+At the odd and even detection lines (book Section 6.1.2, seed 000 Fig. 3) the residual is the
+distortion the model does not produce. Across levels (seed 000 Figs. 4-5) the change of the
+measured and of the model's BLA with the excitation level.
+
+In time, the mean residual period of the highest level is kept with the model's internal signals
+(plant input, and position and velocity of a mechanical template) for the figures that show a
+jump at zero velocity or a cubic trend against position.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nlsid.analysis.lines import EVEN, EXCITED, ODD, classify_lines, spectra
+from nlsid.analysis.output_spectrum import db
+from nlsid.diagnose.simulation import ModelRunner, steady_mean, steady_periods
+from nlsid.diagnose.split import ESTIMATION
+from nlsid.io.run import Run
+
+ALPHA = 0.001
+BLA_PROBABILITY = 0.95
+
+
+@dataclass
+class Residual:
+    """One run's mean steady-state period: measured, model, and the residual's spectrum and noise."""
+
+    run_id: str
+    role: str
+    kind: str
+    level: float | None
+    fs: float
+    period: int
+    n_periods: int
+    excited_bins: np.ndarray | None
+    measured: np.ndarray
+    model: np.ndarray
+    noise_var: np.ndarray
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.measured - self.model
+
+    @property
+    def spectrum(self) -> np.ndarray:
+        return spectra(self.residual)
+
+
+def residual_of(run: Run, model_y: np.ndarray, role: str) -> Residual:
+    """The :class:`Residual` of a measured run and the model's output on it (same length)."""
+    e = run.periods("y") - steady_periods(run, model_y)
+    P = e.shape[0]
+    if P > 1:
+        deviation = spectra(e - e.mean(axis=0))
+        noise_var = np.sum(np.abs(deviation) ** 2, axis=0) / (P * (P - 1))
+    else:
+        noise_var = np.full(run.period // 2 + 1, np.nan)
+    return Residual(run.run_id, role, run.kind, run.level, run.fs, run.period, P, run.excited_bins,
+                    run.periods("y").mean(axis=0), steady_mean(run, model_y), noise_var)
+
+
+@dataclass(frozen=True)
+class Test:
+    """Residual power of a set of lines against the noise: ratio (dB), degrees of freedom, p-value."""
+
+    above_noise_db: float
+    dof: float
+    noise_dof: float
+    p_value: float
+
+    @property
+    def significant(self) -> bool:
+        return math.isfinite(self.p_value) and self.p_value < ALPHA
+
+    def summary(self) -> dict:
+        return {"above_noise_db": self.above_noise_db, "dof": self.dof, "noise_dof": self.noise_dof,
+                "p_value": self.p_value, "significant": self.significant}
+
+
+def power_test(power: float, noise: np.ndarray, n_periods: int) -> Test:
+    """The F test of the module docstring for a residual ``power`` = sum |E|^2 over lines whose
+    noise variances are ``noise`` (one value per line and run)."""
+    from scipy.stats import f as f_dist
+
+    noise = noise[np.isfinite(noise)]
+    total = float(np.sum(noise))
+    if noise.size == 0 or total <= 0 or n_periods < 2:
+        return Test(float("nan"), float("nan"), float("nan"), float("nan"))
+    dof = 2 * total**2 / float(np.sum(noise**2))
+    noise_dof = dof * (n_periods - 1)
+    ratio = power / total
+    return Test(db(ratio), dof, noise_dof, float(f_dist.sf(ratio, dof, noise_dof)))
+
+
+def ac_lines(period: int) -> np.ndarray:
+    """Lines 1 .. (N-1)//2: every line of the period but DC and Nyquist."""
+    return np.arange(1, (period - 1) // 2 + 1)
+
+
+def error_power(residuals: list[Residual], errors: list[np.ndarray] | None = None) -> tuple[float, float]:
+    """Mean power per run of the periodic error without its mean (``errors``: the error periods of
+    another model on the same runs; default: the residuals), and of the noise in it."""
+    e_power = n_power = 0.0
+    for i, res in enumerate(residuals):
+        k = ac_lines(res.period)
+        E = spectra(res.residual if errors is None else errors[i])[k]
+        e_power += 2 * float(np.sum(np.abs(E) ** 2))
+        n_power += 2 * float(np.sum(res.noise_var[k]))
+    return e_power / len(residuals), n_power / len(residuals)
+
+
+def error_test(residuals: list[Residual], errors: list[np.ndarray] | None = None) -> Test:
+    """:func:`power_test` of the whole error (all AC lines of all the runs)."""
+    power = sum(float(np.sum(np.abs(spectra(res.residual if errors is None else errors[i])[ac_lines(res.period)]) ** 2))
+                for i, res in enumerate(residuals))
+    noise = np.concatenate([res.noise_var[ac_lines(res.period)] for res in residuals])
+    return power_test(power, noise, min(res.n_periods for res in residuals))
+
+
+def line_tests(residuals: list[Residual]) -> dict[str, dict]:
+    """Residual at the excited, odd and even in-band lines of multisine runs (module docstring)."""
+    out = {}
+    for name, kind in (("excited", EXCITED), ("odd", ODD), ("even", EVEN)):
+        power, noise = 0.0, []
+        for res in residuals:
+            lines = classify_lines(res.period, res.fs, res.excited_bins)
+            k = np.flatnonzero((lines.kind == kind) & lines.in_band)
+            power += float(np.sum(np.abs(res.spectrum[k]) ** 2))
+            noise.append(res.noise_var[k])
+        noise = np.concatenate(noise) if noise else np.zeros(0)
+        out[name] = power_test(power, noise, min(res.n_periods for res in residuals)).summary()
+        out[name]["lines"] = int(noise.size)
+    return out
+
+
+def compare_bla(measured, model) -> dict:
+    """Measured BLA against the model's at one level's excited lines (module docstring)."""
+    from nlsid.analysis.confidence import f_quantile_2
+
+    G, Gm = measured.robust.G, model.robust.G
+    M = measured.robust.n_realizations
+    variance = measured.robust.var_total
+    observations = M
+    if not np.all(np.isfinite(variance)):
+        variance, observations = measured.robust.var_noise, M * measured.robust.n_periods
+    threshold = f_quantile_2(BLA_PROBABILITY, 2 * observations - 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.abs(G - Gm) ** 2 / variance
+    outside = z > threshold
+    gain_db = 20 * np.log10(np.abs(G) / np.abs(Gm))
+    phase_deg = np.degrees(np.angle(G / Gm))
+    freq = measured.lines.frequency(measured.lines.excited)
+    worst = int(np.argmax(np.where(outside, np.abs(gain_db), -1))) if outside.any() else None
+    return {
+        "level": measured.level, "u_rms": measured.u_rms, "lines": int(G.size),
+        "outside_bounds": int(outside.sum()), "outside_fraction": float(outside.mean()),
+        "expected_fraction": 1 - BLA_PROBABILITY,
+        "gain_error_max_db": float(gain_db[np.argmax(np.abs(gain_db))]),
+        "phase_error_max_deg": float(phase_deg[np.argmax(np.abs(phase_deg))]),
+        "worst_frequency_hz": float(freq[worst]) if worst is not None else float("nan"),
+        "frequency_hz": freq, "G": G, "G_model": Gm, "radius": measured.robust.bounds.radius,
+        "gain_error_db": gain_db, "phase_error_deg": phase_deg, "outside": outside,
+    }
+
+
+def bla_significant(row: dict) -> bool:
+    """More lines outside the 95% circles than chance: a binomial test at :data:`ALPHA`."""
+    from scipy.stats import binom
+
+    return bool(binom.sf(row["outside_bounds"] - 1, row["lines"], row["expected_fraction"]) < ALPHA)
+
+
+@dataclass
+class Evidence:
+    """Everything ``diagnose`` measured about the discrepancy (see :meth:`summary`)."""
+
+    residuals: list[Residual]
+    overall: Test
+    lines: list[dict]
+    bla: list[dict]
+    levels: list[dict]
+    time: dict
+    noise_rms: float
+    error_rms: float
+    spectra: dict = field(default_factory=dict)
+    bla_levels: tuple = ()
+
+    @property
+    def odd_seen(self) -> bool:
+        return any(row["odd"]["significant"] for row in self.lines)
+
+    @property
+    def even_seen(self) -> bool:
+        return any(row["even"]["significant"] for row in self.lines)
+
+    @property
+    def linear_seen(self) -> bool:
+        return any(row["significant"] for row in self.bla)
+
+    def summary(self) -> dict:
+        return {
+            "error_rms": self.error_rms, "noise_rms": self.noise_rms,
+            "error_above_noise": self.overall.summary(),
+            "lines": self.lines,
+            "bla": [{k: v for k, v in row.items() if not isinstance(v, np.ndarray)} for row in self.bla],
+            "levels": self.levels,
+            "odd_distortion_unexplained": self.odd_seen, "even_distortion_unexplained": self.even_seen,
+            "linear_mismatch": self.linear_seen,
+        }
+
+    def findings(self) -> list[str]:
+        """What the simulation gets wrong, in words, each with its size."""
+        out = [f"simulation error {self.error_rms:.3g} rms against a noise floor of {self.noise_rms:.3g} "
+               f"({self.overall.above_noise_db:+.1f} dB, p = {self.overall.p_value:.2g})"]
+        for row in self.bla:
+            if row["significant"]:
+                out.append(f"level {_name(row['level'])}: model FRF outside the BLA's 95% bounds at "
+                           f"{row['outside_bounds']} of {row['lines']} lines; up to {row['gain_error_max_db']:+.1f} dB "
+                           f"(worst near {row['worst_frequency_hz']:.3g} Hz) and {row['phase_error_max_deg']:+.0f} deg")
+        for row in self.lines:
+            for name in ("odd", "even"):
+                test = row[name]
+                if test["significant"]:
+                    out.append(f"level {_name(row['level'])}: {name} distortion the model does not produce, "
+                               f"{test['above_noise_db']:.1f} dB above the noise")
+        changes = [row for row in self.levels if math.isfinite(row.get("bla_change_max_db", float("nan")))]
+        if len(self.levels) > 1 and changes:
+            last = changes[-1]
+            out.append(f"BLA changes by {last['bla_change_max_db']:+.1f} dB over the levels; the model's by "
+                       f"{last['model_bla_change_max_db']:+.1f} dB")
+        return out
+
+
+def _name(level) -> str:
+    return "-" if level is None else f"{level:g}"
+
+
+def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str]) -> tuple[Evidence, dict[str, Run]]:
+    """Simulate the model on every periodic run and measure the discrepancy (module docstring).
+
+    Returns the evidence and the model's simulated runs keyed by run id.
+    """
+    from nlsid.analysis.levels import across_levels, analyse_runs
+
+    used = [run for run in runs if run.run_id in roles]
+    simulated = {run.run_id: runner.simulate(run) for run in used}
+    residuals = [residual_of(run, simulated[run.run_id].y, roles[run.run_id]) for run in used]
+    multisine = [run for run in used if run.kind == "multisine"]
+    lines, bla, levels, spectra_ = [], [], [], {}
+    measured_levels = model_levels = ()
+    if multisine:
+        model_runs = [_as_measured(simulated[run.run_id], run) for run in multisine]
+        measured_levels, _ = analyse_runs(((run, run.run_id) for run in multisine), "auto", BLA_PROBABILITY)
+        model_levels, _ = analyse_runs(((run, run.run_id) for run in model_runs), "auto", BLA_PROBABILITY)
+        for measured, model in zip(measured_levels, model_levels):
+            members = [res for res in residuals if res.kind == "multisine" and res.level == measured.level]
+            row = line_tests(members)
+            row["level"] = measured.level
+            row["u_rms"] = measured.u_rms
+            lines.append(row)
+            comparison = compare_bla(measured, model)
+            comparison["significant"] = bla_significant(comparison)
+            bla.append(comparison)
+            spectra_[measured.level] = (measured.spectrum, model.spectrum, measured.lines)
+        for row, model_row in zip(across_levels(list(measured_levels))["levels"],
+                                  across_levels(list(model_levels))["levels"]):
+            row["model_bla_change_max_db"] = model_row.get("bla_change_max_db", float("nan"))
+            row["model_bla_db"] = model_row["bla_db"]
+            levels.append(row)
+    error, noise = error_power(residuals)
+    return Evidence(
+        residuals=residuals, overall=error_test(residuals), lines=lines, bla=bla, levels=levels,
+        time=_time_signals(runner, used, residuals), noise_rms=math.sqrt(noise), error_rms=math.sqrt(error),
+        spectra=spectra_, bla_levels=(measured_levels, model_levels),
+    ), simulated
+
+
+def _as_measured(simulated: Run, measured: Run) -> Run:
+    """A simulated run with the measured run's metadata (its own u, y and, in closed loop, r)."""
+    return dataclasses.replace(measured, u=simulated.u, y=simulated.y, r=simulated.r)
+
+
+def _time_signals(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> dict:
+    """Mean residual period of the strongest estimation run with the model's internal signals."""
+    candidates = [(run, res) for run, res in zip(runs, residuals) if res.role == ESTIMATION]
+    run, res = max(candidates, key=lambda pair: float(np.std(pair[0].periods("u"))))
+    internal = runner.internal(run)
+    out = {"run_id": run.run_id, "fs": run.fs, "residual": res.residual, "measured": res.measured,
+           "model": res.model}
+    for name, signal in internal.items():
+        out[name] = steady_mean(run, signal)
+    return out

@@ -1,0 +1,388 @@
+"""The library of causes: each a named physical or structural hypothesis with its signature, a first
+estimate of its parameters from the residual, and its model extension.
+
+Every hypothesis h adds a block with parameters theta to the user's model. For a small effect the
+residual of the nominal model is, to first order in the effect (exactly for an input or output
+block on a linear model in open loop),
+
+    e(t) = y(t) - y_model(t) ~ S_h[ d_h(theta; signals of the model) ](t) + noise,
+
+where d_h is the missing signal (a force at the driven mass, an input error at the actuator, an
+output error) computed from the model's internal signals, and S_h the model's response to it at the
+measured output (:meth:`~nlsid.diagnose.simulation.ModelRunner.response`: G d in open loop, the
+loop's sensitivity in closed loop). This is the residual "against the model's internal signals"
+made quantitative: parameters that enter linearly are the least-squares regression of e on the
+responses (over the mean steady-state periods of the estimation runs), one shape parameter
+(a threshold, a Stribeck velocity) is chosen by a bounded scalar search of the same residual sum of
+squares. The standard errors are those of ordinary least squares, ``s^2 (X^T X)^-1``.
+
+Library (signature = what the evidence shows when it is the cause; extension = the config keys):
+
+=================== ========================================= ====================================
+name                signature                                 extension (parameters)
+=================== ========================================= ====================================
+coulomb             odd distortion; BLA gain rises with       ``nonlinearities: coulomb`` (fc)
+                    level; residual force jumps at v = 0
+stribeck            as coulomb, with a break-away peak at     ``nonlinearities: stribeck``
+                    low velocity                              (fs, fc, vs; delta = 2)
+cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
+                    level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
+input_saturation    odd distortion; BLA gain falls with       ``input_nonlinearity: saturation``
+                    level; residual where abs(u) is large     (limit a: lower = -a, upper = a)
+deadzone            odd distortion; BLA gain rises with       ``input_nonlinearity: deadzone``
+                    level; residual where abs(u) is small     (half width a: lower = -a, upper = a)
+backlash            odd distortion and a phase lag that       ``input_nonlinearity: backlash``
+                    shrinks with level                        (width)
+quadratic_output    even distortion                           ``output_nonlinearity: polynomial``
+                                                              [0, 1, a2] (a2)
+missing_resonance   BLA differs from the model around one     transfer function times
+                    frequency, no distortion                  b0 / (s^2 + 2 zeta wr s + wr^2)
+                                                              (fr = wr / 2 pi in Hz, zeta, b0)
+delay               BLA phase error growing linearly with     ``delay`` (seconds, whole samples)
+                    frequency, gain right, no distortion
+=================== ========================================= ====================================
+
+The delay and the missing resonance are linear: they are estimated from the ratio
+``G_BLA / G_model`` of the measured and the model's BLA (evidence), the delay from the slope of its
+phase (weighted least squares, weights ``2 |G|^2 / var(G)``, the inverse variance of the phase),
+the resonance by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
+Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std(R)``).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
+from nlsid.io.run import Run
+
+STRIBECK_DELTA = 2.0
+
+
+@dataclass
+class Context:
+    """What the estimates need: the nominal model, the estimation runs, their residual periods, the
+    model's internal signals on them (full length) and the BLA levels (measured, model)."""
+
+    runner: ModelRunner
+    runs: list[Run]
+    residuals: list[np.ndarray]
+    internal: list[dict[str, np.ndarray]]
+    bla_levels: tuple = ()
+
+    def target(self) -> np.ndarray:
+        return np.concatenate(self.residuals)
+
+    def response(self, signals: list[np.ndarray], where: str) -> np.ndarray:
+        """Stacked mean steady-state response of every run to its disturbance (``process`` or ``output``)."""
+        return np.concatenate([steady_mean(run, self.runner.response(run, **{where: signal}))
+                               for run, signal in zip(self.runs, signals)])
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Parameter values and standard errors; ``explained_db`` is the drop of the estimation
+    residual's sum of squares the signature predicts (10 log10 of before over after)."""
+
+    values: dict[str, float]
+    std: dict[str, float]
+    explained_db: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    name: str
+    title: str
+    family: str
+    main: str
+    unit: str
+    signature: str
+    applies: Callable[[ModelRunner], str | None]
+    estimate: Callable[[Context], Estimate | str]
+    extend: Callable[[dict, dict], dict]
+    parameters: tuple[str, ...] = field(default=())
+
+
+def _regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Estimate:
+    X = np.column_stack(columns)
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    rss = float(np.sum((y - X @ theta) ** 2))
+    dof = max(y.size - len(names), 1)
+    cov = np.linalg.pinv(X.T @ X) * rss / dof
+    before = float(np.sum(y**2))
+    return Estimate({n: float(v) for n, v in zip(names, theta)},
+                    {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)},
+                    10 * math.log10(before / rss) if rss > 0 else float("inf"))
+
+
+def _scan(cost: Callable[[float], float], lower: float, upper: float, log: bool = False) -> float:
+    """The shape parameter in [lower, upper] that minimises ``cost`` (bounded Brent search)."""
+    from scipy.optimize import minimize_scalar
+
+    if log:
+        result = minimize_scalar(lambda q: cost(math.exp(q)), bounds=(math.log(lower), math.log(upper)),
+                                 method="bounded", options={"xatol": 1e-3})
+        return float(math.exp(result.x))
+    result = minimize_scalar(cost, bounds=(lower, upper), method="bounded",
+                             options={"xatol": 1e-4 * (upper - lower)})
+    return float(result.x)
+
+
+# ---- forces on the driven mass (mechanical templates) ------------------------------------------
+
+def _mechanical(runner: ModelRunner) -> str | None:
+    return None if runner.mechanical else "needs a mechanical template (mass_spring_damper, two_mass_stage)"
+
+
+def _force_columns(ctx: Context, forces: list[Callable[[dict], np.ndarray]]) -> list[np.ndarray]:
+    """Responses to unit-coefficient forces F(signals) at the driven mass: d = -F / gain."""
+    gain = ctx.runner.actuator_gain
+    return [ctx.response([-force(signals) / gain for signals in ctx.internal], "process") for force in forces]
+
+
+def _estimate_coulomb(ctx: Context) -> Estimate | str:
+    est = _regress(ctx.target(), _force_columns(ctx, [lambda s: np.sign(s["velocity"])]), ["fc"])
+    return est if est.values["fc"] > 0 else "the residual correlates negatively with sign(v): not friction"
+
+
+def _stribeck_columns(ctx: Context, vs: float) -> list[np.ndarray]:
+    def weight(s):
+        return np.exp(-np.abs(s["velocity"] / vs) ** STRIBECK_DELTA)
+    return _force_columns(ctx, [lambda s: np.sign(s["velocity"]) * weight(s),
+                                lambda s: np.sign(s["velocity"]) * (1 - weight(s))])
+
+
+def _estimate_stribeck(ctx: Context) -> Estimate | str:
+    y = ctx.target()
+    v_rms = float(np.sqrt(np.mean(np.concatenate([s["velocity"] for s in ctx.internal]) ** 2)))
+
+    def rss(vs: float) -> float:
+        X = np.column_stack(_stribeck_columns(ctx, vs))
+        return float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
+
+    vs = _scan(rss, 1e-3 * v_rms, v_rms, log=True)
+    est = _regress(y, _stribeck_columns(ctx, vs), ["fs", "fc"])
+    if est.values["fc"] <= 0 or est.values["fs"] <= 0:
+        return "friction levels estimated <= 0: not Stribeck friction"
+    return Estimate({**est.values, "vs": vs}, {**est.std, "vs": float("nan")}, est.explained_db,
+                    "vs by a bounded search (no standard error)")
+
+
+def _estimate_cubic(ctx: Context) -> Estimate | str:
+    return _regress(ctx.target(), _force_columns(ctx, [lambda s: s["position"] ** 3]), ["k3"])
+
+
+def _add_force(force: dict) -> Callable[[dict, dict], dict]:
+    def extend(data: dict, values: dict) -> dict:
+        out = copy.deepcopy(data)
+        out["model"].setdefault("nonlinearities", []).append(
+            {**force, **{k: float(v) for k, v in values.items()}})
+        return out
+    return extend
+
+
+def _extend_stribeck(data: dict, values: dict) -> dict:
+    return _add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, values)
+
+
+# ---- input and output blocks (any plant) ------------------------------------------------------
+
+def _no_block(key: str) -> Callable[[ModelRunner], str | None]:
+    def applies(runner: ModelRunner) -> str | None:
+        if runner.kind not in LTI + ("mass_spring_damper", "two_mass_stage"):
+            return "needs an LTI model or a mechanical template"
+        if runner.data["model"].get(key) is not None:
+            return f"the model already has an {key}"
+        return None
+    return applies
+
+
+def _block_map(block: dict) -> Callable[[np.ndarray], np.ndarray]:
+    from nlsid.io.model_config import BacklashConfig, DeadzoneConfig, SaturationConfig
+    from nlsid.models.blocks import static_map
+
+    schema = {"saturation": SaturationConfig, "deadzone": DeadzoneConfig, "backlash": BacklashConfig}[block["type"]]
+    return static_map(schema(**block))
+
+
+def _input_block(make: Callable[[float], dict], name: str, lower: Callable[[np.ndarray], float],
+                 upper: Callable[[np.ndarray], float]) -> Callable[[Context], Estimate | str]:
+    """Estimate of a one-parameter input block: e ~ S[f_a(u) - u], a by a bounded search."""
+    def estimate(ctx: Context) -> Estimate | str:
+        y = ctx.target()
+        magnitude = np.abs(np.concatenate([run.u for run in ctx.runs]))
+
+        def predicted(a: float) -> np.ndarray:
+            block = _block_map(make(a))
+            return ctx.response([block(run.u) - run.u for run in ctx.runs], "process")
+
+        a = _scan(lambda a: float(np.sum((y - predicted(a)) ** 2)), lower(magnitude), upper(magnitude))
+        rss = float(np.sum((y - predicted(a)) ** 2))
+        return Estimate({name: a}, {name: float("nan")}, 10 * math.log10(float(np.sum(y**2)) / rss),
+                        f"{name} by a bounded search of the residual (no standard error)")
+    return estimate
+
+
+def _set_block(key: str, make: Callable[[float], dict], name: str) -> Callable[[dict, dict], dict]:
+    def extend(data: dict, values: dict) -> dict:
+        out = copy.deepcopy(data)
+        out["model"][key] = make(float(values[name]))
+        return out
+    return extend
+
+
+def _saturation(a: float) -> dict:
+    return {"type": "saturation", "lower": -a, "upper": a}
+
+
+def _deadzone(a: float) -> dict:
+    return {"type": "deadzone", "lower": -a, "upper": a}
+
+
+def _backlash(w: float) -> dict:
+    return {"type": "backlash", "width": w}
+
+
+def _estimate_quadratic(ctx: Context) -> Estimate | str:
+    outputs = [ctx.runner.simulate(run).y for run in ctx.runs]
+    return _regress(ctx.target(), [ctx.response([x**2 for x in outputs], "output")], ["a2"])
+
+
+def _extend_quadratic(data: dict, values: dict) -> dict:
+    out = copy.deepcopy(data)
+    out["model"]["output_nonlinearity"] = {"type": "polynomial", "coefficients": [0.0, 1.0, float(values["a2"])]}
+    return out
+
+
+# ---- linear: delay and a missing resonance, from G_BLA / G_model ---------------------------------
+
+def _ratios(ctx: Context) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(angular frequency, G/G_model, variance of the ratio) per level."""
+    out = []
+    measured, model = ctx.bla_levels
+    for a, b in zip(measured, model):
+        w = 2 * np.pi * a.lines.frequency(a.lines.excited)
+        R = a.robust.G / b.robust.G
+        var = a.robust.var_total if np.all(np.isfinite(a.robust.var_total)) else a.robust.var_noise
+        out.append((w, R, var / np.abs(b.robust.G) ** 2))
+    return out
+
+
+def _estimate_delay(ctx: Context) -> Estimate | str:
+    ratios = _ratios(ctx)
+    if not ratios:
+        return "needs multisine runs (the BLA phase)"
+    num = den = 0.0
+    for w, R, var in ratios:
+        phase = np.unwrap(np.angle(R))
+        weight = 2 * np.abs(R) ** 2 / var
+        num += float(np.sum(weight * w * phase))
+        den += float(np.sum(weight * w * w))
+    tau = -num / den
+    fs = ctx.runs[0].fs
+    samples = int(round(tau * fs))
+    if samples < 1:
+        return f"the BLA phase shows no dead time (slope {tau * fs:.2f} samples)"
+    current = float(ctx.runner.data["model"].get("delay", 0.0))
+    return Estimate({"delay": current + samples / fs}, {"delay": 1 / math.sqrt(den)}, float("nan"),
+                    f"{samples} more samples from the BLA phase slope ({tau * fs:.2f} samples before rounding)")
+
+
+def _extend_delay(data: dict, values: dict) -> dict:
+    out = copy.deepcopy(data)
+    out["model"]["delay"] = float(values["delay"])
+    return out
+
+
+def _transfer_function(runner: ModelRunner) -> str | None:
+    model = runner.data["model"]
+    if model["type"] != "transfer_function" or model.get("domain", "continuous") != "continuous":
+        return "needs a continuous transfer_function model"
+    return None
+
+
+def _estimate_resonance(ctx: Context) -> Estimate | str:
+    ratios = _ratios(ctx)
+    if not ratios:
+        return "needs multisine runs (the BLA)"
+    rows, rhs = [], []
+    for w, R, var in ratios:
+        scale = 1 / np.sqrt(var)
+        block = np.column_stack([R * 1j * w, R, -np.ones_like(R)]) * scale[:, None]
+        rows += [block.real, block.imag]
+        target = R * w**2 * scale
+        rhs += [target.real, target.imag]
+    X, y = np.vstack(rows), np.concatenate(rhs)
+    est = _regress(y, list(X.T), ["a1", "a0", "b0"])
+    a1, a0, b0 = (est.values[k] for k in ("a1", "a0", "b0"))
+    if a0 <= 0 or a1 <= 0:
+        return "the BLA ratio shows no stable resonance"
+    wr = math.sqrt(a0)
+    fr_std = est.std["a0"] / (2 * wr) / (2 * math.pi)
+    return Estimate({"fr": wr / (2 * math.pi), "zeta": a1 / (2 * wr), "b0": b0},
+                    {"fr": fr_std, "zeta": float("nan"), "b0": est.std["b0"]}, est.explained_db,
+                    "Levy's linearised least squares on the BLA ratio")
+
+
+def _extend_resonance(data: dict, values: dict) -> dict:
+    out = copy.deepcopy(data)
+    wr = 2 * math.pi * values["fr"]
+    model = out["model"]
+    model["num"] = [float(c) for c in np.asarray(model["num"], dtype=float) * values["b0"]]
+    model["den"] = [float(c) for c in np.convolve(model["den"], [1.0, 2 * values["zeta"] * wr, wr * wr])]
+    return out
+
+
+def _always(runner: ModelRunner) -> str | None:
+    return None
+
+
+def _quantile(q: float) -> Callable[[np.ndarray], float]:
+    return lambda x: float(np.quantile(x, q))
+
+
+LIBRARY: tuple[Hypothesis, ...] = (
+    Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
+               "odd distortion; BLA gain rises with level; residual force jumps at zero velocity",
+               _mechanical, _estimate_coulomb, _add_force({"type": "coulomb"}), ("fc",)),
+    Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
+               "as Coulomb friction, with a break-away peak at low velocity",
+               _mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs")),
+    Hypothesis("cubic_stiffness", "Cubic stiffness", "stiffness", "k3", "N/m^3",
+               "odd distortion; the resonance moves with level; residual force cubic in position",
+               _mechanical, _estimate_cubic, _add_force({"type": "cubic_stiffness"}), ("k3",)),
+    Hypothesis("input_saturation", "Input saturation", "input", "limit", "input units",
+               "odd distortion; BLA gain falls with level; residual where |u| is large",
+               _no_block("input_nonlinearity"),
+               _input_block(_saturation, "limit", _quantile(0.5), lambda x: float(np.max(x))),
+               _set_block("input_nonlinearity", _saturation, "limit"), ("limit",)),
+    Hypothesis("deadzone", "Input deadzone", "input", "half_width", "input units",
+               "odd distortion; BLA gain rises with level; residual where |u| is small",
+               _no_block("input_nonlinearity"),
+               _input_block(_deadzone, "half_width", lambda x: 0.0, _quantile(0.9)),
+               _set_block("input_nonlinearity", _deadzone, "half_width"), ("half_width",)),
+    Hypothesis("backlash", "Backlash at the input", "input", "width", "input units",
+               "odd distortion and a phase lag that shrinks with level",
+               _no_block("input_nonlinearity"),
+               _input_block(_backlash, "width", _quantile(0.001), _quantile(0.9)),
+               _set_block("input_nonlinearity", _backlash, "width"), ("width",)),
+    Hypothesis("quadratic_output", "Quadratic (even) output nonlinearity", "output", "a2", "1/output units",
+               "even distortion at the even detection lines",
+               _no_block("output_nonlinearity"), _estimate_quadratic, _extend_quadratic, ("a2",)),
+    Hypothesis("missing_resonance", "A missing resonance", "linear", "fr", "Hz",
+               "BLA differs from the model around one frequency; no distortion",
+               _transfer_function, _estimate_resonance, _extend_resonance, ("fr", "zeta", "b0")),
+    Hypothesis("delay", "A dead time", "delay", "delay", "s",
+               "BLA phase error growing linearly with frequency, gain right; no distortion",
+               _always, _estimate_delay, _extend_delay, ("delay",)),
+)
+
+
+def by_name(name: str) -> Hypothesis:
+    return next(h for h in LIBRARY if h.name == name)

@@ -1,0 +1,137 @@
+"""The user's model (a model config as plain data) run on measured runs, with probes of its insides.
+
+``diagnose`` simulates the model exactly as ``nlsid simulate`` would (the same validation, the same
+engine), noise-free, on the measured excitation: in open loop on the recorded plant input ``u``, in
+closed loop (a ``closed_loop:`` section) on the recorded reference ``r``. Extensions of the model
+are new config data (:mod:`nlsid.diagnose.hypotheses`) and run through the same path, so an
+extended model YAML that ``diagnose`` writes is what ``simulate`` runs.
+
+Two probes serve the evidence and the signature estimates:
+
+- :meth:`ModelRunner.internal`: the model's position and velocity of its driven mass (mechanical
+  templates), by running a copy of the config whose ``output`` is that signal;
+- :meth:`ModelRunner.response`: the response of the recorded output to a disturbance added at the
+  plant input (``process``) or to the measured output (``output``) with the excitation set to zero.
+  For a linear model this is the exact small-signal sensitivity of the output to a force (or input
+  error) at the actuator and to an output error, in open loop (G d) and in closed loop (the loop's
+  input and output sensitivities), because the engine adds ``process`` to the held plant input
+  after the dead time and the controller reads the output with ``y_noise`` added.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+
+MECHANICAL = ("mass_spring_damper", "two_mass_stage")
+LTI = ("transfer_function", "zpk", "state_space")
+
+
+@dataclass(frozen=True)
+class ModelRunner:
+    """A validated model config and its simulation objects (``data`` is the config as plain data)."""
+
+    data: dict
+    source: str
+    config: object
+    plant: object
+    loop: object
+
+    @classmethod
+    def from_data(cls, data: dict, source: str) -> "ModelRunner":
+        """Validate ``data`` as a model config (errors name ``source``) and build the model."""
+        from nlsid.io.model_config import validate_simulate_config
+        from nlsid.models import from_config
+
+        config = validate_simulate_config(data, source, {})
+        if config.sweep is not None:
+            raise InputError(f"{source}: sweep", "diagnose compares one model with the data; remove the sweep")
+        try:
+            return cls(data, source, config, from_config.model(config), from_config.closed_loop(config))
+        except InputError as exc:
+            raise InputError(source, f"{exc.where}: {exc.what}") from None
+
+    @property
+    def kind(self) -> str:
+        return self.config.model.type
+
+    @property
+    def closed(self) -> bool:
+        return self.loop is not None
+
+    @property
+    def mechanical(self) -> bool:
+        return self.kind in MECHANICAL
+
+    def excitation(self, run: Run) -> Run:
+        """The run the engine needs: u is the excitation (the reference r in closed loop)."""
+        if not self.closed:
+            return dataclasses.replace(run, r=None)
+        if run.r is None:
+            raise InputError(f"run {run.run_id}", "the model has a closed_loop section but the run records "
+                                                  "no reference r")
+        return dataclasses.replace(run, u=run.r, r=None)
+
+    def simulate(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None,
+                 excite: bool = True) -> Run:
+        """The model's noise-free response to ``run`` (plus the optional disturbances, see module)."""
+        from nlsid.simulate.engine import simulate_run
+        from nlsid.simulate.noise import Noise
+
+        source = self.excitation(run)
+        if not excite:
+            source = dataclasses.replace(source, u=np.zeros_like(source.u))
+        zero = np.zeros(run.n_samples)
+        noise = Noise(zero, zero if output is None else output, zero if process is None else process)
+        try:
+            return simulate_run(self.plant, self.loop, source, self.config.simulation.substeps, noise)
+        except InputError as exc:
+            raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
+
+    def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
+        """Recorded-output response to a plant-input and/or output disturbance, excitation zero."""
+        return self.simulate(run, process, output, excite=False).y
+
+    def internal(self, run: Run) -> dict[str, np.ndarray]:
+        """Signals inside the model on ``run``: ``input`` (the plant input), and for a mechanical
+        template ``position`` and ``velocity`` of the driven mass (without output blocks)."""
+        out = {"input": self.simulate(run).u}
+        if self.mechanical:
+            for signal in ("position", "velocity"):
+                out[signal] = self.with_changes(_probe(self.data, signal)).simulate(run).y
+        return out
+
+    def with_changes(self, data: dict) -> "ModelRunner":
+        return ModelRunner.from_data(data, self.source)
+
+    @property
+    def actuator_gain(self) -> float:
+        """Force per unit of plant input on the driven mass (mechanical templates)."""
+        return float(self.config.model.gain)
+
+
+def _probe(data: dict, signal: str) -> dict:
+    """A copy of ``data`` whose model outputs ``signal`` of the driven mass, without output block."""
+    out = copy.deepcopy(data)
+    model = out["model"]
+    model["output"] = signal
+    if model["type"] == "two_mass_stage":
+        model["output_at"] = "motor"
+    model.pop("output_nonlinearity", None)
+    return out
+
+
+def steady_periods(run: Run, signal: np.ndarray) -> np.ndarray:
+    """The steady-state periods (P, N) of a signal of ``run``'s length (transient periods dropped)."""
+    return signal[run.transient_periods * run.period:].reshape(run.n_periods, run.period)
+
+
+def steady_mean(run: Run, signal: np.ndarray) -> np.ndarray:
+    """The mean steady-state period (N,) of a signal of ``run``'s length."""
+    return steady_periods(run, signal).mean(axis=0)

@@ -1,0 +1,80 @@
+"""Ranking the hypotheses and naming the cause only when the evidence is significant.
+
+Let ``E_0`` be the validation error power of the original model, ``E_h`` that of hypothesis h
+(:mod:`nlsid.diagnose.gain`), and ``nu`` the equivalent degrees of freedom of the validation noise
+(Satterthwaite, :mod:`nlsid.diagnose.evidence`). With ``F* = F_{1 - ALPHA}(nu, nu)``, ALPHA = 0.001:
+
+1. *No significant discrepancy* when the original model's error on all the periodic runs is not
+   significantly above the noise (the F test of :mod:`nlsid.diagnose.evidence`, p >= ALPHA): noise
+   alone explains what is seen. This is the answer whatever the hypotheses do.
+2. Hypothesis h *explains* the discrepancy when ``E_0 / E_h > F*``: its error is smaller than the
+   original's by more than noise would make it. (The two errors share one noise realization, so
+   without a real improvement their ratio stays much closer to 1 than an F variable: the rule is
+   conservative.)
+3. Among the hypotheses that explain, the best is the one with the smallest ``E_h``; a hypothesis
+   is *tied* with it when ``E_h / E_best < F*``. If every tied hypothesis belongs to the same family
+   (e.g. Coulomb and Stribeck friction, which contains it), the winner is the one with the fewest
+   parameters (the simplest sufficient cause). If tied hypotheses of different families remain,
+   no single cause is named: the verdict lists them.
+4. Otherwise (a discrepancy, but no hypothesis explains it) the verdict says what was seen and that
+   no hypothesis of the library explains it.
+
+Hypotheses are ranked by ``E_h`` (smallest first); those that could not be estimated or do not apply
+to the model are listed after them with the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ALPHA = 0.001
+
+NO_DISCREPANCY, EXPLAINED, AMBIGUOUS, UNEXPLAINED = "no_discrepancy", "explained", "ambiguous", "unexplained"
+
+
+def f_critical(dof: float) -> float:
+    """``F_{1 - ALPHA}(dof, dof)``."""
+    from scipy.stats import f as f_dist
+
+    return float(f_dist.isf(ALPHA, dof, dof))
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted hypothesis as the ranking sees it."""
+
+    name: str
+    family: str
+    n_parameters: int
+    error_power: float
+
+
+@dataclass(frozen=True)
+class Verdict:
+    status: str
+    winner: str | None
+    tied: tuple[str, ...]
+    explaining: tuple[str, ...]
+    threshold: float
+
+    def summary(self) -> dict:
+        return {"status": self.status, "winner": self.winner, "tied": list(self.tied),
+                "explaining": list(self.explaining), "f_threshold": self.threshold, "alpha": ALPHA}
+
+
+def decide(discrepancy: bool, original_power: float, candidates: list[Candidate], dof: float) -> Verdict:
+    """The verdict of the module docstring."""
+    threshold = f_critical(dof)
+    explaining = sorted((c for c in candidates if original_power / c.error_power > threshold),
+                        key=lambda c: c.error_power)
+    names = tuple(c.name for c in explaining)
+    if not discrepancy:
+        return Verdict(NO_DISCREPANCY, None, (), names, threshold)
+    if not explaining:
+        return Verdict(UNEXPLAINED, None, (), names, threshold)
+    best = explaining[0]
+    tied = [c for c in explaining if c.error_power / best.error_power < threshold]
+    if len({c.family for c in tied}) > 1:
+        return Verdict(AMBIGUOUS, None, tuple(c.name for c in tied), names, threshold)
+    winner = min(tied, key=lambda c: (c.n_parameters, c.error_power))
+    return Verdict(EXPLAINED, winner.name, tuple(c.name for c in tied), names, threshold)
