@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import click
 from rich.table import Table
@@ -12,7 +11,7 @@ from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path, check_writable
 
 from .common import LOGGER, emit_json, force_option, json_option, progress, settings
-from .options import map_option, parse_map
+from .options import map_option, parse_map, plot_folder, plots_option
 
 
 @click.command()
@@ -23,8 +22,7 @@ from .options import map_option, parse_map
                    "(project on r, for closed loops); auto uses reference when the runs carry r, else io.")
 @click.option("--confidence", type=float, default=0.95, show_default=True, metavar="P",
               help="Probability of the confidence bounds on |G_BLA| and its phase.")
-@click.option("--plots", type=click.Path(file_okay=False), metavar="DIR",
-              help="Write PNG figures (spectrum, BLA with bounds, BLA versus level) into DIR.")
+@plots_option
 @map_option
 @force_option
 @json_option
@@ -50,7 +48,7 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
     if not 0 < confidence < 1:
         raise InputError("--confidence", f"expected a probability in (0, 1), got {confidence:g}")
     check_writable(output, force)
-    plot_dir = _plot_dir(plots)
+    plot_dir = plot_folder(plots)
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
             levels, warnings = analyse_runs(recording_runs(rec, recording), method, confidence,
@@ -61,7 +59,7 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
         from nlsid.report.bla_plots import render_figures
 
         figures = render_figures(levels)
-        plot_dir.mkdir(exist_ok=True)
+        plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)
     write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force)
@@ -76,17 +74,6 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
                    "levels": summaries, "across_levels": across, "warnings": warnings})
         return
     _print_table(output, summaries)
-
-
-def _plot_dir(plots: str | None) -> Path | None:
-    if plots is None:
-        return None
-    folder = Path(plots)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(plots, "--plots expects a folder, this is a file")
-    if not folder.parent.exists():
-        raise InputError(plots, f"folder {folder.parent} does not exist")
-    return folder
 
 
 def _cell(value: float, fmt: str = ".1f") -> str:

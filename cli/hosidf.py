@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 from typing import Iterator
 
 import click
@@ -15,18 +14,7 @@ from nlsid.io.recording import open_recording
 from nlsid.io.run import Run
 
 from .common import LOGGER, emit_json, force_option, json_option, progress, settings
-from .options import map_option, parse_map
-
-
-def _plot_folder(plots: str | None) -> Path | None:
-    if plots is None:
-        return None
-    folder = Path(plots)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(str(folder), "--plots must name a folder")
-    if not folder.parent.exists():
-        raise InputError(str(folder), f"folder {folder.parent} does not exist")
-    return folder
+from .options import map_option, parse_map, plot_folder, plots_option
 
 
 def _sine_runs(recording) -> Iterator[Run]:
@@ -76,7 +64,7 @@ def _analytic(branches, grid):
               help="Linearity cost over runs that differ in run parameter PARAM (seed 003), e.g. K_fc.")
 @click.option("--model", type=click.Path(dir_okay=False),
               help="Model config (polynomial block structure): add its analytic HOSIDFs (seed 002 Lemma 2).")
-@click.option("--plots", type=click.Path(file_okay=True), help="Write figures (PNG) into this folder.")
+@plots_option
 @map_option
 @force_option
 @json_option
@@ -101,7 +89,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     from nlsid.io.hosidf_file import write_hosidf
 
     check_writable(output, force)
-    folder = _plot_folder(plots)
+    folder = plot_folder(plots)
     if parameter is not None and model is not None:
         raise InputError("--model", "analytic HOSIDFs apply to a frequency x amplitude grid, not to --sweep")
     grid = analytic = result = None
@@ -126,7 +114,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     if folder is not None:
         from nlsid.report import hosidf_plots
 
-        folder.mkdir(exist_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
         figures = (hosidf_plots.grid_figures(grid, spectrum_of, folder, analytic) if grid is not None
                    else hosidf_plots.sweep_figures(result, folder))
     summary = _summary(output, signal, grid, result, figures)

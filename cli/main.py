@@ -12,11 +12,13 @@ from nlsid.errors import NlsidError
 from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
+from .fit import fit
 from .import_ import import_
 from .hosidf import hosidf
 from .info import info
 from .pending import PENDING_COMMANDS
 from .report import report
+from .run import run
 from .simulate import simulate
 
 
@@ -31,7 +33,7 @@ class NlsidGroup(click.Group):
             ctx.exit(exc.exit_code)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        order = ["design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "info"]
+        order = ["design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "run", "info"]
         return [name for name in order if name in self.commands] + sorted(set(self.commands) - set(order))
 
 
@@ -47,12 +49,14 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
     \b
       design   -> excitation.h5   (multisines, single-sine grids)
+      import   -> recording.h5    (CSV, MATLAB, HDF5, MCAP files; excitation inferred)
       simulate -> recording.h5    (the model run on an excitation)
       bla      -> bla.h5          (Best Linear Approximation, noise and distortion)
       hosidf   -> hosidf.h5       (higher order sinusoidal input describing functions)
       fit      -> model.yaml      (parametric models)
       diagnose -> diagnosis/      (what a simulation model gets wrong, and the fix)
       report   -> report.html
+      run      chains the stages of a pipeline config, skipping up-to-date steps
 
     Exit codes: 0 success, 1 a requested check failed, 2 bad usage or bad input.
     """
@@ -62,10 +66,12 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 
 cli.add_command(design)
+cli.add_command(fit)
 cli.add_command(import_)
 cli.add_command(hosidf)
 cli.add_command(bla)
 cli.add_command(info)
+cli.add_command(run)
 cli.add_command(simulate)
 cli.add_command(report)
 for command in PENDING_COMMANDS:

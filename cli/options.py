@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from nlsid.errors import InputError
@@ -26,3 +28,17 @@ def parse_map(items: tuple[str, ...]) -> dict[str, str] | None:
             raise InputError("--map", f"signal {name} is mapped twice")
         out[name] = source
     return out
+
+
+plots_option = click.option("--plots", metavar="DIR", type=click.Path(),
+                            help="Write PNG figures into DIR (created if missing).")
+
+
+def plot_folder(plots: str | None) -> Path | None:
+    """The ``--plots`` folder, checked before any work is done (it is created when figures are written)."""
+    if plots is None:
+        return None
+    folder = Path(plots)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(plots, "--plots expects a folder, this is a file")
+    return folder

@@ -1,0 +1,92 @@
+"""`nlsid run`: steps chain through their files, up-to-date steps are skipped, failures stop the run."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).parents[1]
+
+DESIGN = {"fs": 256.0, "seed": 1, "multisine": {"period": 256, "band": [1.0, 40.0], "realizations": 2,
+                                                 "periods": 2, "rms_levels": [1.0]}}
+MODEL = {"model": {"type": "transfer_function", "domain": "discrete", "num": [0.5], "den": [1.0, -0.5]}}
+
+
+@pytest.fixture
+def project(tmp_path):
+    (tmp_path / "design.yaml").write_text(yaml.safe_dump(DESIGN))
+    (tmp_path / "model.yaml").write_text(yaml.safe_dump(MODEL))
+    steps = ["design design.yaml -o out/excitation.h5",
+             "simulate model.yaml --excitation out/excitation.h5 -o out/recording.h5",
+             "bla out/recording.h5 -o out/bla.h5"]
+    (tmp_path / "pipeline.yaml").write_text(yaml.safe_dump({"steps": steps}))
+    return tmp_path
+
+
+def statuses(result) -> list[str]:
+    return [step["status"] for step in result.json()["steps"]]
+
+
+def test_runs_then_skips_then_reruns_what_is_stale(run_cli, project):
+    first = run_cli("run", project / "pipeline.yaml", "--json")
+    assert first.exit_code == 0, first.stderr
+    assert statuses(first) == ["ran", "ran", "ran"]
+    assert (project / "out" / "bla.h5").exists()
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["up to date"] * 3
+    # A newer model makes the simulation and everything after it stale, not the design.
+    model = project / "model.yaml"
+    later = (project / "out" / "bla.h5").stat().st_mtime + 10
+    os.utime(model, (later, later))
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["up to date", "ran", "ran"]
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--always", "--json")) == ["ran"] * 3
+
+
+def test_paths_are_relative_to_root(run_cli, project, tmp_path_factory):
+    elsewhere = tmp_path_factory.mktemp("configs")
+    config = {"root": os.path.relpath(project, elsewhere),
+              "steps": ["design design.yaml -o out/e.h5"]}
+    (elsewhere / "p.yaml").write_text(yaml.safe_dump(config))
+    result = run_cli("run", elsewhere / "p.yaml")
+    assert result.exit_code == 0, result.stderr
+    assert (project / "out" / "e.h5").exists()
+
+
+def test_a_failing_step_stops_the_pipeline_with_its_exit_code(run_cli, project):
+    (project / "model.yaml").write_text("model: {type: transfer_function, num: [1.0], den: [1.0, -1.0]}\n")
+    result = run_cli("run", project / "pipeline.yaml", "--json")
+    assert result.exit_code == 2
+    assert statuses(result) == ["ran", "failed (2)"]
+    assert "model.yaml" in result.stderr and "Traceback" not in result.stderr
+    assert not (project / "out" / "bla.h5").exists()
+
+
+@pytest.mark.parametrize("steps, message", [
+    (["design design.yaml"], "steps[0]: names no output: give it -o PATH"),
+    (["run other.yaml -o x"], "steps[0]: expected a stage command line"),
+    ([], "steps: expected at least 1 items"),
+])
+def test_bad_pipeline_configs(run_cli, project, steps, message):
+    (project / "pipeline.yaml").write_text(yaml.safe_dump({"steps": steps}))
+    result = run_cli("run", project / "pipeline.yaml")
+    assert result.exit_code == 2 and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_shipped_pipeline_config_is_valid(run_cli, tmp_path):
+    """The README's pipeline file names only files that exist or that an earlier step writes."""
+    from nlsid.cli.run import PipelineConfig, plan
+    from nlsid.io.config import load_config
+
+    path = ROOT / "configs" / "pipeline_stage.yaml"
+    root, steps = plan(load_config(path, PipelineConfig), path)
+    written = set()
+    for step in steps:
+        for arg in step.args[1:]:
+            if arg.endswith((".yaml", ".h5", ".mcap")) and (root / arg) != step.output:
+                assert (root / arg).exists() or (root / arg) in written, arg
+        written.add(step.output)
+    assert shutil.which("nlsid") is not None
