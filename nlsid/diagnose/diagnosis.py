@@ -99,6 +99,26 @@ class Diagnosis:
         }
 
 
+def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str) -> Estimate:
+    """The signature estimate refined by the fit engine (simulation error of the estimation runs).
+
+    Each parameter keeps its sign and stays within three decades of its signature estimate.
+    """
+    from nlsid.fit.extension import FreeParameter, fit_free_parameters
+
+    paths = hypothesis.paths(data)
+    free = {}
+    for name, path in paths.items():
+        start = estimate.values[name]
+        bounds = sorted((start * 1e-3, start * 1e3))
+        free[path] = FreeParameter(start, *bounds)
+    fit = fit_free_parameters(hypothesis.extend(data, estimate.values), free, runs, [], source=source)
+    values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
+    std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
+    note = "; ".join(filter(None, [estimate.note, "refined by the fit engine (simulation error)", *fit.warnings]))
+    return Estimate(values, std, estimate.explained_db, note)
+
+
 def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list) -> None:
     try:
         extended = runner.with_changes(outcome.extended)
@@ -135,6 +155,12 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         if isinstance(estimate, str):
             outcome.reason = estimate
             continue
+        if hypothesis.paths is not None:
+            try:
+                estimate = refine(hypothesis, data, estimate, est_runs, source)
+            except InputError as exc:
+                outcome.reason = f"the fit failed: {exc}"
+                continue
         outcome.estimate = estimate
         outcome.extended = hypothesis.extend(data, estimate.values)
         _score(outcome, runner, val_runs, val)

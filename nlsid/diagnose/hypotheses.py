@@ -107,6 +107,7 @@ class Hypothesis:
     estimate: Callable[[Context], Estimate | str]
     extend: Callable[[dict, dict], dict]
     parameters: tuple[str, ...] = field(default=())
+    paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
 
 
 def _regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Estimate:
@@ -191,6 +192,14 @@ def _extend_stribeck(data: dict, values: dict) -> dict:
     return _add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, values)
 
 
+def _force_paths(names: tuple[str, ...]) -> Callable[[dict], dict[str, str]]:
+    """Key paths of the parameters of the force :func:`_add_force` appends to ``data``."""
+    def paths(data: dict) -> dict[str, str]:
+        index = len(data["model"].get("nonlinearities", []))
+        return {n: f"model.nonlinearities[{index}].{n}" for n in names}
+    return paths
+
+
 # ---- input and output blocks (any plant) ------------------------------------------------------
 
 def _no_block(key: str) -> Callable[[ModelRunner], str | None]:
@@ -224,17 +233,22 @@ def _input_block(make: Callable[[float], dict], name: str, lower: Callable[[np.n
 
         a = _scan(lambda a: float(np.sum((y - predicted(a)) ** 2)), lower(magnitude), upper(magnitude))
         rss = float(np.sum((y - predicted(a)) ** 2))
-        return Estimate({name: a}, {name: float("nan")}, 10 * math.log10(float(np.sum(y**2)) / rss),
-                        f"{name} by a bounded search of the residual (no standard error)")
+        values = {k: v for k, v in make(a).items() if k != "type"}
+        return Estimate(values, {k: float("nan") for k in values}, 10 * math.log10(float(np.sum(y**2)) / rss),
+                        f"symmetric {name} by a bounded search of the residual")
     return estimate
 
 
-def _set_block(key: str, make: Callable[[float], dict], name: str) -> Callable[[dict, dict], dict]:
+def _set_block(key: str, kind: str) -> Callable[[dict, dict], dict]:
     def extend(data: dict, values: dict) -> dict:
         out = copy.deepcopy(data)
-        out["model"][key] = make(float(values[name]))
+        out["model"][key] = {"type": kind, **{k: float(v) for k, v in values.items()}}
         return out
     return extend
+
+
+def _block_paths(key: str, names: tuple[str, ...]) -> Callable[[dict], dict[str, str]]:
+    return lambda data: {n: f"model.{key}.{n}" for n in names}
 
 
 def _saturation(a: float) -> dict:
@@ -350,28 +364,30 @@ def _quantile(q: float) -> Callable[[np.ndarray], float]:
 LIBRARY: tuple[Hypothesis, ...] = (
     Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
                "odd distortion; BLA gain rises with level; residual force jumps at zero velocity",
-               _mechanical, _estimate_coulomb, _add_force({"type": "coulomb"}), ("fc",)),
+               _mechanical, _estimate_coulomb, _add_force({"type": "coulomb"}), ("fc",), _force_paths(("fc",))),
     Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
                "as Coulomb friction, with a break-away peak at low velocity",
-               _mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs")),
+               _mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs"), _force_paths(("fs", "fc", "vs"))),
     Hypothesis("cubic_stiffness", "Cubic stiffness", "stiffness", "k3", "N/m^3",
                "odd distortion; the resonance moves with level; residual force cubic in position",
-               _mechanical, _estimate_cubic, _add_force({"type": "cubic_stiffness"}), ("k3",)),
-    Hypothesis("input_saturation", "Input saturation", "input", "limit", "input units",
+               _mechanical, _estimate_cubic, _add_force({"type": "cubic_stiffness"}), ("k3",), _force_paths(("k3",))),
+    Hypothesis("input_saturation", "Input saturation", "input", "upper", "input units",
                "odd distortion; BLA gain falls with level; residual where |u| is large",
                _no_block("input_nonlinearity"),
                _input_block(_saturation, "limit", _quantile(0.5), lambda x: float(np.max(x))),
-               _set_block("input_nonlinearity", _saturation, "limit"), ("limit",)),
-    Hypothesis("deadzone", "Input deadzone", "input", "half_width", "input units",
+               _set_block("input_nonlinearity", "saturation"), ("upper", "lower"),
+               _block_paths("input_nonlinearity", ("upper", "lower"))),
+    Hypothesis("deadzone", "Input deadzone", "input", "upper", "input units",
                "odd distortion; BLA gain rises with level; residual where |u| is small",
                _no_block("input_nonlinearity"),
-               _input_block(_deadzone, "half_width", lambda x: 0.0, _quantile(0.9)),
-               _set_block("input_nonlinearity", _deadzone, "half_width"), ("half_width",)),
+               _input_block(_deadzone, "half width", lambda x: 0.0, _quantile(0.9)),
+               _set_block("input_nonlinearity", "deadzone"), ("upper", "lower"),
+               _block_paths("input_nonlinearity", ("upper", "lower"))),
     Hypothesis("backlash", "Backlash at the input", "input", "width", "input units",
                "odd distortion and a phase lag that shrinks with level",
                _no_block("input_nonlinearity"),
                _input_block(_backlash, "width", _quantile(0.001), _quantile(0.9)),
-               _set_block("input_nonlinearity", _backlash, "width"), ("width",)),
+               _set_block("input_nonlinearity", "backlash"), ("width",), _block_paths("input_nonlinearity", ("width",))),
     Hypothesis("quadratic_output", "Quadratic (even) output nonlinearity", "output", "a2", "1/output units",
                "even distortion at the even detection lines",
                _no_block("output_nonlinearity"), _estimate_quadratic, _extend_quadratic, ("a2",)),
