@@ -11,10 +11,6 @@ import click
 from nlsid.errors import InputError
 
 _STAGES = {
-    "fit": (
-        "Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.",
-        "nlsid fit bla.h5 --order 2/2 -o model.yaml",
-    ),
     "diagnose": (
         "Show what a simulation model gets wrong on measured data, name the cause and fix it.",
         "nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/",

@@ -392,3 +392,17 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         runs=runs, warnings=warnings, config=completed, evaluations=evaluations, message=str(result.message),
         samples=int(result.fun.size), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
     )
+
+
+def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequence[str] | None = None,
+                    workers: int | None = None) -> ExtensionFit:
+    """``nlsid fit --model``: the free parameters of a model config file fitted to recorded runs."""
+    from nlsid.io.config import load_yaml
+
+    data, lines = load_yaml(model_path)
+    config = validate_simulate_config(data, model_path, lines)
+    if not config.free:
+        raise InputError(str(model_path), "free: no free parameters to fit; mark them under a top-level free: key")
+    estimation, validation = split_runs(runs, validation_ids)
+    return fit_free_parameters(data, free_from_config(config.free), estimation, validation, source=str(model_path),
+                               lines=lines, workers=workers)

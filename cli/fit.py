@@ -1,0 +1,131 @@
+"""``nlsid fit``: a transfer function fitted to a BLA, or the free parameters of a model fitted to data."""
+
+from __future__ import annotations
+
+import click
+
+from nlsid.errors import InputError
+
+from .common import emit_json, force_option, json_option, settings
+from .options import map_option, parse_map
+
+
+@click.command()
+@click.argument("bla_file", required=False, type=click.Path(dir_okay=False))
+@click.option("--order", default=None, metavar="NB/NA|auto", help="Numerator/denominator orders, or auto (scan and select).")
+@click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,
+              help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
+@click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
+@click.option("--max-order", type=click.IntRange(min=1), default=4, show_default=True, help="Largest na scanned by --order auto.")
+@click.option("--level", type=click.IntRange(min=0), default=None, help="Level index in bla.h5 (required when it holds several).")
+@click.option("--plot", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG): data, model, residual, noise and nonlinear std.")
+@click.option("--model", "model_config", type=click.Path(dir_okay=False), default=None,
+              help="Model config with a free: section (fit its free parameters to --data).")
+@click.option("--data", "data", type=click.Path(dir_okay=False), default=None, help="Recording to fit --model to (.h5 or .mcap).")
+@click.option("--validation", multiple=True, metavar="RUN_ID",
+              help="Run held out for validation (repeat). Default: the highest realization of each level, else the last run.")
+@click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (default: all cores).")
+@map_option
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")
+@force_option
+@json_option
+def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, workers, mapping,
+        output, force, as_json) -> None:
+    """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
+
+    From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
+    maximum likelihood, book ch. 7), with the cost against its expected value, parameter
+    standard deviations and an order scan with --order auto.
+
+    From a model and data: the parameters under the config's free: key minimise the simulation
+    error on estimation runs; the error on held-out validation runs is reported.
+
+    Examples:
+
+    \b
+      nlsid fit bla.h5 --order 2/2 --domain s -o model.yaml --plot fit.png
+      nlsid fit bla.h5 --order auto -o model.yaml
+      nlsid fit --model stage.yaml --data recording.h5 -o fitted.yaml
+    """
+    if model_config is not None or data is not None:
+        if bla_file is not None or order is not None:
+            raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
+        if model_config is None or data is None:
+            raise InputError("nlsid fit", "--model and --data go together")
+        _fit_extension(model_config, data, list(validation), workers, parse_map(mapping), output, force, as_json)
+        return
+    if bla_file is None or order is None:
+        raise InputError("nlsid fit", "give BLA_FILE and --order NB/NA (or auto), or --model with --data")
+    _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
+
+
+def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
+    from nlsid.fit.bla_fit import fit_bla, parse_delay, parse_order
+    from nlsid.io.atomic import atomic_path, check_writable
+    from nlsid.io.fit_file import report_path, write_fit
+    from nlsid.io.provenance import provenance
+
+    order_pair, delay_samples = parse_order(order), parse_delay(delay)
+    for path in (output, report_path(output)) + ((plot,) if plot else ()):
+        check_writable(path, force)
+    result = fit_bla(bla_file, order_pair, domain, delay_samples, max_order, level)
+    fit_ = result.fit
+    report = result.report()
+    header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function",
+              f"cost {fit_.cost:.6g}, expected {fit_.expected_cost:.6g} +- {fit_.cost_std:.3g} ({fit_.lines} lines)",
+              f"report: {report_path(output).name}"]
+    if plot:
+        from nlsid.report.fit_plots import tf_fit_png
+
+        data = result.level.data
+        png = tf_fit_png(data.frequency, data.G, fit_.response, fit_.response_std, result.level.noise_std,
+                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})")
+        with atomic_path(plot, force) as tmp:
+            tmp.write_bytes(png)
+    write_fit(output, {"model": fit_.model.config()}, header, report, provenance(input_paths=[bla_file]), force=force)
+    for warning in result.warnings:
+        settings().console.print(f"warning: {warning}")
+    if as_json:
+        emit_json({"output": output, "report": str(report_path(output)), "plot": plot,
+                   **{k: report[k] for k in ("domain", "order", "delay_samples", "num", "den", "parameters", "cost",
+                                             "expected_cost", "cost_std", "lines", "stable", "order_reason", "order_scan",
+                                             "warnings")}})
+        return
+    console = settings().console
+    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, expected "
+                  f"{fit_.expected_cost:.5g} +- {fit_.cost_std:.3g} over {fit_.lines} lines")
+    console.print(f"order: {report['order_reason']}")
+    for name, value, std in zip(fit_.names, fit_.values, fit_.std):
+        console.print(f"  {name} = {value:.6g} +- {std:.2g}")
+
+
+def _fit_extension(model_config, data, validation, workers, mapping, output, force, as_json) -> None:
+    from nlsid.fit.extension import fit_config_file
+    from nlsid.io.fit_file import report_path, write_fit
+    from nlsid.io.provenance import provenance
+    from nlsid.io.atomic import check_writable
+    from nlsid.io.recording import read_runs
+
+    check_writable(output, force)
+    check_writable(report_path(output), force)
+    runs = read_runs(data, require_y=True, mapping=mapping)
+    result = fit_config_file(model_config, runs, validation or None, workers)
+    summary = result.summary()
+    header = [f"nlsid fit --model {model_config} --data {data}",
+              "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),
+              f"validation rms error {result.validation_rms:.4g} (noise {result.noise_rms_validation:.4g}); "
+              f"report: {report_path(output).name}"]
+    write_fit(output, result.config, header, {"kind": "extension", **summary},
+              provenance(config_paths=[model_config], input_paths=[data]), force=force)
+    for warning in result.warnings:
+        settings().console.print(f"warning: {warning}")
+    if as_json:
+        emit_json({"output": output, "report": str(report_path(output)), **summary})
+        return
+    console = settings().console
+    for name, value, std, start in zip(result.names, result.values, result.std, result.start):
+        console.print(f"  {name} = {value:.6g} +- {std:.2g} (start {start:.6g})")
+    console.print(f"rms error: estimation {result.estimation_rms:.4g} (start {result.start_estimation_rms:.4g}), "
+                  f"validation {result.validation_rms:.4g} (start {result.start_validation_rms:.4g}); "
+                  f"noise level {result.noise_rms_validation:.4g}")

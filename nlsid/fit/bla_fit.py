@@ -1,0 +1,81 @@
+"""``nlsid fit bla.h5``: a transfer function fitted to one level of a BLA file, by a given or a
+selected order, with the report numbers (:mod:`nlsid.fit.tf_fit`, :mod:`nlsid.fit.order`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+
+from nlsid.errors import InputError
+from nlsid.fit.bla_source import BLALevel, frf_from_bla
+from nlsid.fit.order import OrderSelection, select_order
+from nlsid.fit.tf_fit import TFFit, fit_transfer_function
+
+_ORDER = re.compile(r"(\d+)/(\d+)")
+
+
+def parse_order(text: str) -> tuple[int, int] | None:
+    """``"NB/NA"`` -> (nb, na); ``"auto"`` -> None."""
+    if text == "auto":
+        return None
+    match = _ORDER.fullmatch(text.strip())
+    if match is None:
+        raise InputError("--order", f"expected NB/NA (numerator/denominator orders, e.g. 2/2) or auto, got {text!r}")
+    return int(match.group(1)), int(match.group(2))
+
+
+def parse_delay(text: str) -> int | None:
+    """``"auto"`` -> None (scan), else a whole number of samples >= 0."""
+    if text == "auto":
+        return None
+    if not text.isdigit():
+        raise InputError("--delay", f"expected a whole number of samples >= 0 or auto, got {text!r}")
+    return int(text)
+
+
+@dataclass
+class BLAFit:
+    level: BLALevel
+    fit: TFFit
+    selection: OrderSelection | None
+
+    @property
+    def warnings(self) -> list[str]:
+        return self.level.warnings + (self.selection.warnings if self.selection else self.fit.warnings)
+
+    def report(self) -> dict:
+        """The numbers of the fit report (``docs/formats.md``, nlsid fit outputs)."""
+        fit, data = self.fit, self.level.data
+        return {
+            "kind": "transfer_function",
+            "domain": fit.model.domain,
+            "order": f"{fit.nb}/{fit.na}",
+            "delay_samples": fit.model.delay,
+            "num": fit.model.num, "den": fit.model.den,
+            "parameters": {n: {"value": float(v), "std": float(s)} for n, v, s in zip(fit.names, fit.values, fit.std)},
+            "covariance": fit.covariance,
+            "cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
+            "lines": fit.lines, "n_theta": fit.n_theta, "realizations": data.realizations,
+            "poles": [[float(p.real), float(p.imag)] for p in fit.model.poles()],
+            "stable": fit.model.stable(),
+            "order_scan": [r.row() for r in self.selection.scan] if self.selection else [],
+            "order_reason": self.selection.reason if self.selection else "given with --order",
+            "frequency": data.frequency,
+            "model_std": fit.response_std,
+            "warnings": self.warnings,
+        }
+
+
+def fit_bla(path: str | os.PathLike, order: tuple[int, int] | None, domain: str, delay: int | None,
+            max_order: int, level: int | None) -> BLAFit:
+    """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``."""
+    source = frf_from_bla(path, level)
+    if order is not None:
+        return BLAFit(source, fit_transfer_function(source.data, order[0], order[1], domain, delay), None)
+    if delay is None:
+        delay = fit_transfer_function(source.data, max_order, max_order, domain, None).model.delay
+    selection = select_order(source.data, max_order, domain, delay)
+    return BLAFit(source, selection.fit, selection)
+

@@ -1,0 +1,80 @@
+"""The measured FRF a transfer function is fitted to: one level of a ``bla.h5`` file.
+
+The weight is the variance of the averaged BLA (book Section 7.4.2): the robust method's
+``var_total`` (noise + stochastic nonlinear distortions, (6-3)) when the level has M >= 2
+realizations, else the fast method's ``var_total`` ((6-55)), else the noise variance alone
+(with a warning: nonlinear distortions are then missing from the weight and the cost check
+flags them, book Section 7.5 (i)).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.fit.tf_fit import FRFData
+from nlsid.io.bla_file import read_bla
+
+
+def _finite(values) -> bool:
+    return values is not None and bool(np.all(np.isfinite(values))) and bool(np.all(np.asarray(values) > 0))
+
+
+@dataclass(frozen=True)
+class BLALevel:
+    """The FRF to fit, the standard deviations of the averaged BLA's noise and nonlinear parts
+    (sqrt(var_noise), sqrt(var_nl / M), for the figure; NaN where unknown) and warnings."""
+
+    data: FRFData
+    noise_std: np.ndarray
+    nl_std: np.ndarray
+    warnings: list[str]
+
+
+def _std(values, divisor: float, size: int) -> np.ndarray:
+    if values is None:
+        return np.full(size, np.nan)
+    return np.sqrt(np.maximum(np.asarray(values, dtype=float) / divisor, 0.0))
+
+
+def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
+    """One level of ``bla.h5``; ``level`` may be omitted when the file holds one level."""
+    content = read_bla(path)
+    levels = content["levels"]
+    if level is None:
+        if len(levels) > 1:
+            raise InputError(f"{path}", f"{len(levels)} levels in the file; choose one with --level 0..{len(levels) - 1}")
+        level = 0
+    if not 0 <= level < len(levels):
+        raise InputError("--level", f"expected 0..{len(levels) - 1} for {path}, got {level}")
+    chosen = levels[level]
+    attrs, robust, fast = chosen["attrs"], chosen["robust"], chosen["fast"]
+    where = f"{path}:/levels/{chosen['name']}"
+    warnings = []
+    if _finite(robust.get("var_total")):
+        G, variance = robust["G"], robust["var_total"]
+        realizations = int(attrs["n_realizations"])
+        if realizations < 7:
+            warnings.append(f"weights from M = {realizations} realizations: the variance estimates are rough and the "
+                            "cost check approximate (the book advises M >= 7)")
+    elif fast is not None and _finite(fast.get("var_total")):
+        G, variance = fast["G"], fast["var_total"]
+        realizations = None
+        warnings.append("weights: the fast method's total variance (one realization): the cost check is approximate")
+    elif _finite(robust.get("var_noise")):
+        G, variance = robust["G"], robust["var_noise"]
+        realizations = None
+        warnings.append("weights: noise variance only (one realization, no detection lines): nonlinear distortions "
+                        "are not in the weight and raise the cost above its expected value")
+    else:
+        raise InputError(f"{where}/robust", "no finite positive variance (var_total, fast var_total or var_noise) "
+                                            "to weight the fit: measure M >= 2 realizations or P >= 2 periods")
+    period = int(attrs["period"])
+    data = FRFData(np.asarray(chosen["excited_bins"], dtype=np.int64), np.asarray(G, dtype=complex),
+                   np.asarray(variance, dtype=float), float(attrs["fs"]), period, realizations)
+    m = max(int(attrs["n_realizations"]), 1)
+    size = data.bins.size
+    return BLALevel(data, _std(robust.get("var_noise"), 1.0, size), _std(robust.get("var_nl"), m, size), warnings)

@@ -1,0 +1,48 @@
+"""Figure of a transfer function fitted to a BLA (``nlsid fit --plot``): magnitude and phase of the
+data and the model, the residual |G_BLA - G_model|, the model's standard deviation, and the noise and
+nonlinear standard deviations of the averaged BLA (the weights' parts, book Ex 99 and 100).
+
+matplotlib is imported inside the function so that importing this module stays cheap.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+
+def _db(magnitude: np.ndarray) -> np.ndarray:
+    magnitude = np.asarray(magnitude, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(magnitude > 0, 20 * np.log10(magnitude), np.nan)
+
+
+def tf_fit_png(frequency: np.ndarray, data: np.ndarray, model: np.ndarray, model_std: np.ndarray,
+               noise_std: np.ndarray, nl_std: np.ndarray, title: str) -> bytes:
+    """PNG bytes of the two-panel figure (dB magnitudes; phase in degrees)."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(8, 6.4), layout="constrained")
+    magnitude, phase = figure.add_subplot(2, 1, 1), figure.add_subplot(2, 1, 2, sharex=None)
+    magnitude.plot(frequency, _db(np.abs(data)), "k.", markersize=3, label="BLA")
+    magnitude.plot(frequency, _db(np.abs(model)), color="tab:blue", linewidth=1.2, label="model")
+    magnitude.plot(frequency, _db(np.abs(data - model)), "r.", markersize=2, label="|residual|")
+    magnitude.plot(frequency, _db(model_std), color="tab:blue", linestyle=":", linewidth=1, label="model std")
+    magnitude.plot(frequency, _db(noise_std), color="tab:green", linewidth=1, label="noise std")
+    magnitude.plot(frequency, _db(nl_std), color="tab:orange", linewidth=1, label="nonlinear std")
+    magnitude.set_ylabel("dB")
+    magnitude.set_title(title)
+    magnitude.legend(fontsize="small", ncol=3)
+    magnitude.grid(True, alpha=0.3)
+    phase.plot(frequency, np.degrees(np.unwrap(np.angle(data))), "k.", markersize=3, label="BLA")
+    phase.plot(frequency, np.degrees(np.unwrap(np.angle(model))), color="tab:blue", linewidth=1.2, label="model")
+    phase.set_ylabel("phase (deg)")
+    phase.set_xlabel("frequency (Hz)")
+    phase.grid(True, alpha=0.3)
+    if frequency.size and frequency.min() > 0 and frequency.max() / frequency.min() > 20:
+        magnitude.set_xscale("log")
+        phase.set_xscale("log")
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110)
+    return buffer.getvalue()
