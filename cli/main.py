@@ -12,6 +12,7 @@ from nlsid.errors import NlsidError
 from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
+from .diagnose import diagnose
 from .fit import fit
 from .import_ import import_
 from .hosidf import hosidf
@@ -66,6 +67,7 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 
 cli.add_command(design)
+cli.add_command(diagnose)
 cli.add_command(fit)
 cli.add_command(import_)
 cli.add_command(hosidf)

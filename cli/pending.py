@@ -11,10 +11,6 @@ import click
 from nlsid.errors import InputError
 
 _STAGES = {
-    "diagnose": (
-        "Show what a simulation model gets wrong on measured data, name the cause and fix it.",
-        "nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/",
-    ),
 }
 
 

@@ -83,6 +83,35 @@ class Diagnosis:
                        f"{o.score.above_floor_db:.1f} dB above the noise floor")
         return out
 
+    def arrays(self) -> dict:
+        """The result arrays of :mod:`nlsid.io.diagnosis_file` (figures of the report)."""
+        import numpy as np
+
+        ev = self.evidence
+        bla = [{"level": r["level"], "u_rms": r["u_rms"], "frequency": r["frequency_hz"], "G": r["G"],
+                "G_model": r["G_model"], "radius": r["radius"], "gain_error_db": r["gain_error_db"],
+                "phase_error_deg": r["phase_error_deg"], "outside": r["outside"].astype(np.int8)} for r in ev.bla]
+        spectrum = []
+        for level, (measured, model, lines) in ev.spectra.items():
+            spectrum.append({"level": level, "kind": lines.kind, "in_band": lines.in_band.astype(np.int8),
+                             "frequency": lines.frequency(np.arange(lines.kind.size)), "y_power": measured.y_power,
+                             "model_power": model.y_power, "noise": measured.y_noise})
+        first = next(res for res in ev.residuals if res.role == VALIDATION)
+        validation = {"run_id": first.run_id, "fs": first.fs, "original_error": first.residual}
+        if self.winner is not None:
+            validation["extended_error"] = self.winner.errors[0]
+        return {"bla": bla, "spectrum": spectrum, "time": ev.time, "validation": validation}
+
+    def extended_header(self) -> list[str]:
+        """Header comment of the extended model: the cause, the values with standard errors, the gain."""
+        w = self.winner
+        lines = [f"Extended by nlsid diagnose: {w.hypothesis.title} added to {self.model_source}"]
+        for name, value in w.estimate.values.items():
+            lines.append(f"  {name} = {value:.6g} +- {w.estimate.std[name]:.2g} (one standard error)")
+        lines.append(f"Validation error {w.score.error_rms:.4g} rms ({w.score.gain_db:+.1f} dB against the original "
+                     f"model, {w.score.above_floor_db:.1f} dB above the noise floor)")
+        return lines
+
     def summary(self) -> dict:
         split = {role: sorted(k for k, v in self.roles.items() if v == role) for role in (ESTIMATION, VALIDATION)}
         winner = self.winner

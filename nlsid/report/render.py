@@ -21,11 +21,13 @@ from typing import Callable
 from nlsid.errors import InputError
 from nlsid.report.html import Page
 from nlsid.report.render_bla import render_bla
+from nlsid.report.render_diagnosis import render_diagnosis
 from nlsid.report.render_hosidf import render_hosidf
 from nlsid.report.render_model import render_model
 
 RENDERERS: dict[str, Callable[[Path], Page]] = {
     "bla": render_bla,
+    "diagnosis": render_diagnosis,
     "hosidf": render_hosidf,
     "model": render_model,
 }

@@ -1,0 +1,113 @@
+"""``nlsid diagnose``: what a simulation model gets wrong on measured data, the cause, the fix, the gain."""
+
+from __future__ import annotations
+
+import math
+
+import click
+from rich.table import Table
+
+from nlsid.errors import CheckFailed
+
+from .common import emit_json, force_option, json_option, progress, settings
+from .options import map_option, parse_map
+
+
+@click.command()
+@click.option("--model", "model_path", required=True, type=click.Path(dir_okay=False),
+              help="The simulation model (a model config YAML, as `nlsid simulate` reads).")
+@click.option("--data", "data_path", required=True, type=click.Path(dir_okay=False),
+              help="The measured recording (.h5 or .mcap): multisine and/or sine runs with u and y (and r).")
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
+              help="Folder to write: summary.json, results.h5, extended_model.yaml.")
+@click.option("--fail-if-discrepancy", is_flag=True,
+              help="Exit 1 when the simulation error is significantly above the noise.")
+@click.option("--fail-if-error-above", type=float, metavar="DB",
+              help="Exit 1 when the model's simulation error is more than DB dB above the noise floor.")
+@click.option("--fail-if-distortion-above", type=float, metavar="DB",
+              help="Exit 1 when odd or even distortion the model does not produce exceeds the noise by DB dB.")
+@map_option
+@force_option
+@json_option
+def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
+             fail_if_distortion_above: float | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+    """Show what a simulation model gets wrong on measured data, name the cause and fix it.
+
+    The model is simulated on the measured excitation (u, or r in closed loop) and compared with
+    the measured output per line (BLA with bounds, odd and even distortion against the noise),
+    per level and in time. Each hypothesis of the library (friction, cubic stiffness, input
+    saturation, deadzone, backlash, quadratic output, a missing resonance, a delay) is estimated
+    on half of the runs and scored on the others; a cause is named only when its gain is
+    significant. The outputs are written before any --fail-if check exits 1.
+
+    Example:
+
+    \b
+      nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/
+    """
+    from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
+    from nlsid.diagnose.hypotheses import LIBRARY
+    from nlsid.io.config import load_yaml
+    from nlsid.io.diagnosis_file import extended_yaml, write_diagnosis
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import read_runs
+
+    data, _ = load_yaml(model_path)
+    if not isinstance(data, dict):
+        from nlsid.errors import InputError
+
+        raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
+    runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
+    with progress("diagnose", len(LIBRARY) + 1) as step:
+        result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step())
+    winner = result.winner
+    extended = extended_yaml(winner.extended, result.extended_header()) if winner is not None else None
+    summary = result.summary()
+    write_diagnosis(output, summary, result.arrays(), extended,
+                    provenance(config_paths=[model_path], input_paths=[data_path]), force=force)
+    if as_json:
+        emit_json({"output": output, **summary})
+    else:
+        _print(result, output)
+    _check(summary, fail_if_discrepancy, fail_if_error_above, fail_if_distortion_above)
+
+
+def _print(result, output: str) -> None:
+    console = settings().console
+    console.print(result.headline(), style="bold", markup=False)
+    for line in result.evidence.findings():
+        console.print(f"  - {line}", markup=False)
+    table = Table(title="Hypotheses (validation runs)")
+    for column in ("hypothesis", "main parameter", "gain dB", "above floor dB", "distortion explained", "note"):
+        table.add_column(column)
+    for o in result.outcomes:
+        if o.score is None:
+            table.add_row(o.hypothesis.title, "-", "-", "-", "-", o.reason)
+            continue
+        main = o.hypothesis.main
+        explained = o.score.distortion_explained
+        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", f"{o.score.gain_db:+.1f}",
+                      f"{o.score.above_floor_db:.1f}", "-" if math.isnan(explained) else f"{100 * explained:.0f} %",
+                      "winner" if o is result.winner else "")
+    console.print(table)
+    console.print(f"-> {output}", markup=False)
+
+
+def _check(summary: dict, discrepancy: bool, error_above: float | None, distortion_above: float | None) -> None:
+    """The --fail-if checks on the written summary; CheckFailed (exit 1) names every failed one."""
+    evidence = summary["evidence"]
+    failed = []
+    overall = evidence["error_above_noise"]
+    if discrepancy and overall["significant"]:
+        failed.append(f"significant discrepancy ({overall['above_noise_db']:+.1f} dB above the noise, "
+                      f"p = {overall['p_value']:.2g})")
+    if error_above is not None and overall["above_noise_db"] > error_above:
+        failed.append(f"simulation error {overall['above_noise_db']:.1f} dB above the noise > {error_above:g} dB")
+    if distortion_above is not None:
+        worst = max((row[name]["above_noise_db"] for row in evidence["lines"] for name in ("odd", "even")
+                     if row[name]["above_noise_db"] is not None and math.isfinite(row[name]["above_noise_db"])),
+                    default=-math.inf)
+        if worst > distortion_above:
+            failed.append(f"unexplained distortion {worst:.1f} dB above the noise > {distortion_above:g} dB")
+    if failed:
+        raise CheckFailed("--fail-if", "; ".join(failed))

@@ -1,0 +1,179 @@
+"""The output folder of ``nlsid diagnose``: a summary, result arrays and the extended model.
+
+Layout (``docs/formats.md``, drafted in ``docs/drafts/diagnose.md``)::
+
+    diagnosis/
+      summary.json          nlsid_format = "diagnosis", nlsid_format_version = 1, provenance,
+                            headline, findings, split, evidence, original, verdict, hypotheses,
+                            gain, files (the names below that exist)
+      results.h5            root attrs nlsid_format = "diagnosis_results", nlsid_format_version = 1
+        /bla/level_NN/      per multisine level (attrs level (NaN: none), u_rms): frequency (F,) Hz,
+                            G, G_model (F, 2: re, im), radius (F,) of the 95% circle of G,
+                            gain_error_db, phase_error_deg (F,), outside (F,) int8
+        /spectrum/level_NN/ per line 0 .. N//2: kind (int8: -1 DC/Nyquist, 0 excited, 1 odd, 2 even,
+                            3 non-harmonic), in_band (int8), frequency (Hz), y_power (measured),
+                            model_power (model), noise (measured noise variance), all on the scale
+                            of the P-averaged spectrum (DFT / N)
+        /time/              one mean steady-state period (attrs run_id, fs): measured, model,
+                            residual, input, [position, velocity] (mechanical models)
+        /validation/        one validation run's mean period (attrs run_id, fs): original_error,
+                            [extended_error] (the winner's)
+      extended_model.yaml   only when a cause is named: the user's model plus the fitted block,
+                            parameter values and standard errors in its header comment
+
+The folder is written next to its final place under a temporary name and renamed when complete, so
+a failed run leaves nothing; an existing folder is replaced only with ``force``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from nlsid.errors import InputError
+
+FORMAT = "diagnosis"
+RESULTS_FORMAT = "diagnosis_results"
+FORMAT_VERSION = 1
+SUMMARY, RESULTS, EXTENDED = "summary.json", "results.h5", "extended_model.yaml"
+COMPLEX_LAYOUT = "re_im_last_axis"
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _put(group, name: str, value) -> None:
+    array = np.asarray(value)
+    if np.iscomplexobj(array):
+        dataset = group.create_dataset(name, data=np.stack([array.real, array.imag], axis=-1))
+        dataset.attrs["complex"] = COMPLEX_LAYOUT
+    else:
+        group.create_dataset(name, data=array)
+
+
+def _level_name(i: int) -> str:
+    return f"level_{i:02d}"
+
+
+def _write_results(path: Path, arrays: dict) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as handle:
+        handle.attrs["nlsid_format"] = RESULTS_FORMAT
+        handle.attrs["nlsid_format_version"] = FORMAT_VERSION
+        for section in ("bla", "spectrum"):
+            group = handle.create_group(section)
+            for i, level in enumerate(arrays.get(section, [])):
+                sub = group.create_group(_level_name(i))
+                for key, value in level.items():
+                    if key in ("level", "u_rms"):
+                        sub.attrs[key] = float("nan") if value is None else float(value)
+                    else:
+                        _put(sub, key, value)
+        for section in ("time", "validation"):
+            group = handle.create_group(section)
+            for key, value in arrays.get(section, {}).items():
+                if key in ("run_id", "fs"):
+                    group.attrs[key] = value
+                else:
+                    _put(group, key, value)
+
+
+def extended_yaml(data: dict, header: list[str]) -> str:
+    """The extended model config as YAML text, with ``header`` lines as a leading comment."""
+    import yaml
+
+    comment = "".join(f"# {line}\n" for line in header)
+    return comment + yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None)
+
+
+def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, extended: str | None,
+                    provenance: dict, force: bool = False) -> Path:
+    """Write the folder of the module docstring atomically; refuse an existing one unless ``force``."""
+    target = Path(folder)
+    if target.exists() and not force:
+        raise InputError(str(target), "output exists; pass --force to replace it")
+    if target.exists() and not target.is_dir():
+        raise InputError(str(target), "output exists and is not a folder")
+    parent = target.absolute().parent
+    if not parent.is_dir():
+        raise InputError(str(target), f"folder {parent} does not exist")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
+    try:
+        files = [SUMMARY, RESULTS] + ([EXTENDED] if extended is not None else [])
+        _write_results(tmp / RESULTS, arrays)
+        if extended is not None:
+            (tmp / EXTENDED).write_text(extended, encoding="utf-8")
+        document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": provenance,
+                    **summary, "files": files}
+        (tmp / SUMMARY).write_text(json.dumps(_jsonable(document), indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        os.chmod(tmp, 0o755)
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return target
+
+
+def _read_group(group) -> dict:
+    out = {key: (float(v) if isinstance(v, (float, np.floating)) else v) for key, v in group.attrs.items()}
+    for key, dataset in group.items():
+        value = dataset[()]
+        if dataset.attrs.get("complex") == COMPLEX_LAYOUT:
+            value = value[..., 0] + 1j * value[..., 1]
+        out[key] = value
+    return out
+
+
+def read_diagnosis(folder: str | os.PathLike) -> tuple[dict, dict]:
+    """The summary and the result arrays of a diagnosis folder, checked for format and version."""
+    import h5py
+
+    folder = Path(folder)
+    summary_path = folder / SUMMARY
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(str(folder), f"no {SUMMARY}: not a diagnosis folder") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(str(summary_path), f"not valid JSON ({exc})") from None
+    if not isinstance(summary, dict) or summary.get("nlsid_format") != FORMAT:
+        raise InputError(f"{summary_path}: nlsid_format", f"expected {FORMAT!r}")
+    if summary.get("nlsid_format_version") != FORMAT_VERSION:
+        raise InputError(f"{summary_path}: nlsid_format_version",
+                         f"expected {FORMAT_VERSION}, got {summary.get('nlsid_format_version')!r}")
+    results = folder / RESULTS
+    try:
+        with h5py.File(results, "r") as handle:
+            if handle.attrs.get("nlsid_format") != RESULTS_FORMAT:
+                raise InputError(f"{results}:/", f"nlsid_format is not {RESULTS_FORMAT!r}")
+            arrays = {section: [_read_group(handle[section][name]) for name in sorted(handle[section])]
+                      for section in ("bla", "spectrum")}
+            for section in ("time", "validation"):
+                arrays[section] = _read_group(handle[section])
+    except (OSError, KeyError) as exc:
+        raise InputError(str(results), f"missing or damaged results file ({exc})") from None
+    return summary, arrays
