@@ -1,0 +1,256 @@
+"""Transfer functions fitted to a BLA (nlsid.fit.tf_fit, nlsid.fit.order, nlsid fit BLA).
+
+References are independent of the code under test: systems from scipy.signal (cheby1, lfilter,
+cont2discrete with the zero-order hold), multisines and noise from tests/bla_cases.py, and the
+statistics of the weighted least-squares cost at its minimum (book 4.7 L: E{V} = F - n_theta/2,
+V ~ (1/2) chi^2 with 2F - n_theta degrees of freedom for exact variances).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy import signal, stats
+
+from nlsid.analysis.levels import analyse_runs
+from nlsid.fit.order import select_order
+from nlsid.fit.tf_fit import FRFData, TransferFunction, expected_cost, fit_order, fit_transfer_function
+from nlsid.io.run import Run
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bla_cases import multisine  # noqa: E402
+
+
+def _mahalanobis(fit, truth: np.ndarray) -> float:
+    delta = fit.values - truth
+    return float(delta @ np.linalg.solve(fit.covariance, delta))
+
+
+def _bla_of(system, bins, N, fs, M, P, snr_db, rng) -> FRFData:
+    """Robust BLA (frf method) of ``system`` from M realizations of P periods, output noise at snr_db."""
+    runs = []
+    for m in range(M):
+        u = np.tile(multisine(N, bins, 1.0, rng), P + 1)
+        y0 = system(u)
+        y_rms = np.sqrt(np.mean(y0[N:] ** 2))
+        y = y0 + y_rms * 10 ** (-snr_db / 20) * rng.standard_normal(u.size)
+        runs.append((Run(f"r{m}", fs, "multisine", u, y, period=N, transient_periods=1, realization=m,
+                         excited_bins=bins), f"r{m}"))
+    levels, _ = analyse_runs(runs, method="frf")
+    robust = levels[0].robust
+    return FRFData(robust.bins, robust.G, robust.var_total, fs, N, M)
+
+
+def test_discrete_coefficients_recovered_within_their_uncertainty_at_40_db():
+    # A 2nd-order resonance (z domain), M = 8 realizations x P = 2 periods, output noise 40 dB
+    # below the output. The estimate is asymptotically Gaussian with the reported covariance, so
+    # the Mahalanobis distance to the truth follows chi^2(5): above its 99.9 % point with
+    # probability 0.001 if the covariance is right (and far above it if it were 10x too small).
+    b, a = signal.cheby1(2, 3, 2 * 0.05)
+    N, fs, rng = 1024, 1.0, np.random.default_rng(11)
+    bins = np.arange(1, 200)
+    data = _bla_of(lambda u: signal.lfilter(b, a, u), bins, N, fs, 8, 2, 40.0, rng)
+    fit = fit_order(data, 2, 2, "z")
+    truth = np.concatenate([a[1:] / a[0], b / a[0]])
+    assert _mahalanobis(fit, truth) < stats.chi2.ppf(0.999, 5)
+    assert np.all(fit.std < 0.05 * np.abs(truth))  # the bound is tight enough to mean something
+    assert fit.model.stable()
+
+
+def test_continuous_coefficients_through_the_zero_order_hold():
+    # 4000 / (s^2 + 20 s + 4000) (10 Hz resonance) sampled with a ZOH at 1 kHz: the data come from
+    # scipy's ZOH discretisation (cont2discrete) filtered by lfilter, independent of the fit's
+    # state-space ZOH. Same chi^2(3) criterion on (a0, a1, b0).
+    num, den, fs = [4000.0], [1.0, 20.0, 4000.0], 1000.0
+    bd, ad, _ = signal.cont2discrete((num, den), 1 / fs, method="zoh")
+    N, rng = 2000, np.random.default_rng(5)
+    bins = np.arange(1, 200)
+    data = _bla_of(lambda u: signal.lfilter(bd.ravel(), ad, u), bins, N, fs, 8, 2, 40.0, rng)
+    fit = fit_order(data, 0, 2, "s")
+    assert fit.names == ["a0", "a1", "b0"]
+    assert _mahalanobis(fit, np.array([4000.0, 20.0, 4000.0])) < stats.chi2.ppf(0.999, 3)
+    assert fit.std[1] < 0.01 * 20.0
+
+
+def _synthetic(G0: np.ndarray, sigma: np.ndarray, rng) -> np.ndarray:
+    return G0 + sigma / np.sqrt(2) * (rng.standard_normal(G0.size) + 1j * rng.standard_normal(G0.size))
+
+
+def test_cost_matches_its_expectation_for_the_true_order_and_not_for_a_too_low_one():
+    # Book Ex 62: G0 = cheby1(5, 5, 2*0.1), a fifth-order system; a 4/4 model is too simple.
+    # Synthetic FRF data with exactly known circular complex noise (1 % of |G0| on average): for
+    # 5/5, V ~ (1/2) chi^2(2F - 11), mean F - 5.5, std sqrt(F - 5.5) = 44.6 for F = 2000; the
+    # check at 4 std fails by chance with probability 6e-5. The 4/4 model leaves model errors
+    # far above the noise (Ex 62, Fig 4-7), so its cost exceeds the expectation by > 100 std.
+    b, a = signal.cheby1(5, 5, 2 * 0.1)
+    N, bins = 4096, np.arange(1, 2001)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z)
+    sigma = np.full(bins.size, 0.01 * np.mean(np.abs(G0)))
+    data = FRFData(bins, _synthetic(G0, sigma, np.random.default_rng(2)), sigma ** 2, 1.0, N)
+    right = fit_order(data, 5, 5, "z")
+    assert right.expected_cost == pytest.approx(2000 - 11 / 2)
+    assert abs(right.cost - right.expected_cost) < 4 * right.cost_std
+    low = fit_order(data, 4, 4, "z")
+    assert low.cost > low.expected_cost + 100 * low.cost_std
+
+
+def test_expected_cost_with_sample_variances():
+    # E{1/sigma_hat^2} = (M-1)/(M-2) / sigma^2 for a complex variance from M samples (digest 3.4).
+    assert expected_cost(100, 6, 7) == pytest.approx((6 / 5 * 97, 6 / 5 * np.sqrt(97)))
+    assert expected_cost(100, 6, None) == pytest.approx((97, np.sqrt(97)))
+
+
+def test_model_frequency_response_std_matches_monte_carlo():
+    # The reported std of the model's response per line is the linearised propagation of the
+    # parameter covariance. Independent check: the spread of the fitted responses over 40
+    # independent noise draws. With 40 draws the sample std has a relative std of about
+    # 1/sqrt(2*39) = 11 %, so the band-mean ratio must lie within 0.75..1.33.
+    b, a = signal.butter(2, 2 * 0.1)
+    N, bins = 1024, np.arange(1, 120)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z)
+    sigma = 0.02 * np.abs(G0) + 1e-3
+    rng = np.random.default_rng(8)
+    responses, reported = [], None
+    for _ in range(40):
+        fit = fit_order(FRFData(bins, _synthetic(G0, sigma, rng), sigma ** 2, 1.0, N), 2, 2, "z")
+        responses.append(fit.response)
+        reported = fit.response_std
+    spread = np.std(np.array(responses), axis=0, ddof=1)
+    assert 0.75 < np.mean(spread / reported) < 1.33
+
+
+def test_order_scan_selects_the_true_order_and_says_why():
+    b, a = signal.cheby1(2, 3, 2 * 0.08)
+    N, bins = 1024, np.arange(1, 300)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z)
+    sigma = 0.01 * np.abs(G0) + 1e-4
+    data = FRFData(bins, _synthetic(G0, sigma, np.random.default_rng(4)), sigma ** 2, 1.0, N)
+    selection = select_order(data, 3, "z")
+    assert (selection.fit.nb, selection.fit.na) == (2, 2)
+    assert "smallest model" in selection.reason
+    rejected = [r for r in selection.scan if r.nb + r.na < 4]
+    assert rejected and not any(r.accepted for r in rejected)
+
+
+def test_delay_is_found_by_scanning_whole_samples():
+    b, a = signal.butter(2, 2 * 0.1)
+    N, bins = 1024, np.arange(1, 200)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z) * z ** -3
+    sigma = 0.01 * np.abs(G0) + 1e-4
+    data = FRFData(bins, _synthetic(G0, sigma, np.random.default_rng(6)), sigma ** 2, 1.0, N)
+    fit = fit_transfer_function(data, 2, 2, "z", delay=None, max_delay=5)
+    assert fit.model.delay == 3
+    assert abs(fit.cost - fit.expected_cost) < 4 * fit.cost_std
+
+
+DESIGN = """fs: 1000.0
+seed: 3
+multisine:
+  period: 2000
+  band: [0.5, 100.0]
+  lines: full
+  realizations: 8
+  periods: 2
+  transient_periods: 2
+  rms_levels: [1.0]
+"""
+
+TRUE_MODEL = """model:
+  type: transfer_function
+  num: [4000.0]
+  den: [1.0, 20.0, 4000.0]
+disturbances:
+  y_noise: 0.005
+  seed: 5
+"""
+
+
+@pytest.fixture(scope="module")
+def bla_file(tmp_path_factory):
+    from click.testing import CliRunner
+
+    from nlsid.cli.main import cli
+
+    folder = tmp_path_factory.mktemp("fit_tf")
+    (folder / "design.yaml").write_text(DESIGN)
+    (folder / "true.yaml").write_text(TRUE_MODEL)
+    runner = CliRunner()
+    for args in (["design", folder / "design.yaml", "-o", folder / "exc.h5"],
+                 ["simulate", folder / "true.yaml", "--excitation", folder / "exc.h5", "-o", folder / "rec.h5"],
+                 ["bla", folder / "rec.h5", "-o", folder / "bla.h5"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    return folder
+
+
+def _frf_of_simulation(recording) -> tuple[np.ndarray, np.ndarray]:
+    """Y/U at the excited bins of the last period of each run, averaged over runs (numpy FFT)."""
+    from nlsid.io.recording import read_runs
+
+    runs = read_runs(recording)
+    bins = runs[0].excited_bins
+    G = np.mean([np.fft.fft(r.periods("y")[-1])[bins] / np.fft.fft(r.periods("u")[-1])[bins] for r in runs], axis=0)
+    return bins, G
+
+
+@pytest.mark.parametrize("domain, order", [("s", "0/2"), ("z", "2/2")])
+def test_written_model_runs_in_simulate_and_reproduces_the_fitted_response(run_cli, bla_file, tmp_path, domain, order):
+    # The model YAML is run unchanged by nlsid simulate (noise-free: no disturbances are written);
+    # its steady-state FRF must equal the fitted model's response at the excited lines. Both are
+    # exact for a ZOH-held input, so they agree to rounding plus the transient left after two
+    # periods (e^{-10 * 4 s}, far below the 1e-6 relative tolerance).
+    model = tmp_path / "model.yaml"
+    result = run_cli("fit", bla_file / "bla.h5", "--order", order, "--domain", domain, "-o", model,
+                     "--plot", tmp_path / "fit.png", "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()
+    assert summary["order"] == order
+    assert abs(summary["cost"] - summary["expected_cost"]) < 4 * summary["cost_std"] * 1.5
+    report = json.loads((tmp_path / "model.fit.json").read_text())
+    assert report["nlsid_format"] == "fit" and report["kind"] == "transfer_function"
+    assert (tmp_path / "fit.png").read_bytes()[:4] == b"\x89PNG"
+    sim = run_cli("simulate", model, "--excitation", bla_file / "exc.h5", "-o", tmp_path / "sim.h5")
+    assert sim.exit_code == 0, sim.stderr
+    bins, G_sim = _frf_of_simulation(tmp_path / "sim.h5")
+    config = yaml.safe_load(model.read_text())["model"]
+    fitted = TransferFunction(domain, np.array(config["num"]), np.array(config["den"]), 0, 1000.0)
+    G_fit = fitted.response(bins, 2000)
+    assert np.max(np.abs(G_sim - G_fit) / np.abs(G_fit)) < 1e-6
+
+
+def test_order_auto_through_the_command_line(run_cli, bla_file, tmp_path):
+    result = run_cli("fit", bla_file / "bla.h5", "--order", "auto", "--max-order", "2", "--domain", "s",
+                     "-o", tmp_path / "m.yaml", "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()
+    assert summary["order"] in ("0/2", "1/2")  # the true 0/2, or 1/2 with b1 ~ 0: both have a passing cost
+    assert summary["order_scan"] and "expected value" in summary["order_reason"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--order", "two"], "--order: expected NB/NA"),
+    (["--order", "3/2", "--domain", "s"], "proper"),
+    (["--order", "2/2", "--delay", "-1"], "--delay"),
+    (["--order", "2/2", "--level", "4"], "--level"),
+])
+def test_bad_requests_fail_with_one_line(run_cli, bla_file, tmp_path, args, message):
+    result = run_cli("fit", bla_file / "bla.h5", *args, "-o", tmp_path / "m.yaml")
+    assert result.exit_code == 2
+    assert message in result.stderr and result.stderr.count("\n") == 1
+    assert not (tmp_path / "m.yaml").exists() and not (tmp_path / "m.fit.json").exists()
+
+
+def test_existing_output_is_not_overwritten(run_cli, bla_file, tmp_path):
+    (tmp_path / "m.yaml").write_text("keep")
+    result = run_cli("fit", bla_file / "bla.h5", "--order", "0/2", "-o", tmp_path / "m.yaml")
+    assert result.exit_code == 2 and "--force" in result.stderr
+    assert (tmp_path / "m.yaml").read_text() == "keep"
