@@ -115,5 +115,5 @@ def test_runs_of_a_level_with_different_lines_is_one_clear_error(tmp_path, run_c
 
 def test_read_bla_rejects_other_files(recording):
     path, _ = recording
-    with pytest.raises(InputError, match="nlsid_format must be 'bla'"):
+    with pytest.raises(InputError, match="nlsid_format is 'recording', expected a 'bla' file"):
         read_bla(path)

@@ -26,7 +26,6 @@ Meaning and units of each dataset: ``docs/formats.md`` (drafted in ``docs/drafts
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import fields
 from pathlib import Path
@@ -35,11 +34,10 @@ import h5py
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.atomic import atomic_path
+from nlsid.io.result_file import create_result, datasets, json_safe, open_result, put, text
 
 FORMAT = "bla"
 FORMAT_VERSION = 1
-COMPLEX_LAYOUT = "re_im_last_axis"
 _BOUNDS = ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")
 _ROBUST = ("G", "var_total", "var_noise", "var_nl", "var_noise_period", "var_ys", "var_input_nl")
 _FAST = ("G", "var_noise", "var_total", "var_nl", "var_nl_even")
@@ -47,50 +45,22 @@ _FAST_LINES = {"yc_power": "Yc_power", "yc_noise": "Yc_noise",
                "fraction_significant_y": "fraction_significant_y", "fraction_significant_u": "fraction_significant_u"}
 
 
-def _put(group: h5py.Group, name: str, value) -> None:
-    if value is None:
-        return
-    array = np.asarray(value)
-    if np.iscomplexobj(array):
-        dataset = group.create_dataset(name, data=np.stack([array.real, array.imag], axis=-1))
-        dataset.attrs["complex"] = COMPLEX_LAYOUT
-    else:
-        group.create_dataset(name, data=array)
-
-
 def _put_bounds(group: h5py.Group, bounds) -> None:
     for item in fields(bounds):
-        _put(group, item.name, getattr(bounds, item.name))
+        put(group, item.name, getattr(bounds, item.name))
 
 
 def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: float, warnings: list[str],
               across: dict, force: bool = False) -> Path:
     """Write the :class:`~nlsid.analysis.levels.LevelResult` list atomically in the layout above."""
-    with atomic_path(path, force) as tmp:
-        with h5py.File(tmp, "w") as handle:
-            handle.attrs["nlsid_format"] = FORMAT
-            handle.attrs["nlsid_format_version"] = FORMAT_VERSION
-            handle.attrs["provenance"] = json.dumps(provenance, sort_keys=True)
-            handle.attrs["confidence"] = float(probability)
-            handle.attrs["warnings"] = json.dumps(warnings)
-            handle.attrs["across_levels"] = json.dumps(_plain(across), sort_keys=True)
-            root = handle.create_group("levels")
-            for index, level in enumerate(levels):
-                _write_level(root.create_group(f"level_{index:02d}"), level)
+    with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
+        handle.attrs["confidence"] = float(probability)
+        handle.attrs["warnings"] = json.dumps(warnings)
+        handle.attrs["across_levels"] = json.dumps(json_safe(across), sort_keys=True)
+        root = handle.create_group("levels")
+        for index, level in enumerate(levels):
+            _write_level(root.create_group(f"level_{index:02d}"), level)
     return Path(path)
-
-
-def _plain(value):
-    """JSON-safe copy: numpy scalars to Python, non-finite floats to None."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _write_level(group: h5py.Group, level) -> None:
@@ -107,45 +77,27 @@ def _write_level(group: h5py.Group, level) -> None:
         "base": int(lines.base),
         "run_ids": json.dumps(level.run_ids),
         "warnings": json.dumps(level.warnings),
-        "summary": json.dumps(_plain(level.summary()), sort_keys=True),
+        "summary": json.dumps(json_safe(level.summary()), sort_keys=True),
     }
     group.attrs.update(attrs)
-    _put(group, "excited_bins", lines.excited.astype(np.int64))
-    _put(group, "frequency", lines.frequency(lines.excited))
+    put(group, "excited_bins", lines.excited.astype(np.int64))
+    put(group, "frequency", lines.frequency(lines.excited))
     robust = group.create_group("robust")
     for name in _ROBUST:
-        _put(robust, name, getattr(level.robust, name))
+        put(robust, name, getattr(level.robust, name))
     _put_bounds(robust, level.robust.bounds)
     if level.fast is not None:
         fast = group.create_group("fast")
         for name in _FAST:
-            _put(fast, name, getattr(level.fast, name))
+            put(fast, name, getattr(level.fast, name))
         _put_bounds(fast, level.fast.bounds)
         for name, attr in _FAST_LINES.items():
-            _put(fast, name, getattr(level.fast, attr))
+            put(fast, name, getattr(level.fast, attr))
     per_line = group.create_group("lines")
-    _put(per_line, "kind", lines.kind)
-    _put(per_line, "in_band", lines.in_band.astype(np.int8))
+    put(per_line, "kind", lines.kind)
+    put(per_line, "in_band", lines.in_band.astype(np.int8))
     for name in ("u_power", "u_noise", "y_power", "y_noise"):
-        _put(per_line, name, getattr(level.spectrum, name))
-
-
-def _read_group(group: h5py.Group, where: str) -> dict:
-    out = {}
-    for name, dataset in group.items():
-        if not isinstance(dataset, h5py.Dataset):
-            continue
-        value = dataset[()]
-        if dataset.attrs.get("complex") == COMPLEX_LAYOUT:
-            if value.shape[-1:] != (2,):
-                raise InputError(f"{where}/{name}", "complex dataset without a trailing axis of 2 (re, im)")
-            value = value[..., 0] + 1j * value[..., 1]
-        out[name] = value
-    return out
-
-
-def _text(value) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
+        put(per_line, name, getattr(level.spectrum, name))
 
 
 def read_bla(path: str | os.PathLike) -> dict:
@@ -154,18 +106,7 @@ def read_bla(path: str | os.PathLike) -> dict:
     Returns ``{"attrs": {...}, "levels": [{"attrs": {...}, "excited_bins", "frequency",
     "robust": {...}, "fast": {...} or None, "lines": {...}}, ...]}``; JSON attributes are parsed.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(str(path), "file not found")
-    try:
-        handle = h5py.File(path, "r")
-    except OSError:
-        raise InputError(str(path), "cannot open: not an HDF5 file or truncated") from None
-    with handle:
-        if _text(handle.attrs.get("nlsid_format", "")) != FORMAT:
-            raise InputError(f"{path}:/", f"attribute nlsid_format must be '{FORMAT}' (a file written by nlsid bla)")
-        if int(handle.attrs.get("nlsid_format_version", -1)) != FORMAT_VERSION:
-            raise InputError(f"{path}:/", f"attribute nlsid_format_version must be {FORMAT_VERSION}")
+    with open_result(path, FORMAT, FORMAT_VERSION, "nlsid bla") as handle:
         attrs = {key: _attr(key, value) for key, value in handle.attrs.items()}
         if "levels" not in handle:
             raise InputError(f"{path}:/levels", "missing group")
@@ -180,9 +121,9 @@ def read_bla(path: str | os.PathLike) -> dict:
                 "attrs": {key: _attr(key, value) for key, value in group.attrs.items()},
                 "excited_bins": group["excited_bins"][()],
                 "frequency": group["frequency"][()],
-                "robust": _read_group(group["robust"], f"{where}/robust"),
-                "fast": _read_group(group["fast"], f"{where}/fast") if "fast" in group else None,
-                "lines": _read_group(group["lines"], f"{where}/lines"),
+                "robust": datasets(group["robust"], f"{where}/robust"),
+                "fast": datasets(group["fast"], f"{where}/fast") if "fast" in group else None,
+                "lines": datasets(group["lines"], f"{where}/lines"),
             })
     return {"attrs": attrs, "levels": levels}
 
@@ -194,5 +135,5 @@ def _attr(key: str, value):
     if isinstance(value, np.generic):
         value = value.item()
     if key in _JSON_ATTRS:
-        return json.loads(_text(value))
-    return _text(value) if isinstance(value, bytes) else value
+        return json.loads(text(value))
+    return text(value) if isinstance(value, bytes) else value

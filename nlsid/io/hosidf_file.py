@@ -7,21 +7,22 @@ Layout (``docs/formats.md``; F frequencies, A amplitudes, K+1 harmonics k = 0..K
     /grid/                present for a frequency x amplitude grid
         frequency (F,) Hz, bin (F,) int64 DFT bin of the tone in one period, level (A,) amplitude,
         harmonic (K+1,) int64, n_repeats (F, A) int64, n_periods (F, A) int64 (0: cell not measured)
-        H/{re,im} (F, A, K+1)           seed 002 Eq. 12: Y(k w0)/U(w0)^k, mean over repeats (Eq. 11)
+        H (F, A, K+1)           seed 002 Eq. 12: Y(k w0)/U(w0)^k, mean over repeats (Eq. 11)
         H_var_repeats (F, A, K+1)       seed 000 Eq. 12, variance of the mean over repeats
         H_var_periods (F, A, K+1)       the same over periods, propagated to the mean
-        H000/{re,im}, H000_var_repeats, H000_var_periods   seed 000 Eqs. 8-9 (|Y|/|U|, angle Y - k angle U)
-        Y/{re,im} (F, A, K+1)           seed 003 Table I expected value (input-phase aligned)
+        H000, H000_var_repeats, H000_var_periods   seed 000 Eqs. 8-9 (|Y|/|U|, angle Y - k angle U)
+        Y (F, A, K+1)           seed 003 Table I expected value (input-phase aligned)
         Y_var_mean (F, A, K+1), Y_avg_var (F, A), Y_var_var (F, A)   Table I
         bound (F, A, K+1)               Eq. 6 noise bound eps_k;  significant (F, A, K+1) uint8 |Y| > eps_k
-        analytic/H/{re,im} (F, A, K+1)  seed 002 Lemma 2 from a model config (only with --model)
+        analytic/H (F, A, K+1)  seed 002 Lemma 2 from a model config (only with --model)
     /sweep/               present for a parameter sweep; attrs parameter, frequency, level,
                           optimum (Definition 3), time_optimum (Eq. 7)
         value (M,), cost (M,) Eq. 5, cost_all (M,) Eq. 4, time_error (M,) Eq. 7,
-        used (M, K+1) uint8 the harmonics in the set of Eq. 5, H/{re,im} (M, K+1),
-        Y/{re,im} (M, K+1), Y_var_mean (M, K+1), bound (M, K+1)
+        used (M, K+1) uint8 the harmonics in the set of Eq. 5, H (M, K+1),
+        Y (M, K+1), Y_var_mean (M, K+1), bound (M, K+1)
 
-Complex arrays are stored explicitly as a group with float64 datasets ``re`` and ``im``. Cells of
+Complex arrays are float64 with a trailing axis of 2 (re, im), dataset attribute
+``complex = "re_im_last_axis"`` (:mod:`nlsid.io.result_file`). Cells of
 the grid that were not measured hold NaN (and ``n_repeats`` 0). Unavailable variances (fewer
 than two repeats or periods) are NaN.
 """
@@ -37,17 +38,10 @@ import numpy as np
 
 from nlsid.analysis.hosidf import HOSIDFGrid
 from nlsid.analysis.linearity_cost import Sweep
-from nlsid.errors import InputError
-from nlsid.io.atomic import atomic_path
+from nlsid.io.result_file import create_result, datasets, open_result, put, text
 
 FORMAT = "hosidf"
 FORMAT_VERSION = 1
-
-
-def _complex(group: h5py.Group, name: str, value: np.ndarray) -> None:
-    sub = group.create_group(name)
-    sub.create_dataset("re", data=np.asarray(value.real, dtype=np.float64))
-    sub.create_dataset("im", data=np.asarray(value.imag, dtype=np.float64))
 
 
 def _write_grid(group: h5py.Group, grid: HOSIDFGrid, analytic: np.ndarray | None) -> None:
@@ -61,17 +55,17 @@ def _write_grid(group: h5py.Group, grid: HOSIDFGrid, analytic: np.ndarray | None
     group.create_dataset("n_repeats", data=grid.counts("n_repeats"))
     group.create_dataset("n_periods", data=grid.counts("n_periods"))
     for name in ("h", "h000"):
-        _complex(group, name.upper(), grid.field(name))
+        put(group, name.upper(), grid.field(name))
         for kind in ("repeats", "periods"):
             group.create_dataset(f"{name.upper()}_var_{kind}", data=grid.field(f"{name}_var_{kind}").real)
-    _complex(group, "Y", grid.stat("mean"))
+    put(group, "Y", grid.stat("mean"))
     group.create_dataset("Y_var_mean", data=grid.stat("var_mean"))
     group.create_dataset("Y_avg_var", data=grid.stat("avg_var"))
     group.create_dataset("Y_var_var", data=grid.stat("var_var"))
     group.create_dataset("bound", data=grid.stat("bound"))
     group.create_dataset("significant", data=grid.stat("significant").astype(np.uint8))
     if analytic is not None:
-        _complex(group.create_group("analytic"), "H", analytic)
+        put(group.create_group("analytic"), "H", np.asarray(analytic, dtype=complex))
 
 
 def _write_sweep(group: h5py.Group, result: Sweep) -> None:
@@ -83,8 +77,8 @@ def _write_sweep(group: h5py.Group, result: Sweep) -> None:
     for name in ("value", "cost", "cost_all", "time_error"):
         group.create_dataset(name, data=result.values(name).astype(np.float64))
     group.create_dataset("used", data=result.values("used").astype(np.uint8))
-    _complex(group, "H", result.values("h"))
-    _complex(group, "Y", np.array([p.stats.mean for p in result.points]))
+    put(group, "H", result.values("h"))
+    put(group, "Y", np.array([p.stats.mean for p in result.points]))
     group.create_dataset("Y_var_mean", data=np.array([p.stats.var_mean for p in result.points]))
     group.create_dataset("bound", data=np.array([p.stats.bound for p in result.points]))
 
@@ -93,49 +87,28 @@ def write_hosidf(path: str | os.PathLike, harmonics: int, input_signal: str, pro
                  grid: HOSIDFGrid | None = None, analytic: np.ndarray | None = None,
                  sweep: Sweep | None = None, force: bool = False) -> Path:
     """Write a grid and/or a sweep atomically in the layout above."""
-    with atomic_path(path, force) as tmp:
-        with h5py.File(tmp, "w") as handle:
-            handle.attrs["nlsid_format"] = FORMAT
-            handle.attrs["nlsid_format_version"] = FORMAT_VERSION
-            handle.attrs["provenance"] = json.dumps(provenance, sort_keys=True)
-            handle.attrs["harmonics"] = int(harmonics)
-            handle.attrs["input_signal"] = input_signal
-            if grid is not None:
-                _write_grid(handle.create_group("grid"), grid, analytic)
-            if sweep is not None:
-                _write_sweep(handle.create_group("sweep"), sweep)
+    with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
+        handle.attrs["harmonics"] = int(harmonics)
+        handle.attrs["input_signal"] = input_signal
+        if grid is not None:
+            _write_grid(handle.create_group("grid"), grid, analytic)
+        if sweep is not None:
+            _write_sweep(handle.create_group("sweep"), sweep)
     return Path(path)
 
 
-def _read_group(group: h5py.Group) -> dict:
-    out: dict = {key: value for key, value in group.attrs.items()}
+def _read_group(group: h5py.Group, where: str) -> dict:
+    out: dict = {key: (text(value) if isinstance(value, bytes) else value) for key, value in group.attrs.items()}
+    out.update(datasets(group, where))
     for name, obj in group.items():
-        if isinstance(obj, h5py.Group) and set(obj) == {"re", "im"}:
-            out[name] = obj["re"][()] + 1j * obj["im"][()]
-        elif isinstance(obj, h5py.Group):
-            out[name] = _read_group(obj)
-        else:
-            out[name] = obj[()]
+        if isinstance(obj, h5py.Group):
+            out[name] = _read_group(obj, f"{where}/{name}")
     return out
 
 
 def read_hosidf(path: str | os.PathLike) -> dict:
-    """Read a hosidf.h5 file into nested dicts of arrays (complex groups become complex arrays)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(str(path), "file not found")
-    try:
-        handle = h5py.File(path, "r")
-    except OSError:
-        raise InputError(str(path), "not an HDF5 file") from None
-    with handle:
-        fmt = handle.attrs.get("nlsid_format")
-        fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
-        if fmt != FORMAT:
-            raise InputError(f"{path}:/", f"attribute nlsid_format must be '{FORMAT}', got {fmt!r}")
-        version = int(np.asarray(handle.attrs.get("nlsid_format_version", -1)).reshape(-1)[0])
-        if version != FORMAT_VERSION:
-            raise InputError(f"{path}:/", f"attribute nlsid_format_version must be {FORMAT_VERSION}, got {version}")
-        out = _read_group(handle)
+    """Read a hosidf.h5 file into nested dicts of arrays (complex arrays restored)."""
+    with open_result(path, FORMAT, FORMAT_VERSION, "nlsid hosidf") as handle:
+        out = _read_group(handle, f"{path}:")
     out["provenance"] = json.loads(out["provenance"])
     return out
