@@ -24,14 +24,17 @@ from .options import map_option, parse_map
 @click.option("--data", "data", type=click.Path(dir_okay=False), default=None, help="Recording to fit --model to (.h5 or .mcap).")
 @click.option("--validation", multiple=True, metavar="RUN_ID",
               help="Run held out for validation (repeat). Default: the highest realization of each level, else the last run.")
+@click.option("--start-estimate", is_flag=True,
+              help="Start free force parameters (fc, fv, k3 of a mass_spring_damper) without a start: value at a "
+                   "regression of the residual force instead of the config's value.")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (default: all cores).")
 @map_option
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")
 @force_option
 @json_option
-def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, workers, mapping,
-        output, force, as_json) -> None:
+def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, start_estimate,
+        workers, mapping, output, force, as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
@@ -53,7 +56,8 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
             raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
         if model_config is None or data is None:
             raise InputError("nlsid fit", "--model and --data go together")
-        _fit_extension(model_config, data, list(validation), workers, parse_map(mapping), output, force, as_json)
+        _fit_extension(model_config, data, list(validation), start_estimate, workers, parse_map(mapping), output,
+                       force, as_json)
         return
     if bla_file is None or order is None:
         raise InputError("nlsid fit", "give BLA_FILE and --order NB/NA (or auto), or --model with --data")
@@ -100,7 +104,7 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")
 
 
-def _fit_extension(model_config, data, validation, workers, mapping, output, force, as_json) -> None:
+def _fit_extension(model_config, data, validation, start_estimate, workers, mapping, output, force, as_json) -> None:
     from nlsid.fit.extension import fit_config_file
     from nlsid.io.fit_file import report_path, write_fit
     from nlsid.io.provenance import provenance
@@ -110,7 +114,7 @@ def _fit_extension(model_config, data, validation, workers, mapping, output, for
     check_writable(output, force)
     check_writable(report_path(output), force)
     runs = read_runs(data, require_y=True, mapping=mapping)
-    result = fit_config_file(model_config, runs, validation or None, workers)
+    result = fit_config_file(model_config, runs, validation or None, workers, start_estimate)
     summary = result.summary()
     header = [f"nlsid fit --model {model_config} --data {data}",
               "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),

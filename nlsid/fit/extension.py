@@ -395,8 +395,13 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
 
 
 def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequence[str] | None = None,
-                    workers: int | None = None) -> ExtensionFit:
-    """``nlsid fit --model``: the free parameters of a model config file fitted to recorded runs."""
+                    workers: int | None = None, estimate_start: bool = False) -> ExtensionFit:
+    """``nlsid fit --model``: the free parameters of a model config file fitted to recorded runs.
+
+    ``estimate_start``: free parameters without a ``start`` begin at the force regression of
+    :func:`nlsid.fit.start.force_regression` on the estimation runs (clipped into the bounds)
+    instead of the value written in the config.
+    """
     from nlsid.io.config import load_yaml
 
     data, lines = load_yaml(model_path)
@@ -404,5 +409,13 @@ def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequen
     if not config.free:
         raise InputError(str(model_path), "free: no free parameters to fit; mark them under a top-level free: key")
     estimation, validation = split_runs(runs, validation_ids)
-    return fit_free_parameters(data, free_from_config(config.free), estimation, validation, source=str(model_path),
-                               lines=lines, workers=workers)
+    free = free_from_config(config.free)
+    if estimate_start:
+        from nlsid.fit.start import force_regression
+
+        open_keys = [key for key, p in free.items() if p.start is None]
+        estimates = force_regression(data, estimation, open_keys) if open_keys else {}
+        free = {key: dataclasses.replace(p, start=float(np.clip(estimates[key], p.lower, p.upper)))
+                if key in estimates else p for key, p in free.items()}
+    return fit_free_parameters(data, free, estimation, validation, source=str(model_path), lines=lines,
+                               workers=workers)
