@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import FRFData, TFFit, fit_order
+from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_order
 
 ACCEPT_STD = 3.0   # one-sided: a chi-square cost exceeds E + 3 std with probability about 0.2 %
 
@@ -89,9 +89,10 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         best = min((r for r in passing if r.nb + r.na == fewest), key=lambda r: r.holdout_error)
         lower = [r for r in scan if r.nb + r.na < fewest]
         worst_lower = min((r.cost - r.expected_cost) / r.cost_std for r in lower) if lower else None
+        per_line = expected_cost(1, 0, data.realizations)[0]  # (M-1)/(M-2), or 1 for exact variances
         reason = (f"{best.nb}/{best.na} is the smallest model whose cost {best.cost:.4g} lies within {ACCEPT_STD:g} std "
                   f"of its expected value {best.expected_cost:.4g} +- {best.cost_std:.3g}; held-out lines "
-                  f"{best.holdout_error:.3g} per line (about 1 expected)")
+                  f"{best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
         if worst_lower is not None:
             reason += f"; every smaller model's cost is at least {worst_lower:.1f} std above its expectation"
     else:
