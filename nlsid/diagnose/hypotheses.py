@@ -62,6 +62,7 @@ from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
 from nlsid.io.run import Run
 
 STRIBECK_DELTA = 2.0
+STRIBECK_START_RATIO = 1.5  # fs / fc at the start of the fit when the signature cannot separate them
 
 
 @dataclass
@@ -141,6 +142,12 @@ def _mechanical(runner: ModelRunner) -> str | None:
     return None if runner.mechanical else "needs a mechanical template (mass_spring_damper, two_mass_stage)"
 
 
+def _needs(ctx: Context, signal: str) -> str | None:
+    if all(signal in s for s in ctx.internal):
+        return None
+    return f"the model's {signal} of the driven mass is not available (closed loop on another output)"
+
+
 def _force_columns(ctx: Context, forces: list[Callable[[dict], np.ndarray]]) -> list[np.ndarray]:
     """Responses to unit-coefficient forces F(signals) at the driven mass: d = -F / gain."""
     gain = ctx.runner.actuator_gain
@@ -148,6 +155,8 @@ def _force_columns(ctx: Context, forces: list[Callable[[dict], np.ndarray]]) -> 
 
 
 def _estimate_coulomb(ctx: Context) -> Estimate | str:
+    if _needs(ctx, "velocity"):
+        return _needs(ctx, "velocity")
     est = _regress(ctx.target(), _force_columns(ctx, [lambda s: np.sign(s["velocity"])]), ["fc"])
     return est if est.values["fc"] > 0 else "the residual correlates negatively with sign(v): not friction"
 
@@ -160,6 +169,8 @@ def _stribeck_columns(ctx: Context, vs: float) -> list[np.ndarray]:
 
 
 def _estimate_stribeck(ctx: Context) -> Estimate | str:
+    if _needs(ctx, "velocity"):
+        return _needs(ctx, "velocity")
     y = ctx.target()
     v_rms = float(np.sqrt(np.mean(np.concatenate([s["velocity"] for s in ctx.internal]) ** 2)))
 
@@ -169,13 +180,21 @@ def _estimate_stribeck(ctx: Context) -> Estimate | str:
 
     vs = _scan(rss, 1e-3 * v_rms, v_rms, log=True)
     est = _regress(y, _stribeck_columns(ctx, vs), ["fs", "fc"])
-    if est.values["fc"] <= 0 or est.values["fs"] <= 0:
-        return "friction levels estimated <= 0: not Stribeck friction"
-    return Estimate({**est.values, "vs": vs}, {**est.std, "vs": float("nan")}, est.explained_db,
-                    "vs by a bounded search (no standard error)")
+    if est.values["fc"] > 0 and est.values["fs"] > 0:
+        return Estimate({**est.values, "vs": vs}, {**est.std, "vs": float("nan")}, est.explained_db,
+                        "vs by a bounded search (no standard error)")
+    coulomb = _estimate_coulomb(ctx)
+    if isinstance(coulomb, str):
+        return coulomb
+    fc = coulomb.values["fc"]
+    return Estimate({"fs": STRIBECK_START_RATIO * fc, "fc": fc, "vs": vs}, {k: float("nan") for k in ("fs", "fc", "vs")},
+                    float("nan"), f"levels not separable to first order: start fc from Coulomb, fs = "
+                                  f"{STRIBECK_START_RATIO:g} fc")
 
 
 def _estimate_cubic(ctx: Context) -> Estimate | str:
+    if _needs(ctx, "position"):
+        return _needs(ctx, "position")
     return _regress(ctx.target(), _force_columns(ctx, [lambda s: s["position"] ** 3]), ["k3"])
 
 

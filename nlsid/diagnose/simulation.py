@@ -100,11 +100,29 @@ class ModelRunner:
 
     def internal(self, run: Run) -> dict[str, np.ndarray]:
         """Signals inside the model on ``run``: ``input`` (the plant input), and for a mechanical
-        template ``position`` and ``velocity`` of the driven mass (without output blocks)."""
-        out = {"input": self.simulate(run).u}
-        if self.mechanical:
+        template ``position`` and ``velocity`` of the driven mass where they can be had.
+
+        Open loop: by running copies of the config that output them (exact). Closed loop: changing
+        the output would change the loop, so they come from the model's own output when it is the
+        driven mass's: the position itself and its central-difference derivative as the velocity
+        (its zero crossings, which friction depends on, are not delayed), or the velocity alone.
+        """
+        nominal = self.simulate(run)
+        out = {"input": nominal.u}
+        if not self.mechanical:
+            return out
+        if not self.closed:
             for signal in ("position", "velocity"):
                 out[signal] = self.with_changes(_probe(self.data, signal)).simulate(run).y
+            return out
+        model = self.config.model
+        if model.type == "two_mass_stage" and model.output_at != "motor" or model.output_nonlinearity is not None:
+            return out
+        if model.output == "position":
+            out["position"] = nominal.y
+            out["velocity"] = np.gradient(nominal.y, 1.0 / run.fs)
+        else:
+            out["velocity"] = nominal.y
         return out
 
     def with_changes(self, data: dict) -> "ModelRunner":
