@@ -17,7 +17,6 @@ from .fit import fit
 from .import_ import import_
 from .hosidf import hosidf
 from .info import info
-from .pending import PENDING_COMMANDS
 from .report import report
 from .run import run
 from .simulate import simulate
@@ -76,8 +75,6 @@ cli.add_command(info)
 cli.add_command(run)
 cli.add_command(simulate)
 cli.add_command(report)
-for command in PENDING_COMMANDS:
-    cli.add_command(command)
 
 
 def main() -> None:

@@ -235,8 +235,9 @@ def test_bad_inputs_fail_cleanly_without_output(run_cli, tmp_path):
     (tmp_path / "empty").mkdir()
     _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "summary.json")
     (tmp_path / "empty" / "summary.json").write_text('{"nlsid_format": "diagnosis"}')
-    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "no report for a 'diagnosis'",
-                    "bla, hosidf, model")
+    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "summary.json", "nlsid_format_version")
+    (tmp_path / "empty" / "summary.json").write_text('{"nlsid_format": "weather"}')
+    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "no report for a 'weather'")
     (tmp_path / "bad.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  den: [1.0, -1.0]\n")
     _one_line_error(run_cli("report", tmp_path / "bad.yaml", "-o", out), "bad.yaml", "unstable")
     (tmp_path / "typo.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  denn: [1.0, 1.0]\n")
