@@ -15,8 +15,8 @@ from .common import emit_json, force_option, json_option, settings
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The HTML page to write.")
 @force_option
 @json_option
-def report(source: str, output: str, force: bool, as_json: bool) -> None:
-    """Render a BLA, HOSIDF or model as one self-contained HTML page.
+def report(source: str, output: str, force: bool, as_json: bool) -> dict:
+    """Render a diagnosis, BLA, HOSIDF or model as one self-contained HTML page.
 
     The page opens with the verdict, then the evidence figures with captions, then the tables of
     numbers and the provenance. Figures are embedded, so the page can be mailed as it is.
@@ -25,6 +25,7 @@ def report(source: str, output: str, force: bool, as_json: bool) -> None:
     Examples:
 
     \b
+      nlsid report diagnosis/ -o report.html
       nlsid report bla.h5 -o bla_report.html
       nlsid report hosidf.h5 -o hosidf_report.html --json
       nlsid report configs/model_resonance.yaml -o model.html
@@ -35,9 +36,11 @@ def report(source: str, output: str, force: bool, as_json: bool) -> None:
     check_writable(output, force)
     page = render(source)
     write_text_atomic(output, render_html(page, f"nlsid {__version__} report"), force=force)
+    summary = {"output": output, **page.summary()}
     if as_json:
-        emit_json({"output": output, **page.summary()})
-        return
+        emit_json(summary)
+        return summary
     console = settings().console
     console.print(page.headline, style="bold", markup=False)
     console.print(f"{len(page.figures)} figures, {len(page.tables)} tables -> {output}", markup=False)
+    return summary

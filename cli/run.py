@@ -123,28 +123,36 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
         step.output.parent.mkdir(parents=True, exist_ok=True)
         console.rule(f"nlsid {step.text}", style="dim")
         started = time.perf_counter()
-        code = _invoke(cli, root, step)
+        code, headline = _invoke(cli, root, step)
         done.append({"step": step.text, "status": "ran" if code == EXIT_OK else f"failed ({code})",
                      "seconds": round(time.perf_counter() - started, 2), "output": str(step.output)})
+        if headline:
+            done[-1]["headline"] = headline
         if code != EXIT_OK:
             _finish(done, as_json)
             raise click.exceptions.Exit(code)
     _finish(done, as_json)
 
 
-def _invoke(cli: click.Group, root: Path, step: Step) -> int:
-    """Run one step in this process, from the root folder, overwriting its stale output."""
+def _invoke(cli: click.Group, root: Path, step: Step) -> tuple[int, str | None]:
+    """Run one step in this process, from the root folder, overwriting its stale output.
+
+    Returns the exit code and the step's headline, when its command returns a summary with one
+    (``report`` does: the verdict of the page).
+    """
     quiet = ["-q"] if settings().quiet else []
     previous = Path.cwd()
     os.chdir(root)
     try:
-        code = cli.main(args=[*quiet, *step.args, "--force"], prog_name="nlsid", standalone_mode=False)
+        result = cli.main(args=[*quiet, *step.args, "--force"], prog_name="nlsid", standalone_mode=False)
     except click.ClickException as exc:
         click.echo(f"nlsid: error: step '{step.text}': {exc.format_message()}", err=True)
-        code = exc.exit_code
+        return exc.exit_code, None
     finally:
         os.chdir(previous)
-    return code or EXIT_OK
+    if isinstance(result, dict):
+        return EXIT_OK, result.get("headline")
+    return result or EXIT_OK, None
 
 
 def _finish(done: list[dict], as_json: bool) -> None:
@@ -159,6 +167,9 @@ def _finish(done: list[dict], as_json: bool) -> None:
     console = settings().console
     console.print(table)
     last = done[-1]
+    headlines = [row["headline"] for row in done if "headline" in row]
+    if headlines:
+        console.print(f"verdict: {headlines[-1]}", style="bold", markup=False)
     if last["status"] in ("ran", "up to date"):
-        console.print(f"result: {last['output']}")
+        console.print(f"result: {last['output']}", markup=False)
 
