@@ -58,9 +58,15 @@ def tustin(ss: StateSpace, ts: float) -> StateSpace:
 
 def reference_velocity(r: np.ndarray, fs: float, periodic: bool) -> np.ndarray:
     """Central-difference velocity of the reference (periodic wrap for a record of whole periods)."""
-    if periodic:
-        return (np.roll(r, -1) - np.roll(r, 1)) * fs / 2
-    return np.gradient(r, 1.0 / fs)
+    if not periodic:
+        return np.gradient(r, 1.0 / fs)
+    n = r.shape[0]
+    v = np.empty_like(r)  # (r[k+1] - r[k-1]) fs / 2, indices modulo n, without temporaries
+    np.subtract(r[2:], r[:-2], out=v[1:-1])
+    v[0] = r[1 % n] - r[-1]
+    v[-1] = r[0] - r[(n - 2) % n]
+    v *= fs / 2
+    return v
 
 
 def feedforward(r: np.ndarray, fs: float, periodic: bool, coulomb: float, velocity: float) -> np.ndarray:
@@ -68,4 +74,9 @@ def feedforward(r: np.ndarray, fs: float, periodic: bool, coulomb: float, veloci
     if coulomb == 0 and velocity == 0:
         return np.zeros_like(r)
     v = reference_velocity(r, fs, periodic)
-    return coulomb * np.sign(v) + velocity * v
+    out = np.sign(v)
+    out *= coulomb
+    if velocity:
+        v *= velocity
+        out += v
+    return out

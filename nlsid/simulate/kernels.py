@@ -13,7 +13,9 @@ One call simulates one run, sample by sample (k = 0 .. N-1, t_k = k Ts):
 4. the plant state is advanced over ``substeps`` sub-steps of h = Ts / substeps: exact ZOH
    propagation x+ = Phi x + Gamma p, then each nonlinear force in turn (:func:`force`) is
    held over the sub-step, x+ -= Gamma_F F (the laws and their numerical treatment are in
-   :mod:`nlsid.models.forces`).
+   :mod:`nlsid.models.forces`). The recursion is evaluated in closed form per sample
+   (:mod:`nlsid.simulate.propagation`): each force reads its signal from the state at the start
+   of the sample and the forces chosen before it, and the state is updated once per sample.
 
 Without nonlinear forces the result at the sample instants is exact for any number of sub-steps
 (up to rounding): the ZOH propagation is the exact solution for a held input. The input and output
@@ -83,10 +85,10 @@ def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _derived(kinds: np.ndarray, p: np.ndarray, h: float) -> np.ndarray:
-    """Per-element constants of the LuGre step for sub-step h (computed once per run):
-    sigma0 + sigma1/h, sigma0 h + sigma1, sigma1/h, 1/vs, h sigma0/fc."""
-    d = np.zeros((p.shape[0], 5))
+def _derived(kinds: np.ndarray, p: np.ndarray, h: float, gains: np.ndarray) -> np.ndarray:
+    """Per-element constants of the LuGre step for sub-step h and force gain g (computed once per
+    run): sigma0 + sigma1/h, sigma0 h + sigma1, sigma1/h, 1/vs, beta = h sigma0/fc, 1/((1 + g sigma2) beta)."""
+    d = np.zeros((p.shape[0], 6))
     for e in range(p.shape[0]):
         if kinds[e] == forces.LUGRE:
             d[e, 0] = p[e, 0] + p[e, 1] / h
@@ -94,28 +96,30 @@ def _derived(kinds: np.ndarray, p: np.ndarray, h: float) -> np.ndarray:
             d[e, 2] = p[e, 1] / h
             d[e, 3] = 1.0 / p[e, 5]
             d[e, 4] = h * p[e, 0] / p[e, 3]
+            d[e, 5] = 1.0 / ((1.0 + gains[e] * p[e, 2]) * d[e, 4])
     return d
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float, g: float,
-           h: float) -> float:
+def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float, g: float,
+           h: float) -> tuple[float, float]:
     """LuGre force over a sub-step: the implicit step of nlsid.models.forces solved for v+.
 
     The residual R(v) = v (1 + g F1(v)) + g F0(v) - v_free is increasing in v (the a(v) coupling is
     a contraction), so the root has the sign of -R(0), where a = 1 and F0 = sigma0 z. On that side
     R is smooth and Newton's method converges quadratically (safeguarded: an iterate that crosses
     zero is replaced by half the previous one). ``d[e]`` holds the constants of :func:`_derived`.
+    Returns the force and the bristle state z at the end of the sub-step. Newton starts from
+    v = v_free - g F with F the ``previous`` sub-step's force: exact when the force does not
+    change, a better guess than the previous velocity when the mass accelerates.
     """
     sigma0, sigma2, fc, fs, vs = p[e, 0], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
     k1, k2, s1h, inv_vs, beta0 = d[e, 0], d[e, 1], d[e, 2], d[e, 3], d[e, 4]
-    z = state[e]
     r0 = g * sigma0 * z - s_free
     if r0 == 0.0:
-        warm[e] = 0.0
-        return sigma0 * z
+        return sigma0 * z, z
     sd = -1.0 if r0 > 0.0 else 1.0
-    v = warm[e]  # warm start: the previous sub-step's velocity, when on the root's side
+    v = s_free - g * previous  # warm start, when on the root's side
     if v * sd <= 0.0:
         v = -r0 / (1.0 + g * (k2 + sigma2))
     hs = h * sigma0 * sd
@@ -125,26 +129,27 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.nda
     a0 = 1.0 + g * sigma2
     s = s_free + g * s1h * z
     qa = a0 * beta
+    inv_qa = d[e, 5] * sd  # 1 / qa
     qb = a0 - s * beta + g * k2
     qc = g * k1 * z - s
     disc = qb * qb - 4.0 * qa * qc
     if disc >= 0.0 and v * sd * inv_vs >= SLIDING:  # tried when the start value slides fast
         root = -0.5 * (qb + math.copysign(math.sqrt(disc), qb))  # no cancellation
-        for v_q in (root / qa, qc / root if root != 0.0 else 0.0):
-            if v_q * sd * inv_vs >= SLIDING:
-                a = 1.0 / (1.0 + beta * v_q)
-                state[e] = a * (z + h * v_q)
-                warm[e] = v_q
-                return k1 * a * z - s1h * z + (k2 * a + sigma2) * v_q
+        v_q = root * inv_qa
+        if v_q * sd * inv_vs < SLIDING:  # the other root
+            v_q = qc / root if root != 0.0 else 0.0
+        if v_q * sd * inv_vs >= SLIDING:
+            a = 1.0 / (1.0 + beta * v_q)
+            return k1 * a * z - s1h * z + (k2 * a + sigma2) * v_q, a * (z + h * v_q)
     a = 1.0
     for _ in range(forces.MAX_ITERATIONS):
         w = v * inv_vs
         ex = math.exp(-w * w) if w * w < SLIDING * SLIDING else 0.0
-        inv_level = 1.0 / (fc + (fs - fc) * ex)
+        level = fc + (fs - fc) * ex
         dlevel = -2.0 * (fs - fc) * ex * w * inv_vs
-        c = hs * v * inv_level
-        a = 1.0 / (1.0 + c)
-        da = -a * a * (hs * inv_level - c * dlevel * inv_level)
+        inv_den = 1.0 / (level + hs * v)
+        a = level * inv_den  # 1 / (1 + hs v / level)
+        da = hs * (dlevel * v - level) * inv_den * inv_den
         f1 = k2 * a + sigma2
         res = v * (1.0 + g * f1) + g * (k1 * a * z - s1h * z) - s_free
         step = res / (1.0 + g * f1 + g * (v * k2 + k1 * z) * da)
@@ -153,9 +158,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.nda
             v = v_new  # remaining error about step^2 (Newton); a is off by |da| step
             break
         v = v_new if v_new * sd > 0.0 else 0.5 * v
-    state[e] = a * (z + h * v)
-    warm[e] = v
-    return k1 * a * z - s1h * z + (k2 * a + sigma2) * v
+    return k1 * a * z - s1h * z + (k2 * a + sigma2) * v, a * (z + h * v)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -197,52 +200,55 @@ def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, state: np.ndarray, warm: np.ndarray, s_free: float,
-          s_now: float, g: float, h: float) -> float:
-    """The force of element ``e`` held over one sub-step; updates its internal state ``state[e]``
-    (and ``warm[e]``, the last velocity, a starting point for the next sub-step's iteration).
+def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float,
+          s_now: float, g: float, h: float) -> tuple[float, float]:
+    """The force of element ``e`` held over one sub-step and its internal state after it (LuGre's
+    bristle deflection; ``z``, unused by the other laws, is returned unchanged). ``previous`` is
+    the element's force over the previous sub-step, a starting point for LuGre's iteration.
 
     ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
     sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
     force held over the sub-step, ``h`` the sub-step length.
     """
     if kind == forces.LUGRE:
-        return _lugre(p, d, e, state, warm, s_free, g, h)
+        return _lugre(p, d, e, z, previous, s_free, g, h)
     if kind == forces.COULOMB:
         fc, fv = p[e, 0], p[e, 1]
         if _stick_or_slip(s_free, g, fc):
-            return s_free / g
+            return s_free / g, z
         s = 1.0 if s_free > 0 else -1.0
         v = (s_free - g * fc * s) / (1.0 + g * fv)
-        return fc * s + fv * v
+        return fc * s + fv * v, z
     if kind == forces.STRIBECK:
-        return _stribeck(p, e, s_free, g)
+        return _stribeck(p, e, s_free, g), z
     # CUBIC
     mid = 0.5 * (s_now + s_free)
-    return p[e, 0] * mid * mid * mid
+    return p[e, 0] * mid * mid * mid, z
 
 
 @njit(cache=True, nogil=True)
-def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, delay,
+def simulate_loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay,
                   closed, Ac, Bc, Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params,
                   u_out, y_out):
-    """Run the loop described in the module docstring; fill ``u_out`` and ``y_out``; return the final state."""
-    n = Phi.shape[0]
+    """Run the loop described in the module docstring; fill ``u_out`` and ``y_out``; return the final state.
+
+    ``phi`` .. ``col_pow`` are the closed-form coefficients of :class:`nlsid.simulate.propagation.Propagation`
+    (their first axis is the number of sub-steps + 1).
+    """
+    n = phi.shape[0]
     nc = Ac.shape[0]
     n_el = kinds.shape[0]
+    substeps = row_pow.shape[0] - 1
     x = x0.copy()
     xn = np.empty(n)
     xc = np.zeros(nc)
     xcn = np.empty(nc)
     state = np.zeros(n_el)
-    warm = np.zeros(n_el)
-    derived = _derived(kinds, params, h)
+    f = np.zeros((substeps, n_el))  # the forces of the sub-steps of this sample (of the last one before)
     gains = np.empty(n_el)
     for e in range(n_el):
-        acc = 0.0
-        for i in range(n):
-            acc += rows[e, i] * cols[e, i]
-        gains[e] = acc
+        gains[e] = coupling[0, e, e]
+    derived = _derived(kinds, params, h, gains)
     buf = np.zeros(max(delay, 1))
     p = 0.0  # plant input: the input block's output (also its memory)
     y_m = 0.0  # plant output through the output block (also its memory)
@@ -261,7 +267,7 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
                 for j in range(nc):
                     acc += Ac[i, j] * xc[j]
                 xcn[i] = acc
-            xc[:] = xcn
+            xc, xcn = xcn, xc
         else:
             u = u_in[k]
         u_out[k] = u
@@ -275,20 +281,31 @@ def simulate_loop(Phi, Gu, C, D, x0, kinds, params, cols, rows, substeps, h, del
         if not closed:
             y_m = block(out_kind, out_params, y_now + D * p, y_m)
         y_out[k] = y_m + y_noise[k]
-        for _ in range(substeps):
-            for i in range(n):
-                acc = Gu[i] * p
-                for j in range(n):
-                    acc += Phi[i, j] * x[j]
-                xn[i] = acc
+        for j in range(substeps if n_el else 0):
             for e in range(n_el):
+                s_free = row_gamma[j + 1, e] * p
+                for i in range(n):
+                    s_free += row_pow[j + 1, e, i] * x[i]
+                for i in range(j + 1):
+                    for e2 in range(n_el if i < j else e):
+                        s_free -= coupling[j - i, e, e2] * f[i, e2]
                 s_now = 0.0
-                s_free = 0.0
-                for i in range(n):
-                    s_now += rows[e, i] * x[i]
-                    s_free += rows[e, i] * xn[i]
-                f = force(kinds[e], params, derived, e, state, warm, s_free, s_now, gains[e], h)
-                for i in range(n):
-                    xn[i] -= cols[e, i] * f
-            x[:] = xn
+                if kinds[e] in forces.POSITION_KINDS:  # the only laws that read the start value
+                    s_now = row_gamma[j, e] * p
+                    for i in range(n):
+                        s_now += row_pow[j, e, i] * x[i]
+                    for i in range(j):
+                        for e2 in range(n_el):
+                            s_now -= coupling[j - 1 - i, e, e2] * f[i, e2]
+                f[j, e], state[e] = force(kinds[e], params, derived, e, state[e], f[j - 1 if j else substeps - 1, e],
+                                          s_free, s_now, gains[e], h)
+        for i in range(n):
+            acc = gamma[i] * p
+            for j in range(n):
+                acc += phi[i, j] * x[j]
+            for j in range(substeps if n_el else 0):
+                for e in range(n_el):
+                    acc -= col_pow[j, e, i] * f[j, e]
+            xn[i] = acc
+        x, xn = xn, x
     return x
