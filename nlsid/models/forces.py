@@ -30,8 +30,8 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   Implicit (backward Euler) step: z+ = a (z + h v+), a = 1 / (1 + h sigma0 |v+| / s(v+)). For a
   given a, F = F0 + F1 v+ is affine in v+ (F0 = (sigma0 + sigma1/h) a z - sigma1 z / h,
   F1 = (sigma0 h + sigma1) a + sigma2), and v+ = v_free - g_v F closes the equation in v+ alone.
-  It is solved by Newton's method on the side of zero where the root lies, from the previous
-  sub-step's velocity, until the step is below TOLERANCE (|v+| + vs); while sliding fast
+  It is solved by Newton's method on the side of zero where the root lies, from v_free - g_v F
+  with the previous sub-step's F, until the step is below TOLERANCE (|v+| + vs); while sliding fast
   (|v| > 6.5 vs, where the Stribeck term is below rounding) it is a quadratic with a closed-form
   root. Stable for any h (bristle stiffness sigma0 and damping sigma1 are implicit). Using |v+|
   rather than |v_free| in a matters at standstill: v_free - v+ = g_v F is not small against

@@ -34,7 +34,7 @@ from nlsid.models import blocks, forces
 SLIDING = 6.5  # |v| / vs above which e^{-(v/vs)^2} < 5e-19: the Stribeck term is below rounding
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def block(kind: int, p: np.ndarray, x: float, memory: float) -> float:
     """Output of a nonlinear block (laws and parameter encoding in :mod:`nlsid.models.blocks`) for
     input ``x``; ``memory`` is the block's previous output (used by the backlash only)."""
@@ -68,7 +68,7 @@ def block(kind: int, p: np.ndarray, x: float, memory: float) -> float:
     return memory
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, fastmath={"contract"}, nogil=True)
 def apply_block(kind: int, p: np.ndarray, x: np.ndarray) -> np.ndarray:
     """:func:`block` along a signal, starting from memory 0."""
     y = np.empty_like(x)
@@ -79,12 +79,12 @@ def apply_block(kind: int, p: np.ndarray, x: np.ndarray) -> np.ndarray:
     return y
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
     return abs(v_free) <= g * breakaway
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, fastmath={"contract"}, nogil=True)
 def _derived(kinds: np.ndarray, p: np.ndarray, h: float, gains: np.ndarray) -> np.ndarray:
     """Per-element constants of the LuGre step for sub-step h and force gain g (computed once per
     run): sigma0 + sigma1/h, sigma0 h + sigma1, sigma1/h, 1/vs, beta = h sigma0/fc, 1/((1 + g sigma2) beta)."""
@@ -100,7 +100,7 @@ def _derived(kinds: np.ndarray, p: np.ndarray, h: float, gains: np.ndarray) -> n
     return d
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float, g: float,
            h: float) -> tuple[float, float]:
     """LuGre force over a sub-step: the implicit step of nlsid.models.forces solved for v+.
@@ -161,7 +161,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
     return k1 * a * z - s1h * z + (k2 * a + sigma2) * v, a * (z + h * v)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
     """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
 
@@ -199,7 +199,7 @@ def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
     return s * (fc + (fs - fc) * math.exp(-((w / vs) ** delta)) + fv * w)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float,
           s_now: float, g: float, h: float) -> tuple[float, float]:
     """The force of element ``e`` held over one sub-step and its internal state after it (LuGre's
@@ -226,7 +226,7 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: f
     return p[e, 0] * mid * mid * mid, z
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, fastmath={"contract"}, nogil=True)
 def simulate_loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay,
                   closed, Ac, Bc, Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params,
                   u_out, y_out):
