@@ -15,7 +15,11 @@ Cases:
 * ``linear_lsim``: the same stage without friction, open loop, under a random-phase multisine:
   nlsid against scipy.signal.lsim (ZOH input) on the whole record, and their difference.
 * ``sweep_parallel``: the 80-value K_fc sweep of the config on 2 periods each, with 1 worker
-  and with all cores.
+  and with all cores (threads), and the speed-up.
+
+Times are the best of a few repeats, as wall-clock seconds and as CPU seconds of the simulating
+thread (``thread_time``: on a loaded machine the wall clock also counts the time other processes
+hold the core). ``load_average`` (1 min, at start and end) says how loaded the machine was.
 """
 
 from __future__ import annotations
@@ -48,12 +52,18 @@ def sine_run(samples: int) -> Run:
 
 
 def timed(fn, repeat: int = 3) -> tuple[float, object]:
-    best, out = math.inf, None
+    return timed_cpu(fn, repeat)[::2]
+
+
+def timed_cpu(fn, repeat: int = 3) -> tuple[float, float, object]:
+    """Best wall-clock and best thread CPU seconds over ``repeat`` calls, and the last result."""
+    wall, cpu, out = math.inf, math.inf, None
     for _ in range(repeat):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.thread_time()
         out = fn()
-        best = min(best, time.perf_counter() - start)
-    return best, out
+        wall = min(wall, time.perf_counter() - start)
+        cpu = min(cpu, time.thread_time() - start_cpu)
+    return wall, cpu, out
 
 
 def stage_point():
@@ -99,8 +109,8 @@ def lugre_closed_loop(samples: int, ivp_samples: int) -> dict:
     substeps = point.config.simulation.substeps
     run = sine_run(samples)
     simulate_run(model, loop, sine_run(2 * N), substeps)  # warm-up: load/compile the kernels
-    seconds, out = timed(lambda: simulate_run(model, loop, run, substeps))
-    seconds_1, _ = timed(lambda: simulate_run(model, loop, run, 1))
+    seconds, cpu, out = timed_cpu(lambda: simulate_run(model, loop, run, substeps), 5)
+    seconds_1, cpu_1, _ = timed_cpu(lambda: simulate_run(model, loop, run, 1), 5)
 
     short = Run("sine", FS, "sine", run.u[:N], period=N, transient_periods=0, frequency=FS / N)
     reference = ivp_closed_loop(point, short, ivp_samples, 1e-10)
@@ -119,7 +129,9 @@ def lugre_closed_loop(samples: int, ivp_samples: int) -> dict:
         "substeps": substeps,
         "nlsid_seconds": seconds,
         "nlsid_samples_per_second": run.n_samples / seconds,
+        "nlsid_samples_per_second_cpu": run.n_samples / cpu,
         "nlsid_samples_per_second_substeps_1": run.n_samples / seconds_1,
+        "nlsid_samples_per_second_substeps_1_cpu": run.n_samples / cpu_1,
         "nlsid_relative_error": nlsid_error,
         "nlsid_relative_error_substeps_1": nlsid_error_1,
         "solve_ivp_rtol": ivp["rtol"],
@@ -145,7 +157,7 @@ def linear_lsim(samples: int) -> dict:
         u += np.cos(2 * np.pi * k * n / N + phase)
     run = Run("ms", FS, "multisine", u / np.std(u), period=N, transient_periods=0, excited_bins=bins)
     simulate_run(linear, None, Run("ms", FS, "multisine", run.u[:N], period=N, excited_bins=bins), None)
-    seconds, out = timed(lambda: simulate_run(linear, None, run, None))
+    seconds, cpu, out = timed_cpu(lambda: simulate_run(linear, None, run, None), 5)
     t = n / FS
     ss = plant.ss
     start = time.perf_counter()
@@ -155,6 +167,7 @@ def linear_lsim(samples: int) -> dict:
         "samples": run.n_samples,
         "nlsid_seconds": seconds,
         "nlsid_samples_per_second": run.n_samples / seconds,
+        "nlsid_samples_per_second_cpu": run.n_samples / cpu,
         "lsim_seconds": lsim_seconds,
         "speedup_vs_lsim": lsim_seconds / seconds,
         "max_relative_difference": float(np.max(np.abs(out.y - y_lsim)) / np.max(np.abs(y_lsim))),
@@ -166,10 +179,12 @@ def sweep_parallel() -> dict:
     runs = [sine_run(2 * N)]
     simulate_all(points[:2], runs, workers=1)
     out = {"runs": len(points), "samples_per_run": runs[0].n_samples}
-    for workers in sorted({1, os.cpu_count() or 1}):
-        seconds, _ = timed(lambda: simulate_all(points, runs, workers=workers), repeat=2)
+    counts = sorted({1, os.cpu_count() or 1})
+    for workers in counts:
+        seconds, _ = timed(lambda: simulate_all(points, runs, workers=workers), repeat=3)
         out[f"seconds_workers_{workers}"] = seconds
         out[f"samples_per_second_workers_{workers}"] = len(points) * runs[0].n_samples / seconds
+    out["speedup"] = out["seconds_workers_1"] / out[f"seconds_workers_{counts[-1]}"]
     return out
 
 
@@ -178,12 +193,14 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--ivp-samples", type=int, default=1024)
     args = parser.parse_args()
+    load_start = os.getloadavg()[0]
     result = {
         "cpu_count": os.cpu_count(),
         "lugre_closed_loop": lugre_closed_loop(args.samples, args.ivp_samples),
         "linear_lsim": linear_lsim(args.samples),
         "sweep_parallel": sweep_parallel(),
     }
+    result["load_average"] = {"start": load_start, "end": os.getloadavg()[0]}
     print(json.dumps(result, indent=2))
 
 
