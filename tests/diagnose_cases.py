@@ -4,7 +4,9 @@ The excitation is a random-odd multisine (odd lines 1..119 of a 1024-sample peri
 line in three dropped at random as a detection line, book Section 6.1.2) at two rms levels, four
 independent-phase realizations per level, two transient and two steady-state periods. The
 "measured" output is the project's simulator run on the *true* config (nominal + effect) with
-white Gaussian sensor noise of std NOISE (in closed loop the noise is fed back, like a sensor's).
+white Gaussian sensor noise of std NOISE (in closed loop the noise is fed back, like a sensor's);
+in open loop the recorded input carries measurement noise of std U_NOISE too (the true system is
+driven by the noise-free input), so the model's response to input noise is part of the floor.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from nlsid.signals.multisine import flat_amplitudes, random_phases, synthesize
 
 FS, N = 1024.0, 1024
 NOISE = 1e-3  # sensor noise std: the outputs' rms is about 0.45, so the noise is about -53 dB
+U_NOISE = 3e-4  # input measurement noise std (open loop): through the resonance (gain 2.5) as large as NOISE
 
 MSD = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4e4, "gain": 1e4}}
 TF = {"model": {"type": "transfer_function", "num": [1e4], "den": [1.0, 20.0, 4e4]}}
@@ -40,7 +43,8 @@ def excitation(rng: np.random.Generator, levels=(0.5, 1.0), realizations: int = 
     return runs
 
 
-def measure(true_data: dict, runs: list[Run], rng: np.random.Generator, noise: float = NOISE) -> list[Run]:
+def measure(true_data: dict, runs: list[Run], rng: np.random.Generator, noise: float = NOISE,
+            u_noise: float = U_NOISE) -> list[Run]:
     """The runs as measured on the true system (closed loop when the config has closed_loop)."""
     runner = ModelRunner.from_data(true_data, "true.yaml")
     out = []
@@ -50,7 +54,8 @@ def measure(true_data: dict, runs: list[Run], rng: np.random.Generator, noise: f
             sim = runner.simulate(dataclasses.replace(run, r=run.u), output=n)
             out.append(dataclasses.replace(run, u=sim.u, y=sim.y, r=run.u.copy()))
         else:
-            out.append(dataclasses.replace(run, y=runner.simulate(run).y + n))
+            measured_u = run.u + rng.standard_normal(run.n_samples) * u_noise
+            out.append(dataclasses.replace(run, u=measured_u, y=runner.simulate(run).y + n))
     return out
 
 

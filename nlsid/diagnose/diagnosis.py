@@ -15,7 +15,7 @@ from typing import Callable
 
 from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence, error_test, gather
-from nlsid.diagnose.gain import Score, model_errors, score
+from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, split_runs
@@ -32,7 +32,7 @@ class Outcome:
     score: Score | None = None
     extended: dict | None = None
     reason: str = ""
-    errors: list = field(default_factory=list)
+    residuals: list = field(default_factory=list)  # validation residuals of the extended model
 
     def summary(self) -> dict:
         h = self.hypothesis
@@ -69,7 +69,7 @@ class Diagnosis:
             main = w.hypothesis.main
             return (f"Cause: {w.hypothesis.title} ({main} = {w.estimate.values[main]:.4g} {w.hypothesis.unit}); "
                     f"the extended model's validation error is {w.score.gain_db:.1f} dB smaller, "
-                    f"{w.score.above_floor_db:.1f} dB above the noise floor")
+                    f"{versus_floor(w.score)}")
         seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
         if status == rules.AMBIGUOUS:
             return f"Discrepancy ({seen}); equally good explanations: {', '.join(self.verdict.tied)}"
@@ -79,8 +79,7 @@ class Diagnosis:
         out = self.evidence.findings()
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
-            out.append(f"{o.hypothesis.title}: validation gain {o.score.gain_db:+.1f} dB, "
-                       f"{o.score.above_floor_db:.1f} dB above the noise floor")
+            out.append(f"{o.hypothesis.title}: validation gain {o.score.gain_db:+.1f} dB, {versus_floor(o.score)}")
         return out
 
     def arrays(self) -> dict:
@@ -99,7 +98,7 @@ class Diagnosis:
         first = next(res for res in ev.residuals if res.role == VALIDATION)
         validation = {"run_id": first.run_id, "fs": first.fs, "original_error": first.residual}
         if self.winner is not None:
-            validation["extended_error"] = self.winner.errors[0]
+            validation["extended_error"] = self.winner.residuals[0].residual
         return {"bla": bla, "spectrum": spectrum, "time": ev.time, "validation": validation}
 
     def extended_header(self) -> list[str]:
@@ -109,7 +108,7 @@ class Diagnosis:
         for name, value in w.estimate.values.items():
             lines.append(f"  {name} = {value:.6g} +- {w.estimate.std[name]:.2g} (one standard error)")
         lines.append(f"Validation error {w.score.error_rms:.4g} rms ({w.score.gain_db:+.1f} dB against the original "
-                     f"model, {w.score.above_floor_db:.1f} dB above the noise floor)")
+                     f"model, {versus_floor(w.score)})")
         return lines
 
     def summary(self) -> dict:
@@ -126,6 +125,12 @@ class Diagnosis:
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "gain": gain,
         }
+
+
+def versus_floor(score: Score) -> str:
+    """Where a model's validation error lies against the noise floor, in words ("0.3 dB above ...")."""
+    x = score.above_floor_db
+    return f"{abs(x):.1f} dB {'above' if x >= 0 else 'below'} the noise floor"
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str) -> Estimate:
@@ -154,8 +159,8 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
     except InputError as exc:
         outcome.reason = f"the extended model is not valid: {exc.what}"
         return
-    outcome.errors = model_errors(extended, val_runs, val_res)
-    outcome.score = score(val_res, outcome.errors)
+    outcome.residuals = model_residuals(extended, val_runs, val_res)
+    outcome.score = score(val_res, outcome.residuals)
 
 
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
@@ -190,7 +195,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
             except InputError as exc:
                 outcome.reason = f"the fit failed: {exc}"
                 continue
-        outcome.estimate = estimate
+        outcome.estimate = context.fitted[hypothesis.name] = estimate
         outcome.extended = hypothesis.extend(data, estimate.values)
         _score(outcome, runner, val_runs, val)
         step(hypothesis.name)

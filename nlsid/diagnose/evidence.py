@@ -6,7 +6,10 @@ steady-state periods. Its P-averaged one-period spectrum ``E(k)`` (DFT scaled by
 :mod:`nlsid.analysis.lines`) holds what the model misses plus noise; the noise variance of
 ``E(k)``, ``s2(k)``, is the period-to-period variance of the residual (book (6-12), seed 000
 Eq. (3)): the model is noise-free, so this is the noise of the measurement as it reaches the
-residual (output noise, and in open loop the model's response to the input noise).
+residual (output noise, and in open loop the model's response to the input noise). It also holds
+whatever part of the measured output is not periodic yet and the model does not reproduce (a
+friction transient that outlasts the transient periods): the noise of a wrong model is then
+overestimated and its test is conservative (:mod:`nlsid.diagnose.gain` takes each model's own).
 
 Size and significance against noise. For a set S of lines (and runs) the residual power relative
 to the noise is ``ratio = sum_S |E|^2 / sum_S s2`` (shown in dB). If the model is right, each
@@ -24,6 +27,14 @@ variance (book (6-88), Exercise 92: the model's BLA lies outside the 95% confide
 At the odd and even detection lines (book Section 6.1.2, seed 000 Fig. 3) the residual is the
 distortion the model does not produce. Across levels (seed 000 Figs. 4-5) the change of the
 measured and of the model's BLA with the excitation level.
+
+On single-sine runs (the HOSIDF excitation, seed 000 Eqs. 8-12) the residual at the harmonics
+h k0 of the tone's line k0 is what the model misses of each HOSIDF (the first, h = 1, its
+describing function): per sine (frequency and amplitude, all its runs) the same F test at the
+fundamental, at the odd harmonics 3, 5, ... and at the even harmonics 2, 4, ... up to
+:data:`HARMONICS` (or the last line below Nyquist), and the size of each harmonic above the noise.
+Odd harmonics point to an odd nonlinearity (friction, a cubic spring, saturation), even ones to
+an even one (a quadratic output).
 
 In time, the mean residual period of the highest level is kept with the model's internal signals
 (plant input, and position and velocity of a mechanical template) for the figures that show a
@@ -46,6 +57,7 @@ from nlsid.io.run import Run
 
 ALPHA = 0.001
 BLA_PROBABILITY = 0.95
+HARMONICS = 9  # sine harmonics tested (the fundamental included)
 
 
 @dataclass
@@ -124,22 +136,20 @@ def ac_lines(period: int) -> np.ndarray:
     return np.arange(1, (period - 1) // 2 + 1)
 
 
-def error_power(residuals: list[Residual], errors: list[np.ndarray] | None = None) -> tuple[float, float]:
-    """Mean power per run of the periodic error without its mean (``errors``: the error periods of
-    another model on the same runs; default: the residuals), and of the noise in it."""
+def error_power(residuals: list[Residual]) -> tuple[float, float]:
+    """Mean power per run of the residual's mean period without its mean value (all AC lines), and
+    of the noise in it (its variance ``noise_var`` summed over the same lines)."""
     e_power = n_power = 0.0
-    for i, res in enumerate(residuals):
+    for res in residuals:
         k = ac_lines(res.period)
-        E = spectra(res.residual if errors is None else errors[i])[k]
-        e_power += 2 * float(np.sum(np.abs(E) ** 2))
+        e_power += 2 * float(np.sum(np.abs(res.spectrum[k]) ** 2))
         n_power += 2 * float(np.sum(res.noise_var[k]))
     return e_power / len(residuals), n_power / len(residuals)
 
 
-def error_test(residuals: list[Residual], errors: list[np.ndarray] | None = None) -> Test:
-    """:func:`power_test` of the whole error (all AC lines of all the runs)."""
-    power = sum(float(np.sum(np.abs(spectra(res.residual if errors is None else errors[i])[ac_lines(res.period)]) ** 2))
-                for i, res in enumerate(residuals))
+def error_test(residuals: list[Residual]) -> Test:
+    """:func:`power_test` of the whole residual (all AC lines of all the runs) against its noise."""
+    power = sum(float(np.sum(np.abs(res.spectrum[ac_lines(res.period)]) ** 2)) for res in residuals)
     noise = np.concatenate([res.noise_var[ac_lines(res.period)] for res in residuals])
     return power_test(power, noise, min(res.n_periods for res in residuals))
 
@@ -157,6 +167,31 @@ def line_tests(residuals: list[Residual]) -> dict[str, dict]:
         noise = np.concatenate(noise) if noise else np.zeros(0)
         out[name] = power_test(power, noise, min(res.n_periods for res in residuals)).summary()
         out[name]["lines"] = int(noise.size)
+    return out
+
+
+def harmonic_tests(residuals: list[Residual], runs: list[Run]) -> list[dict]:
+    """Residual at the harmonics of every sine (frequency, amplitude) of the sine runs (module docstring)."""
+    from nlsid.analysis.hosidf import sine_bin
+
+    groups: dict[tuple, list[tuple[Residual, int]]] = {}
+    for res, run in zip(residuals, runs):
+        if run.kind == "sine":
+            groups.setdefault((run.frequency, run.level), []).append((res, sine_bin(run, f"run {run.run_id}")))
+    out = []
+    for (frequency, level), members in sorted(groups.items(), key=lambda item: (item[0][0], item[0][1] or 0.0)):
+        P = min(res.n_periods for res, _ in members)
+        row = {"frequency_hz": frequency, "level": level, "runs": len(members), "harmonic_above_noise_db": []}
+        limit = min(HARMONICS, min((res.period - 1) // 2 // k0 for res, k0 in members))
+        for h in range(1, limit + 1):
+            test = power_test(sum(float(abs(res.spectrum[h * k0]) ** 2) for res, k0 in members),
+                              np.array([res.noise_var[h * k0] for res, k0 in members]), P)
+            row["harmonic_above_noise_db"].append(test.above_noise_db)
+        for name, orders in (("fundamental", [1]), ("odd", range(3, limit + 1, 2)), ("even", range(2, limit + 1, 2))):
+            power = sum(float(abs(res.spectrum[h * k0]) ** 2) for res, k0 in members for h in orders)
+            noise = np.array([res.noise_var[h * k0] for res, k0 in members for h in orders])
+            row[name] = power_test(power, noise, P).summary()
+        out.append(row)
     return out
 
 
@@ -211,14 +246,15 @@ class Evidence:
     error_rms: float
     spectra: dict = field(default_factory=dict)
     bla_levels: tuple = ()
+    harmonics: list[dict] = field(default_factory=list)
 
     @property
     def odd_seen(self) -> bool:
-        return any(row["odd"]["significant"] for row in self.lines)
+        return any(row["odd"]["significant"] for row in self.lines + self.harmonics)
 
     @property
     def even_seen(self) -> bool:
-        return any(row["even"]["significant"] for row in self.lines)
+        return any(row["even"]["significant"] for row in self.lines + self.harmonics)
 
     @property
     def linear_seen(self) -> bool:
@@ -231,6 +267,7 @@ class Evidence:
             "lines": self.lines,
             "bla": [{k: v for k, v in row.items() if not isinstance(v, np.ndarray)} for row in self.bla],
             "levels": self.levels,
+            "harmonics": self.harmonics,
             "odd_distortion_unexplained": self.odd_seen, "even_distortion_unexplained": self.even_seen,
             "linear_mismatch": self.linear_seen,
         }
@@ -250,6 +287,14 @@ class Evidence:
                 if test["significant"]:
                     out.append(f"level {_name(row['level'])}: {name} distortion the model does not produce, "
                                f"{test['above_noise_db']:.1f} dB above the noise")
+        for row in self.harmonics:
+            for name in ("odd", "even"):
+                if row[name]["significant"]:
+                    sizes = ", ".join(f"{h}: {x:.0f} dB" for h, x in enumerate(row["harmonic_above_noise_db"], 1)
+                                      if (h % 2 == 1) == (name == "odd") and h > 1)
+                    out.append(f"sine {row['frequency_hz']:g} Hz, level {_name(row['level'])}: {name} harmonics "
+                               f"the model does not produce, {row[name]['above_noise_db']:.1f} dB above the noise "
+                               f"({sizes})")
         changes = [row for row in self.levels if math.isfinite(row.get("bla_change_max_db", float("nan")))]
         if len(self.levels) > 1 and changes:
             last = changes[-1]
@@ -298,7 +343,7 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str]) -> tuple
     return Evidence(
         residuals=residuals, overall=error_test(residuals), lines=lines, bla=bla, levels=levels,
         time=_time_signals(runner, used, residuals), noise_rms=math.sqrt(noise), error_rms=math.sqrt(error),
-        spectra=spectra_, bla_levels=(measured_levels, model_levels),
+        spectra=spectra_, bla_levels=(measured_levels, model_levels), harmonics=harmonic_tests(residuals, used),
     ), simulated
 
 

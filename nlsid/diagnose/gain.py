@@ -1,18 +1,31 @@
 """The gain on validation data: original against extended model, and how close to the noise floor.
 
 On the validation runs (:mod:`nlsid.diagnose.split`, never seen by an estimate) the error of a
-model is the mean steady-state period of the measured output minus the model's, without its mean
-value (all lines but DC and Nyquist). Per model:
+model M is the mean steady-state period of its residual ``y - y_M`` without its mean value (all
+lines but DC and Nyquist). Per model:
 
 - ``error_rms``: the rms of that error, averaged in power over the runs; ``error_db`` = 20 log10;
 - ``gain_db`` = 20 log10(error_rms of the original / error_rms of this model): > 0 is better;
-- ``above_floor_db`` = 20 log10(error_rms / noise_rms): the noise floor ``noise_rms`` is the rms of
-  the noise left in the averaged period (its period-to-period variance over P,
-  :mod:`nlsid.diagnose.evidence`), the error a perfect model would show; 0 dB is the best possible;
+- ``noise_rms``, the noise floor: the error the true system's model would show on these runs.
+  The true model's residual is ``n_y - G n_u`` (open loop: output noise and the model's response
+  to the input's measurement noise; closed loop: the noise as the loop passes it), with no
+  systematic part, so its P-averaged period has the power ``sum_k s2(k)`` of
+  :mod:`nlsid.diagnose.evidence`, s2 estimated from the period-to-period variance of the
+  residual. That estimate is taken on the residual of the model being scored, for two reasons the
+  original model's residual cannot serve: the response to input noise depends on the model (a
+  resonance without its friction amplifies it), and a transient of the measured output that
+  outlasts the transient periods (friction settling on a sine) varies from period to period
+  unless the model reproduces it. For the true model (and a correct extension) the estimate is
+  its own error's noise, so ``error_rms / noise_rms`` squared follows the F distribution of
+  :func:`nlsid.diagnose.evidence.power_test`: 0 dB within a fraction of a dB at these degrees
+  of freedom;
+- ``above_floor_db`` = 20 log10(error_rms / noise_rms): 0 dB is the best possible, and
+  ``p_above_noise`` its p-value under that F distribution;
 - ``distortion_explained``: at the in-band odd and even detection lines of the validation
-  multisines, the part of the residual's power above the noise that the model removes,
-  ``(B - A) / (B - N)`` with B and A the residual powers before and after and N the noise power
-  (1 = all of it; NaN when the original model leaves nothing above the noise there).
+  multisines, the part of the original residual's power above the noise that the model removes,
+  ``(B - A) / (B - N)`` with B and A the residual powers of the original and of this model and N
+  this model's noise power there (1 = all of it; NaN when the original model leaves nothing above
+  the noise there).
 """
 
 from __future__ import annotations
@@ -22,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlsid.analysis.lines import EVEN, ODD, classify_lines, spectra
-from nlsid.diagnose.evidence import Residual, error_power, error_test
-from nlsid.diagnose.simulation import ModelRunner, steady_mean
+from nlsid.analysis.lines import EVEN, ODD, classify_lines
+from nlsid.diagnose.evidence import Residual, error_power, error_test, residual_of
+from nlsid.diagnose.simulation import ModelRunner
 from nlsid.io.run import Run
 
 
@@ -48,30 +61,30 @@ class Score:
                 "p_above_noise": self.p_above_noise}
 
 
-def model_errors(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> list[np.ndarray]:
-    """Mean error periods of ``runner``'s model on the validation ``runs`` (same order as ``residuals``)."""
-    return [res.measured - steady_mean(run, runner.simulate(run).y) for run, res in zip(runs, residuals)]
+def model_residuals(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> list[Residual]:
+    """The residuals of ``runner``'s model on the validation ``runs`` (same order and roles as ``residuals``)."""
+    return [residual_of(run, runner.simulate(run).y, res.role) for run, res in zip(runs, residuals)]
 
 
-def _detection_power(residuals: list[Residual], errors: list[np.ndarray] | None) -> tuple[float, float]:
+def _detection_power(residuals: list[Residual]) -> tuple[float, float]:
     power = noise = 0.0
-    for i, res in enumerate(residuals):
+    for res in residuals:
         if res.kind != "multisine":
             continue
         lines = classify_lines(res.period, res.fs, res.excited_bins)
         k = np.flatnonzero(((lines.kind == ODD) | (lines.kind == EVEN)) & lines.in_band)
-        E = spectra(res.residual if errors is None else errors[i])[k]
-        power += float(np.sum(np.abs(E) ** 2))
+        power += float(np.sum(np.abs(res.spectrum[k]) ** 2))
         noise += float(np.sum(res.noise_var[k]))
     return power, noise
 
 
-def score(residuals: list[Residual], errors: list[np.ndarray] | None = None) -> Score:
-    """The :class:`Score` of a model whose validation errors are ``errors`` (default: the original)."""
-    original, noise = error_power(residuals)
-    power, _ = error_power(residuals, errors)
-    before, noise_lines = _detection_power(residuals, None)
-    after, _ = _detection_power(residuals, errors)
+def score(original: list[Residual], model: list[Residual] | None = None) -> Score:
+    """The :class:`Score` of a model whose validation residuals are ``model`` (default: the original's)."""
+    model = original if model is None else model
+    original_power, _ = error_power(original)
+    power, noise = error_power(model)
+    before, _ = _detection_power(original)
+    after, noise_lines = _detection_power(model)
     explained = (before - after) / (before - noise_lines) if before > noise_lines else float("nan")
-    return Score(math.sqrt(power), math.sqrt(noise), 10 * math.log10(original / power),
-                 10 * math.log10(power / noise), explained, error_test(residuals, errors).p_value)
+    return Score(math.sqrt(power), math.sqrt(noise), 10 * math.log10(original_power / power),
+                 10 * math.log10(power / noise), explained, error_test(model).p_value)

@@ -13,8 +13,8 @@ measured output (:meth:`~nlsid.diagnose.simulation.ModelRunner.response`: G d in
 loop's sensitivity in closed loop). This is the residual "against the model's internal signals"
 made quantitative: parameters that enter linearly are the least-squares regression of e on the
 responses (over the mean steady-state periods of the estimation runs), one shape parameter
-(a threshold, a Stribeck velocity) is chosen by a bounded scalar search of the same residual sum of
-squares. The standard errors are those of ordinary least squares, ``s^2 (X^T X)^-1``.
+is chosen by the same residual sum of squares: a threshold by a bounded scalar search, a Stribeck
+velocity on a grid (:func:`_estimate_stribeck`). The standard errors are those of ordinary least squares, ``s^2 (X^T X)^-1``.
 
 Library (signature = what the evidence shows when it is the cause; extension = the config keys):
 
@@ -25,6 +25,8 @@ coulomb             odd distortion; BLA gain rises with       ``nonlinearities: 
                     level; residual force jumps at v = 0
 stribeck            as coulomb, with a break-away peak at     ``nonlinearities: stribeck``
                     low velocity                              (fs, fc, vs; delta = 2)
+lugre               as stribeck, with presliding: a stiff     ``nonlinearities: lugre`` (sigma0,
+                    force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0)
 cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
                     level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
 input_saturation    odd distortion; BLA gain falls with       ``input_nonlinearity: saturation``
@@ -37,12 +39,21 @@ quadratic_output    even distortion                           ``output_nonlinear
                                                               [0, 1, a2] (a2)
 missing_resonance   BLA differs from the model around one     transfer function times
                     frequency, no distortion                  b0 / (s^2 + 2 zeta wr s + wr^2)
-                                                              (fr = wr / 2 pi in Hz, zeta, b0)
+                                                              (fr = wr / 2 pi in Hz, zeta, b0); a
+                                                              mass_spring_damper becomes its
+                                                              transfer function (mode in series)
+wrong_mechanics     BLA differs around the model's own        ``mass``, ``damping``, ``stiffness``
+                    resonance (height, frequency), no         of a mass_spring_damper corrected
+                    distortion                                (main: damping)
 delay               BLA phase error growing linearly with     ``delay`` (seconds, whole samples)
                     frequency, gain right, no distortion
 =================== ========================================= ====================================
 
-The delay and the missing resonance are linear: they are estimated from the ratio
+Friction is one family of nested laws: Coulomb (fc) in Stribeck (fs = fc) in LuGre (sigma0 to
+infinity); the verdict names the richer law only when it is significantly better
+(:mod:`nlsid.diagnose.verdict`), and each richer law starts from the simpler one's fit. The
+mechanics correction starts at the model's own values and is refined by the fit engine like the
+forces. The delay and the missing resonance are linear: they are estimated from the ratio
 ``G_BLA / G_model`` of the measured and the model's BLA (evidence), the delay from the slope of its
 phase (weighted least squares, weights ``2 |G|^2 / var(G)``, the inverse variance of the phase),
 the resonance by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
@@ -62,22 +73,32 @@ from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
 from nlsid.io.run import Run
 
 STRIBECK_DELTA = 2.0
-STRIBECK_START_RATIO = 1.5  # fs / fc at the start of the fit when the signature cannot separate them
+STRIBECK_START_RATIO = 1.5  # fs / fc at the start of the fit when the signature shows no break-away peak
+LUGRE_DEFLECTIONS = (1e-1, 1e-2, 1e-3, 1e-4)  # fs / sigma0 over the rms position, LuGre start grid
+STRIBECK_GRID = 25         # Stribeck velocities tried for the start values (a factor 1.21 apart)
 
 
 @dataclass
 class Context:
     """What the estimates need: the nominal model, the estimation runs, their residual periods, the
-    model's internal signals on them (full length) and the BLA levels (measured, model)."""
+    model's internal signals on them (full length), the BLA levels (measured, model) and the
+    final estimates of the hypotheses before this one in :data:`LIBRARY`, by name."""
 
     runner: ModelRunner
     runs: list[Run]
     residuals: list[np.ndarray]
     internal: list[dict[str, np.ndarray]]
     bla_levels: tuple = ()
+    fitted: dict = field(default_factory=dict)
 
     def target(self) -> np.ndarray:
         return np.concatenate(self.residuals)
+
+    def simulation_rss(self, data: dict) -> float:
+        """Sum of squares of measured minus simulated mean steady-state periods of the model ``data``."""
+        runner = self.runner.with_changes(data)
+        return float(sum(np.sum((steady_mean(run, run.y) - steady_mean(run, runner.simulate(run).y)) ** 2)
+                         for run in self.runs))
 
     def response(self, signals: list[np.ndarray], where: str) -> np.ndarray:
         """Stacked mean steady-state response of every run to its disturbance (``process`` or ``output``)."""
@@ -123,14 +144,10 @@ def _regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Esti
                     10 * math.log10(before / rss) if rss > 0 else float("inf"))
 
 
-def _scan(cost: Callable[[float], float], lower: float, upper: float, log: bool = False) -> float:
+def _scan(cost: Callable[[float], float], lower: float, upper: float) -> float:
     """The shape parameter in [lower, upper] that minimises ``cost`` (bounded Brent search)."""
     from scipy.optimize import minimize_scalar
 
-    if log:
-        result = minimize_scalar(lambda q: cost(math.exp(q)), bounds=(math.log(lower), math.log(upper)),
-                                 method="bounded", options={"xatol": 1e-3})
-        return float(math.exp(result.x))
     result = minimize_scalar(cost, bounds=(lower, upper), method="bounded",
                              options={"xatol": 1e-4 * (upper - lower)})
     return float(result.x)
@@ -169,27 +186,61 @@ def _stribeck_columns(ctx: Context, vs: float) -> list[np.ndarray]:
 
 
 def _estimate_stribeck(ctx: Context) -> Estimate | str:
+    """Stribeck start values: for each Stribeck velocity vs of a log grid (:data:`STRIBECK_GRID`
+    values from 1e-2 to 1 times the model's rms velocity) the levels fs and fc enter linearly and
+    are regressed; the start is the grid point of least residual among those with a break-away
+    peak, fs > fc > 0. A continuous search of vs is not used: the first-order cost has spurious
+    minima at small vs with fs < 0 (the force then cancels part of the Coulomb step), and a start
+    at a tiny vs leaves fs without effect on the simulation, so the fit engine cannot move it.
+    Without a physical grid point the start is Coulomb's fc with fs = STRIBECK_START_RATIO fc and
+    vs the median model speed (where fs acts on half of the samples).
+    """
     if _needs(ctx, "velocity"):
         return _needs(ctx, "velocity")
     y = ctx.target()
-    v_rms = float(np.sqrt(np.mean(np.concatenate([s["velocity"] for s in ctx.internal]) ** 2)))
-
-    def rss(vs: float) -> float:
-        X = np.column_stack(_stribeck_columns(ctx, vs))
-        return float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
-
-    vs = _scan(rss, 1e-3 * v_rms, v_rms, log=True)
-    est = _regress(y, _stribeck_columns(ctx, vs), ["fs", "fc"])
-    if est.values["fc"] > 0 and est.values["fs"] > 0:
+    speed = np.abs(np.concatenate([s["velocity"] for s in ctx.internal]))
+    v_rms = float(np.sqrt(np.mean(speed**2)))
+    best = None
+    for vs in np.geomspace(1e-2 * v_rms, v_rms, STRIBECK_GRID):
+        est = _regress(y, _stribeck_columns(ctx, vs), ["fs", "fc"])
+        if est.values["fs"] > est.values["fc"] > 0 and (best is None or est.explained_db > best[1].explained_db):
+            best = (float(vs), est)
+    if best is not None:
+        vs, est = best
         return Estimate({**est.values, "vs": vs}, {**est.std, "vs": float("nan")}, est.explained_db,
-                        "vs by a bounded search (no standard error)")
+                        f"vs on a grid of {STRIBECK_GRID} values (no standard error)")
     coulomb = _estimate_coulomb(ctx)
     if isinstance(coulomb, str):
         return coulomb
     fc = coulomb.values["fc"]
-    return Estimate({"fs": STRIBECK_START_RATIO * fc, "fc": fc, "vs": vs}, {k: float("nan") for k in ("fs", "fc", "vs")},
-                    float("nan"), f"levels not separable to first order: start fc from Coulomb, fs = "
-                                  f"{STRIBECK_START_RATIO:g} fc")
+    return Estimate({"fs": STRIBECK_START_RATIO * fc, "fc": fc, "vs": float(np.median(speed))},
+                    {k: float("nan") for k in ("fs", "fc", "vs")}, float("nan"),
+                    f"no break-away peak to first order: start fc from Coulomb, fs = {STRIBECK_START_RATIO:g} fc, "
+                    f"vs the median model speed")
+
+
+def _estimate_lugre(ctx: Context) -> Estimate | str:
+    """LuGre start values: the levels and the Stribeck velocity of the fitted Stribeck hypothesis
+    (LuGre's steady-state friction is that Stribeck curve with delta = 2), and the bristle
+    stiffness sigma0 from a log grid by the simulation error of the estimation runs: sigma0 such
+    that the presliding deflection fs / sigma0 is 10^-1 .. 10^-4 of the model's rms position (the
+    LuGre law reduces to Stribeck's when it is far smaller than the motion). The bristle damping
+    sigma1 and the viscous sigma2 are 0 (viscous damping is the model's own)."""
+    stribeck = ctx.fitted.get("stribeck")
+    if stribeck is None:
+        return "needs the Stribeck hypothesis's estimate to start from"
+    if _needs(ctx, "position"):
+        return _needs(ctx, "position")
+    position = np.concatenate([s["position"] for s in ctx.internal])
+    levels = {k: stribeck.values[k] for k in ("fc", "fs", "vs")}
+    spread = float(np.std(position))
+    grid = [levels["fs"] / (spread * ratio) for ratio in LUGRE_DEFLECTIONS]
+    extend = by_name("lugre").extend
+    costs = [ctx.simulation_rss(extend(ctx.runner.data, {"sigma0": sigma0, **levels})) for sigma0 in grid]
+    sigma0 = grid[int(np.argmin(costs))]
+    return Estimate({"sigma0": sigma0, **levels}, {"sigma0": float("nan"), **{k: stribeck.std[k] for k in levels}},
+                    10 * math.log10(float(np.sum(ctx.target() ** 2)) / min(costs)),
+                    "levels from the Stribeck fit; sigma0 on a grid of presliding deflections")
 
 
 def _estimate_cubic(ctx: Context) -> Estimate | str:
@@ -333,11 +384,26 @@ def _extend_delay(data: dict, values: dict) -> dict:
     return out
 
 
-def _transfer_function(runner: ModelRunner) -> str | None:
+def _resonance_applies(runner: ModelRunner) -> str | None:
     model = runner.data["model"]
-    if model["type"] != "transfer_function" or model.get("domain", "continuous") != "continuous":
-        return "needs a continuous transfer_function model"
-    return None
+    if model["type"] == "transfer_function" and model.get("domain", "continuous") == "continuous":
+        return None
+    if model["type"] == "mass_spring_damper" and not model.get("nonlinearities") and not model.get("initial"):
+        return None
+    return "needs a continuous transfer_function model, or a mass_spring_damper without forces and initial state"
+
+
+def _as_transfer_function(model: dict) -> dict:
+    """A mass_spring_damper as its transfer function from u to the output: gain / (m s^2 + c s + k)
+    for the position, times s for the velocity (the input/output blocks and the delay are kept)."""
+    if model["type"] == "transfer_function":
+        return model
+    out = {k: v for k, v in model.items() if k in ("input_nonlinearity", "output_nonlinearity", "delay")}
+    gain = float(model.get("gain", 1.0))
+    out.update(type="transfer_function", domain="continuous",
+               num=[gain, 0.0] if model.get("output", "position") == "velocity" else [gain],
+               den=[float(model["mass"]), float(model.get("damping", 0.0)), float(model.get("stiffness", 0.0))])
+    return out
 
 
 def _estimate_resonance(ctx: Context) -> Estimate | str:
@@ -366,9 +432,37 @@ def _estimate_resonance(ctx: Context) -> Estimate | str:
 def _extend_resonance(data: dict, values: dict) -> dict:
     out = copy.deepcopy(data)
     wr = 2 * math.pi * values["fr"]
-    model = out["model"]
+    model = out["model"] = _as_transfer_function(out["model"])
     model["num"] = [float(c) for c in np.asarray(model["num"], dtype=float) * values["b0"]]
     model["den"] = [float(c) for c in np.convolve(model["den"], [1.0, 2 * values["zeta"] * wr, wr * wr])]
+    return out
+
+
+MECHANICS = ("mass", "damping", "stiffness")
+
+
+def _mass_spring_damper(runner: ModelRunner) -> str | None:
+    return None if runner.kind == "mass_spring_damper" else "needs a mass_spring_damper model"
+
+
+def _estimate_mechanics(ctx: Context) -> Estimate | str:
+    """Start values: the model's own mass, damping and stiffness (the fit engine corrects them). A
+    zero damping starts at 5 % of critical, 0.1 sqrt(k m), so that it has an effect to fit."""
+    model = ctx.runner.data["model"]
+    values = {"mass": float(model["mass"]), "damping": float(model.get("damping", 0.0)),
+              "stiffness": float(model.get("stiffness", 0.0))}
+    if values["damping"] == 0:
+        if values["stiffness"] <= 0:
+            return "no damping and no positive stiffness to start a damping correction from"
+        values["damping"] = 0.1 * math.sqrt(values["stiffness"] * values["mass"])
+    if values["stiffness"] == 0:
+        return "no stiffness to start a stiffness correction from (the fit keeps the sign of each start)"
+    return Estimate(values, {k: float("nan") for k in values}, float("nan"), "start at the model's own values")
+
+
+def _set_keys(data: dict, values: dict) -> dict:
+    out = copy.deepcopy(data)
+    out["model"].update({k: float(v) for k, v in values.items()})
     return out
 
 
@@ -387,6 +481,10 @@ LIBRARY: tuple[Hypothesis, ...] = (
     Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
                "as Coulomb friction, with a break-away peak at low velocity",
                _mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs"), _force_paths(("fs", "fc", "vs"))),
+    Hypothesis("lugre", "LuGre friction", "friction", "sigma0", "N/m",
+               "as Stribeck friction, with presliding: a stiff friction force (bristles) after each velocity "
+               "reversal", _mechanical, _estimate_lugre, _add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0}),
+               ("sigma0", "fc", "fs", "vs"), _force_paths(("sigma0", "fc", "fs", "vs"))),
     Hypothesis("cubic_stiffness", "Cubic stiffness", "stiffness", "k3", "N/m^3",
                "odd distortion; the resonance moves with level; residual force cubic in position",
                _mechanical, _estimate_cubic, _add_force({"type": "cubic_stiffness"}), ("k3",), _force_paths(("k3",))),
@@ -412,7 +510,11 @@ LIBRARY: tuple[Hypothesis, ...] = (
                _no_block("output_nonlinearity"), _estimate_quadratic, _extend_quadratic, ("a2",)),
     Hypothesis("missing_resonance", "A missing resonance", "linear", "fr", "Hz",
                "BLA differs from the model around one frequency; no distortion",
-               _transfer_function, _estimate_resonance, _extend_resonance, ("fr", "zeta", "b0")),
+               _resonance_applies, _estimate_resonance, _extend_resonance, ("fr", "zeta", "b0")),
+    Hypothesis("wrong_mechanics", "Wrong damping, stiffness or mass", "linear", "damping", "N s/m",
+               "BLA differs from the model around its resonance (height, frequency); no distortion",
+               _mass_spring_damper, _estimate_mechanics, _set_keys, MECHANICS,
+               lambda data: {k: f"model.{k}" for k in MECHANICS}),
     Hypothesis("delay", "A dead time", "delay", "delay", "s",
                "BLA phase error growing linearly with frequency, gain right; no distortion",
                _always, _estimate_delay, _extend_delay, ("delay",)),

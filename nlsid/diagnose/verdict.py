@@ -12,10 +12,12 @@ Let ``E_0`` be the validation error power of the original model, ``E_h`` that of
    without a real improvement their ratio stays much closer to 1 than an F variable: the rule is
    conservative.)
 3. Among the hypotheses that explain, the best is the one with the smallest ``E_h``; a hypothesis
-   is *tied* with it when ``E_h / E_best < F*``. If every tied hypothesis belongs to the same family
-   (e.g. Coulomb and Stribeck friction, which contains it), the winner is the one with the fewest
-   parameters (the simplest sufficient cause). If tied hypotheses of different families remain,
-   no single cause is named: the verdict lists them.
+   is *tied* with it when ``E_h / E_best < F*``. If tied hypotheses of different families remain,
+   no single cause is named: the verdict lists them. If every tied hypothesis belongs to one
+   family (members nested from simple to rich, e.g. Coulomb in Stribeck in LuGre friction), the
+   cause is the simplest sufficient member: start from the explaining member with the fewest
+   parameters and move to a richer explaining member of the family only when its gain over the
+   current one is itself significant, ``E_current / E_richer > F*`` (the same F rule).
 4. Otherwise (a discrepancy, but no hypothesis explains it) the verdict says what was seen and that
    no hypothesis of the library explains it.
 
@@ -76,5 +78,15 @@ def decide(discrepancy: bool, original_power: float, candidates: list[Candidate]
     tied = [c for c in explaining if c.error_power / best.error_power < threshold]
     if len({c.family for c in tied}) > 1:
         return Verdict(AMBIGUOUS, None, tuple(c.name for c in tied), names, threshold)
-    winner = min(tied, key=lambda c: (c.n_parameters, c.error_power))
-    return Verdict(EXPLAINED, winner.name, tuple(c.name for c in tied), names, threshold)
+    return Verdict(EXPLAINED, simplest_sufficient(explaining, best.family, threshold).name,
+                   tuple(c.name for c in tied), names, threshold)
+
+
+def simplest_sufficient(explaining: list[Candidate], family: str, threshold: float) -> Candidate:
+    """Rule 3 within one family: the richer member only when its gain over the simpler is significant."""
+    members = sorted((c for c in explaining if c.family == family), key=lambda c: (c.n_parameters, c.error_power))
+    current = members[0]
+    for richer in members[1:]:
+        if richer.n_parameters > current.n_parameters and current.error_power / richer.error_power > threshold:
+            current = richer
+    return current

@@ -308,14 +308,20 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
     if sv[0] > 0 and sv[-1] < IDENTIFIABLE_RATIO * sv[0] and not np.any(norms == 0):
         parts = " and ".join(names[i] for i in np.argsort(-np.abs(vt[-1]))[:2])
         warnings.append(f"{parts}: the data cannot tell these apart (singular value ratio {sv[-1] / sv[0]:.1e})")
-    # (J^T J)^{-1} = V diag(1/sv^2) V^T; a singular value clamped at IDENTIFIABLE_RATIO sv[0]
-    # leaves a huge (not an infinite) variance along a direction the data do not determine.
-    floor = max(IDENTIFIABLE_RATIO * sv[0], np.finfo(float).tiny)
-    cov_x = (vt.T / np.maximum(sv, floor) ** 2) @ vt
-    cov = sigma2 * cov_x * np.outer(scale, scale)
-    std = np.sqrt(np.abs(np.diag(cov)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(std, std)
+    if sv[0] == 0:
+        # J = 0: no parameter has an effect, nothing is determined (infinite variances, no correlations).
+        std = np.full(p, math.inf)
+        cov = np.diag(std)
+        corr = np.full((p, p), math.nan)
+        np.fill_diagonal(corr, 1.0)
+    else:
+        # (J^T J)^{-1} = V diag(1/sv^2) V^T; a singular value clamped at IDENTIFIABLE_RATIO sv[0]
+        # leaves a huge (not an infinite) variance along a direction the data do not determine.
+        cov_x = (vt.T / np.maximum(sv, IDENTIFIABLE_RATIO * sv[0]) ** 2) @ vt
+        cov = sigma2 * cov_x * np.outer(scale, scale)
+        std = np.sqrt(np.abs(np.diag(cov)))
+        spread = np.sqrt(np.diag(cov_x))  # > 0: every singular value is clamped above 0
+        corr = cov_x / np.outer(spread, spread)
     for i in range(p):
         for j in range(i + 1, p):
             if abs(corr[i, j]) > CORRELATION_LIMIT:

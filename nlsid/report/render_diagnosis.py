@@ -78,6 +78,16 @@ def _tables(summary: dict) -> list[Table]:
                                      "excited dB", "odd dB", "even dB"], level_rows,
               note="Residual power above the noise at the in-band excited, odd and even lines (dB)."),
     ]
+    harmonic_rows = [[number(row["frequency_hz"], "g"), _level(row["level"]), str(row["runs"]),
+                      number(row["fundamental"]["above_noise_db"], ".1f"), number(row["odd"]["above_noise_db"], ".1f"),
+                      number(row["even"]["above_noise_db"], ".1f"),
+                      " ".join(number(x, ".0f") for x in row["harmonic_above_noise_db"][1:])]
+                     for row in ev.get("harmonics", [])]
+    if harmonic_rows:
+        tables.append(Table("Residual at the sine harmonics (HOSIDF)", ["frequency Hz", "level", "runs", "fundamental dB",
+                                                                       "odd dB", "even dB", "harmonics 2, 3, ... dB"],
+                            harmonic_rows, note="Residual power above the noise at the harmonics of each sine: what "
+                                                "the model misses of each HOSIDF (odd: odd nonlinearity, even: even)."))
     original = summary["original"]
     gain = summary.get("gain")
     gain_rows = [["original model", number(original["error_rms"], ".4g"), number(original["error_db"], ".1f"),
@@ -86,9 +96,12 @@ def _tables(summary: dict) -> list[Table]:
         ext = gain["extended"]
         gain_rows.append(["extended model", number(ext["error_rms"], ".4g"), number(ext["error_db"], ".1f"),
                           number(ext["above_floor_db"], ".1f")])
-    gain_rows.append(["noise floor", number(original["noise_rms"], ".4g"), number(original["noise_db"], ".1f"), "0.0"])
+    floor = gain["extended"] if gain else original
+    gain_rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "0.0"])
     tables.append(Table("Validation error", ["model", "rms", "dB", "above floor dB"], gain_rows,
-                        note="Mean steady-state period of the validation runs, without its mean value."))
+                        note="Mean steady-state period of the validation runs, without its mean value. Each model's "
+                             "floor is the noise in its own residual (period-to-period variance over P): the error "
+                             "the true model would show. The floor row is the best model's."))
     return tables
 
 
