@@ -161,7 +161,8 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
     return k1 * a * z - s1h * z + (k2 * a + sigma2) * v, a * (z + h * v)
 
 
-@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+# Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
+@njit(cache=True, fastmath={"contract"}, nogil=True)
 def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
     """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
 
