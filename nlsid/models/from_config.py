@@ -20,8 +20,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io import model_config as mc
-from nlsid.models import forces
-from nlsid.models import blocks
+from nlsid.models import blocks, forces
 from nlsid.models.blocks import static_map
 from nlsid.models.controller import pid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
@@ -106,14 +105,15 @@ MECHANICAL = ("mass_spring_damper", "two_mass_stage", "nonlinear_feedback")
 def plant(config, closed: bool) -> Plant:
     """The plant of an LTI or mechanical config; a plant without forces in open loop must be stable."""
     where = "model"
-    io = dict(input_block=blocks.encode(config.input_nonlinearity), output_block=blocks.encode(config.output_nonlinearity))
+    ends = dict(input_block=blocks.encode(config.input_nonlinearity),
+                output_block=blocks.encode(config.output_nonlinearity))
     if config.type in MECHANICAL:
         mech = _mechanical(config, where)
         elements = [_force(f, mech, f"{where}.nonlinearities[{i}]") for i, f in enumerate(config.nonlinearities)]
-        result = Plant(mech.ss, mech.x0, elements, **io)
+        result = Plant(mech.ss, mech.x0, elements, **ends)
     else:
         ss = lti(config, where)
-        result = Plant(ss, np.zeros(ss.order), **io)
+        result = Plant(ss, np.zeros(ss.order), **ends)
     if not closed and not result.forces:
         check_stable(result.ss, where)
     return result
