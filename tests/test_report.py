@@ -254,3 +254,21 @@ def test_recording_is_not_a_report_input(run_cli, tmp_path):
     write_recording(tmp_path / "rec.h5", [cases.sine_run("s", 2, 0.5, cases.two_branch)], provenance={})
     _one_line_error(run_cli("report", tmp_path / "rec.h5", "-o", tmp_path / "r.html"), "no report for a 'recording'")
     assert not (tmp_path / "r.html").exists()
+
+
+MODEL_CONFIGS = sorted(p for p in CONFIGS.glob("*.yaml") if p.name.startswith(("model_", "stage_model", "stage_true")))
+
+
+@pytest.mark.parametrize("config", MODEL_CONFIGS, ids=[p.stem for p in MODEL_CONFIGS])
+def test_every_shipped_model_config_renders(run_cli, tmp_path, config):
+    """Every model type and block in configs/ gets a page whose verdict names its nonlinear elements."""
+    from nlsid.io.config import load_yaml
+
+    result = run_cli("report", config, "-o", tmp_path / "m.html", "--json")
+    assert result.exit_code == 0, result.stderr
+    data, _ = load_yaml(config)
+    model = data["model"]
+    expected = [f["type"] for f in model.get("nonlinearities", [])]
+    expected += [model[k]["type"] for k in ("input_nonlinearity", "output_nonlinearity") if k in model]
+    for kind in expected:
+        assert kind.replace("_", " ") in result.json()["headline"]

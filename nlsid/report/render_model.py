@@ -32,6 +32,7 @@ _TITLES = {
     "mass_spring_damper": "Mass-spring-damper", "two_mass_stage": "Two-mass stage", "wiener": "Wiener system",
     "hammerstein": "Hammerstein system", "wiener_hammerstein": "Wiener-Hammerstein system",
     "lpl": "Parallel LPL (Wiener-Hammerstein) system",
+    "nonlinear_feedback": "Nonlinear feedback around an LTI system",
 }
 
 
@@ -137,6 +138,10 @@ def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
     plant = from_config.plant(model, closed=config.closed_loop is not None)
     label = "linear plant" + (" (nonlinear forces removed)" if plant.forces else "")
     nonlinear = [(f"nonlinearities[{i}]", f.model_dump()) for i, f in enumerate(getattr(model, "nonlinearities", []))]
+    for key in ("input_nonlinearity", "output_nonlinearity"):
+        block = getattr(model, key, None)
+        if block is not None:
+            nonlinear.append((key, block.model_dump()))
     return [Element(label, plant.ss)], nonlinear
 
 
