@@ -274,7 +274,7 @@ class Evidence:
 
     def findings(self) -> list[str]:
         """What the simulation gets wrong, in words, each with its size."""
-        out = [f"simulation error {self.error_rms:.3g} rms against a noise floor of {self.noise_rms:.3g} "
+        out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
                f"({self.overall.above_noise_db:+.1f} dB, p = {self.overall.p_value:.2g})"]
         for row in self.bla:
             if row["significant"]:
