@@ -87,78 +87,83 @@ def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
 @njit(cache=True, fastmath={"contract"}, nogil=True)
 def _derived(kinds: np.ndarray, p: np.ndarray, h: float, gains: np.ndarray) -> np.ndarray:
     """Per-element constants of the LuGre step for sub-step h and force gain g (computed once per
-    run): sigma0 + sigma1/h, sigma0 h + sigma1, sigma1/h, 1/vs, beta = h sigma0/fc, 1/((1 + g sigma2) beta)."""
-    d = np.zeros((p.shape[0], 6))
+    run): theta (:mod:`nlsid.models.forces`), 1/vs, sigma0 h, sigma1/h."""
+    d = np.zeros((p.shape[0], 4))
     for e in range(p.shape[0]):
         if kinds[e] == forces.LUGRE:
-            d[e, 0] = p[e, 0] + p[e, 1] / h
-            d[e, 1] = p[e, 0] * h + p[e, 1]
-            d[e, 2] = p[e, 1] / h
-            d[e, 3] = 1.0 / p[e, 5]
-            d[e, 4] = h * p[e, 0] / p[e, 3]
-            d[e, 5] = 1.0 / ((1.0 + gains[e] * p[e, 2]) * d[e, 4])
+            stiffness = gains[e] * (p[e, 0] * h + p[e, 1] + p[e, 2])
+            d[e, 0] = max(0.5, 1.0 - 0.5 / stiffness) if stiffness > 0.0 else 0.5
+            d[e, 1] = 1.0 / p[e, 5]
+            d[e, 2] = p[e, 0] * h
+            d[e, 3] = p[e, 1] / h
     return d
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float, g: float,
-           h: float) -> tuple[float, float]:
-    """LuGre force over a sub-step: the implicit step of nlsid.models.forces solved for v+.
+def _relaxation(x: float) -> tuple[float, float, float, float]:
+    """m0 = (1 - e^-x) / x (the mean of e^{-lambda t} over the sub-step, x = lambda h), r = (1 - m0) / x,
+    and their derivatives in x; a series below x = 1e-4 (truncation below x^3 / 24, no cancellation)."""
+    if x < 1e-4:
+        return 1.0 - x * (0.5 - x / 6.0), 0.5 - x * (1.0 / 6.0 - x / 24.0), x / 3.0 - 0.5, x / 12.0 - 1.0 / 6.0
+    inv_x = 1.0 / x
+    m0 = -math.expm1(-x) * inv_x
+    r = (1.0 - m0) * inv_x
+    dm0 = (1.0 - x * m0 - m0) * inv_x  # (e^-x - m0) / x
+    return m0, r, dm0, -(dm0 + r) * inv_x
 
-    The residual R(v) = v (1 + g F1(v)) + g F0(v) - v_free is increasing in v (the a(v) coupling is
-    a contraction), so the root has the sign of -R(0), where a = 1 and F0 = sigma0 z. On that side
-    R is smooth and Newton's method converges quadratically (safeguarded: an iterate that crosses
-    zero is replaced by half the previous one). ``d[e]`` holds the constants of :func:`_derived`.
-    Returns the force and the bristle state z at the end of the sub-step. Newton starts from
-    v = v_free - g F with F the ``previous`` sub-step's force: exact when the force does not
-    change, a better guess than the previous velocity when the mass accelerates.
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float, s_now: float, g: float,
+           h: float) -> tuple[float, float]:
+    """LuGre force over a sub-step and the bristle state z at its end (scheme and error in
+    :mod:`nlsid.models.forces`), solved for the weighted velocity vv = v + theta (v+ - v).
+
+    ``s_now`` and ``s_free`` are the velocity at the start and at the end without this force, so
+    vv = vv_free - theta g F(vv), vv_free = v + theta (v_free - v). The force over the sub-step is
+    F(vv) = f_z z + f_v vv, whose coefficients depend on x = h sigma0 |vv| / s(vv). The residual
+    R(vv) = vv + theta g F(vv) - vv_free has at vv = 0 the value theta g sigma0 z - vv_free, so the
+    root lies on the side of zero of -R(0), where |vv| is smooth: Newton's method there
+    (an iterate that crosses zero is replaced by half the previous one), from the prediction
+    v_free - g F_prev with F_prev the ``previous`` sub-step's force, until the step is below
+    TOLERANCE (|vv| + vs). ``d[e]`` holds the constants of :func:`_derived`.
     """
-    sigma0, sigma2, fc, fs, vs = p[e, 0], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
-    k1, k2, s1h, inv_vs, beta0 = d[e, 0], d[e, 1], d[e, 2], d[e, 3], d[e, 4]
-    r0 = g * sigma0 * z - s_free
+    sigma0, sigma1, sigma2, fc, fs, vs = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
+    theta, inv_vs, s0h, s1h = d[e, 0], d[e, 1], d[e, 2], d[e, 3]
+    a = 2.0 - 2.0 * theta  # weights of the mean and of the end value of z in the spring force
+    b = 2.0 * theta - 1.0
+    tg = theta * g
+    vv_free = s_now + theta * (s_free - s_now)
+    r0 = tg * sigma0 * z - vv_free
     if r0 == 0.0:
         return sigma0 * z, z
     sd = -1.0 if r0 > 0.0 else 1.0
-    v = s_free - g * previous  # warm start, when on the root's side
-    if v * sd <= 0.0:
-        v = -r0 / (1.0 + g * (k2 + sigma2))
-    hs = h * sigma0 * sd
-    # Sliding fast (|v| >= SLIDING vs, Stribeck term below rounding): level = fc and, with
-    # a = 1 / (1 + beta v), the step equation times (1 + beta v) is a quadratic in v.
-    beta = beta0 * sd
-    a0 = 1.0 + g * sigma2
-    s = s_free + g * s1h * z
-    qa = a0 * beta
-    inv_qa = d[e, 5] * sd  # 1 / qa
-    qb = a0 - s * beta + g * k2
-    qc = g * k1 * z - s
-    disc = qb * qb - 4.0 * qa * qc
-    if disc >= 0.0 and v * sd * inv_vs >= SLIDING:  # tried when the start value slides fast
-        root = -0.5 * (qb + math.copysign(math.sqrt(disc), qb))  # no cancellation
-        v_q = root * inv_qa
-        if v_q * sd * inv_vs < SLIDING:  # the other root
-            v_q = qc / root if root != 0.0 else 0.0
-        if v_q * sd * inv_vs >= SLIDING:
-            a = 1.0 / (1.0 + beta * v_q)
-            return k1 * a * z - s1h * z + (k2 * a + sigma2) * v_q, a * (z + h * v_q)
-    a = 1.0
+    vv = s_now + theta * (s_free - g * previous - s_now)
+    if vv * sd <= 0.0:  # the prediction is on the wrong side: the root of R linearised at x = 0
+        vv = -r0 / (1.0 + tg * (s0h * (0.5 * a + b) + sigma1 + sigma2))
+    force, decay, m0 = sigma0 * z, 1.0, 1.0
     for _ in range(forces.MAX_ITERATIONS):
-        w = v * inv_vs
+        w = vv * inv_vs
         ex = math.exp(-w * w) if w * w < SLIDING * SLIDING else 0.0
-        level = fc + (fs - fc) * ex
-        dlevel = -2.0 * (fs - fc) * ex * w * inv_vs
-        inv_den = 1.0 / (level + hs * v)
-        a = level * inv_den  # 1 / (1 + hs v / level)
-        da = hs * (dlevel * v - level) * inv_den * inv_den
-        f1 = k2 * a + sigma2
-        res = v * (1.0 + g * f1) + g * (k1 * a * z - s1h * z) - s_free
-        step = res / (1.0 + g * f1 + g * (v * k2 + k1 * z) * da)
-        v_new = v - step
-        if abs(step) <= forces.TOLERANCE * (abs(v) + vs) and v_new * sd > 0.0:
-            v = v_new  # remaining error about step^2 (Newton); a is off by |da| step
-            break
-        v = v_new if v_new * sd > 0.0 else 0.5 * v
-    return k1 * a * z - s1h * z + (k2 * a + sigma2) * v, a * (z + h * v)
+        inv_level = 1.0 / (fc + (fs - fc) * ex)
+        x = s0h * vv * sd * inv_level
+        m0, r, dm0, dr = _relaxation(x)
+        decay = 1.0 - x * m0
+        f_v = s0h * (a * r + b * m0) + sigma1 * m0 + sigma2
+        force = (sigma0 * (a * m0 + b * decay) - s1h * x * m0) * z + f_v * vv
+        # dF/dx (d decay/dx = -(m0 + x dm0)) and dx/dvv (the level s falls with |vv|)
+        df_dx = ((sigma0 * (a * dm0 - b * (m0 + x * dm0)) - s1h * (m0 + x * dm0)) * z
+                 + (s0h * (a * dr + b * dm0) + sigma1 * dm0) * vv)
+        dx_dvv = s0h * inv_level * (sd + 2.0 * (fs - fc) * ex * w * inv_vs * vv * sd * inv_level)
+        df_dvv = f_v + df_dx * dx_dvv
+        step = (vv + tg * force - vv_free) / (1.0 + tg * df_dvv)
+        v_new = vv - step
+        if abs(step) <= forces.TOLERANCE * (abs(vv) + vs) and v_new * sd > 0.0:
+            # F and z+ carried to v_new to first order: off by O(step^2), not by step (1 + theta g F'),
+            # which for stiff bristles (theta g F' ~ 1e3) would let a mass at rest creep
+            dz_dvv = (h * dm0 * vv - (m0 + x * dm0) * z) * dx_dvv + h * m0
+            return force - df_dvv * step, decay * z + h * m0 * vv - dz_dvv * step
+        vv = v_new if v_new * sd > 0.0 else 0.5 * vv
+    return force, decay * z + h * m0 * vv
 
 
 # Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
@@ -205,14 +210,14 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: f
           s_now: float, g: float, h: float) -> tuple[float, float]:
     """The force of element ``e`` held over one sub-step and its internal state after it (LuGre's
     bristle deflection; ``z``, unused by the other laws, is returned unchanged). ``previous`` is
-    the element's force over the previous sub-step, a starting point for LuGre's iteration.
+    the element's force over the previous sub-step (LuGre's prediction of the velocity).
 
     ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
     sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
     force held over the sub-step, ``h`` the sub-step length.
     """
     if kind == forces.LUGRE:
-        return _lugre(p, d, e, z, previous, s_free, g, h)
+        return _lugre(p, d, e, z, previous, s_free, s_now, g, h)
     if kind == forces.COULOMB:
         fc, fv = p[e, 0], p[e, 1]
         if _stick_or_slip(s_free, g, fc):
@@ -291,8 +296,8 @@ def simulate_loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupl
                     for e2 in range(n_el if i < j else e):
                         s_free -= coupling[j - i, e, e2] * f[i, e2]
                 s_now = 0.0
-                if kinds[e] in forces.POSITION_KINDS:  # the only laws that read the start value
-                    s_now = row_gamma[j, e] * p
+                if kinds[e] in forces.START_KINDS:  # the only laws that read the start value
+                    s_now = row_gamma[j, e] * p if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
                     for i in range(n):
                         s_now += row_pow[j, e, i] * x[i]
                     for i in range(j):
