@@ -10,10 +10,11 @@ from dataclasses import dataclass
 from typing import Any, Iterator
 
 import click
-import numpy as np
 from rich.console import Console
 from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from nlsid.io.result_file import json_safe
 
 LOGGER = logging.getLogger("nlsid")
 
@@ -50,23 +51,9 @@ json_option = click.option("--json", "as_json", is_flag=True, help="Print a mach
 force_option = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
 def emit_json(summary: dict) -> None:
     """Write a summary as one JSON document on stdout (layouts in docs/formats.md)."""
-    sys.stdout.write(json.dumps(_jsonable(summary), indent=2, sort_keys=True) + "\n")
+    sys.stdout.write(json.dumps(json_safe(summary), indent=2, sort_keys=True) + "\n")
     sys.stdout.flush()
 
 

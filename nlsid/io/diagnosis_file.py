@@ -28,7 +28,6 @@ a failed run leaves nothing; an existing folder is replaced only with ``force``.
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -37,35 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.result_file import datasets, json_safe, put
 
 FORMAT = "diagnosis"
 RESULTS_FORMAT = "diagnosis_results"
 FORMAT_VERSION = 1
 SUMMARY, RESULTS, EXTENDED = "summary.json", "results.h5", "extended_model.yaml"
-COMPLEX_LAYOUT = "re_im_last_axis"
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _put(group, name: str, value) -> None:
-    array = np.asarray(value)
-    if np.iscomplexobj(array):
-        dataset = group.create_dataset(name, data=np.stack([array.real, array.imag], axis=-1))
-        dataset.attrs["complex"] = COMPLEX_LAYOUT
-    else:
-        group.create_dataset(name, data=array)
 
 
 def _level_name(i: int) -> str:
@@ -86,14 +62,14 @@ def _write_results(path: Path, arrays: dict) -> None:
                     if key in ("level", "u_rms"):
                         sub.attrs[key] = float("nan") if value is None else float(value)
                     else:
-                        _put(sub, key, value)
+                        put(sub, key, value)
         for section in ("time", "validation"):
             group = handle.create_group(section)
             for key, value in arrays.get(section, {}).items():
                 if key in ("run_id", "fs"):
                     group.attrs[key] = value
                 else:
-                    _put(group, key, value)
+                    put(group, key, value)
 
 
 def extended_yaml(data: dict, header: list[str]) -> str:
@@ -101,7 +77,7 @@ def extended_yaml(data: dict, header: list[str]) -> str:
     import yaml
 
     comment = "".join(f"# {line}\n" for line in header)
-    return comment + yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None)
+    return comment + yaml.safe_dump(json_safe(data), sort_keys=False, default_flow_style=None)
 
 
 def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, extended: str | None,
@@ -123,7 +99,7 @@ def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, exte
             (tmp / EXTENDED).write_text(extended, encoding="utf-8")
         document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": provenance,
                     **summary, "files": files}
-        (tmp / SUMMARY).write_text(json.dumps(_jsonable(document), indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n", encoding="utf-8")
         os.chmod(tmp, 0o755)
         if target.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
@@ -140,11 +116,7 @@ def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, exte
 
 def _read_group(group) -> dict:
     out = {key: (float(v) if isinstance(v, (float, np.floating)) else v) for key, v in group.attrs.items()}
-    for key, dataset in group.items():
-        value = dataset[()]
-        if dataset.attrs.get("complex") == COMPLEX_LAYOUT:
-            value = value[..., 0] + 1j * value[..., 1]
-        out[key] = value
+    out.update(datasets(group, group.name))
     return out
 
 

@@ -10,14 +10,13 @@ config (``docs/configs.md``). The report holds the numbers behind it (layouts in
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from nlsid.io.atomic import check_writable, write_text_atomic
+from nlsid.io.result_file import json_safe
 
 FORMAT = "fit"
 FORMAT_VERSION = 1
@@ -29,24 +28,10 @@ def report_path(model_path: str | os.PathLike) -> Path:
     return path.with_name(f"{path.stem}.fit.json")
 
 
-def _plain(value):
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def model_yaml(config: dict, header: list[str]) -> str:
     """YAML text of a model config with a comment header (numbers round-trip exactly)."""
     comments = "".join(f"# {line}\n" for line in header)
-    return comments + yaml.safe_dump(_plain(config), sort_keys=False, default_flow_style=None, width=100)
+    return comments + yaml.safe_dump(json_safe(config), sort_keys=False, default_flow_style=None, width=100)
 
 
 def write_fit(model_path: str | os.PathLike, config: dict, header: list[str], report: dict, provenance: dict,
@@ -56,7 +41,7 @@ def write_fit(model_path: str | os.PathLike, config: dict, header: list[str], re
     check_writable(model_path, force)
     check_writable(json_path, force)
     document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": provenance,
-                **_plain(report)}
+                **json_safe(report)}
     write_text_atomic(json_path, json.dumps(document, indent=2, sort_keys=True) + "\n", force=force)
     write_text_atomic(model_path, model_yaml(config, header), force=force)
     return Path(model_path), json_path
