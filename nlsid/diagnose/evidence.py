@@ -275,7 +275,7 @@ class Evidence:
     def findings(self) -> list[str]:
         """What the simulation gets wrong, in words, each with its size."""
         out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
-               f"({self.overall.above_noise_db:+.1f} dB, p = {self.overall.p_value:.2g})"]
+               f"({self.overall.above_noise_db:+.1f} dB, {_p_text(self.overall.p_value)})"]
         for row in self.bla:
             if row["significant"]:
                 out.append(f"level {_name(row['level'])}: model FRF outside the BLA's 95% bounds at "
@@ -287,20 +287,32 @@ class Evidence:
                 if test["significant"]:
                     out.append(f"level {_name(row['level'])}: {name} distortion the model does not produce, "
                                f"{test['above_noise_db']:.1f} dB above the noise")
-        for row in self.harmonics:
-            for name in ("odd", "even"):
-                if row[name]["significant"]:
-                    sizes = ", ".join(f"{h}: {x:.0f} dB" for h, x in enumerate(row["harmonic_above_noise_db"], 1)
-                                      if (h % 2 == 1) == (name == "odd") and h > 1)
-                    out.append(f"sine {row['frequency_hz']:g} Hz, level {_name(row['level'])}: {name} harmonics "
-                               f"the model does not produce, {row[name]['above_noise_db']:.1f} dB above the noise "
-                               f"({sizes})")
+        out += self._harmonic_findings()
         changes = [row for row in self.levels if math.isfinite(row.get("bla_change_max_db", float("nan")))]
         if len(self.levels) > 1 and changes:
             last = changes[-1]
             out.append(f"BLA changes by {last['bla_change_max_db']:+.1f} dB over the levels; the model's by "
                        f"{last['model_bla_change_max_db']:+.1f} dB")
         return out
+
+
+    def _harmonic_findings(self) -> list[str]:
+        """One line per harmonic class over all sine cells (the per-cell numbers are in the summary)."""
+        out = []
+        cells = len(self.harmonics)
+        frequencies = sorted({row["frequency_hz"] for row in self.harmonics})
+        for name in ("odd", "even"):
+            seen = [row[name]["above_noise_db"] for row in self.harmonics if row[name]["significant"]]
+            if seen:
+                out.append(f"sines ({cells} cells, {frequencies[0]:g} to {frequencies[-1]:g} Hz): {name} harmonics "
+                           f"the model does not produce in {len(seen)} of {cells} cells, "
+                           f"{min(seen):.0f} to {max(seen):.0f} dB above the noise")
+        return out
+
+
+def _p_text(p: float) -> str:
+    """A p-value for reading: below double precision's resolution it is a bound, not 0."""
+    return "p < 1e-15" if p < 1e-15 else f"p = {p:.2g}"
 
 
 def _name(level) -> str:
