@@ -219,40 +219,15 @@ class _Basis:
         return tf, np.concatenate([fa[self.free_a], fb]), names
 
 
-def _companion(num_asc: np.ndarray, den_asc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Controller canonical form of B/A given in ascending powers (A's leading coefficient nonzero)."""
-    lead = den_asc[-1]
-    a = den_asc[::-1] / lead                       # descending, monic
-    b = np.zeros(a.size)
-    b[a.size - num_asc.size:] = num_asc[::-1] / lead
-    n = a.size - 1
-    A = np.zeros((n, n))
-    if n:
-        A[0, :] = -a[1:]
-        A[1:, :-1] = np.eye(n - 1)
-    B = np.zeros(n)
-    if n:
-        B[0] = 1.0
-    C = b[1:] - b[0] * a[1:]
-    return A, B, C, float(b[0])
-
-
 def _zoh_response(num_asc: np.ndarray, den_asc: np.ndarray, step: float, z: np.ndarray) -> np.ndarray:
     """ZOH-sampled response C (zI - Phi)^{-1} Gamma + D of B(p)/A(p) (p in units where a sample
     lasts ``step``), at the points z = e^{j w h}."""
-    from scipy.linalg import expm
+    from nlsid.models.lti import StateSpace, from_transfer_function, zoh
 
-    A, B, C, D = _companion(np.asarray(num_asc, float), np.asarray(den_asc, float))
-    n = A.shape[0]
-    if n == 0:
-        return np.full(z.shape, D, dtype=complex)
-    M = np.zeros((n + 1, n + 1))
-    M[:n, :n], M[:n, n] = A * step, B * step
-    E = expm(M)
-    Phi, Gamma = E[:n, :n], E[:n, n]
-    system = z[:, None, None] * np.eye(n)[None] - Phi[None]
-    x = np.linalg.solve(system, np.broadcast_to(Gamma.astype(complex), (z.size, n))[..., None])[..., 0]
-    return x @ C + D
+    continuous = from_transfer_function(np.asarray(num_asc, float)[::-1], np.asarray(den_asc, float)[::-1],
+                                        False, 0.0, "fit")
+    Phi, Gamma = zoh(continuous.A, continuous.B, step)
+    return StateSpace(Phi, Gamma, continuous.C, continuous.D, discrete=True).frequency_response(z)
 
 
 def _weights(data: FRFData) -> np.ndarray:

@@ -45,12 +45,12 @@ class StateSpace:
     def frequency_response(self, s_or_z: np.ndarray) -> np.ndarray:
         """C (xI - A)^{-1} B + D at the complex points ``s_or_z`` (s = j w or z = e^{j w Ts}); no delay."""
         points = np.atleast_1d(np.asarray(s_or_z, dtype=complex))
-        out = np.full(points.shape, complex(self.D))
-        eye = np.eye(self.order)
-        for i, p in enumerate(points):
-            if self.order:
-                out[i] += self.C @ np.linalg.solve(p * eye - self.A, self.B)
-        return out
+        if not self.order:
+            return np.full(points.shape, complex(self.D))
+        system = points.reshape(-1, 1, 1) * np.eye(self.order) - self.A
+        rhs = np.broadcast_to(self.B.astype(complex), (points.size, self.order))[..., None]
+        x = np.linalg.solve(system, rhs)[..., 0]
+        return (x @ self.C + self.D).reshape(points.shape)
 
 
 def delay_samples(delay: float, fs: float, where: str) -> int:
