@@ -16,6 +16,7 @@ exit code.
 
 from __future__ import annotations
 
+import json
 import os
 import shlex
 import time
@@ -119,6 +120,9 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
     for step in steps:
         if not always and up_to_date(step):
             done.append({"step": step.text, "status": "up to date", "seconds": 0.0, "output": str(step.output)})
+            headline = stored_headline(step)
+            if headline:
+                done[-1]["headline"] = headline
             continue
         step.output.parent.mkdir(parents=True, exist_ok=True)
         console.rule(f"nlsid {step.text}", style="dim")
@@ -126,12 +130,29 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
         code, headline = _invoke(cli, root, step)
         done.append({"step": step.text, "status": "ran" if code == EXIT_OK else f"failed ({code})",
                      "seconds": round(time.perf_counter() - started, 2), "output": str(step.output)})
+        headline = headline or (stored_headline(step) if code == EXIT_OK else None)
         if headline:
             done[-1]["headline"] = headline
         if code != EXIT_OK:
             _finish(done, as_json)
             raise click.exceptions.Exit(code)
     _finish(done, as_json)
+
+
+def stored_headline(step: Step) -> str | None:
+    """The verdict an up-to-date step would print: the headline of the diagnosis folder it wrote
+    (``diagnose``) or read (``report``), from its summary.json (docs/formats.md)."""
+    for path in (step.output, *step.inputs):
+        summary = path / "summary.json"
+        if not summary.is_file():
+            continue
+        try:
+            data = json.loads(summary.read_text())
+        except (OSError, ValueError):
+            return None
+        if isinstance(data, dict) and data.get("nlsid_format") == "diagnosis":
+            return data.get("headline")
+    return None
 
 
 def _invoke(cli: click.Group, root: Path, step: Step) -> tuple[int, str | None]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from pathlib import Path
@@ -90,3 +91,28 @@ def test_shipped_pipeline_config_is_valid(run_cli, tmp_path):
                 assert (root / arg).exists() or (root / arg) in written, arg
         written.add(step.output)
     assert shutil.which("nlsid") is not None
+
+
+def test_the_verdict_is_printed_also_when_the_diagnosis_is_up_to_date(run_cli, project):
+    # The model is the simulated truth and the data carry only white output noise, so the verdict
+    # is "no discrepancy" (a false alarm has the probability of the test's level; the seed is fixed).
+    # A second run skips every step and must still print the verdict the diagnosis folder holds.
+    (project / "true.yaml").write_text(yaml.safe_dump({**MODEL, "disturbances": {"y_noise": 0.01, "seed": 3}}))
+    steps = ["design design.yaml -o out/excitation.h5",
+             "simulate true.yaml --excitation out/excitation.h5 -o out/recording.h5",
+             "diagnose --model model.yaml --data out/recording.h5 -o out/diagnosis",
+             "report out/diagnosis -o out/report.html"]
+    (project / "pipeline.yaml").write_text(yaml.safe_dump({"steps": steps}))
+    first = run_cli("run", project / "pipeline.yaml", "--json")
+    assert first.exit_code == 0, first.stderr
+    stored = json.loads((project / "out" / "diagnosis" / "summary.json").read_text())["headline"]
+    assert stored.startswith("No significant discrepancy")
+    assert [s.get("headline") for s in first.json()["steps"]] == [None, None, stored, stored]
+    second = run_cli("run", project / "pipeline.yaml")
+    assert second.exit_code == 0, second.stderr
+    shown = " ".join((second.stdout + second.stderr).split())  # the console writes to stderr
+    assert "up to date" in shown
+    assert f"verdict: {' '.join(stored.split())}" in shown
+    again = run_cli("run", project / "pipeline.yaml", "--json").json()["steps"]
+    assert [s["status"] for s in again] == ["up to date"] * 4
+    assert [s.get("headline") for s in again] == [None, None, stored, stored]
