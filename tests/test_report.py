@@ -272,3 +272,42 @@ def test_every_shipped_model_config_renders(run_cli, tmp_path, config):
     expected += [model[k]["type"] for k in ("input_nonlinearity", "output_nonlinearity") if k in model]
     for kind in expected:
         assert kind.replace("_", " ") in result.json()["headline"]
+
+
+def test_phase_is_unwrapped_along_frequency_and_bounds_follow():
+    # A pure delay of 2.5 samples has phase -2 pi f tau, which passes -180 degrees several times;
+    # unwrapped it is the straight line itself. A NaN line keeps NaN without breaking the others.
+    from nlsid.report.axes import unwrapped_phase
+
+    f = np.linspace(0.01, 0.49, 60)
+    G = np.exp(-2j * np.pi * f * 2.5)
+    G[7] = np.nan
+    degrees, shift = unwrapped_phase(G)
+    expected = -360 * f * 2.5
+    keep = np.arange(f.size) != 7
+    np.testing.assert_allclose(degrees[keep], expected[keep], atol=1e-9)
+    assert np.isnan(degrees[7])
+    np.testing.assert_allclose(np.degrees(np.angle(G[keep]) + shift[keep]), expected[keep], atol=1e-9)
+
+
+def test_log_axes_carry_plain_number_labels():
+    from matplotlib.figure import Figure
+
+    from nlsid.report.axes import plain_log_ticks
+
+    def labels(low, high):
+        axis = Figure().add_subplot()
+        axis.semilogx([low, high], [0, 1])
+        plain_log_ticks(axis.xaxis)
+        low_, high_ = axis.get_xlim()
+        out = []
+        for locs, formatter in ((axis.xaxis.get_majorticklocs(), axis.xaxis.get_major_formatter()),
+                                (axis.xaxis.get_minorticklocs(), axis.xaxis.get_minor_formatter())):
+            formatter.set_locs(locs)
+            out += [formatter(loc, i) for i, loc in enumerate(locs) if low_ <= loc <= high_]
+        return out
+
+    narrow = labels(1.0, 4.0)  # less than a decade: minor ticks labelled
+    assert {"1", "2", "3", "4"} <= set(narrow) and not any("10^" in s or "times" in s for s in narrow)
+    wide = [s for s in labels(0.5, 200.0) if s]  # several decades: the powers of ten only
+    assert set(wide) == {"1", "10", "100"}

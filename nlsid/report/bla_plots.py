@@ -19,6 +19,7 @@ import numpy as np
 
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
+from nlsid.report.axes import plain_log_ticks, unwrapped_phase
 
 
 def _db(power: np.ndarray) -> np.ndarray:
@@ -85,9 +86,10 @@ def bla_figure(level: LevelResult):
     magnitude.set_ylabel("[dB]")
     magnitude.set_title(f"BLA ({robust.method}): {_title(level)}")
     magnitude.legend(fontsize="small", loc="best")
-    phase.plot(f, np.degrees(np.angle(robust.G)), color="k")
-    phase.fill_between(f, np.degrees(robust.bounds.phase_lo), np.degrees(robust.bounds.phase_hi), color="k",
-                       alpha=0.15)
+    degrees, shift = unwrapped_phase(robust.G)
+    phase.plot(f, degrees, color="k")
+    phase.fill_between(f, np.degrees(robust.bounds.phase_lo + shift), np.degrees(robust.bounds.phase_hi + shift),
+                       color="k", alpha=0.15)
     phase.set_xlabel("frequency [Hz]")
     phase.set_ylabel("phase [deg]")
     return figure
@@ -106,6 +108,7 @@ def levels_figure(levels: list[LevelResult]):
     rms = [row["u_rms"] for row in rows]
     trend.semilogx(rms, [row["nl_var_db"] for row in rows], "o--", color="tab:red", label="nonlinear variance")
     trend.semilogx(rms, [row["noise_var_db"] for row in rows], "s:", color="tab:green", label="noise variance")
+    plain_log_ticks(trend.xaxis)
     trend.set_xlabel("u rms")
     trend.set_ylabel("band mean, relative to |G_BLA|^2 [dB]")
     trend.legend(fontsize="small", loc="best")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from nlsid.analysis.lines import EVEN, EXCITED, ODD
+from nlsid.report.axes import plain_log_ticks, unwrapped_phase
 from nlsid.report.html import png
 
 
@@ -42,13 +43,14 @@ def model_vs_bla(level: dict) -> bytes:
     mag.plot(f[out], 20 * np.log10(np.abs(G[out])), "kx", label="model outside bounds")
     mag.set_ylabel("|G| (dB)")
     mag.legend(fontsize=8)
-    phase.plot(f, np.degrees(np.unwrap(np.angle(G))), "C0.-")
-    phase.plot(f, np.degrees(np.unwrap(np.angle(Gm))), "C3--")
+    phase.plot(f, unwrapped_phase(G)[0], "C0.-")
+    phase.plot(f, unwrapped_phase(Gm)[0], "C3--")
     phase.set_ylabel("phase (deg)")
     phase.set_xlabel("frequency (Hz)")
     for axis in (mag, phase):
         axis.set_xscale("log")
         axis.grid(True, alpha=0.3)
+        plain_log_ticks(axis.xaxis)
     return png(figure)
 
 
@@ -77,6 +79,7 @@ def bla_vs_level(levels: list[dict]) -> bytes:
         axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G"])), f"C{i}-", label=f"measured, level {name}")
         axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G_model"])), f"C{i}--", label=f"model, level {name}")
     axis.set_xscale("log")
+    plain_log_ticks(axis.xaxis)
     axis.set_xlabel("frequency (Hz)")
     axis.set_ylabel("|G| (dB)")
     axis.grid(True, alpha=0.3)

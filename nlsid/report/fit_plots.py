@@ -11,6 +11,8 @@ import io
 
 import numpy as np
 
+from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+
 
 def _db(magnitude: np.ndarray) -> np.ndarray:
     magnitude = np.asarray(magnitude, dtype=float)
@@ -35,14 +37,15 @@ def tf_fit_png(frequency: np.ndarray, data: np.ndarray, model: np.ndarray, model
     magnitude.set_title(title)
     magnitude.legend(fontsize="small", ncol=3)
     magnitude.grid(True, alpha=0.3)
-    phase.plot(frequency, np.degrees(np.unwrap(np.angle(data))), "k.", markersize=3, label="BLA")
-    phase.plot(frequency, np.degrees(np.unwrap(np.angle(model))), color="tab:blue", linewidth=1.2, label="model")
+    phase.plot(frequency, unwrapped_phase(data)[0], "k.", markersize=3, label="BLA")
+    phase.plot(frequency, unwrapped_phase(model)[0], color="tab:blue", linewidth=1.2, label="model")
     phase.set_ylabel("phase (deg)")
     phase.set_xlabel("frequency (Hz)")
     phase.grid(True, alpha=0.3)
     if frequency.size and frequency.min() > 0 and frequency.max() / frequency.min() > 20:
-        magnitude.set_xscale("log")
-        phase.set_xscale("log")
+        for axis in (magnitude, phase):
+            axis.set_xscale("log")
+            plain_log_ticks(axis.xaxis)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=110)
     return buffer.getvalue()

@@ -12,6 +12,7 @@ import numpy as np
 
 from nlsid.analysis.hosidf import HOSIDFGrid, RunSpectra
 from nlsid.analysis.linearity_cost import Sweep
+from nlsid.report.axes import plain_log_ticks, unwrapped_phase
 
 
 def _pyplot():
@@ -49,6 +50,7 @@ def plot_versus_amplitude(grid: HOSIDFGrid, fi: int, path: Path) -> Path:
     ax.set_title(f"HOSIDFs at {grid.frequencies[fi]:g} Hz")
     ax.legend(ncol=2, fontsize="small")
     ax.grid(True, which="both", alpha=0.3)
+    plain_log_ticks(ax.xaxis)
     return _save(fig, path)
 
 
@@ -59,7 +61,7 @@ def plot_first_hosidf_map(grid: HOSIDFGrid, path: Path, analytic: np.ndarray | N
     h1 = grid.field("h")[:, :, 1]
     for ai, level in enumerate(grid.levels):
         line, = ax_mag.semilogy(grid.frequencies, np.abs(h1[:, ai]), "o-", ms=3, label=f"a = {level:g}")
-        ax_phase.plot(grid.frequencies, np.degrees(np.angle(h1[:, ai])), "o-", ms=3, color=line.get_color())
+        ax_phase.plot(grid.frequencies, unwrapped_phase(h1[:, ai])[0], "o-", ms=3, color=line.get_color())
         if analytic is not None:
             ax_mag.semilogy(grid.frequencies, np.abs(analytic[:, ai, 1]), "--", color=line.get_color())
     ax_mag.set_ylabel("$|H_1|$")
@@ -69,6 +71,7 @@ def plot_first_hosidf_map(grid: HOSIDFGrid, path: Path, analytic: np.ndarray | N
     for ax in (ax_mag, ax_phase):
         ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
+    plain_log_ticks(ax_phase.xaxis)
     return _save(fig, path)
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
+from nlsid.report.axes import plain_log_ticks, unwrapped_phase
 from nlsid.report.html import Figure, Page, Table, number
 
 _TITLES = {
@@ -157,7 +158,7 @@ def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarra
         curves.append(("loop gain L = C P", loop))
     for name, values in curves:
         magnitude.semilogx(frequency, 20 * np.log10(np.abs(values)), label=name)
-        phase.semilogx(frequency, np.degrees(np.unwrap(np.angle(values))), label=name)
+        phase.semilogx(frequency, unwrapped_phase(values)[0], label=name)
     unit = "f / fs" if elements[0].ss.discrete else "frequency [Hz]"
     magnitude.set_ylabel("magnitude [dB]")
     phase.set_ylabel("phase [deg]")
@@ -165,6 +166,7 @@ def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarra
     magnitude.legend(fontsize="small", loc="best")
     for axis in (magnitude, phase):
         axis.grid(True, which="both", alpha=0.3)
+        plain_log_ticks(axis.xaxis)
     return png(figure)
 
 
