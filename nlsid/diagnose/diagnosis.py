@@ -161,6 +161,24 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     return Estimate(values, std, estimate.explained_db, note)
 
 
+def sufficient_simpler(hypothesis: Hypothesis, outcomes: list[Outcome]) -> Outcome | None:
+    """An already scored member of ``hypothesis``'s family with fewer parameters whose validation
+    error is not significantly above the noise (p >= ALPHA), or None.
+
+    Such a member makes fitting the richer one pointless: the verdict moves to a richer member only
+    when ``E_simpler / E_richer > F*`` (:mod:`nlsid.diagnose.verdict`), and with ``E_simpler``
+    within ``F*`` of the noise floor that needs ``E_richer`` below the floor, which on validation
+    runs (noise the fit never saw) happens with probability about ALPHA. Skipping them saves the
+    slowest fits (Stribeck and LuGre: about three quarters of a diagnosis of Coulomb friction).
+    """
+    for outcome in outcomes:
+        h = outcome.hypothesis
+        if (h.family == hypothesis.family and len(h.parameters) < len(hypothesis.parameters)
+                and outcome.score is not None and outcome.score.p_above_noise >= rules.ALPHA):
+            return outcome
+    return None
+
+
 def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list) -> None:
     try:
         extended = runner.with_changes(outcome.extended)
@@ -192,6 +210,12 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         reason = hypothesis.applies(runner)
         if reason is not None:
             outcome.reason = f"does not apply: {reason}"
+            continue
+        simpler = sufficient_simpler(hypothesis, outcomes)
+        if simpler is not None:
+            outcome.reason = (f"not fitted: {simpler.hypothesis.title} already reaches the noise floor "
+                              f"(p = {simpler.score.p_above_noise:.2g}), so this richer law cannot be "
+                              "significantly better")
             continue
         estimate = hypothesis.estimate(context)
         if isinstance(estimate, str):
