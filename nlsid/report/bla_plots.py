@@ -85,7 +85,8 @@ def bla_figure(level: LevelResult):
                            label="fast method: std nonlinear (even)")
     magnitude.set_ylabel("[dB]")
     magnitude.set_title(f"BLA ({robust.method}): {_title(level)}")
-    magnitude.legend(fontsize="small", loc="best")
+    # beside the axes: six curves spread over the whole height leave no free corner
+    magnitude.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
     degrees, shift = unwrapped_phase(robust.G)
     phase.plot(f, degrees, color="k")
     phase.fill_between(f, np.degrees(robust.bounds.phase_lo + shift), np.degrees(robust.bounds.phase_hi + shift),
