@@ -20,6 +20,14 @@ class CliResult:
     def json(self) -> dict:
         return json.loads(self.stdout)
 
+    def assert_one_line_error(self, *fragments: str) -> None:
+        """Bad input: exit code 2 and one line on stderr, no traceback, containing each fragment."""
+        assert self.exit_code == 2, (self.stdout, self.stderr)
+        lines = self.stderr.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in self.stderr, self.stderr
+        for fragment in fragments:
+            assert fragment in lines[0], lines[0]
+
 
 @pytest.fixture
 def run_cli():

@@ -93,14 +93,6 @@ def test_sweep_finds_friction_optimum(run_cli, tmp_path):
     assert len(list(figures.glob("sweep_*.png"))) == 4
 
 
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 2, (result.stdout, result.stderr)
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
-
-
 def test_bad_inputs(run_cli, lpl_recording, tmp_path):
     out = tmp_path / "o.h5"
     # a recording with a multisine run
@@ -108,8 +100,8 @@ def test_bad_inputs(run_cli, lpl_recording, tmp_path):
     ms = Run(run_id="ms", fs=cases.FS, kind="multisine", u=good.u, y=good.y, period=cases.N, transient_periods=12,
              excited_bins=np.array([1, 3]))
     write_recording(tmp_path / "multisine_only.h5", [ms], provenance={})
-    _one_line_error(run_cli("hosidf", tmp_path / "multisine_only.h5", "-o", out), "multisine_only.h5",
-                    "holds no single-sine runs")
+    run_cli("hosidf", tmp_path / "multisine_only.h5", "-o", out).assert_one_line_error(
+        "multisine_only.h5", "holds no single-sine runs")
     # a mixed recording: the multisine is skipped with a warning, the sine cell is analysed
     write_recording(tmp_path / "mixed.h5", [good, cases.sine_run("sine2", 2, 1.0, cases.two_branch), ms],
                     provenance={})
@@ -120,26 +112,27 @@ def test_bad_inputs(run_cli, lpl_recording, tmp_path):
     off = cases.sine_run("off", 2, 1.0, cases.two_branch)
     off.frequency = 2.5 * cases.FS / cases.N
     write_recording(tmp_path / "off.h5", [off], provenance={})
-    _one_line_error(run_cli("hosidf", tmp_path / "off.h5", "-o", out), "runs/off.frequency", "not on a bin")
+    run_cli("hosidf", tmp_path / "off.h5", "-o", out).assert_one_line_error("runs/off.frequency", "not on a bin")
     # a single repeat where the variance over repeats is asked for
     write_recording(tmp_path / "single.h5", [good], provenance={})
-    _one_line_error(run_cli("hosidf", tmp_path / "single.h5", "-o", out), "1 repeat", "Eq. 12")
+    run_cli("hosidf", tmp_path / "single.h5", "-o", out).assert_one_line_error("1 repeat", "Eq. 12")
     # a sweep parameter missing from a run
     runs = loop.closed_loop([0.0, 0.5], damping=0.0, periods=2, transient=0, substeps=1)
     runs[1].params = {}
     write_recording(tmp_path / "nosweep.h5", runs, provenance={})
-    _one_line_error(run_cli("hosidf", tmp_path / "nosweep.h5", "-o", out, "--sweep", "K_fc"), "kfc_01", "'K_fc' is missing")
+    run_cli("hosidf", tmp_path / "nosweep.h5", "-o", out, "--sweep", "K_fc").assert_one_line_error(
+        "kfc_01", "'K_fc' is missing")
     # nothing was written by the failures, and an existing output is kept without --force
     assert not out.exists()
     out.write_text("keep")
-    _one_line_error(run_cli("hosidf", lpl_recording, "-o", out), "--force")
+    run_cli("hosidf", lpl_recording, "-o", out).assert_one_line_error("--force")
     assert out.read_text() == "keep"
     # a model that is not a polynomial block structure
     model = tmp_path / "sat.yaml"
     model.write_text("model:\n  type: hammerstein\n  nonlinear: {type: saturation, lower: -1, upper: 1}\n"
                      "  linear: {type: transfer_function, num: [1], den: [1, 1]}\n")
-    _one_line_error(run_cli("hosidf", lpl_recording, "-o", tmp_path / "m.h5", "--model", model),
-                    "sat.yaml: model.nonlinear", "polynomial")
+    run_cli("hosidf", lpl_recording, "-o", tmp_path / "m.h5", "--model", model).assert_one_line_error(
+        "sat.yaml: model.nonlinear", "polynomial")
     assert not (tmp_path / "m.h5").exists()
 
 

@@ -219,32 +219,24 @@ def test_page_is_self_contained_and_escaped():
     assert "<b>Figure 1. First part.</b> Second part." in text
 
 
-def _one_line_error(result, *fragments):
-    assert result.exit_code == 2, (result.stdout, result.stderr)
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
-
-
 def test_bad_inputs_fail_cleanly_without_output(run_cli, tmp_path):
     out = tmp_path / "r.html"
-    _one_line_error(run_cli("report", tmp_path / "missing.h5", "-o", out), "missing.h5", "not found")
+    run_cli("report", tmp_path / "missing.h5", "-o", out).assert_one_line_error("missing.h5", "not found")
     (tmp_path / "notes.txt").write_text("hello")
-    _one_line_error(run_cli("report", tmp_path / "notes.txt", "-o", out), "notes.txt", "expected a bla.h5")
+    run_cli("report", tmp_path / "notes.txt", "-o", out).assert_one_line_error("notes.txt", "expected a bla.h5")
     (tmp_path / "empty").mkdir()
-    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "summary.json")
+    run_cli("report", tmp_path / "empty", "-o", out).assert_one_line_error("summary.json")
     (tmp_path / "empty" / "summary.json").write_text('{"nlsid_format": "diagnosis"}')
-    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "summary.json", "nlsid_format_version")
+    run_cli("report", tmp_path / "empty", "-o", out).assert_one_line_error("summary.json", "nlsid_format_version")
     (tmp_path / "empty" / "summary.json").write_text('{"nlsid_format": "weather"}')
-    _one_line_error(run_cli("report", tmp_path / "empty", "-o", out), "no report for a 'weather'")
+    run_cli("report", tmp_path / "empty", "-o", out).assert_one_line_error("no report for a 'weather'")
     (tmp_path / "bad.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  den: [1.0, -1.0]\n")
-    _one_line_error(run_cli("report", tmp_path / "bad.yaml", "-o", out), "bad.yaml", "unstable")
+    run_cli("report", tmp_path / "bad.yaml", "-o", out).assert_one_line_error("bad.yaml", "unstable")
     (tmp_path / "typo.yaml").write_text("model:\n  type: transfer_function\n  num: [1.0]\n  denn: [1.0, 1.0]\n")
-    _one_line_error(run_cli("report", tmp_path / "typo.yaml", "-o", out), "typo.yaml:")
+    run_cli("report", tmp_path / "typo.yaml", "-o", out).assert_one_line_error("typo.yaml:")
     assert not out.exists()
     out.write_text("keep")
-    _one_line_error(run_cli("report", CONFIGS / "model_resonance.yaml", "-o", out), "exists", "--force")
+    run_cli("report", CONFIGS / "model_resonance.yaml", "-o", out).assert_one_line_error("exists", "--force")
     assert out.read_text() == "keep"
     assert run_cli("report", CONFIGS / "model_resonance.yaml", "-o", out, "--force").exit_code == 0
 
@@ -252,7 +244,8 @@ def test_bad_inputs_fail_cleanly_without_output(run_cli, tmp_path):
 def test_recording_is_not_a_report_input(run_cli, tmp_path):
     cases = _load("test_hosidf")
     write_recording(tmp_path / "rec.h5", [cases.sine_run("s", 2, 0.5, cases.two_branch)], provenance={})
-    _one_line_error(run_cli("report", tmp_path / "rec.h5", "-o", tmp_path / "r.html"), "no report for a 'recording'")
+    run_cli("report", tmp_path / "rec.h5", "-o", tmp_path / "r.html").assert_one_line_error(
+        "no report for a 'recording'")
     assert not (tmp_path / "r.html").exists()
 
 
