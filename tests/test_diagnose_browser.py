@@ -12,7 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_diagnose_cli import _setup  # noqa: E402
-from test_report_browser import browse  # noqa: E402  (skips without chromium, fails in CI)
+from test_report_browser import assert_verdict_first_and_figures_shown, browse  # noqa: E402  (skips without chromium, fails in CI)
 
 
 def test_diagnosis_page_renders_with_verdict_and_figures_visible(run_cli, tmp_path):
@@ -20,15 +20,5 @@ def test_diagnosis_page_renders_with_verdict_and_figures_visible(run_cli, tmp_pa
     folder, page = tmp_path / "diagnosis", tmp_path / "diagnosis.html"
     assert run_cli("diagnose", "--model", model, "--data", rec, "-o", folder).exit_code == 0
     assert run_cli("report", folder, "-o", page).exit_code == 0
-    seen = browse(page, tmp_path)
-    assert seen["errors"] == []
-    assert seen["scripts"] == 1  # the probe only: the page itself has no script
-    verdict = seen["verdict"]
-    # The verdict comes first: laid out, visible, inside the first screen (900 px high window).
-    assert verdict["visibility"] == "visible" and verdict["display"] != "none"
-    assert verdict["height"] > 20 and 0 <= verdict["top"] < 900
-    assert verdict["text"].startswith("Cause: Coulomb friction (fc = ")
-    # model vs BLA, line spectrum, BLA vs level, residual vs state, before/after: all decoded and shown
-    assert len(seen["images"]) == 5
-    for image in seen["images"]:
-        assert image["natural_width"] > 0 and image["width"] > 100 and image["height"] > 100
+    # model vs BLA, line spectrum, BLA vs level, residual vs state, before/after: five figures
+    assert_verdict_first_and_figures_shown(browse(page, tmp_path), "Cause: Coulomb friction (fc = ", 5)

@@ -99,18 +99,22 @@ def test_mcap_missing_field_lists_the_fields(run_cli, tmp_path, mcap_source):
     assert_refused(result, tmp_path, mcap_source, "field 'state.pos' not found: fields in state are position")
 
 
-def test_given_period_that_does_not_fit(run_cli, tmp_path):
-    n = np.arange(2000)
+def sine_csv(tmp_path, samples: int):
+    """A CSV with one column u: a sine of period 100 samples."""
     source = tmp_path / "sine.csv"
-    source.write_text("u\n" + "\n".join(f"{v:.17g}" for v in np.sin(2 * np.pi * n / 100)) + "\n")
+    u = np.sin(2 * np.pi * np.arange(samples) / 100)
+    source.write_text("u\n" + "\n".join(f"{v:.17g}" for v in u) + "\n")
+    return source
+
+
+def test_given_period_that_does_not_fit(run_cli, tmp_path):
+    source = sine_csv(tmp_path, 2000)
     result = run_cli("import", source, "--fs", "100", "--period", "99", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "sine.csv:u", "not periodic with the given period of 99 samples")
 
 
 def test_too_many_transient_periods(run_cli, tmp_path):
-    n = np.arange(400)
-    source = tmp_path / "sine.csv"
-    source.write_text("u\n" + "\n".join(f"{v:.17g}" for v in np.sin(2 * np.pi * n / 100)) + "\n")
+    source = sine_csv(tmp_path, 400)
     result = run_cli("import", source, "--fs", "100", "--transient-periods", "4", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "--transient-periods", "4 leaves no steady period")
 
