@@ -38,6 +38,7 @@ def _read_v5(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str
 
     try:
         content = loadmat(path, simplify_cells=True)
+    # scipy.io raises NotImplementedError for HDF5-based (v7.3) content it cannot read: bad input here
     except (ValueError, TypeError, OSError, NotImplementedError) as exc:
         raise InputError(str(path), f"cannot read as a MATLAB file ({str(exc).splitlines()[0]})") from None
     variables = {k: v for k, v in content.items() if not k.startswith("__")}
