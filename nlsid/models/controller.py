@@ -74,7 +74,7 @@ def feedforward(r: np.ndarray, fs: float, periodic: bool, coulomb: float, veloci
     if coulomb == 0 and velocity == 0:
         return np.zeros_like(r)
     v = reference_velocity(r, fs, periodic)
-    out = np.sign(v)
+    out = np.sign(v, out=None if velocity else v)  # in place without a velocity term: one array
     out *= coulomb
     if velocity:
         v *= velocity

@@ -138,12 +138,13 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
     u_out, y_out = _run_kernel(Phi, Gu, ss, plant.x0, plant.forces, m, h, delay, controller, r, ff,
                                run.u, noise.process, noise.y, plant.input_block, plant.output_block)
     _check_finite(y_out, run.run_id)
+    u_out += noise.u  # in place: a fresh 8 MB array costs ~2 ms of page faults per 1e6 samples
     if loop is None:
-        return dataclasses.replace(run, u=u_out + noise.u, y=y_out, r=None)
+        return dataclasses.replace(run, u=u_out, y=y_out, r=None)
     # Closed loop: the excitation is the reference (it keeps the excitation's unit of u); the
     # recorded u is the plant input, whose unit the config does not state.
     units = {"r": run.units["u"]} if "u" in run.units else {}
-    return dataclasses.replace(run, u=u_out + noise.u, y=y_out, r=run.u.copy(), units=units)
+    return dataclasses.replace(run, u=u_out, y=y_out, r=run.u.copy(), units=units)
 
 
 def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int) -> np.ndarray:
