@@ -74,7 +74,7 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
     c = controller if closed else StateSpace(_EMPTY_2, _EMPTY_1, _EMPTY_1, 0.0, True)
     length = (r if closed else u).shape[0]
     u_out, y_out = np.empty(length), np.empty(length)
-    simulate_loop(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params),
+    simulate_loop(n_el)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params),
                   _f64(prop.row_pow), _f64(prop.row_gamma), _f64(prop.coupling), _f64(prop.col_pow),
                   float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
                   _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),

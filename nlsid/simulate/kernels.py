@@ -24,6 +24,7 @@ blocks act on held (or sampled) signals, so evaluating them once per sample is e
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -270,86 +271,94 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: f
     return p[e, 0] * mid * mid * mid, z
 
 
-@njit(cache=True, fastmath={"contract"}, nogil=True)
-def simulate_loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay,
-                  closed, Ac, Bc, Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params,
-                  u_out, y_out):
-    """Run the loop described in the module docstring; fill ``u_out`` and ``y_out``; return the final state.
+@functools.cache
+def simulate_loop(n_el: int):
+    """The kernel for ``n_el`` force elements (compiled once per count, cached on disk): with the
+    count a constant of the compiled code the force loops fold away (measured on the sample stage:
+    docs/commands.md, Speed).
 
-    ``phi`` .. ``col_pow`` are the closed-form coefficients of :class:`nlsid.simulate.propagation.Propagation`
-    (their first axis is the number of sub-steps + 1).
+    The kernel ``loop(phi, gamma, C, D, x0, kinds, ...)`` runs the loop described in the module
+    docstring, fills ``u_out`` and ``y_out`` and returns the final state. ``phi`` .. ``col_pow`` are
+    the closed-form coefficients of :class:`nlsid.simulate.propagation.Propagation` (their first
+    axis is the number of sub-steps + 1).
     """
-    n = phi.shape[0]
-    nc = Ac.shape[0]
-    n_el = kinds.shape[0]
-    substeps = row_pow.shape[0] - 1
-    x = x0.copy()
-    xn = np.empty(n)
-    xc = np.zeros(nc)
-    xcn = np.empty(nc)
-    state = np.zeros(n_el)
-    f = np.zeros((substeps, n_el))  # the forces of the sub-steps of this sample (of the last one before)
-    gains = np.empty(n_el)
-    for e in range(n_el):
-        gains[e] = coupling[0, e, e]
-    derived = _derived(kinds, params, h, gains)
-    buf = np.zeros(max(delay, 1))
-    p = 0.0  # plant input: the input block's output (also its memory)
-    y_m = 0.0  # plant output through the output block (also its memory)
-    for k in range(y_out.shape[0]):
-        y_now = 0.0
-        for i in range(n):
-            y_now += C[i] * x[i]
-        if closed:  # D = 0: the output does not depend on this sample's input
-            y_m = block(out_kind, out_params, y_now, y_m)
-            err = r[k] - (y_m + y_noise[k])
-            u = Dc * err + ff[k]
-            for i in range(nc):
-                u += Cc[i] * xc[i]
-            for i in range(nc):
-                acc = Bc[i] * err
-                for j in range(nc):
-                    acc += Ac[i, j] * xc[j]
-                xcn[i] = acc
-            xc, xcn = xcn, xc
-        else:
-            u = u_in[k]
-        u_out[k] = u
-        if delay > 0:
-            slot = k % delay
-            command = buf[slot]
-            buf[slot] = u
-        else:
-            command = u
-        p = block(in_kind, in_params, command + process[k], p)
-        if not closed:
-            y_m = block(out_kind, out_params, y_now + D * p, y_m)
-        y_out[k] = y_m + y_noise[k]
-        for j in range(substeps if n_el else 0):
-            for e in range(n_el):
-                s_free = row_gamma[j + 1, e] * p
-                for i in range(n):
-                    s_free += row_pow[j + 1, e, i] * x[i]
-                for i in range(j + 1):
-                    for e2 in range(n_el if i < j else e):
-                        s_free -= coupling[j - i, e, e2] * f[i, e2]
-                s_now = 0.0
-                if kinds[e] in forces.START_KINDS:  # the only laws that read the start value
-                    s_now = row_gamma[j, e] * p if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
-                    for i in range(n):
-                        s_now += row_pow[j, e, i] * x[i]
-                    for i in range(j):
-                        for e2 in range(n_el):
-                            s_now -= coupling[j - 1 - i, e, e2] * f[i, e2]
-                f[j, e], state[e] = force(kinds[e], params, derived, e, state[e], f[j - 1 if j else substeps - 1, e],
-                                          s_free, s_now, gains[e], h)
-        for i in range(n):
-            acc = gamma[i] * p
-            for j in range(n):
-                acc += phi[i, j] * x[j]
+
+    @njit(cache=True, fastmath={"contract"}, nogil=True)
+    def loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay, closed, Ac, Bc,
+             Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params, u_out, y_out):
+        substeps = row_pow.shape[0] - 1
+        n = phi.shape[0]
+        nc = Ac.shape[0]
+        x = x0.copy()
+        xn = np.empty(n)
+        xc = np.zeros(nc)
+        xcn = np.empty(nc)
+        state = np.zeros(n_el)
+        f = np.zeros((substeps, n_el))  # the forces of the sub-steps of this sample (of the last one before)
+        gains = np.empty(n_el)
+        for e in range(n_el):
+            gains[e] = coupling[0, e, e]
+        derived = _derived(kinds, params, h, gains)
+        buf = np.zeros(max(delay, 1))
+        p = 0.0  # plant input: the input block's output (also its memory)
+        y_m = 0.0  # plant output through the output block (also its memory)
+        for k in range(y_out.shape[0]):
+            y_now = 0.0
+            for i in range(n):
+                y_now += C[i] * x[i]
+            if closed:  # D = 0: the output does not depend on this sample's input
+                y_m = block(out_kind, out_params, y_now, y_m)
+                err = r[k] - (y_m + y_noise[k])
+                u = Dc * err + ff[k]
+                for i in range(nc):
+                    u += Cc[i] * xc[i]
+                for i in range(nc):
+                    acc = Bc[i] * err
+                    for j in range(nc):
+                        acc += Ac[i, j] * xc[j]
+                    xcn[i] = acc
+                xc, xcn = xcn, xc
+            else:
+                u = u_in[k]
+            u_out[k] = u
+            if delay > 0:
+                slot = k % delay
+                command = buf[slot]
+                buf[slot] = u
+            else:
+                command = u
+            p = block(in_kind, in_params, command + process[k], p)
+            if not closed:
+                y_m = block(out_kind, out_params, y_now + D * p, y_m)
+            y_out[k] = y_m + y_noise[k]
             for j in range(substeps if n_el else 0):
                 for e in range(n_el):
-                    acc -= col_pow[j, e, i] * f[j, e]
-            xn[i] = acc
-        x, xn = xn, x
-    return x
+                    s_free = row_gamma[j + 1, e] * p
+                    for i in range(n):
+                        s_free += row_pow[j + 1, e, i] * x[i]
+                    for i in range(j + 1):
+                        for e2 in range(n_el if i < j else e):
+                            s_free -= coupling[j - i, e, e2] * f[i, e2]
+                    s_now = 0.0
+                    if kinds[e] in forces.START_KINDS:  # the only laws that read the start value
+                        s_now = row_gamma[j, e] * p if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
+                        for i in range(n):
+                            s_now += row_pow[j, e, i] * x[i]
+                        for i in range(j):
+                            for e2 in range(n_el):
+                                s_now -= coupling[j - 1 - i, e, e2] * f[i, e2]
+                    previous = f[j - 1 if j else substeps - 1, e]
+                    f[j, e], state[e] = force(kinds[e], params, derived, e, state[e], previous, s_free, s_now,
+                                              gains[e], h)
+            for i in range(n):
+                acc = gamma[i] * p
+                for j in range(n):
+                    acc += phi[i, j] * x[j]
+                for j in range(substeps if n_el else 0):
+                    for e in range(n_el):
+                        acc -= col_pow[j, e, i] * f[j, e]
+                xn[i] = acc
+            x, xn = xn, x
+        return x
+
+    return loop
