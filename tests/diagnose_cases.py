@@ -28,6 +28,12 @@ U_NOISE = 3e-4  # input measurement noise std (open loop): through the resonance
 MSD = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4e4, "gain": 1e4}}
 TF = {"model": {"type": "transfer_function", "num": [1e4], "den": [1.0, 20.0, 4e4]}}
 PID = {"controller": {"type": "pid", "kp": 2.0, "ki": 40.0, "kd": 0.02, "tau": 0.001}}
+# A two-mass motion stage (flexible mode 39 Hz, no stiffness to the ground: it needs its loop) and
+# a PID for it: crossover about 8 Hz (kp gain / (m1 + m2) = (50 rad/s)^2), derivative damping
+# ratio 0.7, the derivative filtered at 5 ms so that the loop gain stays below 1 above 50 Hz.
+STAGE = {"model": {"type": "two_mass_stage", "motor_mass": 1.0, "load_mass": 0.5, "stiffness": 2.0e4,
+                   "damping": 40.0, "motor_damping": 20.0, "gain": 1e3},
+         "closed_loop": {"controller": {"type": "pid", "kp": 3.75, "ki": 19.0, "kd": 0.105, "tau": 0.005}}}
 
 
 def excitation(rng: np.random.Generator, levels=(0.5, 1.0), realizations: int = 4, periods: int = 2,

@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.signal import ss2tf
 
 sys.path.insert(0, str(Path(__file__).parent))
-from diagnose_cases import FS, MSD, TF, excitation, measure, with_closed_loop  # noqa: E402
+from diagnose_cases import FS, MSD, STAGE, TF, excitation, measure, with_closed_loop  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 from nlsid.diagnose.evidence import error_test  # noqa: E402
 from nlsid.diagnose.gain import model_residuals, score  # noqa: E402
@@ -88,6 +89,15 @@ def _case(effect: str, rng: np.random.Generator):
         true = {"model": {"type": "transfer_function", "num": [1e4 * wr * wr],
                           "den": [float(c) for c in np.convolve([1, 20, 4e4], [1, 0.1 * wr, wr * wr])]}}
         return MSD, true, fr
+    if effect == "stage_resonance":  # closed loop: a mode above the stage's own, on the load's position
+        fr = rng.uniform(60, 90)
+        wr = 2 * np.pi * fr
+        ss = ModelRunner.from_data(STAGE, "stage.yaml").plant.ss
+        num, den = ss2tf(ss.A, ss.B[:, None], ss.C[None, :], np.array([[ss.D]]))
+        true = copy.deepcopy(STAGE)
+        true["model"] = {"type": "transfer_function", "num": [float(c) * wr * wr for c in np.trim_zeros(num[0], "f")],
+                         "den": [float(c) for c in np.convolve(den, [1, 0.1 * wr, wr * wr])]}
+        return STAGE, true, fr
     if effect == "cubic_stiffness":
         k3 = rng.uniform(3e3, 8e3)
         return MSD, _force(MSD, {"type": "cubic_stiffness", "k3": k3}), k3
@@ -118,9 +128,11 @@ def _case(effect: str, rng: np.random.Generator):
 # number of samples: it must be exact (tolerance below half a sample).
 TOLERANCE = {"coulomb": 0.10, "closed_loop_coulomb": 0.10, "stribeck": 0.20, "lugre": 0.20, "cubic_stiffness": 0.10, "input_saturation": 0.10, "deadzone": 0.10,
              "backlash": 0.10, "quadratic_output": 0.10, "missing_resonance": 0.10, "mechanical_resonance": 0.10,
+             "stage_resonance": 0.10,
              "wrong_mechanics": 0.10, "closed_loop_wrong_mechanics": 0.10,
              "delay": 0.2}  # 0.2 x at least 2 samples < half a sample
 EXPECTED = {"closed_loop_coulomb": "coulomb", "mechanical_resonance": "missing_resonance",
+            "stage_resonance": "missing_resonance",
             "closed_loop_wrong_mechanics": "wrong_mechanics"}
 
 

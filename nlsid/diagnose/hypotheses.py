@@ -40,8 +40,9 @@ quadratic_output    even distortion                           ``output_nonlinear
 missing_resonance   BLA differs from the model around one     transfer function times
                     frequency, no distortion                  b0 / (s^2 + 2 zeta wr s + wr^2)
                                                               (fr = wr / 2 pi in Hz, zeta, b0); a
-                                                              mass_spring_damper becomes its
-                                                              transfer function (mode in series)
+                                                              mass_spring_damper or two_mass_stage
+                                                              becomes its transfer function (mode
+                                                              in series)
 wrong_mechanics     BLA differs around the model's own        ``mass``, ``damping``, ``stiffness``
                     resonance (height, frequency), no         of a mass_spring_damper corrected
                     distortion                                (main: damping)
@@ -388,21 +389,47 @@ def _resonance_applies(runner: ModelRunner) -> str | None:
     model = runner.data["model"]
     if model["type"] == "transfer_function" and model.get("domain", "continuous") == "continuous":
         return None
-    if model["type"] == "mass_spring_damper" and not model.get("nonlinearities") and not model.get("initial"):
+    if runner.mechanical and not model.get("nonlinearities") and not model.get("initial"):
         return None
-    return "needs a continuous transfer_function model, or a mass_spring_damper without forces and initial state"
+    return ("needs a continuous transfer_function model, or a mass_spring_damper or two_mass_stage without "
+            "forces and initial state")
+
+
+def _mechanical_transfer_function(model: dict) -> tuple[list[float], list[float]]:
+    """(num, den) in s of a mechanical template from u to its output, from the equations of motion
+    with force gain u:
+
+    - mass_spring_damper  m x'' + c x' + k x = gain u:  X/U = gain / (m s^2 + c s + k);
+    - two_mass_stage  m1 x1'' = gain u - k (x1 - x2) - c (x1' - x2') - c1 x1',
+      m2 x2'' = k (x1 - x2) + c (x1' - x2') - c2 x2':  with P1 = m1 s^2 + (c + c1) s + k,
+      P2 = m2 s^2 + (c + c2) s + k, D = P1 P2 - (c s + k)^2, X1/U = gain P2 / D (motor),
+      X2/U = gain (c s + k) / D (load);
+
+    times s for a velocity output.
+    """
+    gain = float(model.get("gain", 1.0))
+    if model["type"] == "mass_spring_damper":
+        num = np.array([gain])
+        den = np.array([float(model["mass"]), float(model.get("damping", 0.0)), float(model.get("stiffness", 0.0))])
+    else:
+        m1, m2, k = float(model["motor_mass"]), float(model["load_mass"]), float(model["stiffness"])
+        c, c1, c2 = (float(model.get(key, 0.0)) for key in ("damping", "motor_damping", "load_damping"))
+        p1, p2, coupling = np.array([m1, c + c1, k]), np.array([m2, c + c2, k]), np.array([c, k])
+        den = np.polysub(np.convolve(p1, p2), np.convolve(coupling, coupling))
+        num = gain * (p2 if model.get("output_at", "load") == "motor" else coupling)
+    if model.get("output", "position") == "velocity":
+        num = np.append(num, 0.0)
+    return [float(v) for v in num], [float(v) for v in den]
 
 
 def _as_transfer_function(model: dict) -> dict:
-    """A mass_spring_damper as its transfer function from u to the output: gain / (m s^2 + c s + k)
-    for the position, times s for the velocity (the input/output blocks and the delay are kept)."""
+    """A mechanical template as its transfer function from u to the output
+    (:func:`_mechanical_transfer_function`; the input/output blocks and the delay are kept)."""
     if model["type"] == "transfer_function":
         return model
     out = {k: v for k, v in model.items() if k in ("input_nonlinearity", "output_nonlinearity", "delay")}
-    gain = float(model.get("gain", 1.0))
-    out.update(type="transfer_function", domain="continuous",
-               num=[gain, 0.0] if model.get("output", "position") == "velocity" else [gain],
-               den=[float(model["mass"]), float(model.get("damping", 0.0)), float(model.get("stiffness", 0.0))])
+    num, den = _mechanical_transfer_function(model)
+    out.update(type="transfer_function", domain="continuous", num=num, den=den)
     return out
 
 
