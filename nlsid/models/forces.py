@@ -44,8 +44,10 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   while S <= 1, tending to 1 (backward Euler in the spring and damper, L-stable) as S grows,
   continuous in the parameters. With v+ = v_free - g_v F the step is one equation in vv, solved
   by Newton's method on the side of zero where the root lies, from the prediction
-  v_free - g_v F_prev, until the step is below TOLERANCE (|vv| + vs); F and z+ are then carried
-  to the last iterate to first order (an error O(step^2)). The rate is taken at vv, not at
+  v_free - g_v F_prev, until the step is below LUGRE_TOLERANCE (|vv| + vs) = 1e-5 (|vv| + vs);
+  F and z+ are then carried to the last iterate to first order, which leaves an error O(step^2),
+  about 1e-10 relative (the outputs move by 1e-13 against a 1e-10 step; one Newton evaluation
+  fewer on 15-30 % of the steps, 7-15 % faster). The rate is taken at vv, not at
   v_free: at standstill v_free - v+ = g_v F is not small, and a rate at v_free would let the
   bristles relax, an artificial creep of about g_v F^2 / s; at rest vv = 0 and z is held exactly.
 * ``cubic_stiffness`` F = k3 p^3, evaluated at the sub-step midpoint estimate (p + p_free) / 2:
@@ -66,6 +68,7 @@ COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
 MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
 TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
+LUGRE_TOLERANCE = 1e-5  # LuGre: its step is carried to first order, an error O(step^2) ~ TOLERANCE
 POSITION_KINDS = (CUBIC,)
 START_KINDS = (LUGRE, CUBIC)  # laws that read their signal at the start of the sub-step too
 

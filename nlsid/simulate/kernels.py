@@ -161,7 +161,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
     root lies on the side of zero of -R(0), where |vv| is smooth: Newton's method there
     (an iterate that crosses zero is replaced by half the previous one), from the prediction
     v_free - g F_prev with F_prev the ``previous`` sub-step's force, until the step is below
-    TOLERANCE (|vv| + vs). ``d[e]`` holds the constants of :func:`_derived`.
+    LUGRE_TOLERANCE (|vv| + vs). ``d[e]`` holds the constants of :func:`_derived`.
     """
     sigma0, sigma1, sigma2, fc, fs, vs = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
     theta, inv_vs, s0h, s1h, inv_fc = d[e, 0], d[e, 1], d[e, 2], d[e, 3], d[e, 4]
@@ -196,7 +196,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
         df_dvv = f_v + df_dx * dx_dvv
         step = (vv + tg * force - vv_free) / (1.0 + tg * df_dvv)
         v_new = vv - step
-        if abs(step) <= forces.TOLERANCE * (abs(vv) + vs) and v_new * sd > 0.0:
+        if abs(step) <= forces.LUGRE_TOLERANCE * (abs(vv) + vs) and v_new * sd > 0.0:
             # F and z+ carried to v_new to first order: off by O(step^2), not by step (1 + theta g F'),
             # which for stiff bristles (theta g F' ~ 1e3) would let a mass at rest creep
             dz_dvv = (h * dm0 * vv - (m0 + x * dm0) * z) * dx_dvv + h * m0
