@@ -64,6 +64,9 @@ from __future__ import annotations
 
 import numpy as np
 
+# The kernels (nlsid/simulate/kernels.py) compile these constants in, and numba's disk cache is
+# keyed on kernels.py alone: after editing a value here, touch kernels.py (or delete its
+# __pycache__/*.nbi) or the old value stays in force. An installed package is unaffected.
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
 MAX_PARAMS = 6
 MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
