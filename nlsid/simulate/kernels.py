@@ -24,8 +24,8 @@ blocks act on held (or sampled) signals, so evaluating them once per sample is e
 
 from __future__ import annotations
 
-import functools
 import math
+import threading
 
 import numpy as np
 from numba import njit
@@ -272,8 +272,20 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: f
     return p[e, 0] * mid * mid * mid, z
 
 
-@functools.cache
+_KERNELS: dict[int, object] = {}
+_KERNELS_LOCK = threading.Lock()
+
+
 def simulate_loop(n_el: int):
+    """The kernel for ``n_el`` force elements (:func:`_make_loop`), one object per count for all
+    threads: parallel runs then wait for one compilation instead of compiling it twice."""
+    with _KERNELS_LOCK:
+        if n_el not in _KERNELS:
+            _KERNELS[n_el] = _make_loop(n_el)
+        return _KERNELS[n_el]
+
+
+def _make_loop(n_el: int):
     """The kernel for ``n_el`` force elements (compiled once per count, cached on disk): with the
     count a constant of the compiled code the force loops fold away (measured on the sample stage:
     docs/commands.md, Speed).
