@@ -12,6 +12,11 @@ measured 2e-15 to 6e-15, while leaving out either force changes the output by 90
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
@@ -57,15 +62,41 @@ def recursion(u: np.ndarray, substeps: int) -> np.ndarray:
     return y
 
 
-@pytest.mark.parametrize("substeps", [1, 3])
-def test_two_forces_on_two_masses_match_the_sub_step_recursion(substeps):
+FORCES = [{"type": "coulomb", "fc": FC, "fv": FV, "at": "motor"}, {"type": "cubic_stiffness", "k3": K3, "at": "load"}]
+
+
+def excitation() -> np.ndarray:
     n = np.arange(3000)
-    u = 3.0 * np.sin(2 * np.pi * 2 * n / 1000) + 0.5 * np.random.default_rng(3).standard_normal(n.size)
+    return 3.0 * np.sin(2 * np.pi * 2 * n / 1000) + 0.5 * np.random.default_rng(3).standard_normal(n.size)
+
+
+def stage_output(forces: list, substeps: int) -> np.ndarray:
+    """Load position of the stage with ``forces`` under :func:`excitation`, simulated by nlsid."""
     cfg = mc.SimulateConfig.model_validate({"model": {
         "type": "two_mass_stage", "motor_mass": M1, "load_mass": M2, "stiffness": K, "damping": C, "gain": GAIN,
-        "nonlinearities": [{"type": "coulomb", "fc": FC, "fv": FV, "at": "motor"},
-                           {"type": "cubic_stiffness", "k3": K3, "at": "load"}]},
-        "simulation": {"substeps": substeps}})
-    y = simulate_run(from_config.model(cfg), None, Run("r", FS, "arbitrary", u), substeps).y
-    y_ref = recursion(u, substeps)
+        "nonlinearities": forces}, "simulation": {"substeps": substeps}})
+    return simulate_run(from_config.model(cfg), None, Run("r", FS, "arbitrary", excitation()), substeps).y
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_two_forces_on_two_masses_match_the_sub_step_recursion(substeps):
+    y = stage_output(FORCES, substeps)
+    y_ref = recursion(excitation(), substeps)
     assert np.max(np.abs(y - y_ref)) <= 1e-9 * np.max(np.abs(y_ref))
+
+
+def test_each_force_count_comes_back_from_the_disk_cache_as_its_own_kernel():
+    """The kernel is compiled per number of force elements, and numba's disk cache holds one entry
+    per count, told apart by the count (a closure constant). A new process, with the cache this one
+    has just filled, must get the right kernel for each count: the same outputs as here, while the
+    counts' outputs differ from each other by 90 % or more (module docstring)."""
+    counts = {2: FORCES, 1: FORCES[:1], 0: []}
+    here = {n: stage_output(forces, 1) for n, forces in counts.items()}
+    script = ("import json, sys; sys.path.insert(0, sys.argv[1]); from test_simulate_propagation import "
+              "stage_output, FORCES; print(json.dumps({n: stage_output(f, 1).tolist() for n, f in "
+              "((2, FORCES), (1, FORCES[:1]), (0, []))}))")
+    out = subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent)], capture_output=True, text=True,
+                         check=True)
+    there = {int(n): np.array(y) for n, y in json.loads(out.stdout).items()}
+    for n, y in here.items():
+        assert np.array_equal(there[n], y), n
