@@ -45,6 +45,8 @@ def test_missing_resonance_multiplies_the_template_by_the_mode(template, output)
     wr = 2 * np.pi * values["fr"]
     mode = values["b0"] / (-W**2 + 2j * values["zeta"] * wr * W + wr**2)
     np.testing.assert_allclose(_tf_response(extended), _state_space_response(model) * mode, rtol=1e-10)
+    # a free stage's velocity has no pole at 0 (the s of the velocity cancels it); its position has
+    assert (extended["den"][-1] == 0) == (model["type"] == "two_mass_stage" and output == "position")
 
 
 def test_missing_resonance_does_not_apply_to_a_stage_with_forces():

@@ -403,9 +403,9 @@ def _mechanical_transfer_function(model: dict) -> tuple[list[float], list[float]
     - two_mass_stage  m1 x1'' = gain u - k (x1 - x2) - c (x1' - x2') - c1 x1',
       m2 x2'' = k (x1 - x2) + c (x1' - x2') - c2 x2':  with P1 = m1 s^2 + (c + c1) s + k,
       P2 = m2 s^2 + (c + c2) s + k, D = P1 P2 - (c s + k)^2, X1/U = gain P2 / D (motor),
-      X2/U = gain (c s + k) / D (load);
+      X2/U = gain (c s + k) / D (load); D has no constant term (the stage is free: a pole at 0);
 
-    times s for a velocity output.
+    times s for a velocity output (cancelling that pole).
     """
     gain = float(model.get("gain", 1.0))
     if model["type"] == "mass_spring_damper":
@@ -417,8 +417,8 @@ def _mechanical_transfer_function(model: dict) -> tuple[list[float], list[float]
         p1, p2, coupling = np.array([m1, c + c1, k]), np.array([m2, c + c2, k]), np.array([c, k])
         den = np.polysub(np.convolve(p1, p2), np.convolve(coupling, coupling))
         num = gain * (p2 if model.get("output_at", "load") == "motor" else coupling)
-    if model.get("output", "position") == "velocity":
-        num = np.append(num, 0.0)
+    if model.get("output", "position") == "velocity":  # times s; a free stage's pole at 0 cancels
+        num, den = (num, den[:-1]) if den[-1] == 0 else (np.append(num, 0.0), den)
     return [float(v) for v in num], [float(v) for v in den]
 
 
