@@ -151,8 +151,8 @@ def _true_gain(diagnosis, true: dict, runs) -> float:
 
 # The true model's validation error against the noise floor: its power ratio follows
 # F(nu, nu (P - 1)) (nlsid.diagnose.gain), nu ~ 2 x 511 lines x 4 runs here, so its 1e-5 and
-# 1 - 1e-5 quantiles lie within about +-0.5 dB of 0 dB. Over the ~40 cases of this file the chance
-# that any true model falls outside by noise alone is below 40 x 2e-5 = 1e-3; a floor that
+# 1 - 1e-5 quantiles lie within about +-0.5 dB of 0 dB. Over the 55 cases of this file the chance
+# that any true model falls outside by noise alone is below 55 x 2e-5 = 1.1e-3; a floor that
 # misses the input noise through the model, or counts a transient as noise, is off by dB.
 FLOOR_P = 1e-5
 
