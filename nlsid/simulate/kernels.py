@@ -150,7 +150,7 @@ def _relaxation(x: float) -> tuple[float, float, float, float]:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float, s_now: float, g: float,
+def _lugre(p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
            h: float) -> tuple[float, float]:
     """LuGre force over a sub-step and the bristle state z at its end (scheme and error in
     :mod:`nlsid.models.forces`), solved for the weighted velocity vv = v + theta (v+ - v).
@@ -162,10 +162,11 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
     root lies on the side of zero of -R(0), where |vv| is smooth: Newton's method there
     (an iterate that crosses zero is replaced by half the previous one), from the prediction
     v_free - g F_prev with F_prev the ``previous`` sub-step's force, until the step is below
-    LUGRE_TOLERANCE (|vv| + vs). ``d[e]`` holds the constants of :func:`_derived`.
+    LUGRE_TOLERANCE (|vv| + vs). ``p`` holds the element's parameters, ``d`` its constants of
+    :func:`_derived`.
     """
-    sigma0, sigma1, sigma2, fc, fs, vs = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4], p[e, 5]
-    theta, inv_vs, s0h, s1h, inv_fc = d[e, 0], d[e, 1], d[e, 2], d[e, 3], d[e, 4]
+    sigma0, sigma1, sigma2, fc, fs, vs = p
+    theta, inv_vs, s0h, s1h, inv_fc = d
     a = 2.0 - 2.0 * theta  # weights of the mean and of the end value of z in the spring force
     b = 2.0 * theta - 1.0
     tg = theta * g
@@ -208,7 +209,7 @@ def _lugre(p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_fr
 
 # Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
 @njit(cache=True, fastmath={"contract"}, nogil=True)
-def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
+def _stribeck(p: tuple, s_free: float, g: float) -> float:
     """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
 
     Sticks while |v_free| <= g fs. Otherwise the speed w solves
@@ -217,7 +218,7 @@ def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
     whenever a step leaves the bracket (the Stribeck curve's negative slope can make psi
     non-monotone when g |level'| > 1, where a plain fixed-point iteration would diverge).
     """
-    fc, fs, vs, delta, fv = p[e, 0], p[e, 1], p[e, 2], p[e, 3], p[e, 4]
+    fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
     if _stick_or_slip(s_free, g, fs):
         return s_free / g
     s = 1.0 if s_free > 0 else -1.0
@@ -246,9 +247,9 @@ def _stribeck(p: np.ndarray, e: int, s_free: float, g: float) -> float:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: float, s_free: float,
-          s_now: float, g: float, h: float) -> tuple[float, float]:
-    """The force of element ``e`` held over one sub-step and its internal state after it (LuGre's
+def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
+          h: float) -> tuple[float, float]:
+    """The force of an element (parameters ``p``, LuGre's constants ``d``) held over one sub-step and its internal state after it (LuGre's
     bristle deflection; ``z``, unused by the other laws, is returned unchanged). ``previous`` is
     the element's force over the previous sub-step (LuGre's prediction of the velocity).
 
@@ -257,19 +258,19 @@ def force(kind: int, p: np.ndarray, d: np.ndarray, e: int, z: float, previous: f
     force held over the sub-step, ``h`` the sub-step length.
     """
     if kind == forces.LUGRE:
-        return _lugre(p, d, e, z, previous, s_free, s_now, g, h)
+        return _lugre(p, d, z, previous, s_free, s_now, g, h)
     if kind == forces.COULOMB:
-        fc, fv = p[e, 0], p[e, 1]
+        fc, fv = p[0], p[1]
         if _stick_or_slip(s_free, g, fc):
             return s_free / g, z
         s = 1.0 if s_free > 0 else -1.0
         v = (s_free - g * fc * s) / (1.0 + g * fv)
         return fc * s + fv * v, z
     if kind == forces.STRIBECK:
-        return _stribeck(p, e, s_free, g), z
+        return _stribeck(p, s_free, g), z
     # CUBIC
     mid = 0.5 * (s_now + s_free)
-    return p[e, 0] * mid * mid * mid, z
+    return p[0] * mid * mid * mid, z
 
 
 _KERNELS: dict[int, object] = {}
@@ -361,8 +362,11 @@ def _make_loop(n_el: int):
                             for e2 in range(n_el):
                                 s_now -= coupling[j - 1 - i, e, e2] * f[i, e2]
                     previous = f[j - 1 if j else substeps - 1, e]
-                    f[j, e], state[e] = force(kinds[e], params, derived, e, state[e], previous, s_free, s_now,
-                                              gains[e], h)
+                    # scalars, not array rows: an array passed to the inlined law costs two atomic
+                    # reference-count updates each way per call (11 % of the kernel's time)
+                    pe = (params[e, 0], params[e, 1], params[e, 2], params[e, 3], params[e, 4], params[e, 5])
+                    de = (derived[e, 0], derived[e, 1], derived[e, 2], derived[e, 3], derived[e, 4])
+                    f[j, e], state[e] = force(kinds[e], pe, de, state[e], previous, s_free, s_now, gains[e], h)
             for i in range(n):
                 acc = gamma[i] * p
                 for j in range(n):
