@@ -16,6 +16,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from unittest.mock import patch
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from scipy.linalg import expm
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
+from nlsid.simulate import engine
 from nlsid.simulate.engine import simulate_run
 
 FS = 1000.0
@@ -70,33 +72,64 @@ def excitation() -> np.ndarray:
     return 3.0 * np.sin(2 * np.pi * 2 * n / 1000) + 0.5 * np.random.default_rng(3).standard_normal(n.size)
 
 
-def stage_output(forces: list, substeps: int) -> np.ndarray:
-    """Load position of the stage with ``forces`` under :func:`excitation`, simulated by nlsid."""
-    cfg = mc.SimulateConfig.model_validate({"model": {
-        "type": "two_mass_stage", "motor_mass": M1, "load_mass": M2, "stiffness": K, "damping": C, "gain": GAIN,
-        "nonlinearities": forces}, "simulation": {"substeps": substeps}})
-    return simulate_run(from_config.model(cfg), None, Run("r", FS, "arbitrary", excitation()), substeps).y
+STAGE = {"type": "two_mass_stage", "motor_mass": M1, "load_mass": M2, "stiffness": K, "damping": C, "gain": GAIN}
+MASS = {"type": "mass_spring_damper", "mass": M1, "damping": C, "stiffness": K, "gain": GAIN}
 
 
+def stage_output(forces: list, substeps: int, sized: bool = False, plant: dict = STAGE) -> np.ndarray:
+    """Load position of the stage (or the motor's, of ``plant``) with ``forces`` under :func:`excitation`,
+    simulated by nlsid; ``sized``: with the kernel compiled for the plant's state sizes, which the
+    engine otherwise uses only for runs of at least SIZED_SAMPLES samples."""
+    cfg = mc.SimulateConfig.model_validate({"model": {**plant, "nonlinearities": forces},
+                                            "simulation": {"substeps": substeps}})
+    with patch.object(engine, "SIZED_SAMPLES", 0 if sized else engine.SIZED_SAMPLES):
+        return simulate_run(from_config.model(cfg), None, Run("r", FS, "arbitrary", excitation()), substeps).y
+
+
+@pytest.mark.parametrize("sized", [False, True])
 @pytest.mark.parametrize("substeps", [1, 3])
-def test_two_forces_on_two_masses_match_the_sub_step_recursion(substeps):
-    y = stage_output(FORCES, substeps)
+def test_two_forces_on_two_masses_match_the_sub_step_recursion(substeps, sized):
+    y = stage_output(FORCES, substeps, sized)
     y_ref = recursion(excitation(), substeps)
     assert np.max(np.abs(y - y_ref)) <= 1e-9 * np.max(np.abs(y_ref))
 
 
-def test_each_force_count_comes_back_from_the_disk_cache_as_its_own_kernel():
-    """The kernel is compiled per number of force elements, and numba's disk cache holds one entry
-    per count, told apart by the count (a closure constant). A new process, with the cache this one
-    has just filled, must get the right kernel for each count: the same outputs as here, while the
-    counts' outputs differ from each other by 90 % or more (module docstring)."""
-    counts = {2: FORCES, 1: FORCES[:1], 0: []}
-    here = {n: stage_output(forces, 1) for n, forces in counts.items()}
+def test_a_long_run_gets_the_kernel_compiled_for_its_sizes(monkeypatch):
+    """The engine's choice: the sized kernel from SIZED_SAMPLES samples on, the shared one below."""
+    asked = []
+    real = engine.simulate_loop
+    monkeypatch.setattr(engine, "simulate_loop", lambda n_el, sizes=None: asked.append((n_el, sizes)) or real(n_el, sizes))
+    monkeypatch.setattr(engine, "SIZED_SAMPLES", excitation().size)
+    stage_output(FORCES, 1)
+    monkeypatch.setattr(engine, "SIZED_SAMPLES", excitation().size + 1)
+    stage_output(FORCES, 1)
+    assert asked == [(2, (4, 0)), (2, None)]
+
+
+MASS_FORCES = [{key: value for key, value in force.items() if key != "at"} for force in FORCES]
+KERNEL_CASES = {  # name: one kernel each (force count; state sizes compiled in or not)
+    "2 forces": (FORCES, False, STAGE), "1 force": (FORCES[:1], False, STAGE), "0 forces": ([], False, STAGE),
+    "2 forces, stage sizes": (FORCES, True, STAGE), "2 forces, mass sizes": (MASS_FORCES, True, MASS)}
+
+
+def kernel_case_outputs() -> dict:
+    return {name: stage_output(forces, 1, sized, plant).tolist() for name, (forces, sized, plant) in KERNEL_CASES.items()}
+
+
+def test_each_kernel_comes_back_from_the_disk_cache_as_its_own():
+    """The kernel is compiled per number of force elements (and, for long runs, per state sizes),
+    and numba's disk cache holds one entry per key, told apart by the closure constants. A new
+    process, with the cache this one has just filled, must get the right kernel for each key: the
+    same outputs as here, while the force counts' outputs differ from each other by 90 % or more
+    (module docstring) and the two sized plants are different machines (a kernel of the wrong
+    sizes would also read past their arrays)."""
+    here = kernel_case_outputs()
     script = ("import json, sys; sys.path.insert(0, sys.argv[1]); from test_simulate_propagation import "
-              "stage_output, FORCES; print(json.dumps({n: stage_output(f, 1).tolist() for n, f in "
-              "((2, FORCES), (1, FORCES[:1]), (0, []))}))")
+              "kernel_case_outputs; print(json.dumps(kernel_case_outputs()))")
     out = subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent)], capture_output=True, text=True,
                          check=True)
-    there = {int(n): np.array(y) for n, y in json.loads(out.stdout).items()}
-    for n, y in here.items():
-        assert np.array_equal(there[n], y), n
+    there = json.loads(out.stdout)
+    for name, y in here.items():
+        assert np.array_equal(there[name], y), name
+    a, b = (np.array(here[name]) for name in ("2 forces, stage sizes", "2 forces, mass sizes"))
+    assert np.max(np.abs(a - b)) > 0.5 * np.max(np.abs(a))

@@ -18,7 +18,7 @@ from nlsid.models import blocks
 from nlsid.models.controller import feedforward, tustin
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
-from nlsid.simulate.kernels import simulate_loop
+from nlsid.simulate.kernels import SIZED_SAMPLES, simulate_loop
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.propagation import propagation
 
@@ -74,7 +74,8 @@ def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, d
     c = controller if closed else StateSpace(_EMPTY_2, _EMPTY_1, _EMPTY_1, 0.0, True)
     length = (r if closed else u).shape[0]
     u_out, y_out = np.empty(length), np.empty(length)
-    simulate_loop(n_el)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params),
+    sizes = (n, c.order) if length >= SIZED_SAMPLES else None
+    simulate_loop(n_el, sizes)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params),
                   _f64(prop.row_pow), _f64(prop.row_gamma), _f64(prop.coupling), _f64(prop.col_pow),
                   float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
                   _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),

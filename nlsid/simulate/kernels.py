@@ -273,23 +273,34 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
     return p[0] * mid * mid * mid, z
 
 
-_KERNELS: dict[int, object] = {}
+SIZED_SAMPLES = 1 << 19  # runs at least this long get a kernel compiled for their state sizes (:func:`simulate_loop`)
+
+_KERNELS: dict[tuple, object] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def simulate_loop(n_el: int):
-    """The kernel for ``n_el`` force elements (:func:`_make_loop`), one object per count for all
-    threads: parallel runs then wait for one compilation instead of compiling it twice."""
+def simulate_loop(n_el: int, sizes: tuple[int, int] | None = None):
+    """The kernel for ``n_el`` force elements (:func:`_make_loop`), one object per key for all
+    threads: parallel runs then wait for one compilation instead of compiling it twice.
+
+    ``sizes`` = (plant order, controller order) compiles these in as well: the loops over the
+    state then unroll, 9 % less time per sample on the sample stage, for one more compilation
+    (about 8 s, cached on disk) per model shape. The engine asks for it only for runs of at least
+    SIZED_SAMPLES samples, where the time saved is worth it and few shapes occur; diagnoses and the
+    test suite, with many shapes and short runs, share one kernel per force count.
+    """
+    key = (n_el, sizes)
     with _KERNELS_LOCK:
-        if n_el not in _KERNELS:
-            _KERNELS[n_el] = _make_loop(n_el)
-        return _KERNELS[n_el]
+        if key not in _KERNELS:
+            _KERNELS[key] = _make_loop(n_el, *(sizes or (-1, -1)))
+        return _KERNELS[key]
 
 
-def _make_loop(n_el: int):
-    """The kernel for ``n_el`` force elements (compiled once per count, cached on disk): with the
-    count a constant of the compiled code the force loops fold away (measured on the sample stage:
-    docs/commands.md, Speed).
+def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
+    """The kernel for ``n_el`` force elements, and for ``fixed_n`` plant and ``fixed_nc`` controller
+    states if these are not negative (compiled once per key, cached on disk): with these counts
+    constants of the compiled code the force loops fold away and the state loops unroll (measured
+    on the sample stage: docs/commands.md, Speed).
 
     The kernel ``loop(phi, gamma, C, D, x0, kinds, ...)`` runs the loop described in the module
     docstring, fills ``u_out`` and ``y_out`` and returns the final state. ``phi`` .. ``col_pow`` are
@@ -301,8 +312,8 @@ def _make_loop(n_el: int):
     def loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay, closed, Ac, Bc,
              Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params, u_out, y_out):
         substeps = row_pow.shape[0] - 1
-        n = phi.shape[0]
-        nc = Ac.shape[0]
+        n = fixed_n if fixed_n >= 0 else phi.shape[0]
+        nc = fixed_nc if fixed_nc >= 0 else Ac.shape[0]
         x = x0.copy()
         xn = np.empty(n)
         xc = np.zeros(nc)
