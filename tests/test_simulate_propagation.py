@@ -13,6 +13,7 @@ measured 2e-15 to 6e-15, while leaving out either force changes the output by 90
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -133,3 +134,28 @@ def test_each_kernel_comes_back_from_the_disk_cache_as_its_own():
         assert np.array_equal(there[name], y), name
     a, b = (np.array(here[name]) for name in ("2 forces, stage sizes", "2 forces, mass sizes"))
     assert np.max(np.abs(a - b)) > 0.5 * np.max(np.abs(a))
+
+
+def test_kernels_compiled_in_different_processes_load_together(tmp_path):
+    """numba names compiled code after the function and a per-process counter. Two kernels compiled
+    each first in its own process (here: without forces, and with one) must still load side by side
+    in a third from the disk cache, each with its own code and constants (nlsid.simulate.kernels
+    gives each its own name): same outputs as in the processes that compiled them, and distinct
+    names. With one shared name the second kernel got the first one's constants ("'descr' is NULL"
+    when it returned its state, seen once in a cache built by different processes)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    prelude = "import json, sys; sys.path.insert(0, sys.argv[1]); from test_simulate_propagation import stage_output, FORCES\n"
+
+    def run(code: str) -> dict:
+        out = subprocess.run([sys.executable, "-c", prelude + code, str(Path(__file__).parent)], capture_output=True,
+                             text=True, env=env, check=True)
+        return json.loads(out.stdout.splitlines()[-1])
+
+    alone = {**run("print(json.dumps({'0': stage_output([], 1).tolist()}))"),
+             **run("print(json.dumps({'1': stage_output(FORCES[:1], 1).tolist()}))")}
+    together = run("from nlsid.simulate.kernels import simulate_loop\n"
+                   "y = {'0': stage_output([], 1).tolist(), '1': stage_output(FORCES[:1], 1).tolist()}\n"
+                   "names = [c.environment.env_name for n in (0, 1) for c in simulate_loop(n).overloads.values()]\n"
+                   "print(json.dumps({**y, 'names': names}))")
+    assert together["0"] == alone["0"] and together["1"] == alone["1"]
+    assert len(together["names"]) == 2 and together["names"][0] != together["names"][1]

@@ -308,7 +308,6 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
     axis is the number of sub-steps + 1).
     """
 
-    @njit(cache=True, fastmath={"contract"}, nogil=True)
     def loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay, closed, Ac, Bc,
              Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params, u_out, y_out):
         substeps = row_pow.shape[0] - 1
@@ -389,4 +388,10 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
             x, xn = xn, x
         return x
 
-    return loop
+    # A name per key: numba names the compiled code, and the environment holding its constants, after
+    # the function's qualified name and a per-process counter, so two variants compiled first in two
+    # processes would share both names when a third loads them from the disk cache, and the second
+    # would be handed the first one's constants. With the key in the name they cannot meet (and each
+    # variant has its own cache index).
+    loop.__qualname__ = f"{loop.__qualname__}_{n_el}_{fixed_n}_{fixed_nc}".replace("-", "m")
+    return njit(cache=True, fastmath={"contract"}, nogil=True)(loop)
