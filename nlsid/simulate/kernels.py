@@ -249,9 +249,10 @@ def _stribeck(p: tuple, s_free: float, g: float) -> float:
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
           h: float) -> tuple[float, float]:
-    """The force of an element (parameters ``p``, LuGre's constants ``d``) held over one sub-step and its internal state after it (LuGre's
-    bristle deflection; ``z``, unused by the other laws, is returned unchanged). ``previous`` is
-    the element's force over the previous sub-step (LuGre's prediction of the velocity).
+    """The force of an element (parameters ``p``, LuGre's constants ``d``) held over one sub-step
+    and its internal state after it (LuGre's bristle deflection; ``z``, unused by the other laws,
+    is returned unchanged). ``previous`` is the element's force over the previous sub-step (LuGre's
+    prediction of the velocity).
 
     ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
     sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
