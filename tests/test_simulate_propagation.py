@@ -78,9 +78,9 @@ MASS = {"type": "mass_spring_damper", "mass": M1, "damping": C, "stiffness": K, 
 
 
 def stage_output(forces: list, substeps: int, sized: bool = False, plant: dict = STAGE) -> np.ndarray:
-    """Load position of the stage (or the motor's, of ``plant``) with ``forces`` under :func:`excitation`,
-    simulated by nlsid; ``sized``: with the kernel compiled for the plant's state sizes, which the
-    engine otherwise uses only for runs of at least SIZED_SAMPLES samples."""
+    """Output of ``plant`` (the stage's load position, or the mass's position of MASS) with ``forces``
+    under :func:`excitation`, simulated by nlsid; ``sized``: with the kernel compiled for the plant's
+    state sizes, which the engine otherwise uses only for runs of at least SIZED_SAMPLES samples."""
     cfg = mc.SimulateConfig.model_validate({"model": {**plant, "nonlinearities": forces},
                                             "simulation": {"substeps": substeps}})
     with patch.object(engine, "SIZED_SAMPLES", 0 if sized else engine.SIZED_SAMPLES):
