@@ -7,10 +7,11 @@ A pipeline config lists steps as nlsid command lines::
       - design configs/stage_design.yaml -o out/excitation.h5
       - bla sample_data/stage.h5 -o out/bla.h5 --plots out/figures
 
-A step's output is the value of its ``-o``/``--output``; its inputs are every other argument that
-names an existing file or folder, or the output of an earlier step, plus the pipeline config
-itself. A step runs when its output is missing or older than one of its inputs (as make does),
-and then overwrites it; otherwise it is skipped. The first failing step stops the pipeline with its
+A step's output is the value of its ``-o``/``--output``, and its figures (``--plots``/``--plot``)
+are outputs too; its inputs are every other argument that names an existing file or folder, or
+the output of an earlier step, plus the pipeline config itself. A step runs when an output is
+missing or its ``-o`` output is older than one of its inputs (as make does), and then overwrites
+them; otherwise it is skipped. The first failing step stops the pipeline with its
 exit code.
 """
 
@@ -33,6 +34,7 @@ from nlsid.io.config import ConfigValueError, StrictModel, load_config
 from .common import emit_json, json_option, settings
 
 OUTPUT_FLAGS = ("-o", "--output")
+FIGURE_FLAGS = ("--plots", "--plot")  # written by the step, like its output: never its inputs
 
 
 class PipelineConfig(StrictModel):
@@ -56,6 +58,7 @@ class Step:
     args: list[str]
     output: Path
     inputs: list[Path] = field(default_factory=list)
+    figures: list[Path] = field(default_factory=list)
 
     @property
     def text(self) -> str:
@@ -71,16 +74,18 @@ def plan(config: PipelineConfig, config_path: Path) -> tuple[Path, list[Step]]:
         args = shlex.split(line)
         flag = next(i for i, a in enumerate(args) if a in OUTPUT_FLAGS)
         output = root / args[flag + 1]
+        written = {flag + 1} | {i + 1 for i, a in enumerate(args[:-1]) if a in FIGURE_FLAGS}
         inputs = [config_path.resolve()]
         for i, arg in enumerate(args[1:], start=1):
-            if i == flag + 1:
+            if i in written:
                 continue
             for text in (arg, arg.partition("=")[2]):
                 candidate = root / text if text else None
                 if candidate is not None and (candidate in outputs or candidate.exists()):
                     inputs.append(candidate)
                     break
-        steps.append(Step(args=args, output=output, inputs=inputs))
+        figures = [root / args[i] for i in sorted(written - {flag + 1})]
+        steps.append(Step(args=args, output=output, inputs=inputs, figures=figures))
         outputs.add(output)
     return root, steps
 
@@ -93,7 +98,7 @@ def _mtime(path: Path) -> float:
 
 
 def up_to_date(step: Step) -> bool:
-    if not step.output.exists():
+    if not all(path.exists() for path in (step.output, *step.figures)):
         return False
     built = _mtime(step.output)
     return all(p.exists() and _mtime(p) <= built for p in step.inputs)

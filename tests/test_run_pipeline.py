@@ -46,6 +46,19 @@ def test_runs_then_skips_then_reruns_what_is_stale(run_cli, project):
     assert statuses(run_cli("run", project / "pipeline.yaml", "--always", "--json")) == ["ran"] * 3
 
 
+def test_a_step_with_figures_is_skipped_when_up_to_date_and_rerun_when_they_are_gone(run_cli, project):
+    # The figures folder is written after the step's -o output, so taken for an input it would
+    # always look newer and the step would run every time (it did, for the README's bla and hosidf).
+    steps = yaml.safe_load((project / "pipeline.yaml").read_text())["steps"]
+    steps[-1] += " --plots out/figures/bla"
+    (project / "pipeline.yaml").write_text(yaml.safe_dump({"steps": steps}))
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["ran"] * 3
+    assert any((project / "out" / "figures" / "bla").iterdir())
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["up to date"] * 3
+    shutil.rmtree(project / "out" / "figures")
+    assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["up to date", "up to date", "ran"]
+
+
 def test_paths_are_relative_to_root(run_cli, project, tmp_path_factory):
     elsewhere = tmp_path_factory.mktemp("configs")
     config = {"root": os.path.relpath(project, elsewhere),
