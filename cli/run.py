@@ -74,20 +74,32 @@ def plan(config: PipelineConfig, config_path: Path) -> tuple[Path, list[Step]]:
         args = shlex.split(line)
         flag = next(i for i, a in enumerate(args) if a in OUTPUT_FLAGS)
         output = root / args[flag + 1]
-        written = {flag + 1} | {i + 1 for i, a in enumerate(args[:-1]) if a in FIGURE_FLAGS}
+        figures = _figures(args)
         inputs = [config_path.resolve()]
         for i, arg in enumerate(args[1:], start=1):
-            if i in written:
+            if i == flag + 1 or i in figures:
                 continue
             for text in (arg, arg.partition("=")[2]):
                 candidate = root / text if text else None
                 if candidate is not None and (candidate in outputs or candidate.exists()):
                     inputs.append(candidate)
                     break
-        figures = [root / args[i] for i in sorted(written - {flag + 1})]
-        steps.append(Step(args=args, output=output, inputs=inputs, figures=figures))
+        steps.append(Step(args=args, output=output, inputs=inputs, figures=[root / f for f in figures.values()]))
         outputs.add(output)
     return root, steps
+
+
+def _figures(args: list[str]) -> dict[int, str]:
+    """The figure paths of a step's arguments, by the index of the argument that holds them
+    (``--plots DIR`` or ``--plots=DIR``)."""
+    out = {}
+    for i, arg in enumerate(args):
+        name, eq, value = arg.partition("=")
+        if name in FIGURE_FLAGS and eq:
+            out[i] = value
+        elif arg in FIGURE_FLAGS and i + 1 < len(args):
+            out[i + 1] = args[i + 1]
+    return out
 
 
 def _mtime(path: Path) -> float:

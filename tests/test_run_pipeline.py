@@ -46,11 +46,12 @@ def test_runs_then_skips_then_reruns_what_is_stale(run_cli, project):
     assert statuses(run_cli("run", project / "pipeline.yaml", "--always", "--json")) == ["ran"] * 3
 
 
-def test_a_step_with_figures_is_skipped_when_up_to_date_and_rerun_when_they_are_gone(run_cli, project):
+@pytest.mark.parametrize("figures", ["--plots out/figures/bla", "--plots=out/figures/bla"])
+def test_a_step_with_figures_is_skipped_when_up_to_date_and_rerun_when_they_are_gone(run_cli, project, figures):
     # The figures folder is written after the step's -o output, so taken for an input it would
     # always look newer and the step would run every time (it did, for the README's bla and hosidf).
     steps = yaml.safe_load((project / "pipeline.yaml").read_text())["steps"]
-    steps[-1] += " --plots out/figures/bla"
+    steps[-1] += " " + figures
     (project / "pipeline.yaml").write_text(yaml.safe_dump({"steps": steps}))
     assert statuses(run_cli("run", project / "pipeline.yaml", "--json")) == ["ran"] * 3
     assert any((project / "out" / "figures" / "bla").iterdir())
