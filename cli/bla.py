@@ -4,17 +4,16 @@ from __future__ import annotations
 
 
 import click
-from rich.table import Table
 
-from nlsid.analysis.levels import METHOD_CHOICES
+from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path, check_writable
 
-from .common import LOGGER, emit_json, force_option, json_option, progress, settings
+from .common import LOGGER, StageCommand, emit_json, force_option, json_option, progress, settings
 from .options import map_option, parse_map, plot_folder, plots_option
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Result file (HDF5), e.g. bla.h5.")
 @click.option("--method", type=click.Choice(METHOD_CHOICES), default="auto", show_default=True,
@@ -52,7 +51,7 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
             levels, warnings = analyse_runs(recording_runs(rec, recording), method, confidence,
-                                            on_run=lambda run: step())
+                                            on_run=lambda run: step(), source=recording)
     across = across_levels(levels)
     figures = {}
     if plot_dir is not None:
@@ -81,6 +80,8 @@ def _cell(value: float, fmt: str = ".1f") -> str:
 
 
 def _print_table(output: str, summaries: list[dict]) -> None:
+    from rich.table import Table
+
     table = Table(title=f"{output}: BLA per level (dB; variances relative to |G_BLA|^2)")
     for column in ("level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var",
                    "odd-even", "odd-noise", "even-noise"):

@@ -10,11 +10,9 @@ from dataclasses import dataclass
 from typing import Any, Iterator
 
 import click
-from rich.console import Console
-from rich.logging import RichHandler
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from nlsid.io.result_file import json_safe
+# rich, numpy and the library are imported where they are used, so that ``nlsid --help`` and shell
+# completion load click alone (tests/test_cli_startup.py lists what importing the CLI may load).
 
 LOGGER = logging.getLogger("nlsid")
 
@@ -27,9 +25,27 @@ class Settings:
     verbose: int = 0
 
     @property
-    def console(self) -> Console:
-        """Diagnostics go to stderr; stdout is kept for ``--json``."""
+    def console(self):
+        """A rich console on stderr (diagnostics; stdout is kept for ``--json``)."""
+        from rich.console import Console
+
         return Console(stderr=True, quiet=self.quiet, highlight=False)
+
+
+class _StderrHandler(logging.Handler):
+    """Log records through rich on stderr; rich is loaded with the first record, not at start-up."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._rich: logging.Handler | None = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._rich is None:
+            from rich.console import Console
+            from rich.logging import RichHandler
+
+            self._rich = RichHandler(console=Console(stderr=True), show_time=False, show_path=False)
+        self._rich.handle(record)
 
 
 def configure_logging(settings: Settings) -> None:
@@ -37,7 +53,7 @@ def configure_logging(settings: Settings) -> None:
     level = logging.ERROR if settings.quiet else (logging.DEBUG if settings.verbose > 1 else
                                                    logging.INFO if settings.verbose else logging.WARNING)
     LOGGER.handlers.clear()
-    LOGGER.addHandler(RichHandler(console=Console(stderr=True), show_time=False, show_path=False))
+    LOGGER.addHandler(_StderrHandler())
     LOGGER.setLevel(level)
     LOGGER.propagate = False
 
@@ -53,6 +69,8 @@ force_option = click.option("--force", is_flag=True, help="Overwrite an existing
 
 def emit_json(summary: dict) -> None:
     """Write a summary as one JSON document on stdout (layouts in docs/formats.md)."""
+    from nlsid.io.result_file import json_safe
+
     sys.stdout.write(json.dumps(json_safe(summary), indent=2, sort_keys=True) + "\n")
     sys.stdout.flush()
 
@@ -60,6 +78,9 @@ def emit_json(summary: dict) -> None:
 @contextlib.contextmanager
 def progress(description: str, total: int) -> Iterator[Any]:
     """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step()`` callable."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
     quiet = settings().quiet
     bar = Progress(
         TextColumn("{task.description}"),
@@ -73,3 +94,43 @@ def progress(description: str, total: int) -> Iterator[Any]:
     with bar:
         task = bar.add_task(description, total=total)
         yield lambda advance=1: bar.advance(task, advance)
+
+
+OUTPUT_PARAMETERS = ("output", "plots", "plot")  # the parameters that name what a command writes
+
+
+class StageCommand(click.Command):
+    """A subcommand whose outputs are checked before it does any work.
+
+    Each output (``-o``, ``--plots``, ``--plot``) must not be one of the command's inputs (every
+    other path parameter), nor a folder holding one: that would destroy the data being read even
+    with ``--force``. ``-o`` must also be writable now (a file output: not existing unless
+    ``--force``, in a writable folder; a folder output: absent, empty, or ``--force``), so that a
+    long computation never ends in an output it cannot write.
+    """
+
+    def invoke(self, ctx: click.Context):
+        check_outputs(self, ctx.params)
+        return super().invoke(ctx)
+
+
+def check_outputs(command: click.Command, params: dict) -> None:
+    """The checks of :class:`StageCommand` on the parsed parameters of ``command``."""
+    from nlsid.io.atomic import check_not_input, check_output_folder, check_writable
+
+    inputs, outputs = [], []
+    for param in command.params:
+        value = params.get(param.name)
+        if value is None or not isinstance(param.type, click.Path):
+            continue
+        values = list(value) if isinstance(value, (tuple, list)) else [value]
+        (outputs if param.name in OUTPUT_PARAMETERS else inputs).extend((param, v) for v in values)
+    force = bool(params.get("force"))
+    for param, path in outputs:
+        check_not_input(path, [source for _, source in inputs])
+        if param.name != "output":
+            continue
+        if param.type.file_okay:
+            check_writable(path, force)
+        else:
+            check_output_folder(path, force)

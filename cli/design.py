@@ -3,20 +3,11 @@
 from __future__ import annotations
 
 import click
-import numpy as np
-from rich.table import Table
 
-from nlsid.io.config import load_config
-from nlsid.io.design_config import DesignConfig
-from nlsid.io.provenance import provenance
-from nlsid.io.recording import write_recording
-from nlsid.signals.design import design_runs, plan_lines, run_count
-from nlsid.signals.multisine import crest_factor
-
-from .common import emit_json, force_option, json_option, progress, settings
+from .common import StageCommand, emit_json, force_option, json_option, progress, settings
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Excitation file to write (.h5, or .mcap).")
@@ -33,6 +24,13 @@ def design(config: str, output: str, force: bool, as_json: bool) -> None:
     \b
       nlsid design configs/stage_design.yaml -o excitation.h5
     """
+    from nlsid.io.config import load_config
+    from nlsid.io.design_config import DesignConfig
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import write_recording
+    from nlsid.signals.design import design_runs, run_count
+    from nlsid.signals.multisine import crest_factor
+
     cfg = load_config(config, DesignConfig)
     runs_meta = []
 
@@ -53,7 +51,10 @@ def design(config: str, output: str, force: bool, as_json: bool) -> None:
         _print_summary(summary)
 
 
-def _summary(cfg: DesignConfig, runs_meta: list[dict], output: str) -> dict:
+def _summary(cfg, runs_meta: list[dict], output: str) -> dict:
+    """The --json summary of a design (layout in docs/formats.md); ``cfg`` is the DesignConfig."""
+    from nlsid.signals.design import plan_lines
+
     summary: dict = {"output": output, "fs": cfg.fs, "seed": cfg.seed, "runs": len(runs_meta)}
     duration = 0.0
     if cfg.multisine is not None:
@@ -81,6 +82,9 @@ def _summary(cfg: DesignConfig, runs_meta: list[dict], output: str) -> dict:
 
 
 def _print_summary(summary: dict) -> None:
+    import numpy as np
+    from rich.table import Table
+
     table = Table(title=f"design -> {summary['output']}", show_header=False)
     table.add_column(style="bold")
     table.add_column()

@@ -5,15 +5,14 @@ from __future__ import annotations
 import math
 
 import click
-from rich.table import Table
 
 from nlsid.errors import CheckFailed
 
-from .common import emit_json, force_option, json_option, progress, settings
+from .common import StageCommand, emit_json, force_option, json_option, progress, settings
 from .options import map_option, parse_map
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.option("--model", "model_path", required=True, type=click.Path(dir_okay=False),
               help="The simulation model (a model config YAML, as `nlsid simulate` reads).")
 @click.option("--data", "data_path", required=True, type=click.Path(dir_okay=False),
@@ -78,6 +77,8 @@ def _print(result, output: str) -> None:
     console.print(result.headline(), style="bold", markup=False)
     for line in result.evidence.findings():
         console.print(f"  - {line}", markup=False)
+    from rich.table import Table
+
     table = Table(title="Hypotheses (validation runs)")
     for column in ("hypothesis", "main parameter", "gain dB", "above floor dB", "distortion explained", "note"):
         table.add_column(column)

@@ -6,11 +6,11 @@ import click
 
 from nlsid.errors import InputError
 
-from .common import emit_json, force_option, json_option, settings
+from .common import StageCommand, emit_json, force_option, json_option, settings
 from .options import map_option, parse_map
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("bla_file", required=False, type=click.Path(dir_okay=False))
 @click.option("--order", default=None, metavar="NB/NA|auto", help="Numerator/denominator orders, or auto (scan and select).")
 @click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,

@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import itertools
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import click
 
 from nlsid.errors import InputError
 from nlsid.io.atomic import check_writable
-from nlsid.io.provenance import provenance
-from nlsid.io.recording import open_recording
-from nlsid.io.run import Run
 
-from .common import LOGGER, emit_json, force_option, json_option, progress, settings
+if TYPE_CHECKING:
+    from nlsid.io.run import Run
+
+from .common import LOGGER, StageCommand, emit_json, force_option, json_option, progress, settings
 from .options import map_option, parse_map, plot_folder, plots_option
 
 
@@ -35,9 +35,11 @@ def _sine_runs(recording) -> Iterator[Run]:
 
 
 def _first_and_all(runs: Iterator[Run], path: str) -> tuple[Run, Iterator[Run]]:
+    from nlsid.io.feeds import no_sine_runs
+
     first = next(runs, None)
     if first is None:
-        raise InputError(path, "holds no single-sine runs (kind 'sine'): design a sine grid (`sines:` in the design config)")
+        raise no_sine_runs(path)
     return first, itertools.chain([first], runs)
 
 
@@ -52,7 +54,7 @@ def _analytic(branches, grid):
     return out
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The hosidf.h5 file to write.")
 @click.option("--harmonics", default=5, show_default=True, type=int, help="Highest harmonic K (k = 0..K).")
@@ -86,7 +88,10 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     """
     from nlsid.analysis.hosidf import measured_hosidf, run_spectra
     from nlsid.analysis.linearity_cost import sweep
+    from nlsid.io.feeds import hosidf_input
     from nlsid.io.hosidf_file import write_hosidf
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import open_recording
 
     check_writable(output, force)
     folder = plot_folder(plots)
@@ -95,7 +100,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     grid = analytic = result = None
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         first, runs = _first_and_all(_sine_runs(rec), recording)
-        signal = input_choice if input_choice != "auto" else ("r" if first.r is not None else "u")
+        signal = hosidf_input(first, input_choice)
         if parameter is None:
             branches = None
             if model is not None:

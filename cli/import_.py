@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import click
 
-from .common import emit_json, force_option, json_option, settings
+from .common import StageCommand, emit_json, force_option, json_option, settings
 
 
-@click.command("import")
+@click.command("import", cls=StageCommand)
 @click.argument("source", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Recording to write (.h5 or .mcap).")
 @click.option("--u", "u", metavar="NAME", help="Input: CSV column (header or number from 1), MAT variable (struct.field), "

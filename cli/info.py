@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import click
-from rich.table import Table
 
-from nlsid.io.recording import open_recording
-
-from .common import emit_json, json_option, settings
+from .common import StageCommand, emit_json, json_option, settings
 from .options import map_option, parse_map
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("recording", type=click.Path(dir_okay=False))
 @map_option
 @json_option
@@ -25,6 +22,8 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     \b
       nlsid info sample_data/stage.h5
     """
+    from nlsid.io.recording import open_recording
+
     runs = []
     with open_recording(recording, require_y=False, mapping=parse_map(mapping)) as rec:
         fmt = rec.format
@@ -40,6 +39,8 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     if as_json:
         emit_json({"file": recording, "format": fmt, "runs": runs})
         return
+    from rich.table import Table
+
     table = Table(title=f"{recording} ({fmt}, {len(runs)} runs)")
     table.add_column("run", no_wrap=True)
     for column in ("kind", "fs", "period", "periods", "level", "frequency", "signals"):

@@ -7,10 +7,10 @@ import click
 from nlsid import __version__
 from nlsid.io.atomic import check_writable, write_text_atomic
 
-from .common import emit_json, force_option, json_option, settings
+from .common import StageCommand, emit_json, force_option, json_option, settings
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("source", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The HTML page to write.")
 @force_option

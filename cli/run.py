@@ -11,8 +11,9 @@ A step's output is the value of its ``-o``/``--output``, and its figures (``--pl
 are outputs too; its inputs are every other argument that names an existing file or folder, or
 the output of an earlier step, plus the pipeline config itself. A step runs when an output is
 missing or its ``-o`` output is older than one of its inputs (as make does), and then overwrites
-them; otherwise it is skipped. The first failing step stops the pipeline with its
-exit code.
+them; otherwise it is skipped. The whole pipeline is checked before its first step runs
+(:func:`check_steps`); the first failing step stops it with its exit code and one line that names
+the step.
 """
 
 from __future__ import annotations
@@ -25,32 +26,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import click
-from pydantic import Field
-from rich.table import Table
 
-from nlsid.errors import EXIT_OK
-from nlsid.io.config import ConfigValueError, StrictModel, load_config
+from nlsid.errors import EXIT_OK, InputError, NlsidError
 
-from .common import emit_json, json_option, settings
+from .common import OUTPUT_PARAMETERS, StageCommand, emit_json, json_option, settings
 
 OUTPUT_FLAGS = ("-o", "--output")
 FIGURE_FLAGS = ("--plots", "--plot")  # written by the step, like its output: never its inputs
-
-
-class PipelineConfig(StrictModel):
-    root: str = "."
-    steps: list[str] = Field(min_length=1)
-
-    def check(self) -> None:
-        for i, step in enumerate(self.steps):
-            try:
-                args = shlex.split(step)
-            except ValueError as exc:
-                raise ConfigValueError(("steps", i), f"cannot split the command line: {exc}") from None
-            if not args or args[0] in ("run", "-h", "--help"):
-                raise ConfigValueError(("steps", i), "expected a stage command line, e.g. 'bla rec.h5 -o bla.h5'")
-            if not any(flag in args[:-1] for flag in OUTPUT_FLAGS):
-                raise ConfigValueError(("steps", i), "names no output: give it -o PATH")
+# (stage, parameter) -> the schema its config file is validated against before the first step runs
+CONFIG_PARAMETERS = {("design", "config"): "design", ("simulate", "config"): "model",
+                     ("diagnose", "model_path"): "model", ("fit", "model_config"): "model",
+                     ("hosidf", "model"): "model"}
 
 
 @dataclass
@@ -65,7 +51,7 @@ class Step:
         return " ".join(self.args)
 
 
-def plan(config: PipelineConfig, config_path: Path) -> tuple[Path, list[Step]]:
+def plan(config, config_path: Path) -> tuple[Path, list[Step]]:
     """Resolve the steps: arguments relative to the root folder, outputs, and inputs."""
     root = (config_path.parent / config.root).resolve()
     steps: list[Step] = []
@@ -116,7 +102,7 @@ def up_to_date(step: Step) -> bool:
     return all(p.exists() and _mtime(p) <= built for p in step.inputs)
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("pipeline", type=click.Path(dir_okay=False))
 @click.option("--always", is_flag=True, help="Run every step, even those whose outputs are up to date.")
 @json_option
@@ -128,10 +114,14 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
     \b
       nlsid run configs/pipeline_stage.yaml
     """
+    from nlsid.io.config import load_config
+    from nlsid.io.pipeline_config import PipelineConfig
+
     from .main import cli
 
     config_path = Path(pipeline)
     root, steps = plan(load_config(config_path, PipelineConfig), config_path)
+    check_steps(cli, pipeline, root, steps)
     console = settings().console
     done = []
     for step in steps:
@@ -151,9 +141,74 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
         if headline:
             done[-1]["headline"] = headline
         if code != EXIT_OK:
-            _finish(done, as_json)
+            if as_json:
+                emit_json({"steps": done})
             raise click.exceptions.Exit(code)
     _finish(done, as_json)
+
+
+def check_steps(cli: click.Group, pipeline: str, root: Path, steps: list[Step]) -> None:
+    """Validate the whole pipeline before its first step runs, so that a mistake in step 5 does not
+    surface after steps 1-4 have written their outputs: every stage exists, its options parse, each
+    input path exists now or is the output of an earlier step, and the design and model configs
+    that exist now are valid. What depends on data (e.g. a recording a stage cannot use) is found
+    when the step runs."""
+    written: set[Path] = set()
+    previous = Path.cwd()
+    os.chdir(root)
+    try:
+        for i, step in enumerate(steps):
+            where = f"{pipeline}: steps[{i}] '{step.text}'"
+            params = _parse(cli, step, where)
+            command = cli.commands[step.args[0]]
+            for param in command.params:
+                value = params.get(param.name)
+                if value is None or not isinstance(param.type, click.Path) or param.name in OUTPUT_PARAMETERS:
+                    continue
+                path = root / value
+                if path in written:
+                    continue
+                if not path.exists():
+                    raise InputError(where, f"input {value} does not exist (in {root}) and no earlier step writes it")
+                kind = CONFIG_PARAMETERS.get((step.args[0], param.name))
+                if kind is not None:
+                    _check_config(value, kind)
+            written.update([step.output, *step.figures])
+    finally:
+        os.chdir(previous)
+
+
+def _parse(cli: click.Group, step: Step, where: str) -> dict:
+    """The parsed parameters of a step, or its one-line usage error."""
+    command = cli.commands.get(step.args[0])
+    if command is None:
+        stages = ", ".join(name for name in cli.list_commands(click.get_current_context()) if name != "run")
+        raise InputError(where, f"unknown stage {step.args[0]!r}; expected one of {stages}")
+    try:
+        with command.make_context(step.args[0], _step_args(command, step)) as ctx:
+            return dict(ctx.params)
+    except click.ClickException as exc:
+        raise InputError(where, exc.format_message()) from None
+
+
+def _step_args(command: click.Command, step: Step) -> list[str]:
+    """A step's arguments as run: with ``--force``, since a stale output is rebuilt."""
+    has_force = any(param.name == "force" for param in command.params)
+    return [*step.args[1:], *(["--force"] if has_force else [])]
+
+
+def _check_config(path: str, kind: str) -> None:
+    from nlsid.io.config import load_config, load_yaml
+
+    if kind == "design":
+        from nlsid.io.design_config import DesignConfig
+
+        load_config(path, DesignConfig)
+    else:
+        from nlsid.io.model_config import validate_simulate_config
+
+        data, lines = load_yaml(path)
+        validate_simulate_config(data, path, lines)
 
 
 def stored_headline(step: Step) -> str | None:
@@ -175,28 +230,37 @@ def stored_headline(step: Step) -> str | None:
 def _invoke(cli: click.Group, root: Path, step: Step) -> tuple[int, str | None]:
     """Run one step in this process, from the root folder, overwriting its stale output.
 
-    Returns the exit code and the step's headline, when its command returns a summary with one
-    (``report`` does: the verdict of the page).
+    A failing step prints one line, naming the step. Returns the exit code and the step's
+    headline, when its command returns a summary with one (``report`` does: the verdict of the
+    page).
     """
-    quiet = ["-q"] if settings().quiet else []
+    command = cli.commands[step.args[0]]
     previous = Path.cwd()
     os.chdir(root)
     try:
-        result = cli.main(args=[*quiet, *step.args, "--force"], prog_name="nlsid", standalone_mode=False)
+        with command.make_context(step.args[0], _step_args(command, step), parent=click.get_current_context()) as ctx:
+            result = command.invoke(ctx)
+    except NlsidError as exc:
+        click.echo(f"nlsid: error: step '{step.text}': {exc}", err=True)
+        return exc.exit_code, None
     except click.ClickException as exc:
         click.echo(f"nlsid: error: step '{step.text}': {exc.format_message()}", err=True)
+        return exc.exit_code, None
+    except click.exceptions.Exit as exc:
         return exc.exit_code, None
     finally:
         os.chdir(previous)
     if isinstance(result, dict):
         return EXIT_OK, result.get("headline")
-    return result or EXIT_OK, None
+    return EXIT_OK, None
 
 
 def _finish(done: list[dict], as_json: bool) -> None:
     if as_json:
         emit_json({"steps": done})
         return
+    from rich.table import Table
+
     table = Table(title="pipeline")
     for column in ("step", "status", "seconds"):
         table.add_column(column, overflow="fold")

@@ -6,10 +6,10 @@ import time
 
 import click
 
-from .common import emit_json, force_option, json_option, progress, settings
+from .common import StageCommand, emit_json, force_option, json_option, progress, settings
 
 
-@click.command()
+@click.command(cls=StageCommand)
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("--excitation", "excitation", required=True, type=click.Path(dir_okay=False),
               help="Excitation file from `nlsid design` (its u is the plant input, or the reference in closed loop).")

@@ -55,7 +55,7 @@ def test_info_json(run_cli, tmp_path):
 
 def test_console_script_is_installed():
     """The installed `nlsid` entry point runs (the package and its nlsid.cli mapping are installed)."""
-    result = subprocess.run([sys.executable, "-c", "from nlsid.cli.main import main; main()", "--version"],
+    result = subprocess.run([sys.executable, "-c", "from nlsid.cli.entry import main; main()", "--version"],
                             capture_output=True, text=True)
     assert result.returncode == 0 and __version__ in result.stdout
 

@@ -93,8 +93,9 @@ def test_bad_pipeline_configs(run_cli, project, steps, message):
 
 def test_shipped_pipeline_config_is_valid(run_cli, tmp_path):
     """The README's pipeline file names only files that exist or that an earlier step writes."""
-    from nlsid.cli.run import PipelineConfig, plan
+    from nlsid.cli.run import plan
     from nlsid.io.config import load_config
+    from nlsid.io.pipeline_config import PipelineConfig
 
     path = ROOT / "configs" / "pipeline_stage.yaml"
     root, steps = plan(load_config(path, PipelineConfig), path)

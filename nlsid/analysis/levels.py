@@ -17,14 +17,14 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from nlsid.analysis.bla import RobustAccumulator, RobustBLA
+from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.analysis.fast_bla import FastAccumulator, FastBLA, fast_run
 from nlsid.analysis.lines import Lines, classify_lines
 from nlsid.analysis.output_spectrum import OutputSpectrum, SpectrumAccumulator, db
 from nlsid.analysis.period_stats import run_period_stats
 from nlsid.errors import InputError
+from nlsid.io.feeds import BlaRuns, LevelShape
 from nlsid.io.run import Run
-
-METHOD_CHOICES = ("auto", "frf", "io", "reference")
 
 
 @dataclass
@@ -70,52 +70,28 @@ class LevelResult:
 
 
 class _LevelAccumulator:
-    """Per-level state: the first run fixes the period, lines, periods and method."""
+    """Per-level state: the first run fixes the period, lines, periods and method.
 
-    def __init__(self, run: Run, method: str, probability: float):
+    The runs are checked before they get here, by :class:`nlsid.io.feeds.BlaRuns` (the checks
+    ``nlsid info`` runs too): one period, lines and P per level, input at every excited line.
+    """
+
+    def __init__(self, run: Run, shape: LevelShape, method: str, probability: float):
         self.level = run.level
         self.lines = classify_lines(run.period, run.fs, run.excited_bins)
         self.n_periods = run.n_periods
-        self.use_reference = method == "reference" or (method == "auto" and run.r is not None)
+        self.use_reference = shape.use_reference
         robust_method = "reference" if self.use_reference else ("frf" if method == "frf" else "io")
-        self.first = run.run_id
         self.probability = probability
         self.run_ids: list[str] = []
-        self.realizations: dict[int, str] = {}
         self.rms2 = 0.0
         self.robust = RobustAccumulator(self.lines.excited, robust_method)
         self.fast = FastAccumulator()
         self.spectrum = SpectrumAccumulator(self.lines.period // 2 + 1)
 
-    def check(self, run: Run, where: str) -> None:
-        """Runs of one level must share fs, period, excited lines, periods and (for ``reference``) r."""
-        name = f"level {self.level:g}" if self.level is not None else "runs without a level"
-        lines = self.lines
-        if run.period != lines.period or run.fs != lines.fs:
-            raise InputError(where, f"period {run.period} at fs {run.fs:g} differs from run {self.first} of {name} "
-                                    f"(period {lines.period} at fs {lines.fs:g}); one level needs one period")
-        if not np.array_equal(run.excited_bins, lines.excited):
-            raise InputError(f"{where}.excited_bins", f"differ from those of run {self.first} of {name}; "
-                                                      "realizations of one level must excite the same lines")
-        if run.n_periods != self.n_periods:
-            raise InputError(where, f"{run.n_periods} steady-state periods, run {self.first} of {name} has "
-                                    f"{self.n_periods}; realizations of one level need the same P")
-        if self.use_reference and run.r is None:
-            raise InputError(where, f"no reference r, which the reference method of {name} needs")
-        if run.realization is not None:
-            other = self.realizations.setdefault(run.realization, run.run_id)
-            if other != run.run_id:
-                raise InputError(f"{where}.realization", f"{run.realization} is also run {other} of {name}; "
-                                                         "each run must be a new realization of the random phases")
-
-    def add(self, run: Run, where: str) -> None:
-        self.check(run, where)
+    def add(self, run: Run) -> None:
+        """Accumulate one run that :class:`~nlsid.io.feeds.BlaRuns` has checked."""
         stats = run_period_stats(run, self.use_reference)
-        U = np.abs(stats.U[self.lines.excited])
-        if np.any(U <= 1e-12 * U.max()) or (self.use_reference and np.any(stats.R[self.lines.excited] == 0)):
-            bad = int(self.lines.excited[np.argmin(U)])
-            raise InputError(f"{where}/u", f"excited bin {bad} carries no input; "
-                                           "excited_bins does not match the signal")
         self.run_ids.append(run.run_id)
         self.rms2 += stats.u_rms**2
         self.robust.add(stats)
@@ -151,27 +127,28 @@ def analyse_runs(
     method: str = "auto",
     probability: float = 0.95,
     on_run: Callable[[Run], None] | None = None,
+    source: str = "recording",
 ) -> tuple[list[LevelResult], list[str]]:
     """Analyse ``(run, where)`` pairs one at a time; return the levels (sorted) and general warnings.
 
-    ``where`` names the run in error messages (e.g. ``rec.h5:/runs/ms_00``). Runs that are not
-    multisines are skipped with a warning.
+    ``where`` names the run in error messages (e.g. ``rec.h5:/runs/ms_00``), ``source`` the
+    recording. Runs that are not multisines are skipped with a warning. The runs are checked by
+    :class:`nlsid.io.feeds.BlaRuns`, the checks ``nlsid info`` reports.
     """
     if method not in METHOD_CHOICES:
         raise InputError("--method", f"expected one of {', '.join(METHOD_CHOICES)}, got {method!r}")
+    checks = BlaRuns(method)
     groups: dict[float | None, _LevelAccumulator] = {}
-    skipped = []
     for run, where in runs:
-        if run.kind != "multisine":
-            skipped.append(run.run_id)
-        else:
+        shape = checks.add(run, where)
+        if shape is not None:
             if run.level not in groups:
-                groups[run.level] = _LevelAccumulator(run, method, probability)
-            groups[run.level].add(run, where)
+                groups[run.level] = _LevelAccumulator(run, shape, method, probability)
+            groups[run.level].add(run)
         if on_run is not None:
             on_run(run)
-    if not groups:
-        raise InputError("recording", "holds no multisine runs; the BLA needs random-phase multisine runs")
+    checks.finish(source)
+    skipped = checks.skipped
     warnings = [f"skipped {len(skipped)} runs that are not multisines ({', '.join(skipped[:5])}"
                 f"{', ...' if len(skipped) > 5 else ''})"] if skipped else []
     keys = sorted(groups, key=lambda level: (level is not None, level or 0.0))
@@ -194,7 +171,7 @@ def analyse_recording(
     from nlsid.io.recording import open_recording
 
     with open_recording(path, require_y=True, mapping=mapping) as recording:
-        return analyse_runs(recording_runs(recording, path), method, probability)
+        return analyse_runs(recording_runs(recording, path), method, probability, source=str(path))
 
 
 def across_levels(levels: list[LevelResult]) -> dict:

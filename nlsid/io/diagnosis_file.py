@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.atomic import check_output_folder
 from nlsid.io.result_file import datasets, json_safe, put
 
 FORMAT = "diagnosis"
@@ -83,14 +84,8 @@ def extended_yaml(data: dict, header: list[str]) -> str:
 def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, extended: str | None,
                     provenance: dict, force: bool = False) -> Path:
     """Write the folder of the module docstring atomically; refuse an existing one unless ``force``."""
-    target = Path(folder)
-    if target.exists() and not force:
-        raise InputError(str(target), "output exists; pass --force to replace it")
-    if target.exists() and not target.is_dir():
-        raise InputError(str(target), "output exists and is not a folder")
+    target = check_output_folder(folder, force)
     parent = target.absolute().parent
-    if not parent.is_dir():
-        raise InputError(str(target), f"folder {parent} does not exist")
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
     try:
         files = [SUMMARY, RESULTS] + ([EXTENDED] if extended is not None else [])
