@@ -1,0 +1,108 @@
+"""Which nonlinear distortion the non-excited lines show, without a noise level (P = 1 multisines).
+
+With one period per realization, noise and nonlinear distortion cannot be told apart line by line
+(the robust method needs P >= 2, Schoukens, Pintelon and Rolain 2012, Section 6.1). The line
+classes can still be compared with each other (book Section 5.1; Exercises 77-81): an odd random
+multisine excites only odd harmonics, so an even nonlinearity shows at the even lines and an odd one
+at the odd non-excited lines, while noise is at every line alike.
+
+Per class c (in-band odd lines, in-band even lines, out-of-band harmonic lines, nonharmonic lines)
+the mean output power ``P_c`` over its n_c lines and the M realizations is compared with the others.
+If two classes held noise of one level only (locally white noise), each line power would be
+``sigma^2 chi^2_2 / 2`` and ``P_a / P_b ~ F(2 n_a M, 2 n_b M)``, which gives the one-sided
+p-value of "class a is above class b". The distortion class follows:
+
+- odd above even (p < ALPHA and at least MIN_DB): "odd nonlinear distortion dominant";
+- even above odd likewise: "even nonlinear distortion dominant";
+- neither, but both above the weakest class: "odd and even distortion at similar levels";
+- nothing above the weakest class: "no distortion detected above the weakest line class".
+
+The weakest class bounds the noise from above (it holds noise plus whatever distortion falls there):
+``noise_bound_db`` is reported as an upper bound, never as a noise level.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.analysis.lines import EVEN, NONHARMONIC, ODD, Lines
+
+ALPHA = 0.01   # significance of "class a above class b"
+MIN_DB = 3.0   # and a difference a user would call one
+
+
+@dataclass
+class LineClass:
+    name: str
+    lines: int
+    power: float
+
+
+@dataclass
+class DistortionClass:
+    verdict: str
+    odd_above_even_db: float
+    p_odd_above_even: float
+    p_even_above_odd: float
+    noise_bound_db: float
+    bound_from: str
+    classes: list[LineClass]
+
+    def summary(self) -> dict:
+        return {"verdict": self.verdict, "odd_above_even_db": self.odd_above_even_db,
+                "p_odd_above_even": self.p_odd_above_even, "p_even_above_odd": self.p_even_above_odd,
+                "noise_upper_bound_db": self.noise_bound_db, "noise_upper_bound_from": self.bound_from,
+                "classes": {c.name: {"lines": c.lines, "power_db": _db(c.power)} for c in self.classes}}
+
+
+def _db(power: float) -> float:
+    return float(10 * np.log10(power)) if power > 0 else float("nan")
+
+
+def line_classes(lines: Lines, y_power: np.ndarray) -> list[LineClass]:
+    """The non-empty classes of non-excited lines and their mean output power."""
+    harmonic_out = np.union1d(lines.detection(ODD, False), lines.detection(EVEN, False))
+    candidates = [("odd", lines.detection(ODD)), ("even", lines.detection(EVEN)),
+                  ("out_of_band", harmonic_out), ("nonharmonic", lines.detection(NONHARMONIC, None))]
+    return [LineClass(name, int(bins.size), float(np.mean(y_power[bins]))) for name, bins in candidates if bins.size]
+
+
+def above(a: LineClass, b: LineClass, realizations: int) -> float:
+    """One-sided p-value of ``P_a > P_b`` under equal levels: F(2 n_a M, 2 n_b M) survival."""
+    from scipy.stats import f
+
+    if not (a.power > 0 and b.power > 0):
+        return float("nan")
+    return float(f.sf(a.power / b.power, 2 * a.lines * realizations, 2 * b.lines * realizations))
+
+
+def classify(lines: Lines, y_power: np.ndarray, realizations: int) -> DistortionClass:
+    """The distortion class of one level from its rms-averaged output line powers (module docstring)."""
+    classes = line_classes(lines, y_power)
+    by_name = {c.name: c for c in classes}
+    weakest = min(classes, key=lambda c: c.power) if classes else None
+    odd, even = by_name.get("odd"), by_name.get("even")
+    nan = float("nan")
+    p_odd = above(odd, even, realizations) if odd and even else nan
+    p_even = above(even, odd, realizations) if odd and even else nan
+    diff = _db(odd.power) - _db(even.power) if odd and even else nan
+
+    def significant(a: LineClass | None, b: LineClass | None) -> bool:
+        return bool(a and b and a is not b and above(a, b, realizations) < ALPHA
+                    and _db(a.power) - _db(b.power) >= MIN_DB)
+
+    if odd and even and p_odd < ALPHA and diff >= MIN_DB:
+        verdict = f"odd nonlinear distortion dominant: odd non-excited lines {diff:.1f} dB above even"
+    elif odd and even and p_even < ALPHA and -diff >= MIN_DB:
+        verdict = f"even nonlinear distortion dominant: even lines {-diff:.1f} dB above odd"
+    elif significant(odd, weakest) or significant(even, weakest):
+        verdict = f"odd and even distortion at similar levels, above the {weakest.name} lines"
+    elif weakest is None:
+        verdict = "no non-excited lines: the distortion cannot be classified"
+    else:
+        verdict = "no distortion detected above the weakest line class"
+    return DistortionClass(verdict, diff, p_odd, p_even, _db(weakest.power) if weakest else nan,
+                           f"{weakest.name} lines (noise plus any distortion there)" if weakest else "none",
+                           classes)

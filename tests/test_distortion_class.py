@@ -1,0 +1,72 @@
+"""P = 1 random-odd multisines: the odd/even class of the distortion from the non-excited lines alone.
+
+Data made here: random-odd multisines (one line left out at random per group of three odd lines,
+random phases), one transient period dropped, one period kept per realization; a Wiener system (a
+second-order filter, then a static polynomial) written with scipy's lfilter; white output noise.
+Truth: a cubic term puts distortion on the odd lines only, a quadratic term on the even lines only
+(book Section 5.1, Exercise 77); with no polynomial term every class holds noise alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from nlsid.analysis.distortion_class import ALPHA, classify
+from nlsid.analysis.lines import classify_lines
+
+N, FS, M = 1024, 1024.0, 10
+B, A = signal.butter(2, 0.2)
+
+
+def random_odd_bins(rng, top: int = 101) -> np.ndarray:
+    odd = np.arange(1, top + 1, 2)
+    keep = np.ones(odd.size, bool)
+    for start in range(0, odd.size - 2, 3):
+        keep[start + rng.integers(3)] = False
+    return odd[keep]
+
+
+def one_period_outputs(rng, nonlinearity, noise: float) -> tuple[np.ndarray, np.ndarray]:
+    bins = random_odd_bins(rng)
+    powers = []
+    for _ in range(M):
+        spectrum = np.zeros(N // 2 + 1, complex)
+        spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
+        u = np.fft.irfft(spectrum, n=N)
+        u *= 0.5 / u.std()
+        x = signal.lfilter(B, A, np.tile(u, 2))[N:]          # one transient period dropped
+        y = nonlinearity(x) + noise * rng.standard_normal(N) + 0.3   # DC offset of the converter
+        powers.append(np.abs(np.fft.rfft(y) / N) ** 2)
+    return bins, np.mean(powers, axis=0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_cubic_is_odd_and_quadratic_is_even(seed):
+    rng = np.random.default_rng(seed)
+    bins, cubic = one_period_outputs(rng, lambda x: x + 0.3 * x ** 3, noise=1e-4)
+    lines = classify_lines(N, FS, bins)
+    odd = classify(lines, cubic, M)
+    assert odd.verdict.startswith("odd nonlinear distortion dominant"), odd.verdict
+    assert odd.p_odd_above_even < ALPHA and odd.odd_above_even_db > 10
+    bins, quadratic = one_period_outputs(rng, lambda x: x + 0.3 * x ** 2, noise=1e-4)
+    even = classify(classify_lines(N, FS, bins), quadratic, M)
+    assert even.verdict.startswith("even nonlinear distortion dominant"), even.verdict
+    assert even.p_even_above_odd < ALPHA
+
+
+def test_the_noise_bound_is_an_upper_bound_and_is_met_by_a_linear_system():
+    """Linear system: no class stands out (at most the false-alarm rate), and the weakest class's
+    power is the noise power per line, sigma^2/N, within its chi-square spread."""
+    rng = np.random.default_rng(8)
+    sigma = 1e-3
+    verdicts = []
+    for _ in range(20):
+        bins, linear = one_period_outputs(rng, lambda x: x, noise=sigma)
+        result = classify(classify_lines(N, FS, bins), linear, M)
+        verdicts.append(result.verdict)
+        assert result.noise_bound_db <= 10 * np.log10(sigma ** 2 / N) + 0.5
+        assert result.noise_bound_db >= 10 * np.log10(sigma ** 2 / N) - 1.0
+    false_alarms = sum(not v.startswith("no distortion detected") for v in verdicts)
+    assert false_alarms <= 2, verdicts   # 3 comparisons at 1 % each: P(>2 of 20) is about 2e-4
