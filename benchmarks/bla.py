@@ -1,18 +1,35 @@
-"""Benchmark of the ``bla`` stage: throughput against the read + FFT limit, and peak memory.
+"""Benchmark of the ``bla`` stage: throughput against the read + FFT limit, peak memory against
+the number of runs, and the whole ``nlsid bla`` process against a plain h5py + numpy script.
 
-Writes a recording of ``--samples`` time instants (u and y, float64) in ``--runs`` runs of one
-level (a random-phase odd multisine through a Wiener system with noise), then measures
+``throughput``: a recording of ``--samples`` time instants (u and y, float64) in ``--runs`` runs of
+one level (a random-phase odd multisine through a Wiener system with noise), in this process,
+each after a warm-up pass, so both read from the page cache:
 
 - ``limit``: reading the u and y datasets of every run with plain h5py and taking the FFT of their
   (P, N) periods, the least any BLA analysis must do;
-- ``bla``: :func:`nlsid.analysis.levels.analyse_recording` on the same file (validation, spectra,
-  robust and fast methods, output spectrum);
+- ``bla``: :func:`nlsid.analysis.levels.analyse_runs` on the same file (validation, spectra,
+  robust and fast methods, output spectrum).
 
-each after a warm-up pass, so both read from the page cache. Peak memory (ru_maxrss) is measured
-in fresh subprocesses that analyse the first quarter of the runs and all of them: run-by-run
-processing keeps the two equal. Prints one JSON document.
+``memory_vs_runs``: peak RSS of fresh processes that analyse the first 1, a quarter and all of
+those runs (and 2): run-by-run processing keeps them equal.
 
-Usage: python benchmarks/bla.py [--samples 1e8] [--runs 20] [--dir /tmp]
+``end_to_end``: a recording of 20 realizations x 4 levels x 5 periods x 16384 samples (6.5 M
+samples of u and of y); the whole ``nlsid bla REC -o OUT`` process (the console script, not a
+pyenv shim) against the whole process of a plain script that reads every run with h5py and takes
+numpy's rfft of its periods, both fresh processes, interleaved, after one warm-up each: wall
+time (best and all of ``--repeat``), CPU time and peak RSS of each, and their ratios (target:
+nlsid <= 1.5x); and both again with OPENBLAS_NUM_THREADS=1 (``*_openblas_1_thread``): OpenBLAS's
+worker threads spin after a BLAS call (np.dot of a run's samples), which on 2 cores costs CPU
+and takes a core from the main thread.
+
+Peak memory: ru_maxrss of a process counts the memory it held before exec, so a child of this
+(large) process would report this process's peak (a bare interpreter started from a 331 MB parent
+reports 331 MB). Each measured process is therefore spawned by a small launcher interpreter and
+its own figures read with os.wait4; ``calibration`` gives ``python -c pass`` measured that way and
+as a direct child of this process (the inherited figure). Prints one JSON document, with the load
+average at start and end (the machine is shared).
+
+Usage: python benchmarks/bla.py [--samples 1e8] [--runs 20] [--repeat 5] [--dir /tmp]
 """
 
 from __future__ import annotations
@@ -21,6 +38,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -32,28 +50,35 @@ import h5py
 import numpy as np
 
 
-def make_recording(path: Path, samples: int, runs: int, period: int) -> None:
+def make_recording(path: Path, runs: int, periods: int, period: int, levels: tuple = (1.0,),
+                   random_odd: bool = False) -> None:
+    """``runs`` realizations of each rms level, ``periods`` steady-state periods each; odd lines
+    up to N/8, with one of each group of 4 left out at random when ``random_odd``."""
     from scipy import signal
 
     from nlsid.io.hdf5_recording import write_hdf5_recording
     from nlsid.io.run import Run
 
     rng = np.random.default_rng(0)
-    periods = -(-samples // (runs * period))
     excited = np.arange(1, period // 8, 2)
+    if random_odd:
+        groups = excited[: excited.size // 4 * 4].reshape(-1, 4)
+        keep = np.ones(groups.shape, bool)
+        keep[np.arange(groups.shape[0]), rng.integers(0, 4, groups.shape[0])] = False
+        excited = groups[keep]
     b, a = signal.butter(2, 0.2)
 
-    def run(m: int) -> Run:
+    def run(level: int, m: int) -> Run:
         spectrum = np.zeros(period // 2 + 1, complex)
         spectrum[excited] = np.exp(2j * np.pi * rng.random(excited.size))
         u0 = np.tile(np.fft.irfft(spectrum, n=period), periods)
-        u0 /= np.std(u0)
+        u0 *= levels[level] / np.std(u0)
         x = signal.lfilter(b, a, u0)
         y = x + 0.1 * x**3 + 1e-3 * rng.standard_normal(u0.size)
-        return Run(f"ms_{m:03d}", 1000.0, "multisine", u0 + 1e-3 * rng.standard_normal(u0.size), y,
-                   period=period, realization=m, level=1.0, excited_bins=excited)
+        return Run(f"ms_{level}_{m:03d}", 1000.0, "multisine", u0 + 1e-3 * rng.standard_normal(u0.size), y,
+                   period=period, realization=m, level=levels[level], excited_bins=excited)
 
-    write_hdf5_recording(path, (run(m) for m in range(runs)))
+    write_hdf5_recording(path, (run(level, m) for level in range(len(levels)) for m in range(runs)))
 
 
 def read_and_fft(path: Path) -> int:
@@ -84,13 +109,103 @@ def timed(function, *args) -> float:
     return time.perf_counter() - start
 
 
+#: Spawns argv[1:] (stdout to /dev/null) and prints its wall time and its own rusage: the launcher
+#: is a bare interpreter, so the child's pre-exec memory (its copy of the launcher) is small.
+LAUNCHER = (
+    "import json, os, sys, time\n"
+    "start = time.perf_counter()\n"
+    "pid = os.posix_spawn(sys.argv[1], sys.argv[1:], os.environ,\n"
+    "                     file_actions=[(os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0)])\n"
+    "_, status, usage = os.wait4(pid, 0)\n"
+    "print(json.dumps({'wall_s': time.perf_counter() - start, 'cpu_s': usage.ru_utime + usage.ru_stime,\n"
+    "                  'maxrss_kb': usage.ru_maxrss, 'exit': os.waitstatus_to_exitcode(status)}))\n"
+)
+
+#: The plain alternative: read u and y of every run with h5py, numpy's rfft of their periods.
+PLAIN_SCRIPT = (
+    "import sys\n"
+    "import h5py\n"
+    "import numpy as np\n"
+    "with h5py.File(sys.argv[1], 'r') as handle:\n"
+    "    for group in handle['runs'].values():\n"
+    "        period = int(group.attrs['period'])\n"
+    "        skip = int(group.attrs.get('transient_periods', 0)) * period\n"
+    "        for name in ('u', 'y'):\n"
+    "            np.fft.rfft(group[name][skip:].reshape(-1, period), axis=1)\n"
+)
+
+
+def fresh_process(argv: list[str], cwd: Path | None = None, env: dict | None = None) -> dict:
+    """Wall and CPU seconds and peak RSS (MB) of ``argv`` run as a fresh process (absolute argv[0])."""
+    out = subprocess.run([sys.executable, "-c", LAUNCHER, *argv], capture_output=True, text=True, cwd=cwd,
+                         env=None if env is None else {**os.environ, **env})
+    if out.returncode != 0 or not out.stdout.strip():
+        raise RuntimeError(f"launcher failed: {out.stderr[-2000:]}")
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    if result["exit"] != 0:
+        raise RuntimeError(f"{argv[:3]} exited {result['exit']}: {out.stderr[-2000:]}")
+    return {"wall_s": result["wall_s"], "cpu_s": result["cpu_s"], "peak_rss_mb": result["maxrss_kb"] / 1024}
+
+
 def peak_memory_mb(path: Path, runs: int) -> float:
-    """ru_maxrss of a fresh interpreter that analyses the first ``runs`` runs."""
-    code = (f"import resource, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import bla; "
-            f"bla.analyse(__import__('pathlib').Path({str(path)!r}), {runs}); "
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
-    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
-    return int(out.stdout.strip().splitlines()[-1]) / 1024
+    """Peak RSS of a fresh interpreter that analyses the first ``runs`` runs."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import bla; "
+            f"bla.analyse(__import__('pathlib').Path({str(path)!r}), {runs})")
+    return fresh_process([sys.executable, "-c", code])["peak_rss_mb"]
+
+
+def calibration() -> dict:
+    """``python -c pass`` through the launcher, and as a direct child of this process."""
+    inherited = subprocess.run(
+        [sys.executable, "-c", "import resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"],
+        check=True, capture_output=True, text=True)
+    bare = fresh_process([sys.executable, "-c", "pass"])
+    return {"bare_interpreter_wall_s": round(bare["wall_s"], 3),
+            "bare_interpreter_peak_rss_mb": round(bare["peak_rss_mb"], 1),
+            "bare_interpreter_as_direct_child_peak_rss_mb": round(int(inherited.stdout) / 1024, 1),
+            "this_process_peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
+
+
+def nlsid_command() -> str:
+    """The ``nlsid`` console script of this interpreter (a pyenv shim would add its own start-up)."""
+    script = Path(sys.executable).parent / "nlsid"
+    return str(script) if script.exists() else shutil.which("nlsid")
+
+
+def end_to_end(folder: Path, repeat: int) -> dict:
+    """``nlsid bla`` against the plain h5py + rfft script, both fresh processes."""
+    path = folder / "levels.h5"
+    realizations, levels, periods, period = 20, (0.25, 0.5, 1.0, 2.0), 5, 16384
+    make_recording(path, realizations, periods, period, levels, random_odd=True)
+    nlsid = [nlsid_command(), "bla", str(path), "-o", str(folder / "bla_out.h5"), "--force"]
+    plain = [sys.executable, "-c", PLAIN_SCRIPT, str(path)]
+    one_thread = {"OPENBLAS_NUM_THREADS": "1"}
+    commands = {"nlsid": (nlsid, None), "plain": (plain, None),
+                "nlsid_openblas_1_thread": (nlsid, one_thread), "plain_openblas_1_thread": (plain, one_thread)}
+    for argv, env in commands.values():  # warm-up: page cache, bytecode caches
+        fresh_process(argv, folder, env)
+    figures = {name: {"wall_s": [], "cpu_s": [], "peak_rss_mb": []} for name in commands}
+    for _ in range(repeat):
+        for name, (argv, env) in commands.items():
+            for key, value in fresh_process(argv, folder, env).items():
+                figures[name][key].append(value)
+    out = {"realizations": realizations, "levels": len(levels), "periods": periods, "period": period,
+           "samples": realizations * len(levels) * periods * period,
+           "excitation": "random-odd multisine (one odd line in 4 left out as a detection line)",
+           "file_mb": round(path.stat().st_size / 2**20, 1)}
+    for name, f in figures.items():
+        out[name] = {"wall_s_best": round(min(f["wall_s"]), 3), "wall_s_all": [round(w, 3) for w in f["wall_s"]],
+                     "cpu_s_best": round(min(f["cpu_s"]), 3), "peak_rss_mb": round(max(f["peak_rss_mb"]), 1)}
+    nlsid, plain = figures["nlsid"], figures["plain"]
+    out["wall_ratio_nlsid_over_plain"] = round(min(nlsid["wall_s"]) / min(plain["wall_s"]), 2)
+    out["wall_ratio_median"] = round(float(np.median(nlsid["wall_s"]) / np.median(plain["wall_s"])), 2)
+    out["cpu_ratio_nlsid_over_plain"] = round(min(nlsid["cpu_s"]) / min(plain["cpu_s"]), 2)
+    out["peak_rss_ratio_nlsid_over_plain"] = round(max(nlsid["peak_rss_mb"]) / max(plain["peak_rss_mb"]), 2)
+    nlsid_1, plain_1 = figures["nlsid_openblas_1_thread"], figures["plain_openblas_1_thread"]
+    out["wall_ratio_openblas_1_thread"] = round(min(nlsid_1["wall_s"]) / min(plain_1["wall_s"]), 2)
+    out["cpu_ratio_openblas_1_thread"] = round(min(nlsid_1["cpu_s"]) / min(plain_1["cpu_s"]), 2)
+    out["target_wall_ratio"] = 1.5
+    return out
 
 
 def main() -> None:
@@ -98,32 +213,41 @@ def main() -> None:
     parser.add_argument("--samples", type=float, default=1e8)
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--period", type=int, default=8192)
+    parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--dir", default=tempfile.gettempdir())
     args = parser.parse_args()
+    load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(dir=args.dir) as folder:
+        end = end_to_end(Path(folder), args.repeat)  # first, while this process is still small
         path = Path(folder) / "bench.h5"
         start = time.perf_counter()
-        make_recording(path, int(args.samples), args.runs, args.period)
+        make_recording(path, args.runs, -(-int(args.samples) // (args.runs * args.period)), args.period)
         write_s = time.perf_counter() - start
         samples = read_and_fft(path)  # warm-up: the file is now in the page cache
         analyse(path)
         limit_s = min(timed(read_and_fft, path) for _ in range(2))
         bla_s = min(timed(analyse, path) for _ in range(2))
-        quarter = max(args.runs // 4, 1)
+        counts = sorted({1, min(2, args.runs), max(args.runs // 4, 1), args.runs})
+        memory = {f"peak_rss_mb_{n}_runs": round(peak_memory_mb(path, n), 1) for n in counts}
+        memory["samples_per_run"] = samples // args.runs
         result = {
-            "samples": samples,
-            "runs": args.runs,
-            "period": args.period,
-            "file_mb": round(os.path.getsize(path) / 2**20, 1),
-            "write_s": round(write_s, 2),
-            "limit_read_fft_s": round(limit_s, 3),
-            "bla_s": round(bla_s, 3),
-            "limit_samples_per_s": round(samples / limit_s),
-            "bla_samples_per_s": round(samples / bla_s),
-            "bla_fraction_of_limit": round(limit_s / bla_s, 3),
-            f"peak_rss_mb_{quarter}_runs": round(peak_memory_mb(path, quarter), 1),
-            f"peak_rss_mb_{args.runs}_runs": round(peak_memory_mb(path, args.runs), 1),
-            "this_process_peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "throughput": {
+                "samples": samples,
+                "runs": args.runs,
+                "period": args.period,
+                "file_mb": round(os.path.getsize(path) / 2**20, 1),
+                "write_s": round(write_s, 2),
+                "limit_read_fft_s": round(limit_s, 3),
+                "bla_s": round(bla_s, 3),
+                "limit_samples_per_s": round(samples / limit_s),
+                "bla_samples_per_s": round(samples / bla_s),
+                "bla_fraction_of_limit": round(limit_s / bla_s, 3),
+            },
+            "memory_vs_runs": memory,
+            "end_to_end": end,
+            "calibration": calibration(),
+            "cpu_count": os.cpu_count(),
+            "load_average": {"start": load_start, "end": os.getloadavg()},
         }
     print(json.dumps(result, indent=2))
 

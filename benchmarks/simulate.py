@@ -29,6 +29,17 @@ Cases:
   random-phase multisine realizations (lines 1-199 of 4096, 1 mm rms reference, 30 periods
   each), with 1 worker and with all cores, and the speed-up. The multisine reverses the motor
   often (stick phases, more Newton iterations), so it runs slower per sample than the sine.
+* ``cli_end_to_end``: the whole ``nlsid simulate CONFIG --excitation E.h5 -o R.h5`` process (the
+  console script of this interpreter, not a pyenv shim; wall time of the fresh process, best of 3
+  after a warm-up) for the runs above, against the kernel time in this process for the same run
+  (``simulate_run``, best of 3 after a warm-up) and the stage's own timer around the simulation
+  (``simulate_s_reported_by_process``: the ``seconds`` of ``--json``, which includes loading the
+  numba kernels from the disk cache on their first call in the process). ``lugre_closed_loop``:
+  the 1e6-sample sine at K_fc = 0.2 (the config without its sweep); its plain alternative,
+  solve_ivp, is not run end to end (its in-process figure above is minutes). ``linear``: the
+  1e6-sample multisine of ``linear_lsim`` through the same stage without friction, against the
+  whole process of a plain script (``PLAIN_LSIM``: h5py read, the state space from the config's
+  parameters, scipy.signal.lsim, h5py write), and the difference of their outputs.
 
 Times are the best of a few repeats, as wall-clock seconds and as CPU seconds of the simulating
 thread (``thread_time``: on a loaded machine the wall clock also counts the time other processes
@@ -41,6 +52,10 @@ import argparse
 import json
 import math
 import os
+import shutil
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -188,19 +203,25 @@ def lugre_best_of_short_runs(runs: int = 60, samples: int = 65536) -> dict:
     return out
 
 
-def linear_lsim(samples: int) -> dict:
-    from scipy.signal import lsim
-
-    point = stage_point()
-    plant = from_config.model(point.config)
-    linear = Plant(plant.ss, plant.x0, [])
+def multisine_run(samples: int) -> Run:
+    """A random-phase multisine of lines 1-399 of N, unit rms, whole periods."""
     rng = np.random.default_rng(0)
     bins = np.arange(1, 400)
     n = np.arange((samples // N) * N)
     u = np.zeros(n.size)
     for k, phase in zip(bins, rng.uniform(0, 2 * np.pi, bins.size)):
         u += np.cos(2 * np.pi * k * n / N + phase)
-    run = Run("ms", FS, "multisine", u / np.std(u), period=N, transient_periods=0, excited_bins=bins)
+    return Run("ms", FS, "multisine", u / np.std(u), period=N, transient_periods=0, excited_bins=bins)
+
+
+def linear_lsim(samples: int) -> dict:
+    from scipy.signal import lsim
+
+    point = stage_point()
+    plant = from_config.model(point.config)
+    linear = Plant(plant.ss, plant.x0, [])
+    run = multisine_run(samples)
+    n = np.arange(run.n_samples)
     simulate_run(linear, None, run, None)  # warm-up: load/compile the kernel for this length
     seconds, cpu, out = timed_cpu(lambda: simulate_run(linear, None, run, None), 5)
     t = n / FS
@@ -260,6 +281,115 @@ def realizations_parallel() -> dict:
     return out
 
 
+#: The plain alternative to ``nlsid simulate`` on the linear stage: the state space written out from
+#: the config's parameters, scipy.signal.lsim (ZOH) on each run's u, h5py in and out.
+PLAIN_LSIM = """
+import sys
+
+import h5py
+import numpy as np
+import yaml
+from scipy.signal import lsim
+
+config, excitation, output = sys.argv[1:4]
+with open(config) as handle:
+    m = yaml.safe_load(handle)["model"]
+m1, m2, k, c = (float(m[key]) for key in ("motor_mass", "load_mass", "stiffness", "damping"))
+c1, c2, gain = (float(m.get(key, default)) for key, default in (("motor_damping", 0), ("load_damping", 0), ("gain", 1)))
+A = np.array([[0, 1, 0, 0], [-k / m1, -(c + c1) / m1, k / m1, c / m1],
+              [0, 0, 0, 1], [k / m2, c / m2, -k / m2, -(c + c2) / m2]])
+B = np.array([[0.0], [gain / m1], [0.0], [0.0]])
+C = np.array([[0.0, 0.0, 1.0, 0.0]])  # load position
+with h5py.File(excitation, "r") as source, h5py.File(output, "w") as target:
+    for name, group in source["runs"].items():
+        u, fs = group["u"][()], float(group.attrs["fs"])
+        _, y, _ = lsim((A, B, C, np.zeros((1, 1))), u, np.arange(u.size) / fs, interp=False)
+        out = target.create_group(name)
+        out["u"], out["y"] = u, y
+"""
+
+
+def nlsid_command() -> str:
+    """The ``nlsid`` console script of this interpreter (a pyenv shim would add its own start-up)."""
+    script = Path(sys.executable).parent / "nlsid"
+    return str(script) if script.exists() else shutil.which("nlsid")
+
+
+def process_seconds(argv: list[str], repeat: int) -> tuple[list[float], str]:
+    """Wall seconds of ``argv`` as a fresh process, ``repeat`` times after a warm-up; its last stdout."""
+    out = ""
+    walls = []
+    for i in range(repeat + 1):
+        start = time.perf_counter()
+        done = subprocess.run(argv, capture_output=True, text=True)
+        wall = time.perf_counter() - start
+        if done.returncode != 0:
+            raise RuntimeError(f"{argv[:3]} exited {done.returncode}: {done.stderr[-2000:]}")
+        out = done.stdout
+        if i:  # the first is the warm-up (page cache, bytecode and numba caches)
+            walls.append(wall)
+    return walls, out
+
+
+def cli_end_to_end(samples: int, repeat: int = 3) -> dict:
+    """The whole ``nlsid simulate`` process against the kernel in this process for the same run,
+    and, on the linear stage, against a plain h5py + lsim script (PLAIN_LSIM), end to end."""
+    import h5py
+    import yaml
+
+    from nlsid.io.hdf5_recording import write_hdf5_recording
+
+    point = stage_point()
+    data = yaml.safe_load(CONFIG.read_text())
+    data.pop("sweep")
+    data["closed_loop"]["feedforward"]["coulomb"] = float(point.params["K_fc"])
+    linear = {"model": {key: value for key, value in data["model"].items() if key != "nonlinearities"}}
+    cases = {"lugre_closed_loop": (data, sine_run(samples)), "linear": (linear, multisine_run(samples))}
+    out = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for name, (config_data, run) in cases.items():
+            config, excitation, output = (Path(folder) / f"{name}{suffix}" for suffix in (".yaml", "_exc.h5", "_rec.h5"))
+            config.write_text(yaml.safe_dump(config_data))
+            write_hdf5_recording(excitation, [run])
+            argv = [nlsid_command(), "simulate", str(config), "--excitation", str(excitation), "-o",
+                    str(output), "--force", "--json"]
+            walls, stdout = process_seconds(argv, repeat)
+            reported = json.loads(stdout)["seconds"]
+            model, loop = from_config.model(point.config), from_config.closed_loop(point.config)
+            if name == "linear":
+                model, loop = Plant(model.ss, model.x0, []), None
+            substeps = config_data.get("simulation", {}).get("substeps")
+            simulate_run(model, loop, run, substeps)
+            kernel, _, result = timed_cpu(lambda: simulate_run(model, loop, run, substeps), repeat)
+            with h5py.File(output, "r") as handle:
+                y_cli = handle["runs"][run.run_id]["y"][()]
+            case = {
+                "samples": run.n_samples,
+                "process_wall_s_best": min(walls),
+                "process_wall_s_all": walls,
+                "simulate_s_reported_by_process": reported,
+                "kernel_s_in_process": kernel,
+                "process_over_kernel": min(walls) / kernel,
+                "max_abs_difference_process_vs_in_process": float(np.max(np.abs(y_cli - result.y))),
+            }
+            if name == "linear":
+                plain = Path(folder) / "plain_rec.h5"
+                plain_walls, _ = process_seconds([sys.executable, "-c", PLAIN_LSIM, str(config), str(excitation),
+                                                  str(plain)], repeat)
+                with h5py.File(plain, "r") as handle:
+                    y_plain = handle[run.run_id]["y"][()]
+                case.update({
+                    "plain_lsim_script_wall_s_best": min(plain_walls),
+                    "plain_lsim_script_wall_s_all": plain_walls,
+                    "ratio_plain_over_nlsid_process": min(plain_walls) / min(walls),
+                    "max_relative_difference_vs_plain": float(np.max(np.abs(y_cli - y_plain)) / np.max(np.abs(y_plain))),
+                })
+            out[name] = case
+    bare, _ = process_seconds([sys.executable, "-c", "pass"], repeat)
+    out["bare_interpreter_s"] = min(bare)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
@@ -273,6 +403,7 @@ def main() -> None:
         "linear_lsim": linear_lsim(args.samples),
         "sweep_parallel": sweep_parallel(),
         "realizations_parallel": realizations_parallel(),
+        "cli_end_to_end": cli_end_to_end(args.samples),
     }
     result["load_average"] = {"start": load_start, "end": os.getloadavg()[0]}
     print(json.dumps(result, indent=2))

@@ -7,7 +7,7 @@ import click
 
 from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.errors import InputError
-from nlsid.io.atomic import atomic_path, check_writable
+from nlsid.io.atomic import atomic_path, check_suffix, check_writable
 
 from .common import LOGGER, StageCommand, emit_json, force_option, json_option, progress, settings
 from .options import map_option, parse_map, plot_folder, plots_option
@@ -44,6 +44,7 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import open_recording
 
+    check_suffix(output)
     if not 0 < confidence < 1:
         raise InputError("--confidence", f"expected a probability in (0, 1), got {confidence:g}")
     check_writable(output, force)
@@ -91,7 +92,9 @@ def _print_table(output: str, summaries: list[dict]) -> None:
         table.add_row(
             "-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
             f"{row['realizations']} x {row['periods']}", row["method"], _cell(row["bla_db"]),
-            _cell(row["nl_var_db"]), _cell(row["noise_var_db"]), _cell(spectrum["odd_above_even_db"]),
+            _cell(row["nl_var_db"]),
+            {"zero": "zero", "unknown": "unknown"}.get(row.get("noise_floor"), _cell(row["noise_var_db"])),
+            _cell(spectrum["odd_above_even_db"]),
             _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
         )
     settings().console.print(table)

@@ -24,26 +24,37 @@ def design(config: str, output: str, force: bool, as_json: bool) -> None:
     \b
       nlsid design configs/stage_design.yaml -o excitation.h5
     """
-    from nlsid.io.config import load_config
+    import numpy as np
+
+    from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix
+    from nlsid.io.config import config_error, load_yaml, validate
     from nlsid.io.design_config import DesignConfig
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import write_recording
-    from nlsid.signals.design import design_runs, run_count
+    from nlsid.signals.design import design_runs, level_key, run_count
     from nlsid.signals.multisine import crest_factor
 
-    cfg = load_config(config, DesignConfig)
+    check_suffix(output, RECORDING_SUFFIXES)
+    data, lines = load_yaml(config)
+    cfg = validate(data, DesignConfig, config, lines)
     runs_meta = []
 
     def collect(runs):
         with progress("designing", run_count(cfg)) as step:
             for run in runs:
+                if not np.all(np.isfinite(run.u)):  # a level near the float range overflows
+                    what = "rms" if run.kind == "multisine" else "amplitude"
+                    raise config_error(config, lines, level_key(cfg, run),
+                                       f"{what} {run.level:g} gives non-finite samples (float overflow in run "
+                                       f"{run.run_id}); nothing was written")
                 one_period = run.u[: run.period]
                 runs_meta.append({"run": run.run_id, "kind": run.kind, "level": run.level,
                                   "frequency": run.frequency, "crest_factor": crest_factor(one_period)})
                 step()
                 yield run
 
-    write_recording(output, collect(design_runs(cfg)), provenance=provenance(config_paths=[config]), force=force)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused in collect(), by its key
+        write_recording(output, collect(design_runs(cfg)), provenance=provenance(config_paths=[config]), force=force)
     summary = _summary(cfg, runs_meta, output)
     if as_json:
         emit_json(summary)

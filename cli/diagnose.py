@@ -88,11 +88,22 @@ def _print(result, output: str) -> None:
             continue
         main = o.hypothesis.main
         explained = o.score.distortion_explained
-        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", f"{o.score.gain_db:+.1f}",
-                      f"{o.score.above_floor_db:.1f}", "-" if math.isnan(explained) else f"{100 * explained:.0f} %",
+        gain = f"{o.score.gain_db:+.1f}" if math.isfinite(o.score.gain_db) else "exact" if o.score.exact else "-"
+        floor = ("exact" if o.score.exact else "zero floor") if o.score.noise_zero else f"{o.score.above_floor_db:.1f}"
+        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain, floor,
+                      "-" if math.isnan(explained) else f"{100 * explained:.0f} %",
                       "winner" if o is result.winner else "")
     console.print(table)
     console.print(f"-> {output}", markup=False)
+
+
+def _above_noise(test: dict) -> float:
+    """A test's residual above the noise in dB for the checks: +inf for a significant residual over
+    a zero noise floor (noise-free data), -inf when the test has no value (nothing to fail on)."""
+    value = test["above_noise_db"]
+    if test.get("noise_floor_zero"):
+        return math.inf if test["significant"] else -math.inf
+    return value if value is not None and math.isfinite(value) else -math.inf
 
 
 def _check(summary: dict, discrepancy: bool, error_above: float | None, distortion_above: float | None) -> None:
@@ -100,16 +111,19 @@ def _check(summary: dict, discrepancy: bool, error_above: float | None, distorti
     evidence = summary["evidence"]
     failed = []
     overall = evidence["error_above_noise"]
+    above = _above_noise(overall)
     if discrepancy and overall["significant"]:
-        failed.append(f"significant discrepancy ({overall['above_noise_db']:+.1f} dB above the noise, "
-                      f"p = {overall['p_value']:.2g})")
-    if error_above is not None and overall["above_noise_db"] > error_above:
-        failed.append(f"simulation error {overall['above_noise_db']:.1f} dB above the noise > {error_above:g} dB")
+        size = (f"{above:+.1f} dB above the noise, p = {overall['p_value']:.2g}" if math.isfinite(above)
+                else "above a zero noise floor: noise-free data")
+        failed.append(f"significant discrepancy ({size})")
+    if error_above is not None and above > error_above:
+        size = f"{above:.1f} dB" if math.isfinite(above) else "infinitely far (a zero noise floor)"
+        failed.append(f"simulation error {size} above the noise > {error_above:g} dB")
     if distortion_above is not None:
-        worst = max((row[name]["above_noise_db"] for row in evidence["lines"] for name in ("odd", "even")
-                     if row[name]["above_noise_db"] is not None and math.isfinite(row[name]["above_noise_db"])),
+        worst = max((_above_noise(row[name]) for row in evidence["lines"] for name in ("odd", "even")),
                     default=-math.inf)
         if worst > distortion_above:
-            failed.append(f"unexplained distortion {worst:.1f} dB above the noise > {distortion_above:g} dB")
+            size = f"{worst:.1f} dB" if math.isfinite(worst) else "infinitely far (a zero noise floor)"
+            failed.append(f"unexplained distortion {size} above the noise > {distortion_above:g} dB")
     if failed:
         raise CheckFailed("--fail-if", "; ".join(failed))

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Iterator
 import click
 
 from nlsid.errors import InputError
-from nlsid.io.atomic import check_writable
+from nlsid.io.atomic import check_suffix, check_writable
 
 if TYPE_CHECKING:
     from nlsid.io.run import Run
@@ -93,6 +93,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import open_recording
 
+    check_suffix(output)
     check_writable(output, force)
     folder = plot_folder(plots)
     if parameter is not None and model is not None:

@@ -43,11 +43,12 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
       nlsid import old_toolbox.mat --u data.u --y data.y --fs 2048 -o recording.h5
       nlsid import log.mcap --u /cmd:effort --y /joint_states:position -o recording.h5
     """
-    from nlsid.io.atomic import check_writable
+    from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.io.importers.convert import ImportOptions, import_file, provenance_record
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import write_recording
 
+    check_suffix(output, RECORDING_SUFFIXES)
     check_writable(output, force)
     names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
     options = ImportOptions(names=names, time=time, fs=fs, period=period, transient_periods=transient_periods,

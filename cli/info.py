@@ -1,4 +1,4 @@
-"""``nlsid info``: validate a recording and list its runs."""
+"""``nlsid info``: validate a recording, list its runs and the stages it can feed."""
 
 from __future__ import annotations
 
@@ -13,21 +13,28 @@ from .options import map_option, parse_map
 @map_option
 @json_option
 def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
-    """Check a recording (HDF5 or MCAP) against the format and list its runs.
+    """Check a recording (HDF5 or MCAP) against the format, list its runs and the stages it can feed.
 
     Every run is read and validated, so a zero exit code means every later stage can read it.
+    Each stage that reads recordings (bla, hosidf, diagnose, fit --model, simulate --excitation)
+    is then checked with the stage's own checks: whether the file can feed it, the stage's error
+    when not, and notes on what depends on options (for the default options).
 
     Example:
 
     \b
       nlsid info sample_data/stage.h5
     """
+    from nlsid.io.feeds import Survey
     from nlsid.io.recording import open_recording
 
     runs = []
-    with open_recording(recording, require_y=False, mapping=parse_map(mapping)) as rec:
+    parsed = parse_map(mapping)
+    with open_recording(recording, require_y=False, mapping=parsed) as rec:
         fmt = rec.format
+        survey = Survey(rec, recording, parsed)
         for run in rec:
+            survey.add(run)
             runs.append({
                 "run": run.run_id, "kind": run.kind, "fs": run.fs, "samples": run.n_samples,
                 "period": run.period, "transient_periods": run.transient_periods, "periods": run.n_periods,
@@ -36,19 +43,29 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
                 "signals": [name for name in ("u", "y", "r") if getattr(run, name) is not None],
                 "params": run.params,
             })
+    stages = {stage: verdict.summary() for stage, verdict in survey.verdicts().items()}
     if as_json:
-        emit_json({"file": recording, "format": fmt, "runs": runs})
+        emit_json({"file": recording, "format": fmt, "runs": runs, "stages": stages})
         return
     from rich.table import Table
+    from rich.text import Text
 
     table = Table(title=f"{recording} ({fmt}, {len(runs)} runs)")
     table.add_column("run", no_wrap=True)
     for column in ("kind", "fs", "period", "periods", "level", "frequency", "signals"):
         table.add_column(column)
     for row in runs:
-        table.add_row(*[_cell(row[c]) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")],
+        table.add_row(*[Text(_cell(row[c])) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")],
                       ",".join(row["signals"]))
-    settings().console.print(table)
+    console = settings().console
+    console.print(table)
+    feeds = Table(title="stages this recording can feed")
+    for column in ("stage", "feeds", "why not / notes"):
+        feeds.add_column(column, overflow="fold")
+    for stage, verdict in stages.items():
+        text = "\n".join(([verdict["reason"]] if verdict["reason"] else []) + [f"note: {n}" for n in verdict["notes"]])
+        feeds.add_row(stage, "yes" if verdict["feeds"] else "no", Text(text or "-"))  # no markup: [...] is text
+    console.print(feeds)
 
 
 def _cell(value) -> str:

@@ -11,6 +11,7 @@ from nlsid.errors import NlsidError
 
 from .entry import EXIT_INTERRUPTED
 
+from .batch import batch
 from .bla import bla
 from .common import Settings, configure_logging
 from .design import design
@@ -84,7 +85,7 @@ class NlsidGroup(click.Group):
         return [*before, *moved, args[name], *after, *kept, *args[end:]]
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        order = ["design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "run", "info"]
+        order = ["design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "run", "batch", "info"]
         return [name for name in order if name in self.commands] + sorted(set(self.commands) - set(order))
 
 
@@ -122,6 +123,7 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
       diagnose -> diagnosis/      (what a simulation model gets wrong, and the fix)
       report   -> report.html
       run      chains the stages of a pipeline config, skipping up-to-date steps
+      batch    runs a pipeline on every recording of a set (local processes or a Dask cluster)
 
     Exit codes: 0 success, 1 a requested check failed, 2 bad usage or bad input.
     """
@@ -138,5 +140,6 @@ cli.add_command(hosidf)
 cli.add_command(bla)
 cli.add_command(info)
 cli.add_command(run)
+cli.add_command(batch)
 cli.add_command(simulate)
 cli.add_command(report)

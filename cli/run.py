@@ -54,6 +54,10 @@ class Step:
 def plan(config, config_path: Path) -> tuple[Path, list[Step]]:
     """Resolve the steps: arguments relative to the root folder, outputs, and inputs."""
     root = (config_path.parent / config.root).resolve()
+    if not root.is_dir():
+        what = "is a file" if root.exists() else "does not exist"
+        raise InputError(f"{config_path}: root", f"{config.root!r} ({root}) {what}; expected the folder the step "
+                                                 "paths are relative to")
     steps: list[Step] = []
     outputs: set[Path] = set()
     for line in config.steps:

@@ -33,12 +33,13 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     \b
       nlsid simulate configs/model_stage_lugre.yaml --excitation excitation.h5 -o recording.h5
     """
-    from nlsid.io.atomic import check_writable
+    from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import read_runs, write_recording
     from nlsid.simulate.batch import simulate_all
     from nlsid.simulate.sweep import load_points
 
+    check_suffix(output, RECORDING_SUFFIXES)
     check_writable(output, force)
     points = load_points(config)
     runs = read_runs(excitation, require_y=False)

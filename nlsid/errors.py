@@ -10,6 +10,15 @@ EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
 
 
+def one_line(text: str) -> str:
+    """``text`` with every character that would break or garble a terminal line (newlines, the
+    other line separators str.splitlines knows, control characters) written as an escape, e.g.
+    ``\\x1e``: names from a user's file, quoted in a message, must not split its one line."""
+    return "".join(ch if ch.isprintable() or ch == " " else
+                   (f"\\x{ord(ch):02x}" if ord(ch) < 0x100 else f"\\u{ord(ch):04x}" if ord(ch) < 0x10000 else
+                    f"\\U{ord(ch):08x}") for ch in text)
+
+
 class NlsidError(Exception):
     """Base class of the errors nlsid reports to a user without a traceback."""
 
@@ -24,12 +33,18 @@ class InputError(NlsidError):
     """
 
     def __init__(self, where: str, what: str):
-        self.where = str(where)
-        self.what = what
-        super().__init__(f"{self.where}: {what}" if self.where else what)
+        self.where = one_line(str(where))
+        self.what = one_line(what)
+        super().__init__(f"{self.where}: {self.what}" if self.where else self.what)
 
 
 class CheckFailed(NlsidError):
-    """A check the user asked for (e.g. a ``--fail-if`` threshold) did not pass."""
+    """A check the user asked for (e.g. a ``--fail-if`` threshold) did not pass; the message reads
+    ``where: what``, as for :class:`InputError` (two arguments gave a tuple's repr before)."""
 
     exit_code = EXIT_CHECK_FAILED
+
+    def __init__(self, where: str, what: str):
+        self.where = one_line(str(where))
+        self.what = one_line(what)
+        super().__init__(f"{self.where}: {self.what}" if self.where else self.what)

@@ -10,8 +10,9 @@ import sys
 
 import pytest
 
-HEAVY = ("numpy", "scipy", "numba", "llvmlite", "matplotlib", "pydantic", "h5py", "mcap", "yaml", "rich")
-COMMANDS = ("design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "run", "info")
+HEAVY = ("numpy", "scipy", "numba", "llvmlite", "matplotlib", "pydantic", "h5py", "mcap", "yaml", "rich", "dask",
+         "distributed")
+COMMANDS = ("design", "import", "simulate", "bla", "hosidf", "fit", "diagnose", "report", "run", "batch", "info")
 
 PROBE = """
 import json, sys

@@ -214,3 +214,76 @@ def test_human_summary_names_what_was_inferred(run_cli, tmp_path):
     assert result.exit_code == 0
     text = " ".join(result.stderr.split())
     assert "multisine (odd), period 256 samples" in text and "3 realizations back to back" in text
+
+
+def side_by_side(rng: np.random.Generator, realizations: int, periods: int = 3, noise: float = 1e-3):
+    """Realizations of one odd multisine (the same lines and amplitudes, new phases), and y through an FIR."""
+    us = [np.tile(period_of(rng), periods) + rng.normal(0, noise, periods * N) for _ in range(realizations)]
+    return us, [np.convolve(u, [0.5, 0.3, 0.1])[: u.size] for u in us]
+
+
+@pytest.mark.parametrize("u_name, y_name", [("u{}", "y{}"), ("u_{}", "Y_{}"), ("u({}) [N]", "y({}) [m]")])
+def test_csv_realizations_side_by_side_are_one_level_for_bla(run_cli, tmp_path, u_name, y_name):
+    us, ys = side_by_side(np.random.default_rng(10), 10)
+    columns = {"Time (s)": np.arange(us[0].size) / FS}
+    for m, (u, y) in enumerate(zip(us, ys), start=1):
+        columns[u_name.format(m)], columns[y_name.format(m)] = u, y
+    source = tmp_path / "pairs.csv"
+    write_csv(source, columns)
+    out = tmp_path / "rec.h5"
+    summary = summary_of(run_cli("import", source, "-o", out, "--json"))
+    assert summary["run_ids"] == [f"pairs_c{c:02d}" for c in range(10)] and "Time (s)" in summary["fs_from"]
+    runs = read_runs(out)
+    own_levels = [record["inference"]["level"] for record in summary["records"]]
+    for c, run in enumerate(runs):
+        assert (run.kind, run.period, run.n_periods, run.realization) == ("multisine", N, 3, c)
+        np.testing.assert_array_equal(run.excited_bins, BINS)
+        np.testing.assert_array_equal(run.u, us[c])
+        np.testing.assert_array_equal(run.y, ys[c])
+        assert run.level == pytest.approx(np.mean(own_levels), rel=1e-12)
+    # every realization has rms 1 by construction (30 lines of amplitude sqrt(2/30)), up to the noise,
+    # which makes each record's own level differ a little: the runs get one level in their place
+    assert max(abs(level - 1) for level in own_levels) < 1e-3 and len(set(own_levels)) == 10
+    bla = summary_of(run_cli("bla", out, "-o", tmp_path / "bla.h5", "--json"))
+    assert [(level["realizations"], level["periods"]) for level in bla["levels"]] == [(10, 3)]
+
+
+def test_csv_realizations_in_number_order_with_a_sample_rate_column(run_cli, tmp_path):
+    us, ys = side_by_side(np.random.default_rng(11), 2)
+    source = tmp_path / "logger.csv"
+    rate = np.full(us[0].size, np.nan)
+    rate[0] = 2.0  # kHz, on the first row only; the other cells are empty
+    write_csv(source, {"Sample rate (kHz)": rate, "u2": us[1], "y2": ys[1], "u1": us[0], "y1": ys[0]})
+    source.write_text(source.read_text().replace("nan", ""))
+    out = tmp_path / "rec.h5"
+    summary = summary_of(run_cli("import", source, "-o", out, "--json"))
+    assert summary["fs"] == 2000.0 and summary["fs_from"] == f"sample-rate column {source}:Sample rate (kHz)"
+    first, second = read_runs(out)
+    np.testing.assert_array_equal(first.u, us[0])  # u1 is realization 0, though its columns come later
+    np.testing.assert_array_equal(second.y, ys[1])
+    assert (first.fs, first.realization, second.realization) == (2000.0, 0, 1)
+
+
+def test_csv_repeated_header_cells_pair_in_column_order(run_cli, tmp_path):
+    us, ys = side_by_side(np.random.default_rng(12), 3)
+    source = tmp_path / "scope.csv"
+    header = ["fs"] + ["u", "y"] * 3
+    rows = np.column_stack([np.full(us[0].size, FS)] + [x for pair in zip(us, ys) for x in pair])
+    source.write_text("\n".join([",".join(header)] + [",".join(f"{v:.18e}" for v in row) for row in rows]) + "\n")
+    out = tmp_path / "rec.h5"
+    summary = summary_of(run_cli("import", source, "-o", out, "--json"))
+    assert summary["fs"] == FS and summary["runs"] == 3
+    for c, run in enumerate(read_runs(out)):
+        np.testing.assert_array_equal(run.u, us[c])
+        np.testing.assert_array_equal(run.y, ys[c])
+
+
+def test_csv_rate_column_agreeing_with_the_time_column(run_cli, tmp_path):
+    u, y = experiment(seed=13, realizations=1, lead=0)
+    source = tmp_path / "scope.csv"
+    write_csv(source, {"t": np.arange(u.size) / FS, "fs": np.full(u.size, FS), "u": u, "y": y})
+    out = tmp_path / "rec.h5"
+    summary = summary_of(run_cli("import", source, "-o", out, "--json"))
+    assert summary["fs"] == FS and summary["fs_from"].startswith("sample-rate column")
+    with HDF5Recording(out) as rec:
+        assert rec.provenance["import"]["details"]["time_vector_fs"] == pytest.approx(FS, rel=1e-9)

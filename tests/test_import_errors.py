@@ -131,3 +131,118 @@ def test_existing_output_is_kept(run_cli, tmp_path):
     out.write_bytes(b"precious")
     result = run_cli("import", source, "-o", out)
     assert result.exit_code == 2 and "pass --force" in result.stderr and out.read_bytes() == b"precious"
+
+
+def table(tmp_path, header: list[str], columns: list[list[str]], name: str = "bad.csv"):
+    """A CSV from a header and cell columns of equal length."""
+    path = tmp_path / name
+    path.write_text("\n".join([",".join(header)] + [",".join(row) for row in zip(*columns)]) + "\n")
+    return path
+
+
+def cells(k: int, rows: int = 40) -> list[str]:
+    return [f"{np.sin(n / (3 + k)):.6f}" for n in range(rows)]
+
+
+@pytest.mark.parametrize("header, fragments", [
+    (["t", "u1", "y1", "u2", "y2", "u3"], ["do not pair into realizations", "u: 'u1', 'u2', 'u3'; y: 'y1', 'y2'"]),
+    (["t", "u1", "u2", "y"], ["do not pair into realizations", "u: 'u1', 'u2'; y: 'y'"]),
+    (["t", "u1", "y1", "u2", "y3"], ["do not pair into realizations", "u: 'u1', 'u2'; y: 'y1', 'y3'"]),
+    (["t", "u", "u", "y"], ["do not pair into realizations", "u: 'u', 'u'; y: 'y'"]),
+    (["t", "u1", "y2"], ["do not pair into realizations", "u: 'u1'; y: 'y2'"]),
+    (["t", "u", "u", "y1", "y2"], ["do not pair into realizations", "u: 'u', 'u'; y: 'y1', 'y2'"]),
+    (["t", "u", "u2", "y"], ["--u u: ambiguous: a column 'u' and the numbered columns 'u2'", "pass --u u for the one column"]),
+    (["t", "u1", "u2", "y", "y2"], ["--y y: ambiguous: a column 'y' and the numbered columns 'y2'"]),
+    (["t", "u1", "U_1", "y"], ["--u u: columns 'u1' and 'U_1' both have number 1"]),
+])
+def test_csv_columns_that_do_not_pair(run_cli, tmp_path, header, fragments):
+    time = [f"{0.001 * k:.3f}" for k in range(40)]
+    source = table(tmp_path, header, [time] + [cells(k) for k in range(len(header) - 1)])
+    assert_refused(run_cli("import", source, "-o", tmp_path / "rec.h5"), tmp_path, source, "bad.csv", *fragments)
+
+
+@pytest.mark.parametrize("header, args", [(["t", "u", "u2", "y"], ["--u", "u"]), (["t", "u", "y", "y2"], [])])
+def test_csv_one_column_where_it_is_no_question(run_cli, tmp_path, header, args):
+    """An explicit --u u takes the one column; a second sensor y2 beside one input u is not a realization."""
+    time = [f"{0.001 * k:.3f}" for k in range(40)]
+    source = table(tmp_path, header, [time, cells(0), cells(1), cells(2)], name="ok.csv")
+    from nlsid.io.hdf5_recording import HDF5Recording
+
+    result = run_cli("import", source, *args, "-o", tmp_path / "rec.h5", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert result.json()["run_ids"] == ["ok"] and result.json()["signals"] == ["u", "y"]
+    with HDF5Recording(tmp_path / "rec.h5") as recording:
+        assert recording.provenance["import"]["details"]["columns"] == {"u": "u", "y": "y", "time": "t"}
+
+
+@pytest.mark.parametrize("rate, time, fragments", [
+    (["1000"] * 20 + ["2000"] * 20, None, ["bad.csv:fs", "the sample rate varies: 1000 on line 2, 2000 on line 22"]),
+    (["1000"] * 10 + ["abc"] + [""] * 29, None, ["bad.csv:12", "column 'fs': cell 'abc' is not a sample rate"]),
+    (["-5"] + [""] * 39, None, ["bad.csv:2", "cell '-5' is not a sample rate (a number > 0, in Hz)"]),
+    ([""] * 40, None, ["bad.csv:fs", "the sample-rate column holds no value"]),
+    (["1000"] * 40, [f"{0.002 * k:.3f}" for k in range(40)],
+     ["the sample-rate column 'fs' says 1000 Hz but the time vector", "gives 500 Hz"]),
+])
+def test_csv_bad_sample_rate_column(run_cli, tmp_path, rate, time, fragments):
+    header, columns = ["fs", "u", "y"], [rate, cells(0), cells(1)]
+    if time is not None:
+        header, columns = ["time"] + header, [time] + columns
+    source = table(tmp_path, header, columns)
+    assert_refused(run_cli("import", source, "-o", tmp_path / "rec.h5"), tmp_path, source, *fragments)
+
+
+def test_csv_samples_too_large_to_be_measured(run_cli, tmp_path):
+    source = csv_source(tmp_path, GOOD[:7] + ["0.007,1e200,1.0"] + GOOD[8:])
+    assert_refused(run_cli("import", source, "-o", tmp_path / "rec.h5"), tmp_path, source,
+                   "bad.csv:u", "1 samples of magnitude above 1e+100 (largest 1e+200)")
+
+
+@pytest.mark.parametrize("content, fragment", [
+    (b"u,y\n1,2\n3,4\n", "not a MATLAB file (no MAT-file header"),
+    (b"", "not a MATLAB file"),
+    (b"MATLAB 5.0 MAT-file, Platform: GLNXA64", "truncated MAT-file header (38 of 128 bytes)"),
+    (b"MATLAB 5.0 MAT-file".ljust(126) + b"XX", "damaged MAT-file header (no endian indicator IM or MI"),
+])
+def test_mat_that_is_not_matlab(run_cli, tmp_path, content, fragment):
+    source = tmp_path / "data.mat"
+    source.write_bytes(content)
+    result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "data.mat", fragment)
+
+
+def test_mat_truncated_data(run_cli, tmp_path):
+    source = tmp_path / "cut.mat"
+    savemat(source, {"u": np.sin(np.arange(400) / 7.0), "y": np.cos(np.arange(400) / 7.0)})
+    source.write_bytes(source.read_bytes()[:-1000])
+    # 128-byte header; each variable: tag (8) + flags (16) + dims (16) + name (8) + data tag (8) + 3200
+    # bytes = 8 + 3248; y starts at 128 + 8 + 3248 = 3384; the cut file holds 6640 - 1000 bytes
+    result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "cut.mat", "truncated or damaged MAT-file: the variable at byte 3384 "
+                   "claims 3248 bytes, the file holds 2248 after its tag")
+
+
+def test_mat_that_crashes_scipy_is_refused(run_cli, tmp_path):
+    """A data element of reserved type 8 where u's doubles are: scipy's compiled reader dereferences
+    a missing dtype and the interpreter dies (SIGSEGV); read in a child process, it is one line."""
+    source = tmp_path / "crash.mat"
+    savemat(source, {"u": np.sin(np.arange(400) / 7.0)})
+    data = bytearray(source.read_bytes())
+    # 128-byte header; miMATRIX tag (8), array flags (16), dimensions (16), name 'u' (small, 8)
+    assert data[176:184] == (9).to_bytes(4, "little") + (400 * 8).to_bytes(4, "little")  # miDOUBLE, 3200 bytes
+    data[176] = 8
+    source.write_bytes(bytes(data))
+    result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "crash.mat", "scipy's MAT-file reader crashed on it, signal")
+
+
+def test_mat_v4_header_with_sizes_beyond_the_file(run_cli, tmp_path):
+    """A v4 file (no header; five int32 per variable) whose first variable claims 10^6 x 10^3 doubles."""
+    source = tmp_path / "old4.mat"
+    savemat(source, {"u": np.ones(10)}, format="4")
+    data = bytearray(source.read_bytes())
+    assert data[:20] == np.array([0, 1, 10, 0, 2], dtype="<i4").tobytes()  # MOPT 0 (little-endian doubles), 1 x 10, "u"
+    data[4:12] = np.array([10 ** 6, 10 ** 3], dtype="<i4").tobytes()
+    source.write_bytes(bytes(data))
+    result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "old4.mat", "truncated or damaged MAT-file (v4): the variable at byte 0 "
+                   "(1000000 x 1000) needs 8000000000 bytes of data, the file holds 80")

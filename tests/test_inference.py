@@ -178,3 +178,21 @@ def test_grid_names():
     name, missing = grid_of(np.array([2, 3, 5, 6]))
     assert name == "random-full" and missing.tolist() == [4]
     assert grid_of(np.array([1, 2, 4, 8, 16, 32]))[0] == "sparse"
+
+
+def test_a_record_repeating_every_two_samples_is_no_excitation():
+    x = np.tile([1.0, -1.0], 200)  # a Nyquist tone: period 2 has no line between DC and Nyquist
+    result = infer_excitation(x, FS)
+    assert result.kind == "arbitrary" and result.period is None
+    assert "too short a period for any line" in result.notes[-1]
+
+
+def test_noise_free_periods_after_a_lead_in():
+    """Exact repeats give a zero period-to-period variance: the SNR and the phase margin are infinite."""
+    rng = np.random.default_rng(20)
+    bins = np.arange(1, 30, 2)
+    x = np.concatenate([rng.normal(0, 0.3, 37), np.tile(multisine(128, bins, rng), 4)])
+    result = infer_excitation(x, FS)
+    assert (result.kind, result.period) == ("multisine", 128)
+    np.testing.assert_array_equal(result.realizations[0].excited_bins, bins)
+    assert result.measures["input_snr_db"] == math.inf and result.measures["phase_margin_db"] == math.inf

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 
 import numpy as np
 import pytest
@@ -396,3 +397,37 @@ def test_cli_info_reads_foreign_mcap(tmp_path, run_cli):
     assert result.exit_code == 2 and "Traceback" not in result.stderr
     assert "no topic '/nope'; topics in the file: /cmd, /joint" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def _first_chunk(data: bytes) -> int:
+    """Offset of the first Chunk record's content (records: opcode u8, length u64, content)."""
+    at = 8  # after the magic
+    while data[at] != 0x06:
+        at += 9 + int.from_bytes(data[at + 1:at + 9], "little")
+    return at + 9
+
+
+def _damaged_chunk(tmp_path, field: int, value: int):
+    """A recording whose first chunk has ``value`` (u64) at ``field`` bytes into its content: start
+    time u64, end time u64, uncompressed size u64 (16), crc u32, compression (u32 length + "zstd"),
+    records (u64 length (36) + bytes)."""
+    write_recording(tmp_path / "r.mcap", _runs())
+    data = bytearray((tmp_path / "r.mcap").read_bytes())
+    content = _first_chunk(bytes(data))
+    assert data[content + 28:content + 36] == b"\x04\x00\x00\x00zstd"
+    data[content + field:content + field + 8] = value.to_bytes(8, "little")
+    (tmp_path / "bad.mcap").write_bytes(bytes(data))
+    return tmp_path / "bad.mcap"
+
+
+def test_chunk_records_length_beyond_the_file_is_not_allocated(tmp_path):
+    """A records length of 2^62 bytes: a plain file read would first allocate it (MemoryError).
+    Reads stop at the end of the file; the compressed records are intact, so the runs read right."""
+    bad = _damaged_chunk(tmp_path, 36, 2 ** 62)
+    for got, want in zip(read_runs(bad), _runs(), strict=True):
+        _assert_same_run(got, want)
+
+
+def test_chunk_uncompressed_size_beyond_c_is_damaged(tmp_path):
+    with pytest.raises(InputError, match=re.escape("damaged MCAP file (OverflowError")):
+        read_runs(_damaged_chunk(tmp_path, 16, 2 ** 64 - 1))

@@ -131,3 +131,13 @@ def test_the_verdict_is_printed_also_when_the_diagnosis_is_up_to_date(run_cli, p
     again = run_cli("run", project / "pipeline.yaml", "--json").json()["steps"]
     assert [s["status"] for s in again] == ["up to date"] * 4
     assert [s.get("headline") for s in again] == [None, None, stored, stored]
+
+
+@pytest.mark.parametrize("root, message", [("nowhere", "does not exist"), ("design.yaml", "is a file")])
+def test_a_root_that_is_no_folder(run_cli, project, root, message):
+    (project / "pipeline.yaml").write_text(yaml.safe_dump({"root": root, "steps": ["design design.yaml -o out/e.h5"]}))
+    result = run_cli("run", project / "pipeline.yaml")
+    assert result.exit_code == 2 and "Traceback" not in result.stderr, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert f"pipeline.yaml: root: {root!r} ({(project / root).resolve()}) {message}" in line
+    assert not (project / "out").exists()

@@ -46,6 +46,7 @@ import numpy as np
 
 from nlsid.analysis.confidence import Bounds, circle_bounds
 from nlsid.analysis.period_stats import PeriodStats
+from nlsid.analysis.precision import negligible
 
 METHODS = ("frf", "io", "reference")
 
@@ -161,7 +162,8 @@ class RobustAccumulator:
                                      acc.variance_of_mean(acc.syx))
             var_noise = eiv_variance(G, U_R, self._noise_y / M**2, self._noise_u / M**2, self._noise_yu / M**2)
             var_input_nl = M * (acc.variance_of_mean(acc.sxx) - self._noise_u / M**2)
-            warnings += _actuator_warning(acc.variance_of_mean(acc.sxx), self._noise_u / M**2)
+            warnings += _actuator_warning(acc.variance_of_mean(acc.sxx), self._noise_u / M**2,
+                                          float(np.mean(np.abs(U_R) ** 2)))
         else:
             G = acc.mean_x
             var_total = acc.variance_of_mean(acc.sxx)
@@ -195,14 +197,24 @@ def _sample_size_warnings(M: int, P: int) -> list[str]:
     return out
 
 
-def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray) -> list[str]:
+def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u: float) -> list[str]:
     """Nonlinear actuator test (6-40)-(6-43): sigma^2_{U_R} significantly above sigma^2_{U_R,n}.
 
     Without actuator distortion both estimate var(N_U)/(M P) and their band means agree within
     about sqrt(1/((M-1) F)); a factor 2 (3 dB) keeps false alarms negligible for (M-1) F >= 50.
+    Without input noise (a noise-free simulation, as ``diagnose`` runs the model) the test is whether
+    the variation exceeds numerical precision next to ``power_u``, the band-mean power of U_R
+    (:mod:`nlsid.analysis.precision`).
     """
     total, noise = float(np.mean(var_total_u)), float(np.mean(var_noise_u))
     if not total > 2 * noise:
         return []
+    if not noise > 0:
+        # noise-free input (a simulation): any variation over realizations beyond rounding is the
+        # actuator's, but it has no ratio to a noise level to be given in dB
+        if negligible(total, power_u):
+            return []
+        return ["the projected input varies over realizations and has no noise (noise-free data): the actuator is "
+                "nonlinear (book (6-40)-(6-43)) and the BLA from r is H_BLA/A_BLA"]
     return [f"the projected input varies over realizations {10 * np.log10(total / noise):.1f} dB more than its noise: "
             "the actuator is nonlinear (book (6-40)-(6-43)) and the BLA from r is H_BLA/A_BLA"]

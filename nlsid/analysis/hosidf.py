@@ -42,25 +42,10 @@ from typing import Iterable, Literal, Sequence
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.feeds import SineCell, check_cells, check_harmonics, check_sine_run, check_variance_counts
 from nlsid.io.run import Run
 
 Variance = Literal["repeats", "periods", "both"]
-BIN_TOLERANCE = 1e-6  # a frequency attribute is on a bin when |frequency*N/fs - bin| < this
-
-
-def sine_bin(run: Run, where: str) -> int:
-    """The DFT bin of a single-sine run's tone in one period; InputError if it is not a sine on a bin."""
-    if run.kind != "sine":
-        raise InputError(where, f"is a '{run.kind}' run; HOSIDFs need single-sine runs (kind 'sine')")
-    exact = run.frequency * run.period / run.fs
-    line = int(round(exact))
-    if abs(exact - line) > BIN_TOLERANCE or line < 1:
-        raise InputError(
-            f"{where}.frequency",
-            f"{run.frequency:g} Hz is not on a bin of the {run.period}-sample period at fs {run.fs:g} Hz "
-            f"(frequency*period/fs = {exact:.6g}, expected an integer)",
-        )
-    return line
 
 
 def harmonic_phasors(periods: np.ndarray, line: int, harmonics: int) -> np.ndarray:
@@ -89,23 +74,12 @@ class RunSpectra:
 
 
 def run_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str = "") -> RunSpectra:
-    """The spectra of one single-sine run; InputError for a bad run or harmonics above Nyquist."""
+    """The spectra of one single-sine run; InputError for a bad run (:func:`nlsid.io.feeds.check_sine_run`)
+    or harmonics above Nyquist."""
     where = f"{source}:/runs/{run.run_id}" if source else run.run_id
-    line = sine_bin(run, where)
-    if harmonics * line >= run.period / 2:
-        top = (run.period - 1) // 2 // line
-        raise InputError(
-            where,
-            f"harmonic {harmonics} of bin {line} ({run.frequency:g} Hz) lies at or above Nyquist of the "
-            f"{run.period}-sample period; use at most {top} harmonics",
-        )
-    if run.level is None:
-        raise InputError(where, "missing attribute 'level' (the amplitude of the sine)")
-    if getattr(run, input_signal) is None:
-        raise InputError(where, f"run has no input signal '{input_signal}'")
+    line = check_sine_run(run, where, input_signal)
+    check_harmonics(run, line, harmonics, where)
     u1 = harmonic_phasors(run.periods(input_signal), line, 1)[:, 1]
-    if np.any(np.abs(u1) == 0):
-        raise InputError(where, f"input '{input_signal}' has no content at {run.frequency:g} Hz")
     y = harmonic_phasors(run.periods("y"), line, harmonics)
     return RunSpectra(run.run_id, line, float(run.frequency), float(run.level), u1, y)
 
@@ -191,19 +165,18 @@ def _period_variance(per_period: np.ndarray) -> np.ndarray:
 
 def cell_hosidf(spectra: Sequence[RunSpectra]) -> CellHOSIDF:
     """HOSIDFs, their variances over repeats and over periods, and Table I of one cell."""
-    periods = {s.y.shape[0] for s in spectra}
-    if len(periods) != 1:
-        raise InputError(spectra[0].run_id, f"repeats of one cell hold different numbers of periods {sorted(periods)}")
+    first = spectra[0]
+    check_cells([SineCell(first.frequency, first.level, [s.run_id for s in spectra], [s.y.shape[0] for s in spectra])],
+                first.run_id)
     y_p = np.stack([s.y for s in spectra])  # (R, P, K+1)
     u_p = np.stack([s.u1 for s in spectra])  # (R, P)
     y_r, u_r = y_p.mean(axis=1), u_p.mean(axis=1)
     h, h_var = mean_and_variance(normalised(y_r, u_r))
     h0, h0_var = mean_and_variance(unnormalised(y_r, u_r))
     pooled = np.concatenate([s.phase_aligned for s in spectra])
-    first = spectra[0]
     return CellHOSIDF(
         frequency=first.frequency, line=first.line, level=first.level,
-        n_repeats=len(spectra), n_periods=periods.pop(),
+        n_repeats=len(spectra), n_periods=first.y.shape[0],
         h=h, h_var_repeats=h_var, h_var_periods=_period_variance(normalised(y_p, u_p)),
         h000=h0, h000_var_repeats=h0_var, h000_var_periods=_period_variance(unnormalised(y_p, u_p)),
         stats=table_one(pooled),
@@ -246,18 +219,6 @@ class HOSIDFGrid:
         return out
 
 
-def check_variance_counts(cells: dict, variance: Variance, source: str) -> None:
-    """InputError when a requested variance lacks data: < 2 repeats, or < 2 periods per run."""
-    for cell in cells.values():
-        where = f"{source}: cell {cell.frequency:g} Hz, amplitude {cell.level:g}"
-        if variance in ("repeats", "both") and cell.n_repeats < 2:
-            raise InputError(where, f"{cell.n_repeats} repeat; the variance over repeats (seed 000 Eq. 12) "
-                                    "needs at least 2 (or ask for the variance over periods only)")
-        if variance in ("periods", "both") and cell.n_periods < 2:
-            raise InputError(where, f"{cell.n_periods} steady-state period per run; the variance over periods "
-                                    "needs at least 2 (or ask for the variance over repeats only)")
-
-
 def group_cells(spectra: Iterable[RunSpectra]) -> dict[tuple[float, float], list[RunSpectra]]:
     """Group run spectra by (frequency, amplitude): the repeats of one grid cell."""
     cells: dict[tuple[float, float], list[RunSpectra]] = {}
@@ -280,12 +241,11 @@ def measured_hosidf(runs: Iterable[Run], harmonics: int, variance: Variance = "b
         raise InputError(source, "holds no runs")
     frequencies = np.array(sorted({f for f, _ in groups}))
     levels = np.array(sorted({a for _, a in groups}))
+    check_cells([SineCell(f, a, [s.run_id for s in members], [s.y.shape[0] for s in members])
+                 for (f, a), members in groups.items()], source)
     cells = {}
     for (frequency, level), members in groups.items():
-        if len(members) * members[0].y.shape[0] < 2:
-            raise InputError(f"{source}: cell {frequency:g} Hz, amplitude {level:g}",
-                             "a single run of a single period: Table I needs at least two spectra")
         key = (int(np.searchsorted(frequencies, frequency)), int(np.searchsorted(levels, level)))
         cells[key] = cell_hosidf(members)
-    check_variance_counts(cells, variance, source)
+    check_variance_counts(cells.values(), variance, source)
     return HOSIDFGrid(frequencies, levels, harmonics, cells)

@@ -19,9 +19,10 @@ import numpy as np
 from nlsid.analysis.bla import RobustAccumulator, RobustBLA
 from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.analysis.fast_bla import FastAccumulator, FastBLA, fast_run
-from nlsid.analysis.lines import Lines, classify_lines
+from nlsid.analysis.lines import EXCITED, Lines, classify_lines
 from nlsid.analysis.output_spectrum import OutputSpectrum, SpectrumAccumulator, db
 from nlsid.analysis.period_stats import run_period_stats
+from nlsid.analysis.precision import negligible
 from nlsid.errors import InputError
 from nlsid.io.feeds import BlaRuns, LevelShape
 from nlsid.io.run import Run
@@ -45,8 +46,24 @@ class LevelResult:
     def n_realizations(self) -> int:
         return len(self.run_ids)
 
+    @property
+    def noise_floor(self) -> str:
+        """``"unknown"`` with one period per realization (P = 1: no noise estimate), ``"zero"`` when
+        the output noise of the averaged spectrum is zero within numerical precision next to the
+        output at the excited lines (noise-free data, :mod:`nlsid.analysis.precision`), else
+        ``"estimated"``."""
+        if self.n_periods < 2:
+            return "unknown"
+        lines = self.lines.kind >= 0
+        noise = float(np.mean(self.spectrum.y_noise[lines]))
+        output = float(np.mean(self.spectrum.y_power[self.lines.kind == EXCITED]))
+        return "zero" if negligible(noise, output) else "estimated"
+
     def summary(self) -> dict:
-        """Scalars of this level for tables and ``--json``: sizes, spectrum levels and BLA levels (dB)."""
+        """Scalars of this level for tables and ``--json``: sizes, spectrum levels and BLA levels (dB).
+
+        ``noise_floor`` says what the noise levels are (:attr:`noise_floor`); when it is not
+        ``"estimated"`` the noise level and the levels relative to it are NaN (null in JSON)."""
         G2 = float(np.mean(np.abs(self.robust.G) ** 2))
         out = {
             "level": self.level,
@@ -59,9 +76,14 @@ class LevelResult:
             "bla_db": db(G2),
             "nl_var_db": db(float(np.mean(self.robust.var_nl))) - db(G2),
             "noise_var_db": db(float(np.mean(self.robust.var_noise_period))) - db(G2),
+            "noise_floor": self.noise_floor,
             "spectrum": self.spectrum.summary(self.lines),
             "warnings": list(self.warnings),
         }
+        if out["noise_floor"] != "estimated":  # no noise level to state or to compare with
+            out["noise_var_db"] = float("nan")
+            for key in ("noise_db", "odd_above_noise_db", "even_above_noise_db"):
+                out["spectrum"][key] = float("nan")
         if self.fast is not None:
             out["fast_nl_var_db"] = db(float(np.mean(self.fast.var_nl))) - db(G2)
             if self.fast.var_nl_even is not None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from nlsid.diagnose import verdict as rules
-from nlsid.diagnose.evidence import Evidence, error_test, gather
+from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.simulation import ModelRunner
@@ -65,15 +65,21 @@ class Diagnosis:
     def headline(self) -> str:
         status, ev = self.verdict.status, self.evidence
         if status == rules.NO_DISCREPANCY:
+            if ev.exact:
+                return (f"No discrepancy: the simulation reproduces the measured output exactly (error "
+                        f"{ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms, within numerical precision); "
+                        "the noise floor is zero")
             return (f"No significant discrepancy: the simulation error is within the noise "
                     f"({ev.overall.above_noise_db:+.1f} dB, p = {ev.overall.p_value:.2g})")
         if status == rules.EXPLAINED:
             w = self.winner
             main = w.hypothesis.main
             return (f"Cause: {w.hypothesis.title} ({main} = {w.estimate.values[main]:.4g} {w.hypothesis.unit}); "
-                    f"the extended model's validation error is {w.score.gain_db:.1f} dB smaller, "
-                    f"{versus_floor(w.score)}")
-        seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
+                    f"the extended model's validation error is {gain_text(w.score)}, {versus_floor(w.score)}")
+        if ev.noise_zero:
+            seen = f"the simulation error is {ev.error_rms:.3g} rms against a zero noise floor: noise-free data"
+        else:
+            seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
         if status == rules.AMBIGUOUS:
             return f"Discrepancy ({seen}); equally good explanations: {', '.join(self.verdict.tied)}"
         return f"Discrepancy ({seen}); no hypothesis of the library explains it"
@@ -82,7 +88,8 @@ class Diagnosis:
         out = self.evidence.findings()
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
-            out.append(f"{o.hypothesis.title}: validation gain {o.score.gain_db:+.1f} dB, {versus_floor(o.score)}")
+            gain = f"{o.score.gain_db:+.1f} dB" if math.isfinite(o.score.gain_db) else "error zero within numerical precision"
+            out.append(f"{o.hypothesis.title}: validation gain {gain}, {versus_floor(o.score)}")
         return out
 
     def arrays(self) -> dict:
@@ -110,7 +117,8 @@ class Diagnosis:
         lines = [f"Extended by nlsid diagnose: {w.hypothesis.title} added to {self.model_source}"]
         for name, value in w.estimate.values.items():
             lines.append(f"  {name} = {value:.6g} +- {w.estimate.std[name]:.2g} (one standard error)")
-        lines.append(f"Validation error {w.score.error_rms:.4g} rms ({w.score.gain_db:+.1f} dB against the original "
+        gain = f"{w.score.gain_db:+.1f} dB" if math.isfinite(w.score.gain_db) else "zero within numerical precision"
+        lines.append(f"Validation error {w.score.error_rms:.4g} rms ({gain} against the original "
                      f"model, {versus_floor(w.score)})")
         return lines
 
@@ -132,8 +140,17 @@ class Diagnosis:
 
 def versus_floor(score: Score) -> str:
     """Where a model's validation error lies against the noise floor, in words ("0.3 dB above ...")."""
+    if score.noise_zero:
+        return "an exact match (the noise floor is zero)" if score.exact else "the noise floor is zero (noise-free data)"
     x = score.above_floor_db
     return f"{abs(x):.1f} dB {'above' if x >= 0 else 'below'} the noise floor"
+
+
+def gain_text(score: Score) -> str:
+    """The extended model's validation error against the original's, in words."""
+    if math.isfinite(score.gain_db):
+        return f"{score.gain_db:.1f} dB smaller"
+    return "zero within numerical precision"
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str) -> Estimate:
@@ -174,7 +191,7 @@ def sufficient_simpler(hypothesis: Hypothesis, outcomes: list[Outcome]) -> Outco
     for outcome in outcomes:
         h = outcome.hypothesis
         if (h.family == hypothesis.family and len(h.parameters) < len(hypothesis.parameters)
-                and outcome.score is not None and outcome.score.p_above_noise >= rules.ALPHA):
+                and outcome.score is not None and outcome.score.within_floor):
             return outcome
     return None
 
@@ -185,7 +202,11 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
     except InputError as exc:
         outcome.reason = f"the extended model is not valid: {exc.what}"
         return
-    outcome.residuals = model_residuals(extended, val_runs, val_res)
+    try:  # valid as a config, the extension may still not run (a dead time that destabilises the loop)
+        outcome.residuals = model_residuals(extended, val_runs, val_res)
+    except InputError as exc:
+        outcome.reason = f"the extended model does not run: {exc.what}"
+        return
     outcome.score = score(val_res, outcome.residuals)
 
 
@@ -195,7 +216,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     step = step or (lambda name: None)
     runner = ModelRunner.from_data(data, source)
     roles = split_runs(runs, where)
-    evidence, _ = gather(runner, runs, roles)
+    evidence, _ = gather(runner, runs, roles, where)
     step("evidence")
     by_id = {run.run_id: run for run in runs}
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
@@ -211,10 +232,14 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         if reason is not None:
             outcome.reason = f"does not apply: {reason}"
             continue
+        if evidence.exact:
+            outcome.reason = "not fitted: the model reproduces the noise-free data exactly (no residual to explain)"
+            continue
         simpler = sufficient_simpler(hypothesis, outcomes)
         if simpler is not None:
-            outcome.reason = (f"not fitted: {simpler.hypothesis.title} already reaches the noise floor "
-                              f"(p = {simpler.score.p_above_noise:.2g}), so this richer law cannot be "
+            reached = ("matches the data exactly" if simpler.score.exact
+                       else f"already reaches the noise floor (p = {simpler.score.p_above_noise:.2g})")
+            outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached}, so this richer law cannot be "
                               "significantly better")
             continue
         estimate = hypothesis.estimate(context)
@@ -235,6 +260,6 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     original = score(val)
     candidates = [rules.Candidate(o.hypothesis.name, o.hypothesis.family, len(o.hypothesis.parameters),
                                   o.score.error_rms ** 2) for o in outcomes if o.score is not None]
-    dof = error_test(val).dof
+    dof = verdict_dof(val)
     verdict = rules.decide(evidence.overall.significant, original.error_rms ** 2, candidates, dof)
     return Diagnosis(source, roles, evidence, original, outcomes, verdict)

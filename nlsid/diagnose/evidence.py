@@ -19,6 +19,14 @@ a weighted sum of chi-squares with ``nu = 2 (sum s2)^2 / sum s2^2`` equivalent d
 discrepancy is *significant* when its p-value is below :data:`ALPHA` = 0.001; so "nothing beyond
 noise" comes out as the answer when it is the truth (with probability 0.999 per test).
 
+A zero noise floor. Noise-free data (a simulation without disturbances) repeat from period to
+period up to rounding: ``sum_S s2`` is zero within numerical precision next to the measured output's
+power over the same runs (:mod:`nlsid.analysis.precision`). The ratio then has no finite value and
+no F distribution: the test says so (``noise_zero``) and is decided by the residual alone. A
+residual that is zero within the same precision is an *exact match* (not significant, no p-value);
+any larger residual cannot be zero noise (p = 0, significant). Its size above the noise has no
+value in dB (``above_noise_db`` is NaN, written as null).
+
 At the excited lines of each multisine level the measured BLA (robust method, book Section 6.1.1;
 the reference method in closed loop) is compared with the model's BLA computed in the same way
 from the simulated runs: per line the gain error ``20 log10 |G/G_model|`` (dB), the phase error,
@@ -51,6 +59,7 @@ import numpy as np
 
 from nlsid.analysis.lines import EVEN, EXCITED, ODD, classify_lines, spectra
 from nlsid.analysis.output_spectrum import db
+from nlsid.analysis.precision import PRECISION, negligible
 from nlsid.diagnose.simulation import ModelRunner, steady_mean, steady_periods
 from nlsid.diagnose.split import ESTIMATION
 from nlsid.io.run import Run
@@ -84,6 +93,12 @@ class Residual:
     def spectrum(self) -> np.ndarray:
         return spectra(self.residual)
 
+    @property
+    def output_power(self) -> float:
+        """Power of the measured mean period at every AC line, sum |Y(k)|^2 (the scale of
+        numerical precision for this run's residual and noise, :mod:`nlsid.analysis.precision`)."""
+        return float(np.sum(np.abs(spectra(self.measured)[ac_lines(self.period)]) ** 2))
+
 
 def residual_of(run: Run, model_y: np.ndarray, role: str) -> Residual:
     """The :class:`Residual` of a measured run and the model's output on it (same length)."""
@@ -100,30 +115,47 @@ def residual_of(run: Run, model_y: np.ndarray, role: str) -> Residual:
 
 @dataclass(frozen=True)
 class Test:
-    """Residual power of a set of lines against the noise: ratio (dB), degrees of freedom, p-value."""
+    """Residual power of a set of lines against the noise: ratio (dB), degrees of freedom, p-value.
+
+    ``noise_zero``: the noise is zero within numerical precision (noise-free data; the ratio is
+    NaN); ``residual_zero``: so is the residual (with ``noise_zero``: an exact match)."""
 
     above_noise_db: float
     dof: float
     noise_dof: float
     p_value: float
+    noise_zero: bool = False
+    residual_zero: bool = False
 
     @property
     def significant(self) -> bool:
         return math.isfinite(self.p_value) and self.p_value < ALPHA
 
+    @property
+    def exact(self) -> bool:
+        return self.noise_zero and self.residual_zero
+
     def summary(self) -> dict:
         return {"above_noise_db": self.above_noise_db, "dof": self.dof, "noise_dof": self.noise_dof,
-                "p_value": self.p_value, "significant": self.significant}
+                "p_value": self.p_value, "significant": self.significant, "noise_floor_zero": self.noise_zero,
+                "exact_match": self.exact}
 
 
-def power_test(power: float, noise: np.ndarray, n_periods: int) -> Test:
+def power_test(power: float, noise: np.ndarray, n_periods: int, reference: float = float("nan")) -> Test:
     """The F test of the module docstring for a residual ``power`` = sum |E|^2 over lines whose
-    noise variances are ``noise`` (one value per line and run)."""
+    noise variances are ``noise`` (one value per line and run); ``reference`` is the measured
+    output's power over the same runs (:attr:`Residual.output_power`), the scale of numerical
+    precision for a zero noise floor (without it a zero noise gives an undecided, NaN test)."""
     from scipy.stats import f as f_dist
 
     noise = noise[np.isfinite(noise)]
     total = float(np.sum(noise))
-    if noise.size == 0 or total <= 0 or n_periods < 2:
+    if noise.size == 0 or n_periods < 2:
+        return Test(float("nan"), float("nan"), float("nan"), float("nan"))
+    if negligible(total, reference):
+        exact = negligible(power, reference)
+        return Test(float("nan"), float("nan"), float("nan"), float("nan") if exact else 0.0, True, exact)
+    if total <= 0:
         return Test(float("nan"), float("nan"), float("nan"), float("nan"))
     dof = 2 * total**2 / float(np.sum(noise**2))
     noise_dof = dof * (n_periods - 1)
@@ -151,7 +183,23 @@ def error_test(residuals: list[Residual]) -> Test:
     """:func:`power_test` of the whole residual (all AC lines of all the runs) against its noise."""
     power = sum(float(np.sum(np.abs(res.spectrum[ac_lines(res.period)]) ** 2)) for res in residuals)
     noise = np.concatenate([res.noise_var[ac_lines(res.period)] for res in residuals])
-    return power_test(power, noise, min(res.n_periods for res in residuals))
+    return power_test(power, noise, min(res.n_periods for res in residuals), _reference(residuals))
+
+
+def _reference(residuals) -> float:
+    """The measured output's power over these runs (the scale of numerical precision)."""
+    return sum(res.output_power for res in residuals)
+
+
+def verdict_dof(residuals: list[Residual]) -> float:
+    """Degrees of freedom of the noise behind the verdict's F rule: the Satterthwaite value of
+    :func:`error_test`; with a zero noise floor (no noise to count) its upper limit, 2 per AC line
+    (equal variances on every line), so that an improvement must still exceed the spread a
+    residual of that many lines would show."""
+    test = error_test(residuals)
+    if test.noise_zero:
+        return 2.0 * sum(ac_lines(res.period).size for res in residuals)
+    return test.dof
 
 
 def line_tests(residuals: list[Residual]) -> dict[str, dict]:
@@ -165,14 +213,14 @@ def line_tests(residuals: list[Residual]) -> dict[str, dict]:
             power += float(np.sum(np.abs(res.spectrum[k]) ** 2))
             noise.append(res.noise_var[k])
         noise = np.concatenate(noise) if noise else np.zeros(0)
-        out[name] = power_test(power, noise, min(res.n_periods for res in residuals)).summary()
+        out[name] = power_test(power, noise, min(res.n_periods for res in residuals), _reference(residuals)).summary()
         out[name]["lines"] = int(noise.size)
     return out
 
 
 def harmonic_tests(residuals: list[Residual], runs: list[Run]) -> list[dict]:
     """Residual at the harmonics of every sine (frequency, amplitude) of the sine runs (module docstring)."""
-    from nlsid.analysis.hosidf import sine_bin
+    from nlsid.io.feeds import sine_bin
 
     groups: dict[tuple, list[tuple[Residual, int]]] = {}
     for res, run in zip(residuals, runs):
@@ -181,16 +229,17 @@ def harmonic_tests(residuals: list[Residual], runs: list[Run]) -> list[dict]:
     out = []
     for (frequency, level), members in sorted(groups.items(), key=lambda item: (item[0][0], item[0][1] or 0.0)):
         P = min(res.n_periods for res, _ in members)
+        reference = _reference([res for res, _ in members])
         row = {"frequency_hz": frequency, "level": level, "runs": len(members), "harmonic_above_noise_db": []}
         limit = min(HARMONICS, min((res.period - 1) // 2 // k0 for res, k0 in members))
         for h in range(1, limit + 1):
             test = power_test(sum(float(abs(res.spectrum[h * k0]) ** 2) for res, k0 in members),
-                              np.array([res.noise_var[h * k0] for res, k0 in members]), P)
+                              np.array([res.noise_var[h * k0] for res, k0 in members]), P, reference)
             row["harmonic_above_noise_db"].append(test.above_noise_db)
         for name, orders in (("fundamental", [1]), ("odd", range(3, limit + 1, 2)), ("even", range(2, limit + 1, 2))):
             power = sum(float(abs(res.spectrum[h * k0]) ** 2) for res, k0 in members for h in orders)
             noise = np.array([res.noise_var[h * k0] for res, k0 in members for h in orders])
-            row[name] = power_test(power, noise, P).summary()
+            row[name] = power_test(power, noise, P, reference).summary()
         out.append(row)
     return out
 
@@ -206,6 +255,8 @@ def compare_bla(measured, model) -> dict:
     if not np.all(np.isfinite(variance)):
         variance, observations = measured.robust.var_noise, M * measured.robust.n_periods
     threshold = f_quantile_2(BLA_PROBABILITY, 2 * observations - 2)
+    # noise-free data: a zero variance is the numerical precision of G (a circle of that radius)
+    variance = np.maximum(variance, PRECISION**2 * np.abs(G) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.abs(G - Gm) ** 2 / variance
     outside = z > threshold
@@ -247,6 +298,17 @@ class Evidence:
     spectra: dict = field(default_factory=dict)
     bla_levels: tuple = ()
     harmonics: list[dict] = field(default_factory=list)
+    output_rms: float = float("nan")  # of the measured mean periods (AC lines), as error_rms
+
+    @property
+    def noise_zero(self) -> bool:
+        """The noise floor is zero within numerical precision (noise-free data)."""
+        return self.overall.noise_zero
+
+    @property
+    def exact(self) -> bool:
+        """Noise-free data that the model reproduces within numerical precision."""
+        return self.overall.exact
 
     @property
     def odd_seen(self) -> bool:
@@ -262,7 +324,8 @@ class Evidence:
 
     def summary(self) -> dict:
         return {
-            "error_rms": self.error_rms, "noise_rms": self.noise_rms,
+            "error_rms": self.error_rms, "noise_rms": self.noise_rms, "output_rms": self.output_rms,
+            "noise_floor_zero": self.noise_zero, "exact_match": self.exact,
             "error_above_noise": self.overall.summary(),
             "lines": self.lines,
             "bla": [{k: v for k, v in row.items() if not isinstance(v, np.ndarray)} for row in self.bla],
@@ -274,8 +337,15 @@ class Evidence:
 
     def findings(self) -> list[str]:
         """What the simulation gets wrong, in words, each with its size."""
-        out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
-               f"({self.overall.above_noise_db:+.1f} dB, {_p_text(self.overall.p_value)})"]
+        if self.exact:
+            out = [f"simulation error {self.error_rms:.3g} rms against an output of {self.output_rms:.3g} rms: zero "
+                   "within numerical precision; the noise floor is zero (noise-free data)"]
+        elif self.noise_zero:
+            out = [f"simulation error {self.error_rms:.3g} rms against a zero noise floor (noise-free data: every "
+                   "residual above numerical precision is significant)"]
+        else:
+            out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
+                   f"({self.overall.above_noise_db:+.1f} dB, {_p_text(self.overall.p_value)})"]
         for row in self.bla:
             if row["significant"]:
                 out.append(f"level {_name(row['level'])}: model FRF outside the BLA's 95% bounds at "
@@ -286,7 +356,7 @@ class Evidence:
                 test = row[name]
                 if test["significant"]:
                     out.append(f"level {_name(row['level'])}: {name} distortion the model does not produce, "
-                               f"{test['above_noise_db']:.1f} dB above the noise")
+                               f"{_above_text(test)}")
         out += self._harmonic_findings()
         changes = [row for row in self.levels if math.isfinite(row.get("bla_change_max_db", float("nan")))]
         if len(self.levels) > 1 and changes:
@@ -304,10 +374,20 @@ class Evidence:
         for name in ("odd", "even"):
             seen = [row[name]["above_noise_db"] for row in self.harmonics if row[name]["significant"]]
             if seen:
+                finite = [x for x in seen if math.isfinite(x)]
+                size = (f"{min(finite):.0f} to {max(finite):.0f} dB above the noise" if len(finite) == len(seen)
+                        else "above a zero noise floor" if not finite
+                        else f"up to {max(finite):.0f} dB above the noise, in the others above a zero noise floor")
                 out.append(f"sines ({cells} cells, {frequencies[0]:g} to {frequencies[-1]:g} Hz): {name} harmonics "
-                           f"the model does not produce in {len(seen)} of {cells} cells, "
-                           f"{min(seen):.0f} to {max(seen):.0f} dB above the noise")
+                           f"the model does not produce in {len(seen)} of {cells} cells, {size}")
         return out
+
+
+def _above_text(test: dict) -> str:
+    """A test summary's residual against the noise in words (a zero floor has no dB value)."""
+    if test.get("noise_floor_zero"):
+        return "zero within numerical precision" if test.get("exact_match") else "above a zero noise floor"
+    return f"{test['above_noise_db']:.1f} dB above the noise"
 
 
 def _p_text(p: float) -> str:
@@ -319,10 +399,12 @@ def _name(level) -> str:
     return "-" if level is None else f"{level:g}"
 
 
-def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str]) -> tuple[Evidence, dict[str, Run]]:
+def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
+           source: str = "") -> tuple[Evidence, dict[str, Run]]:
     """Simulate the model on every periodic run and measure the discrepancy (module docstring).
 
-    Returns the evidence and the model's simulated runs keyed by run id.
+    Returns the evidence and the model's simulated runs keyed by run id. ``source`` (the
+    recording) prefixes the runs in error messages: ``source:/runs/<id>``.
     """
     from nlsid.analysis.levels import across_levels, analyse_runs
 
@@ -334,7 +416,8 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str]) -> tuple
     measured_levels = model_levels = ()
     if multisine:
         model_runs = [_as_measured(simulated[run.run_id], run) for run in multisine]
-        measured_levels, _ = analyse_runs(((run, run.run_id) for run in multisine), "auto", BLA_PROBABILITY)
+        where = (lambda run: f"{source}:/runs/{run.run_id}") if source else (lambda run: run.run_id)
+        measured_levels, _ = analyse_runs(((run, where(run)) for run in multisine), "auto", BLA_PROBABILITY)
         model_levels, _ = analyse_runs(((run, run.run_id) for run in model_runs), "auto", BLA_PROBABILITY)
         for measured, model in zip(measured_levels, model_levels):
             members = [res for res in residuals if res.kind == "multisine" and res.level == measured.level]
@@ -352,10 +435,12 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str]) -> tuple
             row["model_bla_db"] = model_row["bla_db"]
             levels.append(row)
     error, noise = error_power(residuals)
+    output = 2 * _reference(residuals) / len(residuals)  # mean power per run, as error_power
     return Evidence(
         residuals=residuals, overall=error_test(residuals), lines=lines, bla=bla, levels=levels,
         time=_time_signals(runner, used, residuals), noise_rms=math.sqrt(noise), error_rms=math.sqrt(error),
         spectra=spectra_, bla_levels=(measured_levels, model_levels), harmonics=harmonic_tests(residuals, used),
+        output_rms=math.sqrt(output),
     ), simulated
 
 

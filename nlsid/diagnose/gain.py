@@ -26,6 +26,12 @@ lines but DC and Nyquist). Per model:
   ``(B - A) / (B - N)`` with B and A the residual powers of the original and of this model and N
   this model's noise power there (1 = all of it; NaN when the original model leaves nothing above
   the noise there).
+
+With a zero noise floor (noise-free data, :mod:`nlsid.diagnose.evidence`) ``noise_zero`` is set,
+``above_floor_db`` is NaN (no ratio to a zero floor) and ``p_above_noise`` is 0, or NaN with
+``exact`` set when the model's error is zero within numerical precision as well; ``gain_db`` of
+such an exact model is NaN too (its error has no size to compare), and ``error_db``/``noise_db``
+of a zero rms are NaN. NaN is written as null.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.analysis.lines import EVEN, ODD, classify_lines
-from nlsid.diagnose.evidence import Residual, error_power, error_test, residual_of
+from nlsid.diagnose.evidence import ALPHA, Residual, error_power, error_test, residual_of
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.io.run import Run
 
@@ -49,16 +55,28 @@ class Score:
     above_floor_db: float
     distortion_explained: float
     p_above_noise: float
+    noise_zero: bool = False   # the noise floor is zero within numerical precision (noise-free data)
+    exact: bool = False        # ... and so is this model's error
 
     @property
     def error_db(self) -> float:
-        return 20 * math.log10(self.error_rms)
+        return _db20(self.error_rms)
+
+    @property
+    def within_floor(self) -> bool:
+        """The error is not significantly above the noise floor (an exact match on noise-free data)."""
+        return self.exact or (math.isfinite(self.p_above_noise) and self.p_above_noise >= ALPHA)
 
     def summary(self) -> dict:
         return {"error_rms": self.error_rms, "error_db": self.error_db, "noise_rms": self.noise_rms,
-                "noise_db": 20 * math.log10(self.noise_rms), "gain_db": self.gain_db,
+                "noise_db": _db20(self.noise_rms), "gain_db": self.gain_db,
                 "above_floor_db": self.above_floor_db, "distortion_explained": self.distortion_explained,
-                "p_above_noise": self.p_above_noise}
+                "p_above_noise": self.p_above_noise, "noise_floor_zero": self.noise_zero, "exact_match": self.exact}
+
+
+def _db20(rms: float) -> float:
+    """20 log10 of an rms value; NaN for zero (no finite level in dB)."""
+    return 20 * math.log10(rms) if rms > 0 else float("nan")
 
 
 def model_residuals(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> list[Residual]:
@@ -86,5 +104,12 @@ def score(original: list[Residual], model: list[Residual] | None = None) -> Scor
     before, _ = _detection_power(original)
     after, noise_lines = _detection_power(model)
     explained = (before - after) / (before - noise_lines) if before > noise_lines else float("nan")
-    return Score(math.sqrt(power), math.sqrt(noise), 10 * math.log10(original_power / power),
-                 10 * math.log10(power / noise), explained, error_test(model).p_value)
+    test = error_test(model)
+    if model is original:
+        gain = 0.0
+    elif test.exact or not (power > 0 and original_power > 0):
+        gain = float("nan")
+    else:
+        gain = 10 * math.log10(original_power / power)
+    above = 10 * math.log10(power / noise) if power > 0 and noise > 0 and not test.noise_zero else float("nan")
+    return Score(math.sqrt(power), math.sqrt(noise), gain, above, explained, test.p_value, test.noise_zero, test.exact)

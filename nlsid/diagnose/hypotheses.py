@@ -110,7 +110,8 @@ class Context:
 @dataclass(frozen=True)
 class Estimate:
     """Parameter values and standard errors; ``explained_db`` is the drop of the estimation
-    residual's sum of squares the signature predicts (10 log10 of before over after)."""
+    residual's sum of squares the signature predicts (10 log10 of before over after; NaN when
+    either is zero: :func:`_explained_db`)."""
 
     values: dict[str, float]
     std: dict[str, float]
@@ -133,6 +134,12 @@ class Hypothesis:
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
 
 
+def _explained_db(before: float, after: float) -> float:
+    """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite
+    value (a zero residual to begin with, or one explained exactly, as on noise-free data)."""
+    return 10 * math.log10(before / after) if before > 0 and after > 0 else float("nan")
+
+
 def _regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Estimate:
     X = np.column_stack(columns)
     theta, *_ = np.linalg.lstsq(X, y, rcond=None)
@@ -142,7 +149,7 @@ def _regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Esti
     before = float(np.sum(y**2))
     return Estimate({n: float(v) for n, v in zip(names, theta)},
                     {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)},
-                    10 * math.log10(before / rss) if rss > 0 else float("inf"))
+                    _explained_db(before, rss))
 
 
 def _scan(cost: Callable[[float], float], lower: float, upper: float) -> float:
@@ -240,7 +247,7 @@ def _estimate_lugre(ctx: Context) -> Estimate | str:
     costs = [ctx.simulation_rss(extend(ctx.runner.data, {"sigma0": sigma0, **levels})) for sigma0 in grid]
     sigma0 = grid[int(np.argmin(costs))]
     return Estimate({"sigma0": sigma0, **levels}, {"sigma0": float("nan"), **{k: stribeck.std[k] for k in levels}},
-                    10 * math.log10(float(np.sum(ctx.target() ** 2)) / min(costs)),
+                    _explained_db(float(np.sum(ctx.target() ** 2)), min(costs)),
                     "levels from the Stribeck fit; sigma0 on a grid of presliding deflections")
 
 
@@ -305,7 +312,7 @@ def _input_block(make: Callable[[float], dict], name: str, lower: Callable[[np.n
         a = _scan(lambda a: float(np.sum((y - predicted(a)) ** 2)), lower(magnitude), upper(magnitude))
         rss = float(np.sum((y - predicted(a)) ** 2))
         values = {k: v for k, v in make(a).items() if k != "type"}
-        return Estimate(values, {k: float("nan") for k in values}, 10 * math.log10(float(np.sum(y**2)) / rss),
+        return Estimate(values, {k: float("nan") for k in values}, _explained_db(float(np.sum(y**2)), rss),
                         f"symmetric {name} by a bounded search of the residual")
     return estimate
 
@@ -348,13 +355,18 @@ def _extend_quadratic(data: dict, values: dict) -> dict:
 # ---- linear: delay and a missing resonance, from G_BLA / G_model ---------------------------------
 
 def _ratios(ctx: Context) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """(angular frequency, G/G_model, variance of the ratio) per level."""
+    """(angular frequency, G/G_model, variance of the ratio) per level. The variance of G is at
+    least its numerical precision (noise-free data have none: :mod:`nlsid.analysis.precision`),
+    so that the weights stay finite."""
+    from nlsid.analysis.precision import PRECISION
+
     out = []
     measured, model = ctx.bla_levels
     for a, b in zip(measured, model):
         w = 2 * np.pi * a.lines.frequency(a.lines.excited)
         R = a.robust.G / b.robust.G
         var = a.robust.var_total if np.all(np.isfinite(a.robust.var_total)) else a.robust.var_noise
+        var = np.maximum(var, PRECISION**2 * np.abs(a.robust.G) ** 2)
         out.append((w, R, var / np.abs(b.robust.G) ** 2))
     return out
 

@@ -11,7 +11,7 @@ comparison is made on whole steady-state periods.
 
 from __future__ import annotations
 
-from nlsid.errors import InputError
+from nlsid.io.feeds import check_repeated_excitation, excitation_key
 from nlsid.io.run import Run
 
 ESTIMATION, VALIDATION = "estimation", "validation"
@@ -21,15 +21,13 @@ def split_runs(runs: list[Run], where: str) -> dict[str, str]:
     """Role (``estimation`` or ``validation``) of every periodic run, keyed by run id."""
     groups: dict[tuple, list[Run]] = {}
     for run in runs:
-        if run.period is None:
-            continue
-        groups.setdefault((run.kind, run.level, run.frequency), []).append(run)
+        key = excitation_key(run)
+        if key is not None:
+            groups.setdefault(key, []).append(run)
+    check_repeated_excitation((len(members) for members in groups.values()), where)
     roles = {}
     for members in groups.values():
         ordered = sorted(members, key=lambda r: (r.realization is None, r.realization or 0, r.run_id))
         for i, run in enumerate(ordered):
             roles[run.run_id] = VALIDATION if i % 2 else ESTIMATION
-    if VALIDATION not in roles.values():
-        raise InputError(where, "needs two runs (realizations) of one excitation at least: one to estimate the "
-                                "model extensions, one to validate them")
     return roles

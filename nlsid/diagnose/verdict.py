@@ -23,6 +23,10 @@ Let ``E_0`` be the validation error power of the original model, ``E_h`` that of
 
 Hypotheses are ranked by ``E_h`` (smallest first); those that could not be estimated or do not apply
 to the model are listed after them with the reason.
+
+Noise-free data (a zero noise floor, :mod:`nlsid.diagnose.evidence`): ``nu`` is then its upper
+limit, 2 per AC line of the validation runs (:func:`nlsid.diagnose.evidence.verdict_dof`), and an
+error power of exactly zero makes every ratio over it infinite (:func:`ratio`).
 """
 
 from __future__ import annotations
@@ -32,6 +36,13 @@ from dataclasses import dataclass
 ALPHA = 0.001
 
 NO_DISCREPANCY, EXPLAINED, AMBIGUOUS, UNEXPLAINED = "no_discrepancy", "explained", "ambiguous", "unexplained"
+
+
+def ratio(a: float, b: float) -> float:
+    """``a / b`` for error powers: infinite over a zero ``b`` (1 when both are zero: no change)."""
+    if b > 0:
+        return a / b
+    return float("inf") if a > 0 else 1.0
 
 
 def f_critical(dof: float) -> float:
@@ -67,7 +78,7 @@ class Verdict:
 def decide(discrepancy: bool, original_power: float, candidates: list[Candidate], dof: float) -> Verdict:
     """The verdict of the module docstring."""
     threshold = f_critical(dof)
-    explaining = sorted((c for c in candidates if original_power / c.error_power > threshold),
+    explaining = sorted((c for c in candidates if ratio(original_power, c.error_power) > threshold),
                         key=lambda c: c.error_power)
     names = tuple(c.name for c in explaining)
     if not discrepancy:
@@ -75,7 +86,7 @@ def decide(discrepancy: bool, original_power: float, candidates: list[Candidate]
     if not explaining:
         return Verdict(UNEXPLAINED, None, (), names, threshold)
     best = explaining[0]
-    tied = [c for c in explaining if c.error_power / best.error_power < threshold]
+    tied = [c for c in explaining if ratio(c.error_power, best.error_power) < threshold]
     if len({c.family for c in tied}) > 1:
         return Verdict(AMBIGUOUS, None, tuple(c.name for c in tied), names, threshold)
     return Verdict(EXPLAINED, simplest_sufficient(explaining, best.family, threshold).name,
@@ -87,6 +98,6 @@ def simplest_sufficient(explaining: list[Candidate], family: str, threshold: flo
     members = sorted((c for c in explaining if c.family == family), key=lambda c: (c.n_parameters, c.error_power))
     current = members[0]
     for richer in members[1:]:
-        if richer.n_parameters > current.n_parameters and current.error_power / richer.error_power > threshold:
+        if richer.n_parameters > current.n_parameters and ratio(current.error_power, richer.error_power) > threshold:
             current = richer
     return current

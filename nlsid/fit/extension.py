@@ -46,6 +46,7 @@ from typing import Sequence
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.feeds import check_run_count
 from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
 from nlsid.simulate.sweep import SweepPoint, _deep_copy, _keys, _set
@@ -171,8 +172,7 @@ def split_runs(runs: Sequence[Run], validation_ids: Sequence[str] | None = None)
             raise InputError("validation runs", f"no run {missing[0]!r} in the recording (runs: {', '.join(sorted(known))})")
         held = set(validation_ids)
     else:
-        if len(runs) < 2:
-            raise InputError("runs", "need at least two runs: some to fit and one to validate on")
+        check_run_count(len(runs))
         realizations = {r.realization for r in runs if r.realization is not None}
         if len(realizations) >= 2:
             last = {}
@@ -233,7 +233,10 @@ class _Problem:
     def data(self, theta: np.ndarray) -> dict:
         data = _deep_copy(self.base)
         for name, value in zip(self.names, theta):
-            _set(data, name, float(value))
+            try:
+                _set(data, name, float(value), key=f"free.{name}")
+            except InputError as exc:  # named by the free: key the user wrote, at its line
+                raise InputError(_where(self.source, self.lines, ("free", name)), f"{exc.where}: {exc.what}") from None
         return data
 
     def point(self, theta: np.ndarray) -> SweepPoint:

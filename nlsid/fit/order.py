@@ -1,33 +1,40 @@
 """Order selection for transfer functions fitted to a BLA (book 4.7 L, Ex 76, 99, 100; Section 7.5).
 
-Every proper order nb/na (nb <= na, 1 <= na <= max_order) is fitted. Two checks per order:
+Every proper order nb/na (nb <= na, 1 <= na <= max_order) is fitted, by
+:func:`nlsid.fit.tf_fit.fit_stable`: the free fit when it is stable; when the free fit has real
+poles just beyond the stability boundary (within 3 standard deviations of z = 1 / s = 0) the data
+ask for integrators (a free mass) and those poles are fixed on the boundary; otherwise the fit is
+continued inside the stable region from its reflected poles. Two checks per order:
 
-* the cost at the minimum against its expectation E{V} (:func:`nlsid.fit.tf_fit.expected_cost`):
-  a correct order has V = E{V} within its statistical spread; a too-low order leaves model errors
-  that make V clearly larger (book Ex 62, too-simple model);
-* validation on held-out lines: the model is fitted again on every other excited line and the
-  mean weighted squared error (G_k - G(Omega_k))^2 / sigma_k^2 on the lines it did not see is
-  computed; about 1 (times the variance-estimate factor (M-1)/(M-2)) for a model that predicts
-  unseen frequencies, clearly more for an under- or a badly over-fitted one.
+* the cost at the minimum against its statistical bound :func:`nlsid.fit.tf_fit.cost_bound`
+  (the sample-ML cost of a correct model: E{V} = F - n_theta/2 for exact variances, (M-1)/(M-2)
+  times that for variances from M realizations, with the spread of (1/2) chi^2(2F - n_theta),
+  respectively of a sum of F(2, 2M - 2) terms; book 4.7 L and Chapter 7): a correct order stays
+  below it with probability 0.99865 (3 std of a normal); a too-low order leaves model errors that
+  make V clearly larger (book Ex 62, too-simple model);
+* validation on held-out lines: the model is fitted again (the same way) on every other excited
+  line and the mean weighted squared error (G_k - G(Omega_k))^2 / sigma_k^2 on the lines it did
+  not see is computed; about 1 (times (M-1)/(M-2)) for a model that predicts unseen
+  frequencies, clearly more for an under- or a badly over-fitted one.
 
-The choice: the order with the fewest parameters whose cost lies below E{V} + ACCEPT_STD standard
-deviations (the book's rule: select by the cost check and complexity, not by the lowest cost);
-ties go to the lower held-out error. When no order passes (nonlinear distortions missing from the
-weight, or a model class that cannot describe the data), the order with the lowest held-out error
-is chosen and the reason says so. A higher nested order with a clearly higher cost than a lower
-one is flagged as a local minimum (book Ex 76).
+The choice, among the orders whose fit is stable (or has only the integrators the data ask for;
+a stabilised fit that ends on the boundary does not count): the one with the fewest parameters
+whose cost lies within its bound (the book's rule: select by the cost check and complexity, not by
+the lowest cost); ties go to the lower held-out error. When no stable order passes, the stable
+order with the lowest held-out error is chosen and the reason says so; an unstable model is never
+chosen. A higher nested order with a clearly higher cost than a lower one is flagged as a local
+minimum (book Ex 76).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_order
-
-ACCEPT_STD = 3.0   # one-sided: a chi-square cost exceeds E + 3 std with probability about 0.2 %
+from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_stable, on_boundary
 
 
 @dataclass(frozen=True)
@@ -38,11 +45,26 @@ class OrderResult:
     expected_cost: float
     cost_std: float
     holdout_error: float       # mean weighted squared error per held-out line
-    accepted: bool
+    accepted: bool             # the cost lies within its bound
+    cost_bound: float = math.nan
+    stability: str = "stable"  # of the fit considered for this order (tf_fit.TransferFunction.stability)
+    how: str = "free"          # free, integrator or stabilised (tf_fit.fit_stable)
+    free_pole: float = math.nan  # the free fit's largest |z| (z) or Re s (s): where it would have put its poles
+    boundary: bool = False     # a stabilised fit with a pole within 3 std of the boundary (tf_fit.on_boundary)
+
+    @property
+    def eligible(self) -> bool:
+        """A model ``--order auto`` may choose: strictly stable (a stabilised fit not pressed against
+        the boundary), or with the integrators the data ask for."""
+        if self.how == "integrator":
+            return self.stability in ("stable", "marginal")
+        return self.stability == "stable" and not (self.how == "stabilised" and self.boundary)
 
     def row(self) -> dict:
         return {"order": f"{self.nb}/{self.na}", "cost": self.cost, "expected_cost": self.expected_cost,
-                "cost_std": self.cost_std, "holdout_error": self.holdout_error, "accepted": self.accepted}
+                "cost_std": self.cost_std, "cost_bound": self.cost_bound, "holdout_error": self.holdout_error,
+                "accepted": self.accepted, "stability": self.stability, "fit": self.how, "eligible": self.eligible,
+                "free_fit_pole": self.free_pole, "on_boundary": self.boundary}
 
 
 @dataclass
@@ -62,50 +84,75 @@ def candidate_orders(max_order: int) -> list[tuple[int, int]]:
 
 
 def holdout_error(data: FRFData, nb: int, na: int, domain: str, delay: int) -> float:
-    """Fit on even-indexed lines, return the mean weighted squared error on the odd-indexed ones."""
+    """Fit on even-indexed lines (as the order scan does: :func:`nlsid.fit.tf_fit.fit_stable`),
+    return the mean weighted squared error on the odd-indexed ones."""
     index = np.arange(data.bins.size)
     train, test = data.subset(index % 2 == 0), data.subset(index % 2 == 1)
-    fit = fit_order(train, nb, na, domain, delay)
+    fit = fit_stable(train, nb, na, domain, delay)
     error = test.G - fit.model.response(test.bins, test.period)
     return float(np.mean(np.abs(error) ** 2 / test.variance))
+
+
+def _refusal(r: OrderResult) -> str:
+    if r.how == "stabilised" and (r.boundary or r.stability == "marginal"):
+        return "unstable free fit; the stabilised fit ends on the stability boundary"
+    return f"{r.how} fit {r.stability}"
 
 
 def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 0) -> OrderSelection:
     """Scan the candidate orders and choose one (module docstring); the reason is plain text."""
     scan, fits = [], {}
     for nb, na in candidate_orders(max_order):
-        if 2 * (data.bins.size // 2) <= na + nb + 1:
+        if 2 * (data.bins.size // 2) <= na + nb + 1 or (domain == "s" and nb > na):
             continue
-        fit = fit_order(data, nb, na, domain, delay)
+        fit = fit_stable(data, nb, na, domain, delay)
         fits[(nb, na)] = fit
-        accepted = fit.cost <= fit.expected_cost + ACCEPT_STD * fit.cost_std
         scan.append(OrderResult(nb, na, fit.cost, fit.expected_cost, fit.cost_std,
-                                holdout_error(data, nb, na, domain, delay), accepted))
+                                holdout_error(data, nb, na, domain, delay), fit.accepted, fit.cost_bound,
+                                fit.model.stability(), fit.how, fit.free_pole,
+                                fit.how == "stabilised" and on_boundary(fit)))
     if not scan:
         raise InputError("--order auto", f"{data.bins.size} lines are too few for any model order")
-    passing = [r for r in scan if r.accepted]
+    eligible = [r for r in scan if r.eligible]
+    passing = [r for r in eligible if r.accepted]
+    per_line = expected_cost(1, 0, data.realizations)[0]  # (M-1)/(M-2), or 1 for exact variances
+    refused = [r for r in scan if not r.eligible]
     if passing:
         fewest = min(r.nb + r.na for r in passing)
         best = min((r for r in passing if r.nb + r.na == fewest), key=lambda r: r.holdout_error)
-        lower = [r for r in scan if r.nb + r.na < fewest]
-        worst_lower = min((r.cost - r.expected_cost) / r.cost_std for r in lower) if lower else None
-        per_line = expected_cost(1, 0, data.realizations)[0]  # (M-1)/(M-2), or 1 for exact variances
-        reason = (f"{best.nb}/{best.na} is the smallest model whose cost {best.cost:.4g} lies within {ACCEPT_STD:g} std "
-                  f"of its expected value {best.expected_cost:.4g} +- {best.cost_std:.3g}; held-out lines "
-                  f"{best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
-        if worst_lower is not None:
-            reason += f"; every smaller model's cost is at least {worst_lower:.1f} std above its expectation"
-    else:
-        best = min(scan, key=lambda r: r.holdout_error)
-        reason = (f"no order up to {max_order} reaches its expected cost (the weights miss part of the error: "
+        lower = [r for r in eligible if r.nb + r.na < fewest and r.cost_bound > 0]
+        reason = (f"{best.nb}/{best.na} is the smallest stable model whose cost {best.cost:.4g} lies within its "
+                  f"statistical bound {best.cost_bound:.4g} (expected {best.expected_cost:.4g} +- {best.cost_std:.3g}); "
+                  f"held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
+        if lower:
+            reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
+                       "times its bound")
+    elif eligible:
+        best = min(eligible, key=lambda r: r.holdout_error)
+        reason = (f"no stable order up to {max_order} reaches its cost bound (the weights miss part of the error: "
                   f"nonlinear distortions not in the variance, or a model class that does not fit); "
                   f"{best.nb}/{best.na} predicts held-out lines best ({best.holdout_error:.3g} per line)")
-    warnings = list(fits[(best.nb, best.na)].warnings)
+    else:
+        best = min(scan, key=lambda r: r.cost)
+        reason = (f"no stable fit of any order up to {max_order}: {best.nb}/{best.na} (lowest cost) is "
+                  f"{best.stability}; check the data (a closed loop measured as open loop, a wrong sign)")
+    fit = fits[(best.nb, best.na)]
+    if fit.how == "integrator":
+        reason += f"; {fit.note}"
+    elif fit.how == "stabilised":
+        reason += f"; {fit.note}"
+    if refused:
+        reason += ("; not eligible: " + ", ".join(f"{r.nb}/{r.na} ({_refusal(r)})" for r in refused))
+    warnings = list(fit.warnings)
+    if not best.eligible:
+        warnings.append(f"the chosen {best.nb}/{best.na} model is {best.stability}: no stable fit was found")
     for r in scan:
+        # the cost spread of r: its bound above its expectation (3 std for a normal cost)
+        margin = r.cost_bound - r.expected_cost if math.isfinite(r.expected_cost) else r.cost_bound
         for q in scan:
-            if q.nb >= r.nb and q.na >= r.na and (q.nb, q.na) != (r.nb, r.na) \
-                    and q.cost > r.cost + ACCEPT_STD * r.cost_std:
+            if q.nb >= r.nb and q.na >= r.na and (q.nb, q.na) != (r.nb, r.na) and q.how == r.how == "free" \
+                    and q.cost > r.cost + margin:
                 warnings.append(f"order {q.nb}/{q.na} ends with a higher cost ({q.cost:.4g}) than the nested "
                                 f"{r.nb}/{r.na} ({r.cost:.4g}): a local minimum")
                 break
-    return OrderSelection(fits[(best.nb, best.na)], scan, reason, warnings)
+    return OrderSelection(fit, scan, reason, warnings)

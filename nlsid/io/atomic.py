@@ -109,3 +109,19 @@ def write_text_atomic(path: str | os.PathLike, text: str, force: bool = False) -
     with atomic_path(path, force) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+HDF5_SUFFIXES = (".h5", ".hdf5")
+RECORDING_SUFFIXES = HDF5_SUFFIXES + (".mcap",)  # the recording writers: MCAP for .mcap, else HDF5
+
+
+def check_suffix(path: str | os.PathLike, suffixes: tuple[str, ...] = HDF5_SUFFIXES) -> Path:
+    """Refuse an output name whose suffix (any case) is not one of ``suffixes``: an HDF5 file
+    written as ``e.csv`` is taken for a CSV file by every other tool. Call before any work."""
+    target = Path(path)
+    if target.suffix.lower() not in suffixes:
+        found = f"suffix '{target.suffix}'" if target.suffix else "no suffix"
+        formats = "HDF5 or MCAP" if ".mcap" in suffixes else "HDF5"
+        raise InputError(str(target), f"output name has {found}, but the file written is {formats}: "
+                                      f"name it {', '.join(suffixes[:-1])} or {suffixes[-1]}")
+    return target

@@ -64,47 +64,113 @@ def load_yaml(path: str | os.PathLike) -> tuple[Any, dict[tuple, int]]:
     path = Path(path)
     if not path.is_file():
         raise InputError(str(path), "config file not found")
-    text = path.read_text(encoding="utf-8")
-    loader = _Loader(text)
+    text = decode_yaml(path.read_bytes(), str(path))
+    loader = None
     try:
+        loader = _Loader(text)  # the reader checks for unprintable characters here
         node = loader.get_single_node()
         lines: dict[tuple, int] = {}
-        data = _construct(loader, node, (), lines, str(path)) if node is not None else None
+        data = _construct(loader, node, (), lines, str(path), ()) if node is not None else None
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        code = exc.character if isinstance(exc.character, int) else ord(exc.character)
+        raise InputError(f"{path}:{line}", f"invalid YAML: control character U+{code:04X} is not allowed "
+                                           "(a binary file?)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise InputError(f"{path}{line}", f"invalid YAML: {problem}") from None
+        raise InputError(f"{path}{line}", f"invalid YAML: {' '.join(problem.split())}") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
     return data, lines
 
 
-def _construct(loader: _Loader, node: yaml.Node, key_path: tuple, lines: dict, where: str) -> Any:
-    """Build Python data from a node tree, recording the line of every key and list item."""
+# Byte order marks, and the patterns of NUL bytes an ASCII first character makes without one (YAML
+# 1.2 Section 5.2). UTF-32 comes first: its little-endian BOM begins with UTF-16's.
+BOMS = ((b"\x00\x00\xfe\xff", "utf-32-be"), (b"\xff\xfe\x00\x00", "utf-32-le"), (b"\xfe\xff", "utf-16-be"),
+        (b"\xff\xfe", "utf-16-le"), (b"\xef\xbb\xbf", "utf-8"))
+
+
+def decode_yaml(data: bytes, where: str) -> str:
+    """YAML bytes as text: UTF-8, or UTF-16/32 (either byte order), with or without a byte order mark.
+
+    Without a BOM the encoding follows from the NUL bytes around the first character, which YAML
+    requires to be ASCII (YAML 1.2 Section 5.2). Bytes that are not valid text in that encoding
+    are refused, naming the line and byte.
+    """
+    skip, codec = next(((len(bom), codec) for bom, codec in BOMS if data.startswith(bom)), (0, None))
+    if codec is None:
+        head = data[:4]
+        if len(head) == 4 and head[:3] == b"\x00\x00\x00" and head[3]:
+            codec = "utf-32-be"
+        elif len(head) == 4 and head[0] and head[1:] == b"\x00\x00\x00":
+            codec = "utf-32-le"
+        elif len(head) >= 2 and head[0] == 0 and head[1]:
+            codec = "utf-16-be"
+        elif len(head) >= 2 and head[0] and head[1] == 0:
+            codec = "utf-16-le"
+        else:
+            codec = "utf-8"
+    body = data[skip:]
+    try:
+        return body.decode(codec)
+    except UnicodeDecodeError as exc:
+        line = body[:exc.start].decode(codec, errors="replace").count("\n") + 1
+        name = codec.upper().replace("-LE", " little-endian").replace("-BE", " big-endian")
+        raise InputError(f"{where}:{line}", f"not a text file in {name} (byte {skip + exc.start}: {exc.reason}); "
+                                            "save the config as UTF-8") from None
+
+
+def _construct(loader: _Loader, node: yaml.Node, key_path: tuple, lines: dict, where: str, inside: tuple) -> Any:
+    """Build Python data from a node tree, recording the line of every key and list item.
+
+    ``inside`` holds the collection nodes enclosing ``node``: an alias to one of them (``a: &x [*x]``)
+    would make the data contain itself, and is refused."""
     lines.setdefault(key_path, node.start_mark.line + 1)
+    if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
+        if any(node is outer for outer in inside):
+            raise InputError(f"{where}:{node.start_mark.line + 1}", f"{_dotted(key_path) or 'top level'}: "
+                                                                    "an alias refers to a collection that contains it")
+        inside = inside + (node,)
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)
         out: dict[str, Any] = {}
         for key_node, value_node in node.value:
-            key = loader.construct_object(key_node, deep=True)
+            key = _no_nul(loader.construct_object(key_node, deep=True), key_node, key_path, where)
             if not isinstance(key, str):
                 raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path) or 'top level'}: keys must be text, got {key!r}")
             if key in out:
                 raise InputError(f"{where}:{key_node.start_mark.line + 1}", f"{_dotted(key_path + (key,))}: duplicate key")
             lines[key_path + (key,)] = key_node.start_mark.line + 1
-            out[key] = _construct(loader, value_node, key_path + (key,), lines, where)
+            out[key] = _construct(loader, value_node, key_path + (key,), lines, where, inside)
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_construct(loader, item, key_path + (i,), lines, where) for i, item in enumerate(node.value)]
-    return loader.construct_object(node, deep=True)
+        return [_construct(loader, item, key_path + (i,), lines, where, inside) for i, item in enumerate(node.value)]
+    return _no_nul(loader.construct_object(node, deep=True), node, key_path, where)
+
+
+def _no_nul(value: Any, node: yaml.Node, key_path: tuple, where: str) -> Any:
+    """Refuse text holding a NUL character (written ``"\\0"`` in YAML): no path, unit or name
+    can hold one, and the file system and HDF5 refuse it later with less clear errors."""
+    if isinstance(value, str) and "\0" in value:
+        raise InputError(f"{where}:{node.start_mark.line + 1}", f"{_dotted(key_path) or 'top level'}: "
+                                                                "text holds a NUL character (\\0)")
+    return value
 
 
 def _dotted(key_path: tuple) -> str:
-    """Render a key path as ``a.b[2].c``."""
+    """Render a key path as ``a.b[2].c``; a key that is empty or holds spaces, dots, brackets or
+    unprintable characters is quoted: ``a['x y']``."""
     out = ""
     for part in key_path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif not part or not part.isprintable() or any(ch in part for ch in " .[]'\""):
+            out += f"[{part!r}]"
+        else:
+            out += f".{part}" if out else part
     return out
 
 
@@ -178,9 +244,14 @@ def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tu
             message += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
     except ConfigValueError as exc:
         key_path, message = exc.key_path, exc.message
-    line = _line_of(lines or {}, key_path)
+    raise config_error(path, lines, key_path, message)
+
+
+def config_error(path: str | os.PathLike, lines: dict[tuple, int] | None, key_path: tuple, message: str) -> InputError:
+    """The error of a config key found wrong after validation: ``file:line: a.b[2]: message``."""
+    line = _line_of(lines or {}, tuple(key_path))
     where = f"{path}:{line}" if line is not None else str(path)
-    raise InputError(where, f"{_dotted(key_path) or 'top level'}: {message}")
+    return InputError(where, f"{_dotted(tuple(key_path)) or 'top level'}: {message}")
 
 
 def load_config(path: str | os.PathLike, schema: Type[T]) -> T:

@@ -72,8 +72,8 @@ class MultisineConfig(StrictModel):
                                    f"{self.period}-sample period (lines every {fs / self.period:g} Hz)")
         levels = self.levels()
         for i, level in enumerate(levels):
-            if not level > 0:
-                raise ConfigValueError(key + ("rms_levels", i), f"must be > 0, got {level:g}")
+            if not 0 < level < np.inf:
+                raise ConfigValueError(key + ("rms_levels", i), f"must be > 0 and finite, got {level:g}")
         if self.phases == "schroeder" and self.realizations > 1:
             raise ConfigValueError(key + ("realizations",),
                                    "Schroeder phases are deterministic: use realizations: 1 or phases: random")
@@ -114,8 +114,8 @@ class SinesConfig(StrictModel):
     def check(self, fs: float) -> None:
         self.bins(fs)
         for i, amplitude in enumerate(self.amplitude_values()):
-            if not amplitude > 0:
-                raise ConfigValueError(("sines", "amplitudes", i), f"must be > 0, got {amplitude:g}")
+            if not 0 < amplitude < np.inf:
+                raise ConfigValueError(("sines", "amplitudes", i), f"must be > 0 and finite, got {amplitude:g}")
 
 class DesignConfig(StrictModel):
     """Top level of a design config: a sample rate, a seed, and a multisine and/or a sine grid."""

@@ -9,10 +9,11 @@ Layout::
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
@@ -24,6 +25,25 @@ from nlsid.io.run import SIGNALS, Run, make_run
 
 FORMAT_VERSION = 1
 FORMATS = ("recording", "excitation")
+
+# What h5py raises for a damaged file (HDF5 library errors, found by tests/test_fuzz_inputs.py):
+# OSError (unreadable or truncated data, bad messages), KeyError (an object whose header cannot be
+# read), RuntimeError (a link or B-tree that points past the end of the file) and ValueError
+# (a datatype or dataspace h5py cannot map to numpy).
+H5PY_ERRORS = (OSError, KeyError, RuntimeError, ValueError)
+
+
+@contextlib.contextmanager
+def hdf5_damage(where: str) -> Iterator[None]:
+    """Turn h5py's errors on a damaged file into one InputError naming ``where`` (file and object).
+
+    Wrap h5py calls only: the errors it catches would also hide programming errors in other code.
+    """
+    try:
+        yield
+    except H5PY_ERRORS as exc:
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise InputError(where, f"damaged HDF5 file ({reason})") from None
 
 
 def _open(path: Path) -> h5py.File:
@@ -40,9 +60,22 @@ def _open(path: Path) -> h5py.File:
         raise InputError(str(path), f"cannot open: {reason} ({str(exc).splitlines()[0]})") from None
 
 
+def _first(value):
+    """The first element of a scalar or array attribute (None if missing or empty)."""
+    if value is None:
+        return None
+    flat = np.asarray(value).reshape(-1)
+    return flat[0] if flat.size else None
+
+
 def _text(value) -> str | None:
     """An HDF5 string attribute as str (h5py returns bytes or str depending on how it was written)."""
     return value.decode("utf-8", errors="replace") if isinstance(value, bytes) else (None if value is None else str(value))
+
+
+def _excitation_error(path: Path) -> InputError:
+    return InputError(str(path), "is an excitation without measured output y: "
+                                 "run `nlsid simulate` on it or measure the machine first")
 
 
 class HDF5Recording(RecordingReader):
@@ -64,49 +97,59 @@ class HDF5Recording(RecordingReader):
             raise
 
     def _check_root(self) -> tuple[str, dict]:
-        attrs = self._file.attrs
         where = f"{self.path}:/"
-        fmt = _text(attrs.get("nlsid_format"))
+        with hdf5_damage(where):
+            attrs = self._file.attrs
+            fmt, version, text = _text(attrs.get("nlsid_format")), attrs.get("nlsid_format_version"), attrs.get("provenance")
         if fmt not in FORMATS:
             found = "is missing" if fmt is None else f"is {fmt!r}"
             raise InputError(where, f"attribute nlsid_format {found}, expected 'recording' (see docs/formats.md)")
-        version = attrs.get("nlsid_format_version")
-        if version is None or np.asarray(version).reshape(-1)[0] != FORMAT_VERSION:
-            found = "is missing" if version is None else f"is {np.asarray(version).reshape(-1)[0]}"
+        first = _first(version)
+        if first is None or first != FORMAT_VERSION:
+            found = "is missing" if version is None else f"is {first}"
             raise InputError(where, f"attribute nlsid_format_version {found}, expected {FORMAT_VERSION}")
         if self.require_y and fmt == "excitation":
-            raise InputError(str(self.path), "is an excitation without measured output y: "
-                                             "run `nlsid simulate` on it or measure the machine first")
-        text = _text(attrs.get("provenance"))
-        return fmt, json.loads(text) if text else {}
+            raise _excitation_error(self.path)
+        text = _text(text)
+        try:
+            provenance = json.loads(text) if text else {}
+        except json.JSONDecodeError as exc:
+            raise InputError(where, f"attribute provenance is not JSON ({exc})") from None
+        if not isinstance(provenance, dict):
+            raise InputError(where, f"attribute provenance is JSON of a {type(provenance).__name__}, expected an object")
+        return fmt, provenance
 
     def _list_runs(self) -> list[str]:
-        runs = self._file.get("runs")
-        if not isinstance(runs, h5py.Group):
-            raise InputError(f"{self.path}:/runs", "missing group 'runs'")
-        ids = [name for name, obj in runs.items() if isinstance(obj, h5py.Group)]
+        with hdf5_damage(f"{self.path}:/runs"):
+            runs = self._file.get("runs")
+            if not isinstance(runs, h5py.Group):
+                raise InputError(f"{self.path}:/runs", "missing group 'runs'")
+            ids = [name for name, obj in runs.items() if isinstance(obj, h5py.Group)]
         if not ids:
             raise InputError(f"{self.path}:/runs", "holds no runs")
         return sorted(ids)
 
+    def output_error(self) -> InputError | None:
+        return _excitation_error(self.path) if self.format == "excitation" else None
+
     def load(self, run_id: str) -> Run:
         """Read and validate one run."""
-        where = f"{self.path}:/runs/{run_id}"
-        group = self._file["runs"][run_id]
+        where = self.run_where(run_id)
+        with hdf5_damage(where):
+            group = self._file["runs"][run_id]
+            attrs = dict(group.attrs)
+            present = [name for name in SIGNALS if name in group]
         signals, units = {}, {}
-        for name in SIGNALS:
-            if name in group:
+        for name in present:
+            with hdf5_damage(f"{where}/{name}"):
                 dataset = group[name]
                 if not isinstance(dataset, h5py.Dataset):
                     raise InputError(f"{where}/{name}", "expected a dataset")
-                try:
-                    signals[name] = dataset[()]
-                except OSError as exc:
-                    raise InputError(f"{where}/{name}", f"cannot read data: {exc}") from None
+                signals[name] = dataset[()]
                 unit = _text(dataset.attrs.get("unit"))
-                if unit is not None:
-                    units[name] = unit
-        return make_run(run_id, dict(group.attrs), signals, where, self.require_y, units)
+            if unit is not None:
+                units[name] = unit
+        return make_run(run_id, attrs, signals, where, self.require_y, units)
 
     def close(self) -> None:
         self._file.close()

@@ -93,6 +93,11 @@ class _Collected:
         return times[order], counts[order], values[np.lexsort((np.arange(values.size), rank[message_of_sample]))]
 
 
+def unmapped_output() -> InputError:
+    """The error of reading a foreign file without y where a measured output is required."""
+    return InputError("--map", "map the measured output too: --map y=/topic:field")
+
+
 def read_foreign_run(
     path: Path, handle: BinaryIO, reader: SeekingReader, mapping: dict[str, str], require_y: bool
 ) -> tuple[Run, dict]:
@@ -106,7 +111,7 @@ def read_foreign_run(
     if "u" not in mapping:
         raise InputError("--map", "map the input too: --map u=/topic:field")
     if require_y and "y" not in mapping:
-        raise InputError("--map", "map the measured output too: --map y=/topic:field")
+        raise unmapped_output()
     sources = {name: parse_source(name, mapping[name]) for name in SIGNALS if name in mapping}
     channels, schemas = channels_and_schemas(handle, reader, str(path))
     for name, (topic, _) in sources.items():

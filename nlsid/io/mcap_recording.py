@@ -36,7 +36,7 @@ from nlsid import __version__
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
 from nlsid.io.mcap_file import channels_by_topic, checked, open_mcap
-from nlsid.io.mcap_foreign import read_foreign_run
+from nlsid.io.mcap_foreign import read_foreign_run, unmapped_output
 from nlsid.io.reader import RecordingReader
 from nlsid.io.run import SIGNALS, Run, make_run
 
@@ -87,6 +87,10 @@ BLOCK_SCHEMA = {
 _OWN_KEYS = ("run", "n_samples", "signals", "units")
 
 
+def _excitation_error(path: Path) -> InputError:
+    return InputError(str(path), "is an excitation file without measured output y; run `nlsid simulate` or measure first")
+
+
 class MCAPRecording(RecordingReader):
     """An open MCAP recording whose runs are read one at a time (same interface as HDF5Recording).
 
@@ -131,7 +135,7 @@ class MCAPRecording(RecordingReader):
         if meta.get("nlsid_format_version") != str(FORMAT_VERSION):
             raise InputError(where, f"nlsid_format_version must be '{FORMAT_VERSION}', got {meta.get('nlsid_format_version')!r}")
         if self.require_y and fmt == "excitation":
-            raise InputError(str(self.path), "is an excitation file without measured output y; run `nlsid simulate` or measure first")
+            raise _excitation_error(self.path)
         return fmt, _json_object(meta.get("provenance", "{}"), f"{where}.provenance")
 
     def _list_runs(self) -> dict[str, tuple[dict, int, int | None]]:
@@ -157,12 +161,20 @@ class MCAPRecording(RecordingReader):
             runs[meta["run"]] = (meta, start, end)
         return runs
 
+    def output_error(self) -> InputError | None:
+        if self.format != "excitation":
+            return None
+        return unmapped_output() if self._foreign else _excitation_error(self.path)
+
+    def run_where(self, run_id: str) -> str:
+        return str(self.path) if self._foreign else f"{self.path}:{RUN_TOPIC}[{run_id}]"
+
     def load(self, run_id: str) -> Run:
         """Read and validate one run."""
         if self._foreign:
             return self._foreign[run_id]
         meta, start, end = self._runs[run_id]
-        where = f"{self.path}:{RUN_TOPIC}[{run_id}]"
+        where = self.run_where(run_id)
         n_samples, names, units = _own_fields(meta, where)
         signals = self._read_signals(run_id, names, n_samples, start, end)
         attrs = {k: v for k, v in meta.items() if k not in _OWN_KEYS}

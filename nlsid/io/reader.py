@@ -5,6 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Iterator
 
+from nlsid.errors import InputError
 from nlsid.io.run import Run
 
 
@@ -22,6 +23,15 @@ class RecordingReader(ABC):
     @abstractmethod
     def close(self) -> None:
         """Release the file."""
+
+    def output_error(self) -> InputError | None:
+        """What opening the file with ``require_y=True`` refuses (an excitation: no measured output
+        y), or None. Shared by the reader and ``nlsid info`` (:mod:`nlsid.io.feeds`)."""
+        return None
+
+    def run_where(self, run_id: str) -> str:
+        """How :meth:`load` names run ``run_id`` in its errors."""
+        return f"{self.path}:/runs/{run_id}"
 
     def __iter__(self) -> Iterator[Run]:
         for run_id in self.run_ids:

@@ -12,7 +12,7 @@ from typing import Iterable
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import HDF5Recording, write_hdf5_recording
-from nlsid.io.run import Run
+from nlsid.io.run import SIGNALS, Run
 
 MCAP_MAGIC = b"\x89MCAP"
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -59,9 +59,31 @@ def read_runs(path: str | os.PathLike, require_y: bool = True, mapping: dict[str
 
 
 def write_recording(path: str | os.PathLike, runs: Iterable[Run], provenance: dict | None = None, force: bool = False) -> Path:
-    """Write runs atomically, in MCAP when ``path`` ends in ``.mcap`` and in HDF5 otherwise."""
+    """Write runs atomically, in MCAP when ``path`` ends in ``.mcap`` and in HDF5 otherwise.
+
+    A run with a NaN or Inf sample is refused (InputError naming the run and signal) and nothing
+    is written: no stage writes non-finite samples as if they were measured or designed.
+    """
+    runs = _finite(path, runs)
     if Path(path).suffix.lower() == ".mcap":
         from nlsid.io.mcap_recording import write_mcap_recording
 
         return write_mcap_recording(path, runs, provenance=provenance, force=force)
     return write_hdf5_recording(path, runs, provenance=provenance, force=force)
+
+
+def _finite(path: str | os.PathLike, runs: Iterable[Run]) -> Iterable[Run]:
+    """The runs, each checked for non-finite samples just before it is written."""
+    import numpy as np
+
+    for run in runs:
+        for name in SIGNALS:
+            signal = getattr(run, name)
+            if signal is None:
+                continue
+            bad = ~np.isfinite(signal)
+            if bad.any():
+                raise InputError(f"{path}:/runs/{run.run_id}/{name}",
+                                 f"{int(bad.sum())} NaN or Inf samples (first at index {int(np.argmax(bad))}); "
+                                 "nothing was written")
+        yield run

@@ -18,6 +18,8 @@ from nlsid.errors import InputError
 
 KINDS = ("multisine", "sine", "arbitrary")
 SIGNALS = ("u", "y", "r")
+#: A run without its measured output, read where one is required (also :mod:`nlsid.io.feeds`).
+MISSING_Y = "missing dataset 'y' (this is an excitation without a measured output?)"
 
 
 @dataclass
@@ -238,7 +240,7 @@ def make_run(
     if "u" not in signals:
         raise InputError(where, "missing dataset 'u'")
     if require_y and "y" not in signals:
-        raise InputError(where, "missing dataset 'y' (this is an excitation without a measured output?)")
+        raise InputError(where, MISSING_Y)
     arrays = {name: validate_signal(signals[name], f"{where}/{name}") for name in SIGNALS if name in signals}
     check_lengths({k: v.shape[0] for k, v in arrays.items()}, kw, where)
     return Run(**kw, **arrays, units=dict(units or {}))

@@ -22,6 +22,14 @@ distortion is largest:
 - Across levels (seed 000 Figs. 4-5): ``bla_change_max_db``, the largest change of ``|G_BLA|``
   (20 log10 of the ratio to the lowest level) over the excited lines, for levels that excite the
   same lines.
+- Without a noise level the rules above have nothing to compare with (the summary's
+  ``noise_floor``): with one period per realization (``unknown``, P = 1) the page says that the
+  noise is unknown and gives what the file has (odd against even detection lines; the confidence
+  bounds then hold noise and distortion together, from the total variance over M realizations);
+  on noise-free data (``zero``) a class of distortion is present when its band mean stands above
+  numerical precision, :data:`~nlsid.analysis.precision.PRECISION_DB` = -180 dB relative to the
+  output at the excited lines (or to ``|G_BLA|^2`` for the robust nonlinear variance), and its
+  level is given relative to the output, never to the noise.
 """
 
 from __future__ import annotations
@@ -35,8 +43,9 @@ from nlsid.analysis.bla import RobustBLA
 from nlsid.analysis.confidence import Bounds
 from nlsid.analysis.fast_bla import FastBLA
 from nlsid.analysis.levels import LevelResult
-from nlsid.analysis.lines import classify_lines
+from nlsid.analysis.lines import EVEN, ODD, classify_lines
 from nlsid.analysis.output_spectrum import OutputSpectrum
+from nlsid.analysis.precision import PRECISION_DB
 from nlsid.errors import InputError
 from nlsid.report.html import Figure, Page, Table, number
 
@@ -83,13 +92,97 @@ def _level(stored: dict, where: str) -> LevelResult:
         warnings=list(attrs["warnings"]))
 
 
-def distortion_verdict(summary: dict) -> tuple[str, list[str]]:
-    """Headline and findings on the nonlinear distortion of one level (rules in the module docstring)."""
+def _variance_text(value, summary: dict, nonlinear: bool = False) -> str:
+    """A variance level (dB) for the page; a zero or unknown noise is said, never shown as a number."""
+    floor = noise_floor(summary)
+    if _finite(value) and floor == "zero" and value < PRECISION_DB:
+        return "zero within numerical precision"
+    if _finite(value):
+        return f"{value:.1f} dB"
+    if floor == "unknown":
+        return "unknown (P = 1: noise and distortion not separated)"
+    if floor == "zero" and not nonlinear:
+        return "zero (noise-free data)"
+    return "-"
+
+
+def noise_floor(summary: dict) -> str:
+    """The level's ``noise_floor`` (``estimated``, ``zero``, ``unknown``); files written before the key
+    existed: ``unknown`` with one period per realization, else ``estimated``."""
+    return summary.get("noise_floor") or ("unknown" if summary["periods"] < 2 else "estimated")
+
+
+def _noise_free_verdict(summary: dict, detection: bool) -> tuple[str, list[str]]:
+    """A zero noise floor: distortion is whatever stands above numerical precision (PRECISION_DB
+    relative to the output at the excited lines, or to |G_BLA|^2 for the robust variances)."""
+    spectrum = summary["spectrum"]
+    zero = "the noise floor is zero (noise-free data)"
+    findings = [f"noise-free data: every level above numerical precision ({PRECISION_DB:.0f} dB of the output) "
+                "is distortion, and no level has a ratio to the noise"]
+    if not detection:
+        nl = summary["nl_var_db"]
+        findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
+                        "multisine, book Section 6.1.2)")
+        if _finite(nl) and nl > PRECISION_DB:
+            return f"Nonlinear distortion: its variance is {nl:.0f} dB relative to |G_BLA|²; {zero}", findings
+        return f"No nonlinear distortion beyond numerical precision; {zero}", findings
+    excited = spectrum["excited_db"]
+    # a class's level is null when its lines hold exactly zero power: no distortion of that class
+    below = {name: excited - spectrum[f"{name}_db"] for name in ("odd", "even")
+             if _finite(spectrum[f"{name}_db"]) and _finite(excited) and spectrum[f"{name}_db"] - excited > PRECISION_DB}
+    text = {name: f"{gap:.0f} dB below the output at the excited lines" for name, gap in below.items()}
+    if not summary["odd_grid"]:
+        findings.append("full grid: the detection lines carry odd and even distortion together")
+        if below:
+            return f"Nonlinear distortion at the detection lines, {min(below.values()):.0f} dB below the output; {zero}", findings
+        return f"No nonlinear distortion beyond numerical precision at the detection lines; {zero}", findings
+    if len(below) == 2:
+        return f"Odd and even nonlinear distortion: odd {text['odd']}, even {text['even']}; {zero}", findings
+    if "odd" in below:
+        return f"Odd nonlinear distortion {text['odd']}, no even distortion beyond numerical precision; {zero}", findings
+    if "even" in below:
+        return f"Even nonlinear distortion {text['even']}, no odd distortion beyond numerical precision; {zero}", findings
+    return f"No nonlinear distortion beyond numerical precision; {zero}", findings
+
+
+def _noise_unknown_verdict(summary: dict) -> tuple[str, list[str]]:
+    """One period per realization: no noise estimate, so nothing is compared with the noise; what
+    the file has is said (odd against even, the total variance behind the bounds)."""
+    spectrum = summary["spectrum"]
+    head = "Noise level unknown (one period per realization, P = 1): distortion cannot be compared with the noise"
+    findings = ["P = 1: the noise variance cannot be estimated, so noise and nonlinear distortion are not "
+                "separated (book Section 6.1.1)"]
+    if summary["realizations"] >= 2:
+        findings.append(f"the BLA's confidence bounds come from the total variance over the {summary['realizations']} "
+                        "realizations (noise and nonlinear distortion together)")
+    else:
+        findings.append("one realization and one period: the BLA has no confidence bounds")
+    gap = spectrum["odd_above_even_db"]
+    if summary["odd_grid"] and _finite(gap):
+        lead = "odd" if gap >= 0 else "even"
+        return f"{head}; the {lead} detection lines are {abs(gap):.0f} dB above the {'even' if gap >= 0 else 'odd'}", findings
+    return head, findings
+
+
+def distortion_verdict(summary: dict, detection: bool | None = None) -> tuple[str, list[str]]:
+    """Headline and findings on the nonlinear distortion of one level (rules in the module docstring).
+
+    ``detection``: whether the level has in-band detection lines (None: judged from the summary's
+    levels, which are null both without such lines and, on noise-free data, where they hold no power)."""
+    floor = noise_floor(summary)
+    if floor == "zero":
+        spectrum = summary["spectrum"]
+        if detection is None:
+            detection = _finite(spectrum["odd_db"]) or _finite(spectrum["even_db"])
+        return _noise_free_verdict(summary, detection)
+    if floor == "unknown":
+        return _noise_unknown_verdict(summary)
     spectrum = summary["spectrum"]
     odd, even = spectrum["odd_above_noise_db"], spectrum["even_above_noise_db"]
     findings = []
     if not (_finite(odd) or _finite(even)):
-        excess = summary["nl_var_db"] - summary["noise_var_db"]
+        nl, noise = summary["nl_var_db"], summary["noise_var_db"]
+        excess = nl - noise if _finite(nl) and _finite(noise) else float("nan")
         if not _finite(excess):
             return "Nonlinear distortion not measurable (needs M >= 2 realizations and P >= 2 periods)", findings
         findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
@@ -138,13 +231,17 @@ def _tables(summaries: list[dict], across: dict, probability: float) -> list[Tab
     bla_rows, spectrum_rows = [], []
     for i, s in enumerate(summaries):
         sp = s["spectrum"]
+        unknown = {"zero": "zero", "unknown": "unknown (P = 1)"}.get(noise_floor(s), "-")
         bla_rows.append([_name(s, i), number(s["u_rms"]), f"{s['realizations']} x {s['periods']}", s["method"],
-                         str(s["excited_lines"]), number(s["bla_db"], ".1f"), number(s["nl_var_db"], ".1f"),
-                         number(s["noise_var_db"], ".1f"), number(change[i].get("bla_change_mean_db"), "+.2f"),
+                         str(s["excited_lines"]), number(s["bla_db"], ".1f"),
+                         number(s["nl_var_db"], ".1f") if _finite(s["nl_var_db"]) or noise_floor(s) != "unknown" else unknown,
+                         number(s["noise_var_db"], ".1f") if _finite(s["noise_var_db"]) else unknown, number(change[i].get("bla_change_mean_db"), "+.2f"),
                          number(change[i].get("bla_change_max_db"), "+.2f")])
         spectrum_rows.append([_name(s, i), number(sp["excited_db"], ".1f"), number(sp["odd_db"], ".1f"),
                               number(sp["even_db"], ".1f"), number(sp["nonharmonic_db"], ".1f"),
-                              number(sp["noise_db"], ".1f"), number(sp["odd_above_even_db"], ".1f"),
+                              number(sp["noise_db"], ".1f") if _finite(sp["noise_db"])
+                              else {"zero": "zero", "unknown": "unknown (P = 1)"}.get(noise_floor(s), "-"),
+                              number(sp["odd_above_even_db"], ".1f"),
                               number(sp["odd_above_noise_db"], ".1f"), number(sp["even_above_noise_db"], ".1f"),
                               number(sp["excited_above_odd_db"], ".1f")])
     return [
@@ -184,6 +281,10 @@ def _figures(levels: list[LevelResult], summaries: list[dict], probability: floa
         name = _name(summaries[index], index)
         for key in ("spectrum", "bla"):
             caption = _CAPTIONS[key].format(name=name, p=probability)
+            caption += {"unknown": " The noise is unknown at this level (one period per realization, P = 1): no "
+                                   "noise level is drawn, and the bounds hold noise and distortion together.",
+                        "zero": " The data are noise-free: the noise floor is zero (not drawn)."}.get(
+                            noise_floor(summaries[index]), "")
             out.append(Figure(rendered[f"{key}_level_{index:02d}.png"], caption, f"{key}_level_{index:02d}"))
     return out
 
@@ -200,15 +301,18 @@ def render_bla(path: Path) -> Page:
     across = data["attrs"]["across_levels"]
     probability = float(data["attrs"]["confidence"])
     top = summaries[-1]
-    distortion, findings = distortion_verdict(top)
+    top_lines = levels[-1].lines
+    detection = bool(np.any(((top_lines.kind == ODD) | (top_lines.kind == EVEN)) & top_lines.in_band))
+    distortion, findings = distortion_verdict(top, detection)
     headline = f"{distortion}; {level_verdict(across)}"
     spectrum = top["spectrum"]
     findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, u rms {top['u_rms']:.3g})"] + findings
-    if _finite(spectrum["excited_above_odd_db"]):
+    if _finite(spectrum["excited_above_odd_db"]) and not (noise_floor(top) == "zero"
+                                                          and spectrum["excited_above_odd_db"] > -PRECISION_DB):
         findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the "
                         "excited lines")
-    findings.append(f"nonlinear variance of the BLA {number(top['nl_var_db'], '.1f')} dB, noise variance "
-                    f"{number(top['noise_var_db'], '.1f')} dB relative to |G_BLA|² (band means)")
+    findings.append(f"nonlinear variance of the BLA {_variance_text(top['nl_var_db'], top, nonlinear=True)}, noise "
+                    f"variance {_variance_text(top['noise_var_db'], top)} relative to |G_BLA|² (band means)")
     warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)
                                                   for w in s["warnings"]]
     return Page(

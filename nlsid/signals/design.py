@@ -107,3 +107,14 @@ def design_runs(config: DesignConfig) -> Iterator[Run]:
         yield from multisine_runs(config.multisine, plan, config.fs, config.seed, config.unit)
     if config.sines is not None:
         yield from sine_runs(config.sines, config.fs, config.unit)
+
+
+def level_key(config: DesignConfig, run: Run) -> tuple:
+    """The config key that set a designed run's level: ``multisine.rms_levels[i]`` (or
+    ``multisine.rms_range``), ``sines.amplitudes[i]`` (or ``sines.amplitude_range``)."""
+    part, listed, ranged, values = (
+        ("multisine", "rms_levels", "rms_range", config.multisine.levels()) if run.kind == "multisine"
+        else ("sines", "amplitudes", "amplitude_range", config.sines.amplitude_values()))
+    if getattr(getattr(config, part), listed) is None:
+        return (part, ranged)
+    return (part, listed, int(np.flatnonzero(values == run.level)[0]))

@@ -453,6 +453,10 @@ def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> No
 
 
 def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inference) -> None:
+    if period < 3:  # lines 1 .. (N - 1) // 2 lie strictly between DC and Nyquist: none for N <= 2
+        result.notes.append(f"repeats every {period} sample(s): too short a period for any line between DC and "
+                            "Nyquist, not an excitation")
+        return
     groups = realizations_of(slots)
     if not groups:
         result.notes.append(f"no two consecutive periods of {period} samples repeat: not periodic")
@@ -497,7 +501,8 @@ def _measure(x: np.ndarray, blocks: list[np.ndarray], slots: Slots, tests: list[
         "strongest_unexcited_line_db": db(strongest_off) if strongest_off > 0 else None,
         "dropped_leading_samples": slots.phase,
         "dropped_trailing_samples": x.size - last,
-        "phase_margin_db": None if math.isinf(slots.phase_margin) else db(slots.phase_margin / (2 * noise)),
+        "phase_margin_db": None if math.isinf(slots.phase_margin) else
+                           db(slots.phase_margin / (2 * noise)) if noise > 0 else math.inf,  # noise-free periods
     })
     lead = result.realizations[0].transient_periods
     if slots.phase or lead:

@@ -28,9 +28,9 @@ import math
 import threading
 
 import numpy as np
-from numba import njit
 
 from nlsid.models import blocks, forces
+from nlsid.simulate.jit import njit  # numba, its cache outside the package (not `from numba`)
 
 SLIDING = 6.5  # |v| / vs above which e^{-(v/vs)^2} < 5e-19: the Stribeck term is below rounding
 

@@ -56,25 +56,32 @@ def _keys(path: str) -> tuple | None:
     return tuple(keys)
 
 
-def _set(data: dict, path: str, value: float) -> None:
+def _set(data: dict, path: str, value: float, key: str = "sweep.parameter") -> None:
+    """Write ``value`` at the dotted key ``path`` of ``data``. Errors are addressed to ``key``, the
+    config key that named the path: ``sweep.parameter`` (the message then starts with the path), or
+    a free parameter's own key ``free.<path>``."""
+    def error(what: str) -> InputError:
+        return InputError(key, f"{path}: {what}" if key == "sweep.parameter" else what)
+
     keys = _keys(path)
     if keys is None:
-        raise InputError("sweep.parameter", f"expected a dotted key path such as closed_loop.feedforward.coulomb, got {path!r}")
+        raise InputError(key, f"expected a dotted key path such as closed_loop.feedforward.coulomb, got {path!r}")
     if keys[0] == "sweep":
-        raise InputError("sweep.parameter", "a sweep cannot sweep itself")
+        raise InputError(key, "a sweep cannot sweep itself") if key == "sweep.parameter" \
+            else error("the sweep section holds no model parameter")
     node = data
-    for key in keys[:-1]:
-        if isinstance(key, int):
-            if not isinstance(node, list) or key >= len(node):
-                raise InputError("sweep.parameter", f"{path}: no item [{key}] in the config")
-            node = node[key]
+    for part in keys[:-1]:
+        if isinstance(part, int):
+            if not isinstance(node, list) or part >= len(node):
+                raise error(f"no item [{part}] in the config")
+            node = node[part]
         else:
             if not isinstance(node, dict):
-                raise InputError("sweep.parameter", f"{path}: {key!r} is not a mapping key in the config")
-            node = node.setdefault(key, {})
+                raise error(f"{part!r} is not a mapping key in the config")
+            node = node.setdefault(part, {})
     last = keys[-1]
     if isinstance(last, int) or not isinstance(node, dict):
-        raise InputError("sweep.parameter", f"{path}: must end in a key of a mapping")
+        raise error("must end in a key of a mapping")
     node[last] = value
 
 

@@ -3,7 +3,9 @@
 The excitation is inferred from the reference r when it is selected (closed loop: r is what was
 designed), else from the input u (:func:`nlsid.signals.inference.infer_excitation`). Each
 realization found becomes one run holding its transient and steady periods of u, y and r; a record
-that is not periodic becomes one ``arbitrary`` run. Overrides (``period``, ``transient_periods``,
+that is not periodic becomes one ``arbitrary`` run. Several records that are realizations of one
+multisine (same period and lines, levels within 1 %) share one level, and realization indices are
+numbered across all records, so ``nlsid bla`` takes them as M realizations of that level. Overrides (``period``, ``transient_periods``,
 ``fs``, ``split``) are applied and recorded.
 """
 
@@ -12,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.importers.source import LAYOUTS, Record, Source, records_of
@@ -23,6 +26,7 @@ CSV_SUFFIXES = (".csv", ".tsv", ".txt", ".dat")
 MAT_MAGIC = b"MATLAB "
 MCAP_MAGIC = b"\x89MCAP"
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+SHARED_LEVEL_TOL = 0.01  # records whose levels agree this closely (relative) are realizations of one level
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,7 @@ def read_source(path: Path, options: ImportOptions) -> Source:
     fmt = options.format or detect_format(path)
     names = dict(options.names)
     optional: set[str] = set()
+    defaulted = frozenset(key for key in ("u", "y", "r") if key not in names)
     if fmt == "mcap":
         if "u" not in names:
             raise InputError("--u", "name the input of an MCAP log as /topic:field")
@@ -88,7 +93,7 @@ def read_source(path: Path, options: ImportOptions) -> Source:
     if fmt == "csv":
         from nlsid.io.importers.csv_file import read_csv
 
-        source = read_csv(path, names, options.time, optional, fs_given=options.fs is not None)
+        source = read_csv(path, names, options.time, optional, fs_given=options.fs is not None, defaulted=defaulted)
     elif fmt == "mat":
         from nlsid.io.importers.mat_file import read_mat
 
@@ -116,6 +121,7 @@ def import_file(path: str | Path, options: ImportOptions) -> Imported:
     source = read_source(path, options)
     records, fs, fs_from = records_of(source, options.layout)
     out = Imported(source=source, fs=fs, fs_from=fs_from)
+    inferred = []
     for record in records:
         period = _period(record, options)
         driver = "r" if "r" in record.signals else "u"
@@ -123,7 +129,16 @@ def import_file(path: str | Path, options: ImportOptions) -> Imported:
         if period is not None and inference.period is None:
             raise InputError(f"{source.where[driver]}", f"not periodic with the given period of {period} samples: "
                                                         + "; ".join(inference.notes))
-        runs = _runs(record, inference, options.transient_periods, f"{path}:{record.name}")
+        inferred.append((record, driver, inference))
+    level = _shared_level([inference for _, _, inference in inferred])
+    realization = 0
+    for record, driver, inference in inferred:
+        runs = _runs(record, inference, options.transient_periods, f"{path}:{record.name}", realization, level)
+        realization += len(runs)
+        if level is not None:
+            numbers = ", ".join(str(run.realization) for run in runs)
+            inference.notes.append(f"realization {numbers} of one excitation over {len(inferred)} records (same period "
+                                   f"and lines, levels within {SHARED_LEVEL_TOL:.0%}): level set to their mean {level:.6g}")
         out.runs.extend(runs)
         out.records.append({"record": record.name, "inferred_from": driver, "inference": inference.report(),
                             "runs": [run.run_id for run in runs]})
@@ -137,7 +152,27 @@ def _period(record: Record, options: ImportOptions) -> int | None:
     return options.period if options.period is not None else record.period
 
 
-def _runs(record: Record, inference: Inference, extra_transient: int, where: str) -> list[Run]:
+def _shared_level(inferences: list[Inference]) -> float | None:
+    """The common level of several records that are realizations of one multisine excitation: the
+    same period and excited lines, and levels within SHARED_LEVEL_TOL of each other (the mean level);
+    else None (each record keeps its own level, and ``bla`` treats differing levels separately)."""
+    if len(inferences) < 2 or any(inf.kind != "multisine" or inf.level is None for inf in inferences):
+        return None
+    first = inferences[0]
+    bins = first.realizations[0].excited_bins
+    if any(inf.period != first.period or any(not np.array_equal(r.excited_bins, bins) for r in inf.realizations)
+           for inf in inferences):
+        return None
+    levels = np.array([inf.level for inf in inferences])
+    if levels.max() > levels.min() * (1 + SHARED_LEVEL_TOL):
+        return None
+    return float(levels.mean())
+
+
+def _runs(record: Record, inference: Inference, extra_transient: int, where: str, first_realization: int = 0,
+          level: float | None = None) -> list[Run]:
+    """The runs of one record: one per realization (numbered from ``first_realization``; ``level``
+    replaces the record's own level), or one arbitrary run."""
     signals = record.signals
     if inference.kind == "arbitrary":
         return [make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where, require_y=False)]
@@ -150,11 +185,11 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
                                                     f"of {record.name} ({real.periods} periods)")
         attrs = {"fs": inference.fs, "kind": inference.kind, "period": period,
                  "transient_periods": real.transient_periods + extra_transient,
-                 "excited_bins": real.excited_bins, "level": inference.level}
+                 "excited_bins": real.excited_bins, "level": inference.level if level is None else level}
         if inference.kind == "sine":
             attrs["frequency"] = inference.frequency
         else:
-            attrs["realization"] = index
+            attrs["realization"] = first_realization + index
         run_id = f"{record.name}_m{index:02d}" if several else record.name
         cut = {name: x[real.start:real.stop(period)] for name, x in signals.items()}
         runs.append(make_run(run_id, attrs, cut, f"{where}/{run_id}", require_y=False))

@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage
 from nlsid.io.importers.source import NotFound, Source, pick, source_from
 
 LISTED = 20
@@ -18,10 +19,10 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
     wanted = dict(names, **({"time": time} if time else {}))
     try:
         handle = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(str(path), f"cannot open as HDF5 ({str(exc).splitlines()[0]})") from None
+    except H5PY_ERRORS as exc:
+        raise InputError(str(path), f"cannot open as HDF5 ({' '.join(str(exc).split())})") from None
     with handle:
-        values = pick(wanted, optional, lambda key, name: _dataset(handle, name, f"{path}: --{key} {name}"))
+        values = pick(wanted, optional, lambda key, name: _checked_dataset(handle, name, f"{path}: --{key} {name}"))
     return source_from(path, "hdf5", wanted, values, {"datasets": {k: wanted[k] for k in values}})
 
 
@@ -30,6 +31,11 @@ def datasets_in(handle: h5py.File) -> list[str]:
     found: list[str] = []
     handle.visititems(lambda name, obj: found.append("/" + name) if isinstance(obj, h5py.Dataset) else None)
     return found
+
+
+def _checked_dataset(handle: h5py.File, name: str, where: str) -> np.ndarray:
+    with hdf5_damage(where):
+        return _dataset(handle, name, where)
 
 
 def _dataset(handle: h5py.File, name: str, where: str) -> np.ndarray:
@@ -42,7 +48,4 @@ def _dataset(handle: h5py.File, name: str, where: str) -> np.ndarray:
     if obj.dtype.names:
         raise InputError(where, f"{name!r} is a compound dataset with fields {', '.join(obj.dtype.names)}; "
                                 "expected an array of numbers")
-    try:
-        return np.asarray(obj[()])
-    except OSError as exc:
-        raise InputError(where, f"cannot read data ({exc})") from None
+    return np.asarray(obj[()])

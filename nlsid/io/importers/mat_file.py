@@ -7,12 +7,14 @@ Only numeric arrays are read (MATLAB classes double, single and the integer clas
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage
 from nlsid.io.importers.source import NotFound, Source, pick, source_from
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
@@ -33,16 +35,157 @@ def read_mat(path: Path, names: dict[str, str], time: str | None, optional: set[
     return source_from(path, f"mat v{version}", wanted, values, {"variables": {k: wanted[k] for k in values}})
 
 
+V4_ITEMSIZE = {0: 8, 1: 4, 2: 4, 3: 2, 4: 2, 5: 1}  # precision P of MOPT: double, single, int32, int16, uint16, uint8
+
+
+def mat_file_problem(path: Path) -> str | None:
+    """Why ``path`` is not a MATLAB v4 or v5/v7 file whose variables fit in it (None: it is).
+
+    A v5/v7 file starts with a 116-byte text header and ends its 128-byte header with the endian
+    indicator ``IM`` (little-endian) or ``MI``; its variables follow as data elements (tag: u32
+    type, u32 byte count). A v4 file has no header: each variable is five int32 (type flag ``MOPT``:
+    machine M 0..4, O 0, precision P 0..5, text/sparse T 0..2; rows; columns; imaginary flag; name
+    length), the name and the data. Sizes are checked against the file before scipy reads it, so
+    a damaged size field gives this message instead of an attempt to allocate it.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as handle:
+        head = handle.read(128)
+        if len(head) >= 128 and head[126:128] in (b"IM", b"MI"):
+            return _v5_problem(handle, size, "<" if head[126:128] == b"IM" else ">")
+        if len(head) >= 20 and _v4_flag(int.from_bytes(head[:4], "little", signed=True)) or \
+                len(head) >= 20 and _v4_flag(int.from_bytes(head[:4], "big", signed=True)):
+            little = 0 <= int.from_bytes(head[:4], "little", signed=True) <= 5000  # as scipy guesses it
+            return _v4_problem(handle, size, "<" if little else ">")
+    if head.startswith(b"MATLAB"):
+        return f"truncated MAT-file header ({len(head)} of 128 bytes)" if len(head) < 128 else \
+            "damaged MAT-file header (no endian indicator IM or MI at bytes 126-127)"
+    return "not a MATLAB file (no MAT-file header: MATLAB v5/v7 files start with a 128-byte 'MATLAB ...' " \
+           "header, v7.3 files are HDF5)"
+
+
+def _v4_flag(mopt: int) -> bool:
+    return 0 <= mopt < 5000 and mopt // 100 % 10 == 0 and mopt // 10 % 10 in V4_ITEMSIZE and mopt % 10 <= 2
+
+
+def _v5_problem(handle, size: int, order: str) -> str | None:
+    position = 128
+    while position + 8 <= size:
+        handle.seek(position)
+        _, count = struct.unpack(f"{order}II", handle.read(8))
+        if position + 8 + count > size:
+            return (f"truncated or damaged MAT-file: the variable at byte {position} claims {count} bytes, "
+                    f"the file holds {size - position - 8} after its tag")
+        position += 8 + count
+    return None
+
+
+def _v4_problem(handle, size: int, order: str) -> str | None:
+    position = 0
+    while position < size:
+        handle.seek(position)
+        header = handle.read(20)
+        if len(header) < 20:
+            return f"truncated MAT-file (v4): the variable header at byte {position} is cut"
+        mopt, rows, columns, imaginary, name_length = struct.unpack(f"{order}5i", header)
+        if not _v4_flag(mopt) or rows < 0 or columns < 0 or imaginary not in (0, 1) or name_length < 1:
+            return (f"damaged MAT-file (v4): the variable header at byte {position} reads type {mopt}, {rows} x "
+                    f"{columns}, imaginary flag {imaginary}, name length {name_length}")
+        data = rows * columns * V4_ITEMSIZE[mopt // 10 % 10] * (1 + imaginary)
+        end = position + 20 + name_length + data
+        if end > size:
+            return (f"truncated or damaged MAT-file (v4): the variable at byte {position} ({rows} x {columns}) "
+                    f"needs {data} bytes of data, the file holds {max(size - position - 20 - name_length, 0)}")
+        position = end
+    return None
+
+
+def _library_errors() -> tuple[type[BaseException], ...]:
+    """What scipy.io raises on damaged MAT-file content: its MatReadError, ValueError, TypeError and
+    OSError, zlib.error for a compressed variable that does not inflate (found by
+    tests/test_fuzz_inputs.py), and NotImplementedError for HDF5-based (v7.3) content it cannot read."""
+    import zlib
+
+    from scipy.io.matlab import MatReadError
+
+    return (MatReadError, ValueError, TypeError, OSError, zlib.error, NotImplementedError)
+
+
 def _read_v5(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str, np.ndarray]:
+    problem = mat_file_problem(path)
+    if problem is not None:
+        raise InputError(str(path), problem)
+    content = _loadmat_isolated(path)
+    variables = {k: v for k, v in content.items() if not k.startswith("__")}
+    return pick(wanted, optional, lambda key, name: _lookup(variables, name, f"{path}: --{key} {name}"))
+
+
+def _loadmat(path: Path) -> dict:
+    """``scipy.io.loadmat``, its errors on damaged content as InputError."""
     from scipy.io import loadmat
 
     try:
-        content = loadmat(path, simplify_cells=True)
-    # scipy.io raises NotImplementedError for HDF5-based (v7.3) content it cannot read: bad input here
-    except (ValueError, TypeError, OSError, NotImplementedError) as exc:
-        raise InputError(str(path), f"cannot read as a MATLAB file ({str(exc).splitlines()[0]})") from None
-    variables = {k: v for k, v in content.items() if not k.startswith("__")}
-    return pick(wanted, optional, lambda key, name: _lookup(variables, name, f"{path}: --{key} {name}"))
+        return loadmat(path, simplify_cells=True)
+    except _library_errors() as exc:
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(str(path), f"cannot read as a MATLAB file ({reason})") from None
+    except MemoryError:  # a size field inside a compressed variable, which mat_file_problem cannot see
+        raise InputError(str(path), "cannot read as a MATLAB file (it asks for more memory than there is: a "
+                                    "damaged size field, or a file too large for this machine)") from None
+
+
+def _loadmat_isolated(path: Path) -> dict:
+    """:func:`_loadmat` in a forked child process, where the platform can fork.
+
+    scipy's compiled MAT v5 reader trusts the type codes and lengths in the file, and a damaged
+    file can crash the interpreter: tests/test_fuzz_inputs.py found segmentation faults (a data
+    element of a reserved type, 0, 8, 10, 11 or 19, or a matrix type, where an array's numbers
+    are). A crashed child takes only itself down, and its signal becomes one error line. Forking
+    costs a few milliseconds: the child starts with scipy already imported.
+    """
+    import multiprocessing
+
+    import scipy.io  # noqa: F401  (imported here, so that the child starts with it)
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return _loadmat(path)
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(target=_loadmat_child, args=(path, send), daemon=True)
+    child.start()
+    send.close()
+    try:
+        outcome = receive.recv()
+    except EOFError:  # the child died before it could answer
+        outcome = None
+    finally:
+        receive.close()
+        child.join()
+    if outcome is None:
+        how = f"signal {-child.exitcode}" if child.exitcode is not None and child.exitcode < 0 else f"exit code {child.exitcode}"
+        raise InputError(str(path), f"cannot read as a MATLAB file (scipy's MAT-file reader crashed on it, {how}: "
+                                    "a damaged file?)")
+    kind, value = outcome
+    if kind == "damaged":
+        raise InputError(str(path), value)
+    if kind == "failed":  # not the file's fault: a programming error, shown with its traceback
+        raise RuntimeError(f"reading {path} with scipy.io.loadmat failed in the child process:\n{value}")
+    return value
+
+
+def _loadmat_child(path: Path, send) -> None:
+    import faulthandler
+    import traceback
+
+    faulthandler.disable()  # a crash on a damaged file is expected here and reported by the parent
+    try:
+        send.send(("ok", _loadmat(path)))
+    except InputError as exc:
+        send.send(("damaged", exc.what))
+    except Exception:
+        send.send(("failed", traceback.format_exc()))
+    finally:
+        send.close()
 
 
 def _lookup(variables: dict, name: str, where: str) -> np.ndarray:
@@ -66,10 +209,15 @@ def _lookup(variables: dict, name: str, where: str) -> np.ndarray:
 def _read_v73(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str, np.ndarray]:
     try:
         handle = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(str(path), f"cannot open MATLAB v7.3 file ({str(exc).splitlines()[0]})") from None
+    except H5PY_ERRORS as exc:
+        raise InputError(str(path), f"cannot open MATLAB v7.3 file ({' '.join(str(exc).split())})") from None
     with handle:
-        return pick(wanted, optional, lambda key, name: _v73_array(handle, name, f"{path}: --{key} {name}"))
+        return pick(wanted, optional, lambda key, name: _v73_variable(handle, name, f"{path}: --{key} {name}"))
+
+
+def _v73_variable(handle: h5py.File, name: str, where: str) -> np.ndarray:
+    with hdf5_damage(where):
+        return _v73_array(handle, name, where)
 
 
 def _v73_array(handle: h5py.File, name: str, where: str) -> np.ndarray:

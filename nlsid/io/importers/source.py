@@ -22,6 +22,9 @@ from nlsid.errors import InputError
 from nlsid.io.timestamps import NS, uniform_sampling
 
 LAYOUTS = ("realizations", "periods")
+# Larger samples are refused: no measurement is that large, and their squares summed over a record
+# (the powers and variances of the inference) would overflow float64.
+MAX_MAGNITUDE = 1e100
 
 
 class NotFound(InputError):
@@ -90,6 +93,10 @@ def as_matrix(value: np.ndarray, where: str) -> np.ndarray:
     bad = ~np.isfinite(arr)
     if bad.any():
         raise InputError(where, f"{int(bad.sum())} NaN or Inf samples")
+    huge = np.abs(arr) > MAX_MAGNITUDE
+    if huge.any():
+        raise InputError(where, f"{int(huge.sum())} samples of magnitude above {MAX_MAGNITUDE:g} (largest "
+                                f"{float(np.abs(arr).max()):.3g}): not measured values (a damaged file?)")
     return np.ascontiguousarray(arr)
 
 
@@ -98,6 +105,9 @@ def sample_rate(time: np.ndarray, where: str) -> float:
     t = np.squeeze(np.asarray(time, dtype=np.float64))
     if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
         raise InputError(where, "expected a time vector of at least 2 finite values in seconds")
+    span = float(np.max(np.abs(t - t[0])))
+    if span * NS >= 2.0 ** 63:  # times are counted in int64 nanoseconds: at most about 292 years
+        raise InputError(where, f"time vector spans {span:.3g} s: not the seconds of a measurement")
     ticks = np.round((t - t[0]) * NS).astype(np.int64)
     return uniform_sampling(ticks, np.ones(t.size, dtype=np.int64), where).fs
 

@@ -1,0 +1,201 @@
+"""Speed of ``nlsid batch`` on the local process pool; prints JSON.
+
+* ``speedup``: 8 recordings of a stage (mass-spring-damper with Coulomb friction, fc 0.50 ... 0.57 N,
+  8 realizations x (1 transient + 10) periods x 4096 samples at 2048 Hz, each with its own noise),
+  pipeline: ``bla``, ``fit --model`` of fc, ``fit --model`` of fc, damping and stiffness (the fits
+  with ``--workers 1``: one thread per task, so the worker processes are the only parallelism).
+  Wall time of ``nlsid batch ... --workers 1`` and ``--workers 2``, each into a fresh folder, as
+  processes (start-up, the pipeline check, spawning and warming the workers, the results and the
+  page all included), each timed twice, interleaved, the faster kept (other jobs on the machine
+  only ever add time); ``speedup_2_workers = seconds_1_worker / seconds_2_workers``. The obvious
+  alternative, timed in the same run: the shell loop users write today, ``nlsid run`` of the
+  recording's pipeline once per recording, one after the other (``speedup_vs_shell_loop =
+  seconds_shell_loop / seconds_2_workers``).
+* ``overhead``: what a task costs beyond its steps. ``nlsid -v batch --workers 1`` of a cheap
+  pipeline (``bla`` of a small recording) on 64 recordings; with ``-v`` (not on a terminal) the
+  batch prints a line as each recording's record comes back, and the benchmark notes when each
+  line arrives. With one worker the tasks run back to back, so the time between two lines is one
+  task as the batch sees it; minus the time of its steps (``seconds`` of each step in
+  ``results.jsonl``, measured in the worker) it is the per-task overhead: handing the task to the
+  worker and the record back, the pipeline plan and check, the recording's attributes, the work
+  folder, the log, ``task.json``, the rename, the progress line. The median over the tasks after
+  the first (which also loads the stages) is ``per_task_overhead_ms``; its quartiles are given.
+  ``in_worker_overhead_ms``: the mean of each task's ``seconds`` minus its steps' (the part of the
+  overhead inside the worker).
+
+``load_average`` (1, 5, 15 min) at start and end: the machine is shared with other jobs, which
+take cores from the 2-worker run first.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from statistics import median
+
+import h5py
+import yaml
+
+NLSID = (sys.executable, "-c", "from nlsid.cli.entry import main; main()")
+PLANT = {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0, "gain": 1.0,
+         "output": "position"}
+STAGE = {"fs": 2048.0, "seed": 3, "unit": "N",
+         "multisine": {"period": 4096, "band": [1.0, 80.0], "lines": "random-odd", "realizations": 8, "periods": 10,
+                       "transient_periods": 1, "rms_levels": [1.0]}}
+SMALL = {"fs": 256.0, "seed": 3, "unit": "N",
+         "multisine": {"period": 256, "band": [1.0, 40.0], "lines": "random-odd", "realizations": 2, "periods": 2,
+                       "transient_periods": 1, "rms_levels": [1.0]}}
+FIT_FC = {"model": {**PLANT, "nonlinearities": [{"type": "coulomb", "fc": 0.3}]}, "simulation": {"substeps": 2},
+          "free": {"model.nonlinearities[0].fc": {"lower": 1.0e-6, "upper": 5.0}}}
+FIT_THREE = {"model": {**PLANT, "damping": 15.0, "stiffness": 1900.0, "nonlinearities": [{"type": "coulomb", "fc": 0.3}]},
+             "simulation": {"substeps": 2},
+             "free": {"model.nonlinearities[0].fc": {"lower": 1.0e-6, "upper": 5.0}, "model.damping": {"lower": 0.0},
+                      "model.stiffness": {"lower": 1.0}}}
+STEPS = ["bla {recording} -o {out}/bla.h5",
+         "fit --model fit_fc.yaml --data {recording} -o {out}/fc.yaml --workers 1",
+         "fit --model fit_three.yaml --data {recording} -o {out}/three.yaml --workers 1"]
+CHEAP = ["bla {recording} -o {out}/bla.h5"]
+
+
+def nlsid(*args, check: bool = True) -> subprocess.CompletedProcess:
+    result = subprocess.run([*NLSID, *map(str, args)], capture_output=True, text=True)
+    if check and result.returncode != 0:
+        raise RuntimeError(f"nlsid {' '.join(map(str, args))}: {result.stderr}")
+    return result
+
+
+def in_process(*args) -> None:
+    """Run an nlsid command in this process (the recordings are made here, numba loaded once)."""
+    from click.testing import CliRunner
+
+    from nlsid.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["-q", *map(str, args)])
+    if result.exit_code != 0:
+        raise RuntimeError(f"nlsid {' '.join(map(str, args))}: {result.output}")
+
+
+def make_recordings(folder: Path, design: dict, count: int) -> list[Path]:
+    (folder / "design.yaml").write_text(yaml.safe_dump(design))
+    in_process("design", folder / "design.yaml", "-o", folder / "excitation.h5")
+    paths = []
+    for i in range(count):
+        config = {"model": {**PLANT, "nonlinearities": [{"type": "coulomb", "fc": 0.5 + 0.01 * (i % 8)}]},
+                  "disturbances": {"y_noise": 2.0e-7, "seed": 100 + i}, "simulation": {"substeps": 2}}
+        (folder / f"machine{i}.yaml").write_text(yaml.safe_dump(config))
+        out = folder / "rec" / f"night{i:02d}.h5"
+        out.parent.mkdir(exist_ok=True)
+        in_process("simulate", folder / f"machine{i}.yaml", "--excitation", folder / "excitation.h5", "-o", out)
+        with h5py.File(out, "a") as handle:
+            handle.attrs["recorded"] = f"2026-05-{1 + i % 28:02d}T22:00:00Z"
+        paths.append(out)
+    return paths
+
+
+def timed_batch(pipeline: Path, inputs: list[Path], fleet: Path, workers: int) -> tuple[float, dict]:
+    shutil.rmtree(fleet, ignore_errors=True)
+    listing = inputs[0].parent / f"list_{len(inputs)}.txt"
+    listing.write_text("".join(f"{p.name}\n" for p in inputs))
+    started = time.perf_counter()
+    result = nlsid("batch", pipeline, "--inputs-from", listing, "-o", fleet, "--workers", workers, "--json")
+    seconds = time.perf_counter() - started
+    summary = json.loads(result.stdout)
+    assert summary["ok"] == len(inputs), summary
+    return seconds, summary
+
+
+def arrival_times(pipeline: Path, inputs: list[Path], fleet: Path) -> dict[str, float]:
+    """When each recording's record came back to the batch (its ``-v`` line), by name."""
+    shutil.rmtree(fleet, ignore_errors=True)
+    listing = inputs[0].parent / f"list_{len(inputs)}.txt"
+    listing.write_text("".join(f"{p.name}\n" for p in inputs))
+    process = subprocess.Popen([*NLSID, "-v", "batch", str(pipeline), "--inputs-from", str(listing), "-o", str(fleet),
+                                "--workers", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    names = {p.stem for p in inputs}
+    arrivals = {}
+    for line in process.stderr:
+        name, _, status = line.strip().partition(": ")
+        if name in names and status == "ok":
+            arrivals[name] = time.perf_counter()
+    if process.wait() != 0 or len(arrivals) != len(inputs):
+        raise RuntimeError(f"batch of {len(inputs)} recordings: exit {process.returncode}, {len(arrivals)} records seen")
+    return arrivals
+
+
+def step_seconds(fleet: Path) -> list[float]:
+    rows = [json.loads(line) for line in (fleet / "results.jsonl").read_text().splitlines()]
+    return [sum(step["seconds"] for step in row["steps"]) for row in rows]
+
+
+def main() -> None:
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="nlsid_batch_bench_") as tmp:
+        root = Path(tmp)
+        stage = root / "stage"
+        stage.mkdir()
+        recordings = make_recordings(stage, STAGE, 8)
+        (stage / "fit_fc.yaml").write_text(yaml.safe_dump(FIT_FC))
+        (stage / "fit_three.yaml").write_text(yaml.safe_dump(FIT_THREE))
+        (stage / "pipeline.yaml").write_text(yaml.safe_dump({"steps": STEPS}))
+        # warm numba's on-disk cache for these model shapes, so that no run below compiles
+        timed_batch(stage / "pipeline.yaml", recordings[:1], root / "warm", 1)
+
+        ones, twos = [], []
+        for _ in range(2):
+            ones.append(timed_batch(stage / "pipeline.yaml", recordings, root / "fleet1", 1))
+            twos.append(timed_batch(stage / "pipeline.yaml", recordings, root / "fleet2", 2))
+        one, summary_one = min(ones, key=lambda item: item[0])
+        two, summary_two = min(twos, key=lambda item: item[0])
+        steps_one = step_seconds(root / "fleet1")
+
+        loop_started = time.perf_counter()
+        for i, recording in enumerate(recordings):
+            out = root / "loop" / recording.stem
+            out.mkdir(parents=True)
+            lines = [s.replace("{recording}", str(recording)).replace("{out}", str(out)) for s in STEPS]
+            pipeline = stage / f"run_{i}.yaml"
+            pipeline.write_text(yaml.safe_dump({"steps": lines}))
+            nlsid("-q", "run", pipeline)
+        loop = time.perf_counter() - loop_started
+
+        small = root / "small"
+        small.mkdir()
+        tiny = make_recordings(small, SMALL, 64)
+        (small / "pipeline.yaml").write_text(yaml.safe_dump({"steps": CHEAP}))
+        arrivals = arrival_times(small / "pipeline.yaml", tiny, root / "many")
+        rows = {row["name"]: row for row in map(json.loads, (root / "many" / "results.jsonl").read_text().splitlines())}
+        order = sorted(arrivals, key=arrivals.get)
+        overheads = sorted(arrivals[b] - arrivals[a] - sum(s["seconds"] for s in rows[b]["steps"])
+                           for a, b in zip(order, order[1:]))
+        in_worker = [rows[n]["seconds"] - sum(s["seconds"] for s in rows[n]["steps"]) for n in order[1:]]
+
+    print(json.dumps({
+        "cores": os.cpu_count(),
+        "speedup": {
+            "recordings": len(recordings), "pipeline": STEPS,
+            "seconds_1_worker": round(one, 2), "seconds_2_workers": round(two, 2),
+            "seconds_runs": [[round(t, 2) for t, _ in ones], [round(t, 2) for t, _ in twos]],
+            "speedup_2_workers": round(one / two, 3), "target_speedup": 1.7,
+            "seconds_steps_in_workers_1_worker": round(sum(steps_one), 2),
+            "seconds_shell_loop_nlsid_run": round(loop, 2), "speedup_vs_shell_loop": round(loop / two, 3),
+            "batch_seconds_reported": [summary_one["seconds"], summary_two["seconds"]],
+        },
+        "overhead": {
+            "recordings": len(tiny), "pipeline": CHEAP,
+            "per_task_overhead_ms": round(1000 * median(overheads), 1),
+            "quartiles_ms": [round(1000 * overheads[len(overheads) // 4], 1),
+                             round(1000 * overheads[(3 * len(overheads)) // 4], 1)],
+            "in_worker_overhead_ms": round(1000 * sum(in_worker) / len(in_worker), 1), "target_ms": 100,
+        },
+        "load_average": {"start": [round(x, 2) for x in load_start], "end": [round(x, 2) for x in os.getloadavg()]},
+    }, indent=2))
+
+
+if __name__ == "__main__":
+    main()
