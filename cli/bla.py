@@ -21,25 +21,32 @@ from .options import map_option, parse_map, plot_folder, plots_option
                    "(project on r, for closed loops); auto uses reference when the runs carry r, else io.")
 @click.option("--confidence", type=float, default=0.95, show_default=True, metavar="P",
               help="Probability of the confidence bounds on |G_BLA| and its phase.")
+@click.option("--lpm-lines", type=click.IntRange(min=3), default=7, show_default=True, metavar="W",
+              help="Arbitrary runs: lines of the Local Polynomial Method's window (odd; wider: more degrees "
+                   "of freedom, more bias where G changes fast; docs/lpm.md).")
+@click.option("--lpm-degree", type=click.IntRange(min=0), default=2, show_default=True, metavar="R",
+              help="Arbitrary runs: degree of the local polynomials of G and of the transient.")
 @plots_option
 @map_option
 @force_option
 @json_option
-def bla(recording: str, output: str, method: str, confidence: float, plots: str | None,
-        mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: int, lpm_degree: int,
+        plots: str | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
     """Best Linear Approximation with noise and nonlinear distortion levels (odd/even).
 
-    Runs are grouped by their level attribute; the runs of a level are realizations of a
-    random-phase multisine (same period and excited lines). Per level: the robust method
-    (M realizations x P periods), the fast method (detection lines of a random grid), the output
-    spectrum by line class, and confidence bounds; across levels: the BLA versus rms.
+    Runs are grouped by their level attribute. Multisine runs of a level are realizations of a
+    random-phase multisine (same period and excited lines): the robust method (M realizations x
+    P periods), the fast method (detection lines of a random grid), the output spectrum by line
+    class, and confidence bounds; across levels: the BLA versus rms. Arbitrary runs (noise,
+    sweeps, trajectories) get the Local Polynomial Method (Schoukens, Pintelon and Rolain 2012,
+    Section 3.7): the FRF with its transient removed and the variance of noise plus distortion.
 
     Example:
 
     \b
       nlsid bla recording.h5 -o bla.h5 --plots figures/
     """
-    from nlsid.analysis.levels import across_levels, analyse_runs, recording_runs
+    from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
     from nlsid.io.bla_file import write_bla
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import open_recording
@@ -47,13 +54,16 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
     check_suffix(output)
     if not 0 < confidence < 1:
         raise InputError("--confidence", f"expected a probability in (0, 1), got {confidence:g}")
+    if lpm_lines % 2 == 0:
+        raise InputError("--lpm-lines", f"expected an odd number of lines (a window centred on its line), got {lpm_lines}")
     check_writable(output, force)
     plot_dir = plot_folder(plots)
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
-            levels, warnings = analyse_runs(recording_runs(rec, recording), method, confidence,
-                                            on_run=lambda run: step(), source=recording)
-    across = across_levels(levels)
+            levels, lpm_levels, warnings = analyse_bla(recording_runs(rec, recording), method, confidence,
+                                                       on_run=lambda run: step(), source=recording,
+                                                       lpm_half_width=lpm_lines // 2, lpm_degree=lpm_degree)
+    across = across_levels(levels) if levels else {"reference_level": None, "levels": []}
     figures = {}
     if plot_dir is not None:
         from nlsid.report.bla_plots import render_figures
@@ -62,18 +72,24 @@ def bla(recording: str, output: str, method: str, confidence: float, plots: str 
         plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)
-    write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force)
+    write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force,
+              lpm_levels=lpm_levels)
     for name, data in figures.items():
         with atomic_path(plot_dir / name, force) as tmp:
             tmp.write_bytes(data)
-    for message in warnings + [f"level {i:02d}: {w}" for i, level in enumerate(levels) for w in level.warnings]:
+    for message in (warnings + [f"level {i:02d}: {w}" for i, level in enumerate(levels) for w in level.warnings]
+                    + [f"arbitrary level {i:02d}: {w}" for i, level in enumerate(lpm_levels) for w in level.warnings]):
         LOGGER.warning(message)
     summaries = [level.summary() for level in levels]
+    lpm_summaries = [level.summary() for level in lpm_levels]
     if as_json:
         emit_json({"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
-                   "levels": summaries, "across_levels": across, "warnings": warnings})
+                   "levels": summaries, "lpm_levels": lpm_summaries, "across_levels": across, "warnings": warnings})
         return
-    _print_table(output, summaries)
+    if summaries:
+        _print_table(output, summaries)
+    if lpm_summaries:
+        _print_lpm_table(output, lpm_summaries)
 
 
 def _cell(value: float, fmt: str = ".1f") -> str:
@@ -97,4 +113,18 @@ def _print_table(output: str, summaries: list[dict]) -> None:
             _cell(spectrum["odd_above_even_db"]),
             _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
         )
+    settings().console.print(table)
+
+
+def _print_lpm_table(output: str, summaries: list[dict]) -> None:
+    from rich.table import Table
+
+    table = Table(title=f"{output}: BLA of arbitrary runs by the Local Polynomial Method (dB)")
+    for column in ("level", "u rms", "records", "method", "band Hz", "|G| dB", "noise+NL var (upper bound)", "dof"):
+        table.add_column(column)
+    for row in summaries:
+        lo, hi = row["band_hz"]
+        table.add_row("-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
+                      str(row["realizations"]), row["method"], f"{lo:.4g}..{hi:.4g}", _cell(row["bla_db"]),
+                      _cell(row["total_var_db"]), str(row["lpm"]["dof"]))
     settings().console.print(table)

@@ -70,3 +70,31 @@ def test_the_noise_bound_is_an_upper_bound_and_is_met_by_a_linear_system():
         assert result.noise_bound_db >= 10 * np.log10(sigma ** 2 / N) - 1.0
     false_alarms = sum(not v.startswith("no distortion detected") for v in verdicts)
     assert false_alarms <= 2, verdicts   # 3 comparisons at 1 % each: P(>2 of 20) is about 2e-4
+
+
+def test_bla_of_p1_multisines_states_the_class_and_no_noise_level(run_cli, tmp_path):
+    """End to end: 10 realizations of one period each after a transient period, a cubic Wiener system:
+    the summary names odd distortion, gives the variance across realizations, and no noise level."""
+    from nlsid.io.recording import write_recording
+    from nlsid.io.run import Run
+
+    rng = np.random.default_rng(12)
+    bins = random_odd_bins(rng)
+    runs = []
+    for m in range(M):
+        spectrum = np.zeros(N // 2 + 1, complex)
+        spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
+        u = np.fft.irfft(spectrum, n=N)
+        u = np.tile(0.5 * u / u.std(), 2)
+        x = signal.lfilter(B, A, u)
+        y = x + 0.3 * x ** 3 + 1e-4 * rng.standard_normal(2 * N)
+        runs.append(Run(run_id=f"ms_{m}", fs=FS, kind="multisine", u=u, y=y, period=N, transient_periods=1,
+                        realization=m, excited_bins=bins))
+    write_recording(tmp_path / "p1.h5", runs, provenance={})
+    result = run_cli("bla", tmp_path / "p1.h5", "-o", tmp_path / "bla.h5", "--json")
+    assert result.exit_code == 0, result.stderr
+    level = result.json()["levels"][0]
+    assert level["periods"] == 1 and level["noise_floor"] == "unknown" and level["noise_var_db"] is None
+    assert level["total_var_db"] is not None
+    assert level["distortion_class"]["verdict"].startswith("odd nonlinear distortion dominant")
+    assert level["distortion_class"]["noise_upper_bound_db"] is not None

@@ -16,10 +16,13 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from nlsid.analysis.arbitrary import LPMLevel, analyse_level
 from nlsid.analysis.bla import RobustAccumulator, RobustBLA
 from nlsid.analysis.bla_methods import METHOD_CHOICES
+from nlsid.analysis.distortion_class import classify
 from nlsid.analysis.fast_bla import FastAccumulator, FastBLA, fast_run
 from nlsid.analysis.lines import EXCITED, Lines, classify_lines
+from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
 from nlsid.analysis.output_spectrum import OutputSpectrum, SpectrumAccumulator, db
 from nlsid.analysis.period_stats import run_period_stats
 from nlsid.analysis.precision import negligible
@@ -63,7 +66,10 @@ class LevelResult:
         """Scalars of this level for tables and ``--json``: sizes, spectrum levels and BLA levels (dB).
 
         ``noise_floor`` says what the noise levels are (:attr:`noise_floor`); when it is not
-        ``"estimated"`` the noise level and the levels relative to it are NaN (null in JSON)."""
+        ``"estimated"`` the noise level and the levels relative to it are NaN (null in JSON).
+        ``total_var_db`` is the variance of G_BLA across realizations (noise plus distortion, M >= 2)
+        and ``distortion_class`` the odd/even class from the line classes alone, with an upper
+        bound of the noise (:mod:`nlsid.analysis.distortion_class`): both hold with P = 1 too."""
         G2 = float(np.mean(np.abs(self.robust.G) ** 2))
         out = {
             "level": self.level,
@@ -77,7 +83,9 @@ class LevelResult:
             "nl_var_db": db(float(np.mean(self.robust.var_nl))) - db(G2),
             "noise_var_db": db(float(np.mean(self.robust.var_noise_period))) - db(G2),
             "noise_floor": self.noise_floor,
+            "total_var_db": db(float(np.mean(self.robust.var_total))) - db(G2),
             "spectrum": self.spectrum.summary(self.lines),
+            "distortion_class": classify(self.lines, self.spectrum.y_power, self.n_realizations).summary(),
             "warnings": list(self.warnings),
         }
         if out["noise_floor"] != "estimated":  # no noise level to state or to compare with
@@ -150,12 +158,14 @@ def analyse_runs(
     probability: float = 0.95,
     on_run: Callable[[Run], None] | None = None,
     source: str = "recording",
+    require_multisine: bool = True,
 ) -> tuple[list[LevelResult], list[str]]:
     """Analyse ``(run, where)`` pairs one at a time; return the levels (sorted) and general warnings.
 
     ``where`` names the run in error messages (e.g. ``rec.h5:/runs/ms_00``), ``source`` the
     recording. Runs that are not multisines are skipped with a warning. The runs are checked by
-    :class:`nlsid.io.feeds.BlaRuns`, the checks ``nlsid info`` reports.
+    :class:`nlsid.io.feeds.BlaRuns`, the checks ``nlsid info`` reports; without
+    ``require_multisine`` a stream without multisines gives no levels instead of an error.
     """
     if method not in METHOD_CHOICES:
         raise InputError("--method", f"expected one of {', '.join(METHOD_CHOICES)}, got {method!r}")
@@ -169,12 +179,55 @@ def analyse_runs(
             groups[run.level].add(run)
         if on_run is not None:
             on_run(run)
-    checks.finish(source)
+        del run  # the next run is read while this one would still be held
+    if require_multisine:
+        checks.finish(source)
     skipped = checks.skipped
     warnings = [f"skipped {len(skipped)} runs that are not multisines ({', '.join(skipped[:5])}"
                 f"{', ...' if len(skipped) > 5 else ''})"] if skipped else []
     keys = sorted(groups, key=lambda level: (level is not None, level or 0.0))
     return [groups[key].result() for key in keys], warnings
+
+
+def analyse_bla(
+    runs: Iterable[tuple[Run, str]],
+    method: str = "auto",
+    probability: float = 0.95,
+    on_run: Callable[[Run], None] | None = None,
+    source: str = "recording",
+    lpm_half_width: int = DEFAULT_HALF_WIDTH,
+    lpm_degree: int = DEFAULT_DEGREE,
+) -> tuple[list[LevelResult], list[LPMLevel], list[str]]:
+    """The ``bla`` stage: multisine runs by the robust and fast methods (:func:`analyse_runs`),
+    arbitrary runs by the Local Polynomial Method per level (:mod:`nlsid.analysis.arbitrary`).
+
+    Arbitrary runs are held until their level is analysed (the LPM fits all records of a level
+    jointly); multisine runs stream through one at a time as before.
+    """
+    arbitrary: dict[float | None, list[Run]] = {}
+    checks = BlaRuns(method)
+
+    def multisines() -> Iterator[tuple[Run, str]]:
+        for run, where in runs:
+            if run.kind != "arbitrary":
+                yield run, where
+                continue
+            checks.add(run, where)
+            arbitrary.setdefault(run.level, []).append(run)
+            if on_run is not None:
+                on_run(run)
+
+    levels, warnings = analyse_runs(multisines(), method, probability, on_run, source, require_multisine=False)
+    if not levels:
+        checks.finish(source)  # an error unless arbitrary runs were found
+    use_reference = {"frf": False, "io": False, "reference": True}.get(method)
+    lpm_levels = [analyse_level(arbitrary[key], f"{source}: arbitrary runs of level {key}", probability,
+                                lpm_half_width, lpm_degree, use_reference)
+                  for key in sorted(arbitrary, key=lambda level: (level is not None, level or 0.0))]
+    if method == "io" and lpm_levels:
+        warnings.append("--method io on arbitrary runs: the LPM takes u as known; input noise biases G towards "
+                        "zero (record the reference r and use --method reference)")
+    return levels, lpm_levels, warnings
 
 
 def recording_runs(recording, path: str) -> Iterator[tuple[Run, str]]:

@@ -19,6 +19,17 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
                      yc_power, yc_noise, fraction_significant_y, fraction_significant_u (per bin)
         lines/       per bin 0 .. period//2: kind (int8: -1 DC/Nyquist, 0 excited, 1 odd,
                      2 even, 3 nonharmonic), in_band (int8), u_power, u_noise, y_power, y_noise
+    /lpm_levels/level_NN/   (version 2) one group per level of arbitrary runs, by the Local
+                            Polynomial Method (nlsid.analysis.arbitrary, docs/lpm.md)
+        attrs   level (NaN when none), u_rms, fs, n_samples, n_records, method ("lpm" or
+                "lpm_reference"), half_width, degree, dof, run_ids (JSON), warnings (JSON),
+                summary (JSON, see LPMLevel.summary)
+        bins (F,) int64      DFT bins k of the records' length (frequency k fs / n_samples)
+        frequency (F,)       Hz
+        G (F, 2), var_G, var_y, [G_yr (F, 2), G_ur (F, 2), var_u], radius, mag_lo, mag_hi,
+        phase_lo, phase_hi
+
+Version 1 files (no ``lpm_levels``) are still read.
 
 Meaning and units of each dataset: ``docs/formats.md`` (drafted in ``docs/drafts/bla.md``).
 """
@@ -37,7 +48,8 @@ from nlsid.errors import InputError
 from nlsid.io.result_file import create_result, datasets, json_safe, open_result, put, text
 
 FORMAT = "bla"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)
 _BOUNDS = ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")
 _ROBUST = ("G", "var_total", "var_noise", "var_nl", "var_noise_period", "var_ys", "var_input_nl")
 _FAST = ("G", "var_noise", "var_total", "var_nl", "var_nl_even")
@@ -51,8 +63,9 @@ def _put_bounds(group: h5py.Group, bounds) -> None:
 
 
 def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: float, warnings: list[str],
-              across: dict, force: bool = False) -> Path:
-    """Write the :class:`~nlsid.analysis.levels.LevelResult` list atomically in the layout above."""
+              across: dict, force: bool = False, lpm_levels=()) -> Path:
+    """Write the :class:`~nlsid.analysis.levels.LevelResult` list and the
+    :class:`~nlsid.analysis.arbitrary.LPMLevel` list atomically in the layout above."""
     with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
         handle.attrs["confidence"] = float(probability)
         handle.attrs["warnings"] = json.dumps(warnings)
@@ -60,7 +73,31 @@ def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: fl
         root = handle.create_group("levels")
         for index, level in enumerate(levels):
             _write_level(root.create_group(f"level_{index:02d}"), level)
+        if lpm_levels:
+            lpm_root = handle.create_group("lpm_levels")
+            for index, level in enumerate(lpm_levels):
+                _write_lpm_level(lpm_root.create_group(f"level_{index:02d}"), level)
     return Path(path)
+
+
+def _write_lpm_level(group: h5py.Group, level) -> None:
+    result = level.result
+    group.attrs.update({
+        "level": float("nan") if level.level is None else float(level.level),
+        "u_rms": float(level.u_rms), "fs": float(result.fs), "n_samples": int(result.n_samples),
+        "n_records": int(result.n_records), "method": level.method, "half_width": int(result.half_width),
+        "degree": int(result.degree), "dof": int(result.dof), "run_ids": json.dumps(level.run_ids),
+        "warnings": json.dumps(level.warnings), "summary": json.dumps(json_safe(level.summary()), sort_keys=True),
+    })
+    put(group, "bins", level.bins.astype(np.int64))
+    put(group, "frequency", level.frequency)
+    put(group, "G", level.G)
+    put(group, "var_G", level.var_G)
+    put(group, "var_y", result.var_y[level.band])
+    if result.G_yr is not None:
+        for name in ("G_yr", "G_ur", "var_u"):
+            put(group, name, getattr(result, name)[level.band])
+    _put_bounds(group, level.bounds)
 
 
 def _write_level(group: h5py.Group, level) -> None:
@@ -104,9 +141,10 @@ def read_bla(path: str | os.PathLike) -> dict:
     """Read a ``bla.h5`` file into nested dicts (complex arrays restored).
 
     Returns ``{"attrs": {...}, "levels": [{"attrs": {...}, "excited_bins", "frequency",
-    "robust": {...}, "fast": {...} or None, "lines": {...}}, ...]}``; JSON attributes are parsed.
+    "robust": {...}, "fast": {...} or None, "lines": {...}}, ...], "lpm_levels": [{"attrs": {...},
+    "bins", "frequency", "G", "var_G", ...}, ...]}``; JSON attributes are parsed.
     """
-    with open_result(path, FORMAT, FORMAT_VERSION, "nlsid bla") as handle:
+    with open_result(path, FORMAT, READ_VERSIONS, "nlsid bla") as handle:
         attrs = {key: _attr(key, value) for key, value in handle.attrs.items()}
         if "levels" not in handle:
             raise InputError(f"{path}:/levels", "missing group")
@@ -125,7 +163,16 @@ def read_bla(path: str | os.PathLike) -> dict:
                 "fast": datasets(group["fast"], f"{where}/fast") if "fast" in group else None,
                 "lines": datasets(group["lines"], f"{where}/lines"),
             })
-    return {"attrs": attrs, "levels": levels}
+        lpm_levels = []
+        for name in sorted(handle["lpm_levels"]) if "lpm_levels" in handle else []:
+            group, where = handle["lpm_levels"][name], f"{path}:/lpm_levels/{name}"
+            for required in ("bins", "frequency", "G", "var_G"):
+                if required not in group:
+                    raise InputError(f"{where}/{required}", "missing")
+            lpm_levels.append({"name": name,
+                               "attrs": {key: _attr(key, value) for key, value in group.attrs.items()},
+                               **datasets(group, where)})
+    return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels}
 
 
 _JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary")

@@ -115,15 +115,25 @@ class LevelShape:
 
 
 class BlaRuns:
-    """The checks of the BLA over a stream of ``(run, where)``: :meth:`add` each run, then :meth:`finish`."""
+    """The checks of the BLA over a stream of ``(run, where)``: :meth:`add` each run, then :meth:`finish`.
+
+    Multisine runs feed the robust and fast methods, arbitrary runs the Local Polynomial Method
+    (:mod:`nlsid.analysis.arbitrary`); sines are skipped (they are for ``hosidf``).
+    """
 
     def __init__(self, method: str = "auto"):
         self.method = method
         self.levels: dict[float | None, LevelShape] = {}
+        self.arbitrary: list[str] = []
         self.skipped: list[str] = []
 
     def add(self, run: Run, where: str) -> LevelShape | None:
-        """Check one run; return its level's shape, or None for a run that is not a multisine (skipped)."""
+        """Check one run; return its level's shape, or None for a run that is not a multisine
+        (an arbitrary run, checked and listed in ``arbitrary``, or a skipped one)."""
+        if run.kind == "arbitrary":
+            check_arbitrary_run(run, where, self.method)
+            self.arbitrary.append(run.run_id)
+            return None
         if run.kind != "multisine":
             self.skipped.append(run.run_id)
             return None
@@ -135,8 +145,20 @@ class BlaRuns:
         return shape
 
     def finish(self, source: str) -> None:
-        if not self.levels:
-            raise InputError(source, "holds no multisine runs; the BLA needs random-phase multisine runs")
+        if not self.levels and not self.arbitrary:
+            raise InputError(source, "holds no multisine or arbitrary runs; the BLA needs random-phase multisines "
+                                     "or arbitrarily excited records (sines are for `nlsid hosidf`)")
+
+
+def check_arbitrary_run(run: Run, where: str, method: str) -> None:
+    """An arbitrary run feeds the LPM when it has an exciting input (or reference) and the
+    reference the method asks for."""
+    if method == "reference" and run.r is None:
+        raise InputError(where, "--method reference needs the reference r, which this run does not carry")
+    excitation = run.r if (run.r is not None and method in ("auto", "reference")) else run.u
+    if not np.ptp(excitation) > 0:
+        name = "reference r" if excitation is run.r else "input u"
+        raise InputError(where, f"the {name} is constant: it excites nothing")
 
 
 # --- hosidf: single sines -----------------------------------------------------------------------

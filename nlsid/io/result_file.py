@@ -84,8 +84,9 @@ def create_result(path: str | os.PathLike, kind: str, version: int, provenance: 
             yield handle
 
 
-def open_result(path: str | os.PathLike, kind: str, version: int, written_by: str) -> h5py.File:
-    """Open a result file for reading after checking it is the kind and version expected."""
+def open_result(path: str | os.PathLike, kind: str, version: int | tuple[int, ...], written_by: str) -> h5py.File:
+    """Open a result file for reading after checking it is the kind and a version expected
+    (``version``: the one version, or every version this reader reads)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(str(path), "file not found")
@@ -95,9 +96,11 @@ def open_result(path: str | os.PathLike, kind: str, version: int, written_by: st
         raise InputError(str(path), "cannot open: not an HDF5 file, or truncated") from None
     found = text(handle.attrs.get("nlsid_format", ""))
     version_found = np.asarray(handle.attrs.get("nlsid_format_version", -1)).reshape(-1)[0]
-    if found != kind or version_found != version:
+    versions = (version,) if isinstance(version, int) else tuple(version)
+    if found != kind or version_found not in versions:
         handle.close()
         problem = (f"attribute nlsid_format is {found!r}" if found != kind
                    else f"attribute nlsid_format_version is {version_found}")
-        raise InputError(f"{path}:/", f"{problem}, expected a '{kind}' file version {version} (written by {written_by})")
+        expected = " or ".join(str(v) for v in versions)
+        raise InputError(f"{path}:/", f"{problem}, expected a '{kind}' file version {expected} (written by {written_by})")
     return handle
