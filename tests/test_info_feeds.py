@@ -149,7 +149,8 @@ def test_sines_only_feed_hosidf_not_bla(run_cli, tmp_path):
     rec = str(tmp_path / "sines.h5")
     write_recording(rec, [sine(f"s{f}_{r}", f, 1.0, seed=r) for f in (2, 4) for r in range(2)])
     stages = assert_same_verdicts(run_cli, tmp_path, rec, {"bla": False, "hosidf": True})
-    assert stages["bla"]["reason"] == f"{rec}: holds no multisine runs; the BLA needs random-phase multisine runs"
+    assert stages["bla"]["reason"] == (f"{rec}: holds no multisine or arbitrary runs; the BLA needs random-phase "
+                                       "multisines or arbitrarily excited records (sines are for `nlsid hosidf`)")
     assert stages["bla"]["notes"] == ["skips 4 runs that are not multisines"]
     assert stages["hosidf"]["notes"] == ["--harmonics 7 at most"]  # bin 4 of 64: 7 * 4 < 32
 
