@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy import signal
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -93,3 +94,23 @@ def test_info_says_an_arbitrary_recording_feeds_bla(run_cli, tmp_path):
     rec = write(tmp_path / "rec.h5", open_loop_runs(np.random.default_rng(6), 0.02, count=1))
     stages = run_cli("info", rec, "--json").json()["stages"]
     assert stages["bla"]["feeds"] is True, stages["bla"]
+
+
+def test_fit_reads_an_lpm_level_and_recovers_the_poles(run_cli, tmp_path):
+    """`fit` on the LPM result of three records: the 2/2 z model (the ZOH resonance with a skewed
+    output is exactly 2/2 in z^-1) has the poles exp(lambda T) of the continuous system."""
+    import yaml
+
+    from lpm_cases import PHI
+
+    rec = write(tmp_path / "rec.h5", open_loop_runs(np.random.default_rng(4), 0.02))
+    assert run_cli("-q", "bla", rec, "-o", tmp_path / "bla.h5").exit_code == 0
+    result = run_cli("fit", tmp_path / "bla.h5", "--order", "2/2", "-o", tmp_path / "model.yaml", "--json")
+    assert result.exit_code == 0, result.stderr
+    den = yaml.safe_load((tmp_path / "model.yaml").read_text())["model"]["den"]
+    poles = np.sort_complex(np.roots(den))
+    truth = np.sort_complex(np.linalg.eigvals(PHI))
+    assert np.max(np.abs(poles - truth)) < 2e-3, (poles, truth)
+    # q = 9: costs weighted by variances of 9 degrees of freedom, as for M = 10 realizations
+    summary = result.json()
+    assert summary["expected_cost"] == pytest.approx(9 / 8 * (summary["lines"] - 5 / 2))

@@ -5,6 +5,13 @@ The weight is the variance of the averaged BLA (book Section 7.4.2): the robust 
 realizations, else the fast method's ``var_total`` ((6-55)), else the noise variance alone
 (with a warning: nonlinear distortions are then missing from the weight and the cost check
 flags them, book Section 7.5 (i)).
+
+Levels of arbitrary runs (``lpm_levels``, the Local Polynomial Method, docs/lpm.md) are numbered
+after the multisine levels. Their weight is the LPM's ``var_G`` (noise plus distortion), estimated
+with q degrees of freedom: each cost term is then F(2, 2q) distributed, as for sample variances
+from M = q + 1 realizations, so the expected cost is that of M = q + 1 (finite only for q >= 2,
+with a finite spread only for q >= 3). The lines are the record's DFT bins (period = record
+length).
 """
 
 from __future__ import annotations
@@ -41,15 +48,20 @@ def _std(values, divisor: float, size: int) -> np.ndarray:
 
 
 def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
-    """One level of ``bla.h5``; ``level`` may be omitted when the file holds one level."""
+    """One level of ``bla.h5`` (multisine levels first, then arbitrary-run levels); ``level`` may
+    be omitted when the file holds one level."""
     content = read_bla(path)
     levels = content["levels"]
+    total = len(levels) + len(content["lpm_levels"])
     if level is None:
-        if len(levels) > 1:
-            raise InputError(f"{path}", f"{len(levels)} levels in the file; choose one with --level 0..{len(levels) - 1}")
+        if total > 1:
+            raise InputError(f"{path}", f"{total} levels in the file; choose one with --level 0..{total - 1} "
+                                        "(multisine levels first, then levels of arbitrary runs)")
         level = 0
-    if not 0 <= level < len(levels):
-        raise InputError("--level", f"expected 0..{len(levels) - 1} for {path}, got {level}")
+    if not 0 <= level < total:
+        raise InputError("--level", f"expected 0..{total - 1} for {path}, got {level}")
+    if level >= len(levels):
+        return _lpm_level(path, content["lpm_levels"][level - len(levels)])
     chosen = levels[level]
     attrs, robust, fast = chosen["attrs"], chosen["robust"], chosen["fast"]
     where = f"{path}:/levels/{chosen['name']}"
@@ -78,3 +90,25 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
     m = max(int(attrs["n_realizations"]), 1)
     size = data.bins.size
     return BLALevel(data, _std(robust.get("var_noise"), 1.0, size), _std(robust.get("var_nl"), m, size), warnings)
+
+
+def _lpm_level(path, chosen: dict) -> BLALevel:
+    """An ``lpm_levels`` group as the FRF to fit (module docstring)."""
+    attrs = chosen["attrs"]
+    where = f"{path}:/lpm_levels/{chosen['name']}"
+    variance = np.asarray(chosen["var_G"], dtype=float)
+    usable = np.isfinite(variance) & (variance > 0) & np.isfinite(chosen["G"])
+    if not usable.any():
+        raise InputError(f"{where}/var_G", "no finite positive variance to weight the fit")
+    dof = int(attrs["dof"])
+    warnings = [] if usable.all() else [f"{int((~usable).sum())} lines without a finite variance left out"]
+    if dof < 3:
+        warnings.append(f"weights from the LPM with q = {dof} degrees of freedom: the expected cost is "
+                        f"{'infinite' if dof < 2 else 'finite but its spread is not'}, so the cost check cannot "
+                        "judge the model (use more --lpm-lines or more records for q >= 3)")
+    warnings.append("the LPM's estimates at neighbouring lines share their windows: the cost check's spread "
+                    "assumes independent lines and is approximate")
+    data = FRFData(np.asarray(chosen["bins"], dtype=np.int64)[usable], np.asarray(chosen["G"], dtype=complex)[usable],
+                   variance[usable], float(attrs["fs"]), int(attrs["n_samples"]), dof + 1)
+    size = data.bins.size
+    return BLALevel(data, np.full(size, np.nan), np.full(size, np.nan), warnings)
