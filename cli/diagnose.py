@@ -112,6 +112,12 @@ def _check(summary: dict, discrepancy: bool, error_above: float | None, distorti
     failed = []
     overall = evidence["error_above_noise"]
     above = _above_noise(overall)
+    if not overall.get("noise_known", True) and (discrepancy or error_above is not None or distortion_above is not None):
+        # a check against an unknown noise level cannot pass; a named cause is a discrepancy all the same
+        cause = summary["verdict"]["status"] in ("explained", "ambiguous", "unexplained")
+        failed.append("the noise level is unknown (no two periods per run): the error cannot be checked against it"
+                      + ("; the validation runs show a discrepancy" if cause else ""))
+        raise CheckFailed("--fail-if", "; ".join(failed))
     if discrepancy and overall["significant"]:
         size = (f"{above:+.1f} dB above the noise, p = {overall['p_value']:.2g}" if math.isfinite(above)
                 else "above a zero noise floor: noise-free data")

@@ -71,6 +71,10 @@ class Diagnosis:
                         "the noise floor is zero")
             return (f"No significant discrepancy: the simulation error is within the noise "
                     f"({ev.overall.above_noise_db:+.1f} dB, p = {ev.overall.p_value:.2g})")
+        if status == rules.UNDETERMINED:
+            return (f"Undetermined: the noise level is unknown ({NOISE_UNKNOWN}), so the simulation error "
+                    f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
+                    "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
             w = self.winner
             main = w.hypothesis.main
@@ -78,6 +82,8 @@ class Diagnosis:
                     f"the extended model's validation error is {gain_text(w.score)}, {versus_floor(w.score)}")
         if ev.noise_zero:
             seen = f"the simulation error is {ev.error_rms:.3g} rms against a zero noise floor: noise-free data"
+        elif not ev.overall.noise_known:
+            seen = f"the simulation error is {ev.error_rms:.3g} rms; the noise level is unknown ({NOISE_UNKNOWN})"
         else:
             seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
         if status == rules.AMBIGUOUS:
@@ -138,11 +144,16 @@ class Diagnosis:
         }
 
 
+NOISE_UNKNOWN = "the runs have no two periods to separate noise from the rest"
+
+
 def versus_floor(score: Score) -> str:
     """Where a model's validation error lies against the noise floor, in words ("0.3 dB above ...")."""
     if score.noise_zero:
         return "an exact match (the noise floor is zero)" if score.exact else "the noise floor is zero (noise-free data)"
     x = score.above_floor_db
+    if not math.isfinite(x):
+        return "the noise floor is unknown (judged on the validation runs alone)"
     return f"{abs(x):.1f} dB {'above' if x >= 0 else 'below'} the noise floor"
 
 
@@ -261,5 +272,6 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     candidates = [rules.Candidate(o.hypothesis.name, o.hypothesis.family, len(o.hypothesis.parameters),
                                   o.score.error_rms ** 2) for o in outcomes if o.score is not None]
     dof = verdict_dof(val)
-    verdict = rules.decide(evidence.overall.significant, original.error_rms ** 2, candidates, dof)
+    discrepancy = evidence.overall.significant if evidence.overall.noise_known else None
+    verdict = rules.decide(discrepancy, original.error_rms ** 2, candidates, dof)
     return Diagnosis(source, roles, evidence, original, outcomes, verdict)

@@ -135,10 +135,16 @@ class Test:
     def exact(self) -> bool:
         return self.noise_zero and self.residual_zero
 
+    @property
+    def noise_known(self) -> bool:
+        """False when no noise level could be estimated (P = 1, no periods): nothing can then be
+        "within the noise", and the test is undecided (NaN), not passed."""
+        return self.noise_zero or math.isfinite(self.p_value)
+
     def summary(self) -> dict:
         return {"above_noise_db": self.above_noise_db, "dof": self.dof, "noise_dof": self.noise_dof,
                 "p_value": self.p_value, "significant": self.significant, "noise_floor_zero": self.noise_zero,
-                "exact_match": self.exact}
+                "exact_match": self.exact, "noise_known": self.noise_known}
 
 
 def power_test(power: float, noise: np.ndarray, n_periods: int, reference: float = float("nan")) -> Test:
@@ -195,11 +201,24 @@ def verdict_dof(residuals: list[Residual]) -> float:
     """Degrees of freedom of the noise behind the verdict's F rule: the Satterthwaite value of
     :func:`error_test`; with a zero noise floor (no noise to count) its upper limit, 2 per AC line
     (equal variances on every line), so that an improvement must still exceed the spread a
-    residual of that many lines would show."""
+    residual of that many lines would show; with no noise level at all, that of the validation
+    error (:func:`residual_dof`)."""
     test = error_test(residuals)
     if test.noise_zero:
         return 2.0 * sum(ac_lines(res.period).size for res in residuals)
+    if not test.noise_known:
+        return residual_dof(residuals)
     return test.dof
+
+
+def residual_dof(residuals: list[Residual]) -> float:
+    """Degrees of freedom of the validation error itself when no noise level is known (P = 1):
+    the Satterthwaite value ``2 (sum P_k)^2 / sum P_k^2`` of its line powers P_k over the AC lines
+    of the validation runs. An error concentrated on a few lines (harmonics of friction) gets few
+    degrees of freedom, so the F rule between two models' errors stays conservative."""
+    powers = np.concatenate([np.abs(res.spectrum[ac_lines(res.period)]) ** 2 for res in residuals])
+    total = float(np.sum(powers))
+    return 2.0 * total ** 2 / float(np.sum(powers ** 2)) if total > 0 else float("nan")
 
 
 def line_tests(residuals: list[Residual]) -> dict[str, dict]:
@@ -343,6 +362,9 @@ class Evidence:
         elif self.noise_zero:
             out = [f"simulation error {self.error_rms:.3g} rms against a zero noise floor (noise-free data: every "
                    "residual above numerical precision is significant)"]
+        elif not self.overall.noise_known:
+            out = [f"simulation error {self.error_rms:.3g} rms against an output of {self.output_rms:.3g} rms; the "
+                   "noise level is unknown (no two periods per run): the error is judged on validation runs alone"]
         else:
             out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
                    f"({self.overall.above_noise_db:+.1f} dB, {_p_text(self.overall.p_value)})"]

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 ALPHA = 0.001
 
 NO_DISCREPANCY, EXPLAINED, AMBIGUOUS, UNEXPLAINED = "no_discrepancy", "explained", "ambiguous", "unexplained"
+UNDETERMINED = "undetermined"  # no noise level to judge the error by, and no hypothesis significantly better
 
 
 def ratio(a: float, b: float) -> float:
@@ -75,13 +76,21 @@ class Verdict:
                 "explaining": list(self.explaining), "f_threshold": self.threshold, "alpha": ALPHA}
 
 
-def decide(discrepancy: bool, original_power: float, candidates: list[Candidate], dof: float) -> Verdict:
-    """The verdict of the module docstring."""
+def decide(discrepancy: bool | None, original_power: float, candidates: list[Candidate], dof: float) -> Verdict:
+    """The verdict of the module docstring.
+
+    ``discrepancy`` is None when the noise level is unknown (one period per realization, or runs
+    without periods): whether the error is noise cannot be said, so only the validation data
+    decide. A hypothesis that lowers the validation error significantly (the same F test) is a
+    cause; without one the verdict is UNDETERMINED, never "no discrepancy".
+    """
     threshold = f_critical(dof)
     explaining = sorted((c for c in candidates if ratio(original_power, c.error_power) > threshold),
                         key=lambda c: c.error_power)
     names = tuple(c.name for c in explaining)
-    if not discrepancy:
+    if discrepancy is None and not explaining:
+        return Verdict(UNDETERMINED, None, (), names, threshold)
+    if discrepancy is False:
         return Verdict(NO_DISCREPANCY, None, (), names, threshold)
     if not explaining:
         return Verdict(UNEXPLAINED, None, (), names, threshold)
