@@ -114,3 +114,13 @@ def test_fit_reads_an_lpm_level_and_recovers_the_poles(run_cli, tmp_path):
     # q = 9: costs weighted by variances of 9 degrees of freedom, as for M = 10 realizations
     summary = result.json()
     assert summary["expected_cost"] == pytest.approx(9 / 8 * (summary["lines"] - 5 / 2))
+
+
+def test_report_renders_an_lpm_only_bla_file(run_cli, tmp_path):
+    rec = write(tmp_path / "rec.h5", open_loop_runs(np.random.default_rng(9), 0.02, count=2))
+    assert run_cli("-q", "bla", rec, "-o", tmp_path / "bla.h5").exit_code == 0
+    result = run_cli("report", tmp_path / "bla.h5", "-o", tmp_path / "page.html", "--json")
+    assert result.exit_code == 0, result.stderr
+    page = (tmp_path / "page.html").read_text()
+    assert "Local Polynomial Method" in page and "upper bound of the noise" in page
+    assert "within the noise" not in page

@@ -294,8 +294,10 @@ def render_bla(path: Path) -> Page:
     from nlsid.io.bla_file import read_bla
 
     data = read_bla(path)
-    if not data["levels"]:
+    if not data["levels"] and not data["lpm_levels"]:
         raise InputError(f"{path}:/levels", "holds no level")
+    if not data["levels"]:
+        return _lpm_page(path, data)
     levels = [_level(stored, f"{path}:/levels/{stored['name']}") for stored in data["levels"]]
     summaries = [stored["attrs"]["summary"] for stored in data["levels"]]
     across = data["attrs"]["across_levels"]
@@ -315,9 +317,61 @@ def render_bla(path: Path) -> Page:
                     f"variance {_variance_text(top['noise_var_db'], top)} relative to |G_BLA|² (band means)")
     warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)
                                                   for w in s["warnings"]]
+    lpm_figures, lpm_tables, lpm_warnings = _lpm_parts(data, probability)
     return Page(
         kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
-        headline=headline, findings=findings, figures=_figures(levels, summaries, probability),
-        tables=_tables(summaries, across, probability), warnings=warnings, provenance=data["attrs"]["provenance"],
+        headline=headline, findings=findings, figures=_figures(levels, summaries, probability) + lpm_figures,
+        tables=_tables(summaries, across, probability) + lpm_tables, warnings=warnings + lpm_warnings,
+        provenance=data["attrs"]["provenance"],
         numbers={"levels": summaries, "across_levels": across, "confidence": probability,
-                 "detected_threshold_db": DETECTED_DB})
+                 "detected_threshold_db": DETECTED_DB,
+                 "lpm_levels": [stored["attrs"]["summary"] for stored in data["lpm_levels"]]})
+
+
+def lpm_headline(summary: dict) -> str:
+    """The verdict of a level of arbitrary runs: what the LPM measured, with its floor as a bound."""
+    lo, hi = summary["band_hz"]
+    return (f"FRF of arbitrary excitation by the Local Polynomial Method over {lo:.3g} to {hi:.3g} Hz: "
+            f"|G|² {summary['bla_db']:.1f} dB on average; noise plus nonlinear distortion "
+            f"{summary['total_var_db']:.1f} dB relative to |G|² (an upper bound of the noise: the two "
+            "cannot be separated without periodic excitation)")
+
+
+def _lpm_parts(data: dict, probability: float) -> tuple[list[Figure], list[Table], list[str]]:
+    from nlsid.report.lpm_plots import lpm_figure
+
+    figures, rows, warnings = [], [], []
+    for index, stored in enumerate(data["lpm_levels"]):
+        summary = stored["attrs"]["summary"]
+        name = _name(summary, index)
+        figures.append(Figure(lpm_figure(stored, probability),
+                              f"FRF of the arbitrary runs at {name} by the Local Polynomial Method (Schoukens, "
+                              f"Pintelon and Rolain 2012, Section 3.7) with its {probability:.0%} confidence "
+                              "bounds, F(2, 2q) with q degrees of freedom. The red curve is the standard "
+                              "deviation of the estimate: noise and nonlinear distortion together.",
+                              f"lpm_level_{index:02d}"))
+        lo, hi = summary["band_hz"]
+        rows.append([name, number(summary["u_rms"]), str(summary["realizations"]), summary["method"],
+                     f"{lo:.4g} .. {hi:.4g}", str(summary["excited_lines"]), number(summary["bla_db"], ".1f"),
+                     number(summary["total_var_db"], ".1f"), str(summary["lpm"]["dof"])])
+        warnings += [f"arbitrary {name}: {w}" for w in summary["warnings"]]
+    tables = [Table("BLA of arbitrary runs per level (Local Polynomial Method)",
+                    ["level", "u rms", "records", "method", "band Hz", "lines", "|G|² dB",
+                     "noise+NL var dB (upper bound)", "dof q"], rows,
+                    note="noise+NL var: band mean of the variance of G relative to |G|²; it bounds the noise "
+                         "from above.")] if rows else []
+    return figures, tables, warnings
+
+
+def _lpm_page(path: Path, data: dict) -> Page:
+    """The page of a bla.h5 holding only levels of arbitrary runs."""
+    probability = float(data["attrs"]["confidence"])
+    summaries = [stored["attrs"]["summary"] for stored in data["lpm_levels"]]
+    figures, tables, warnings = _lpm_parts(data, probability)
+    top = summaries[-1]
+    findings = [f"{_name(s, i)}: {s['realizations']} records, q = {s['lpm']['dof']} degrees of freedom, window "
+                f"{s['lpm']['lines']} lines, degree {s['lpm']['degree']}" for i, s in enumerate(summaries)]
+    return Page(kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
+                headline=lpm_headline(top), findings=findings, figures=figures, tables=tables,
+                warnings=list(data["attrs"]["warnings"]) + warnings, provenance=data["attrs"]["provenance"],
+                numbers={"levels": [], "lpm_levels": summaries, "confidence": probability})
