@@ -15,7 +15,7 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @click.option("--y", "y", metavar="NAME", help="Measured output, named like --u. Default: y, if the file has it.")
 @click.option("--r", "r", metavar="NAME", help="Reference of a closed loop, named like --u. Default: r, if the file has it.")
 @click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5); fs is derived and checked uniform.")
-@click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors and MCAP log times).")
+@click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors, CSV sample-rate columns and MCAP log times).")
 @click.option("--period", type=click.IntRange(min=2), help="Samples per period (skips the period search; must fit the data).")
 @click.option("--transient-periods", type=click.IntRange(min=0), default=0, show_default=True,
               help="Further periods to discard at the start of each realization (the output settling).")

@@ -6,7 +6,8 @@ with scipy.io.savemat and h5py, configs as YAML text). Hypothesis corrupts its b
 bit flips, inserted, deleted and overwritten bytes) or, for YAML configs, the parsed document
 (a value replaced by a random scalar, list or mapping, a key deleted or added); the CLI runs
 in-process on the result. The outcome must be exit 0, or exit 2 with exactly one line
-``nlsid: error: ...`` on stderr; on exit 2 the output folder stays empty; the input is never
+``nlsid: error: ...`` on stderr; on exit 2 the output folder stays empty (a pipeline keeps the
+outputs of the steps before the failing one, complete, and no temporary file); the input is never
 changed. Settings are derandomized (the same examples on every run, as CI needs) and bounded
 (``max_examples`` per reader) so the whole module runs in well under a minute on 2 cores.
 Each test also asserts that its unmodified input succeeds and that some corruptions are refused,
@@ -28,7 +29,7 @@ import h5py
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 from mcap.writer import Writer
 from scipy.io import savemat
@@ -36,9 +37,11 @@ from scipy.io import savemat
 from nlsid.io.recording import write_recording
 from nlsid.io.run import make_run
 
-# Examples per reader; NLSID_FUZZ_EXAMPLES=500 explores further (other examples, still reproducible).
+# Examples per reader; NLSID_FUZZ_EXAMPLES=1000 explores further (still reproducible), and
+# NLSID_FUZZ_SEED=N draws other examples (seeded) instead of the derandomized ones CI runs.
 EXAMPLES = int(os.environ.get("NLSID_FUZZ_EXAMPLES", "60"))
-FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+SEED = os.environ.get("NLSID_FUZZ_SEED")
+FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize=SEED is None, database=None,
                 # run_cli is a stateless function-scoped fixture; each example uses its own folder
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
                                        HealthCheck.data_too_large])
@@ -170,7 +173,7 @@ def fuzz(run_cli, name: str, data: bytes, args, strategy=None, beside: dict[str,
     def run_examples(payload: bytes) -> None:
         counts[once(payload)] += 1
 
-    run_examples()
+    (seed(int(SEED))(run_examples) if SEED is not None else run_examples)()
     assert counts[2] > 0, "no corruption was refused: the fuzzer does not reach the reader"
     return counts
 

@@ -246,3 +246,30 @@ def test_mat_v4_header_with_sizes_beyond_the_file(run_cli, tmp_path):
     result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "old4.mat", "truncated or damaged MAT-file (v4): the variable at byte 0 "
                    "(1000000 x 1000) needs 8000000000 bytes of data, the file holds 80")
+
+
+def test_mat_array_of_a_class_matlab_does_not_have(run_cli, tmp_path):
+    source = tmp_path / "odd.mat"
+    savemat(source, {"u": np.sin(np.arange(400) / 7.0)})
+    data = bytearray(source.read_bytes())
+    # after the 128-byte header and the miMATRIX tag: the array flags element (miUINT32, 8 bytes),
+    # whose first byte is the class (6: double); MATLAB's classes end at 17
+    assert data[136:145] == (6).to_bytes(4, "little") + (8).to_bytes(4, "little") + bytes([6])
+    data[144] = 18
+    source.write_bytes(bytes(data))
+    result = run_cli("import", source, "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "odd.mat", "cannot read as a MATLAB file (an array of a class MATLAB does not have)")
+
+
+def test_mat_struct_with_field_names_of_length_zero(run_cli, tmp_path):
+    source = tmp_path / "zero.mat"
+    savemat(source, {"data": {"y": np.ones(10), "t": np.arange(10.0)}})
+    data = bytearray(source.read_bytes())
+    # header (128), miMATRIX tag (8), flags (16), dims (16), name 'data' (small element, 8), then the
+    # field name length as a small int32 element: type 5, 4 bytes, value 2 (one letter and its NUL)
+    assert data[168:184] == b"\x01\x00\x04\x00data" + b"\x05\x00\x04\x00\x02\x00\x00\x00"
+    data[180] = 0  # scipy divides the field names' bytes by this length
+    source.write_bytes(bytes(data))
+    result = run_cli("import", source, "--u", "data.y", "--fs", "10", "-o", tmp_path / "rec.h5")
+    assert_refused(result, tmp_path, source, "zero.mat", "cannot read as a MATLAB file (a damaged count or index: "
+                   "ZeroDivisionError: integer division or modulo by zero)")

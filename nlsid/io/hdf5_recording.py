@@ -33,6 +33,11 @@ FORMATS = ("recording", "excitation")
 H5PY_ERRORS = (OSError, KeyError, RuntimeError, ValueError)
 
 
+def link_name(name: str | bytes) -> str:
+    """A group member's name as text: h5py gives bytes for a name that is not UTF-8 (a damaged file)."""
+    return name.decode("utf-8", errors="backslashreplace") if isinstance(name, bytes) else name
+
+
 @contextlib.contextmanager
 def hdf5_damage(where: str) -> Iterator[None]:
     """Turn h5py's errors on a damaged file into one InputError naming ``where`` (file and object).
@@ -125,6 +130,9 @@ class HDF5Recording(RecordingReader):
             if not isinstance(runs, h5py.Group):
                 raise InputError(f"{self.path}:/runs", "missing group 'runs'")
             ids = [name for name, obj in runs.items() if isinstance(obj, h5py.Group)]
+        for name in ids:
+            if isinstance(name, bytes):
+                raise InputError(f"{self.path}:/runs", f"run name {link_name(name)!r} is not UTF-8 text (a damaged file?)")
         if not ids:
             raise InputError(f"{self.path}:/runs", "holds no runs")
         return sorted(ids)

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage
+from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
 from nlsid.io.importers.source import NotFound, Source, pick, source_from
 
 LISTED = 20
@@ -29,7 +29,7 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
 def datasets_in(handle: h5py.File) -> list[str]:
     """Paths of every dataset in the file."""
     found: list[str] = []
-    handle.visititems(lambda name, obj: found.append("/" + name) if isinstance(obj, h5py.Dataset) else None)
+    handle.visititems(lambda name, obj: found.append("/" + link_name(name)) if isinstance(obj, h5py.Dataset) else None)
     return found
 
 

@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage
+from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
 from nlsid.io.importers.source import NotFound, Source, pick, source_from
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
@@ -102,13 +102,19 @@ def _v4_problem(handle, size: int, order: str) -> str | None:
 
 def _library_errors() -> tuple[type[BaseException], ...]:
     """What scipy.io raises on damaged MAT-file content: its MatReadError, ValueError, TypeError and
-    OSError, zlib.error for a compressed variable that does not inflate (found by
-    tests/test_fuzz_inputs.py), and NotImplementedError for HDF5-based (v7.3) content it cannot read."""
+    OSError; zlib.error for a compressed variable that does not inflate; ArithmeticError for a count
+    read from the file that does not fit (a field name length of 0 divides by zero), and IndexError
+    and KeyError, the same fault in an index or a code; UnboundLocalError for an array of a class
+    code MATLAB does not have (scipy's reader falls through its class cases). zlib.error,
+    ZeroDivisionError and UnboundLocalError were found by tests/test_fuzz_inputs.py.
+    NotImplementedError: HDF5-based (v7.3) content scipy cannot read. Only the call of loadmat
+    is wrapped, so these never hide nlsid's own errors."""
     import zlib
 
     from scipy.io.matlab import MatReadError
 
-    return (MatReadError, ValueError, TypeError, OSError, zlib.error, NotImplementedError)
+    return (MatReadError, ValueError, TypeError, OSError, zlib.error, ArithmeticError, IndexError, KeyError,
+            UnboundLocalError, NotImplementedError)
 
 
 def _read_v5(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str, np.ndarray]:
@@ -128,6 +134,10 @@ def _loadmat(path: Path) -> dict:
         return loadmat(path, simplify_cells=True)
     except _library_errors() as exc:
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, UnboundLocalError):
+            reason = "an array of a class MATLAB does not have"
+        elif isinstance(exc, (ArithmeticError, IndexError, KeyError)):
+            reason = f"a damaged count or index: {type(exc).__name__}: {reason}"
         raise InputError(str(path), f"cannot read as a MATLAB file ({reason})") from None
     except MemoryError:  # a size field inside a compressed variable, which mat_file_problem cannot see
         raise InputError(str(path), "cannot read as a MATLAB file (it asks for more memory than there is: a "
@@ -227,7 +237,7 @@ def _v73_array(handle: h5py.File, name: str, where: str) -> np.ndarray:
         if part not in group or part.startswith("#"):
             inside = ".".join(parts[:depth])
             scope = f"fields of {inside}" if depth else "variables"
-            found = ", ".join(sorted(k for k in group if not k.startswith("#")))
+            found = ", ".join(sorted(k for k in map(link_name, group) if not k.startswith("#")))
             raise NotFound(where, f"no variable {name!r}; {scope}: {found or '(none)'}")
         obj = group[part]
         if isinstance(obj, h5py.Group):
@@ -241,4 +251,5 @@ def _v73_array(handle: h5py.File, name: str, where: str) -> np.ndarray:
             raise InputError(where, f"{name} is a MATLAB {cls}{' (complex)' if obj.dtype.names else ''} array; "
                                     "expected real numbers")
         return np.asarray(obj[()]).T
-    raise InputError(where, f"{name} is a struct with fields {', '.join(sorted(group))}; name one of them ({name}.FIELD)")
+    raise InputError(where, f"{name} is a struct with fields {', '.join(sorted(map(link_name, group)))}; "
+                            f"name one of them ({name}.FIELD)")
