@@ -271,3 +271,14 @@ def test_excited_bin_without_input_is_an_input_error():
         run.excited_bins = np.append(bins, 41)
     with pytest.raises(InputError, match="excited bin 41 carries no input"):
         analyse(runs)
+
+
+def test_frf_method_with_a_recorded_reference_warns():
+    """--method frf ignores r: the level says the noise variance is then under-estimated."""
+    rng = np.random.default_rng(3)
+    bins = odd_random_bins(1, 60, 3, rng)
+    runs = runs_of_level(3, 256, bins, 1.0, lambda u: 0.5 * u, 2, rng, noise_y=0.01, reference=True)
+    with_r = analyse(runs, "frf")[0]
+    assert any("--method frf while the runs carry the reference r" in w for w in with_r.warnings)
+    without = analyse(runs_of_level(3, 256, bins, 1.0, lambda u: 0.5 * u, 2, rng, noise_y=0.01), "frf")[0]
+    assert not any("reference r" in w for w in without.warnings)

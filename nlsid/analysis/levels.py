@@ -111,6 +111,7 @@ class _LevelAccumulator:
         self.lines = classify_lines(run.period, run.fs, run.excited_bins)
         self.n_periods = run.n_periods
         self.use_reference = shape.use_reference
+        self.ignores_reference = method == "frf" and run.r is not None
         robust_method = "reference" if self.use_reference else ("frf" if method == "frf" else "io")
         self.probability = probability
         self.run_ids: list[str] = []
@@ -134,6 +135,9 @@ class _LevelAccumulator:
         robust = self.robust.result(self.probability)
         fast = self.fast.result(self.probability) if self.fast.n else None
         warnings = list(robust.warnings)
+        if self.ignores_reference:
+            warnings.append("--method frf while the runs carry the reference r: the noise variance is under-estimated "
+                            "(in closed loop the noise is fed back into u, up to 100x); use --method reference")
         if fast is None:
             warnings.append("no in-band detection lines: the fast method and the odd/even classification need a "
                             "random-grid multisine (book Section 6.1.2)")
