@@ -29,6 +29,12 @@ class CliResult:
             assert fragment in lines[0], lines[0]
 
 
+def pytest_collection_modifyitems(config, items):
+    """Slow tests first: the parallel workers then finish together instead of waiting on the
+    longest test picked up last."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture
 def run_cli():
     """Invoke ``nlsid ARGS`` in-process; returns exit code, stdout and stderr separately."""
