@@ -1,9 +1,10 @@
 """Speed of ``nlsid batch`` on the local process pool; prints JSON.
 
 * ``speedup``: 8 recordings of a stage (mass-spring-damper with Coulomb friction, fc 0.50 ... 0.57 N,
-  8 realizations x (1 transient + 10) periods x 4096 samples at 2048 Hz, each with its own noise),
-  pipeline: ``bla``, ``fit --model`` of fc, ``fit --model`` of fc, damping and stiffness (the fits
-  with ``--workers 1``: one thread per task, so the worker processes are the only parallelism).
+  6 realizations x (1 transient + 4) periods x 4096 samples at 2048 Hz, each with its own noise),
+  pipeline: ``bla``, ``fit --model`` of fc, of fc, damping and stiffness, and of these and the mass
+  from a start further away (the fits with ``--workers 1``: one thread per task, so the worker
+  processes are the only parallelism).
   Wall time of ``nlsid batch ... --workers 1`` and ``--workers 2``, each into a fresh folder, as
   processes (start-up, the pipeline check, spawning and warming the workers, the results and the
   page all included), each timed twice, interleaved, the faster kept (other jobs on the machine
@@ -24,7 +25,12 @@
   overhead inside the worker).
 
 ``load_average`` (1, 5, 15 min) at start and end: the machine is shared with other jobs, which
-take cores from the 2-worker run first.
+take cores from the 2-worker run first. ``machine_parallelism_before_after``: how many cores two
+processes got just before and just after the speed-up runs (a pure-Python loop alone, then two at
+once: 2 x alone / together; 2.0 on an idle 2-core machine). ``steps_slowdown_when_2_run_at_once``
+(the steps' time in the 2-worker run over the 1-worker run, both as measured inside the workers)
+tells how much of the second core the 2-worker run got: 1.0 on an idle machine, 2.0 when the two
+workers shared one core.
 """
 
 from __future__ import annotations
@@ -46,7 +52,7 @@ NLSID = (sys.executable, "-c", "from nlsid.cli.entry import main; main()")
 PLANT = {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0, "gain": 1.0,
          "output": "position"}
 STAGE = {"fs": 2048.0, "seed": 3, "unit": "N",
-         "multisine": {"period": 4096, "band": [1.0, 80.0], "lines": "random-odd", "realizations": 8, "periods": 10,
+         "multisine": {"period": 4096, "band": [1.0, 80.0], "lines": "random-odd", "realizations": 6, "periods": 4,
                        "transient_periods": 1, "rms_levels": [1.0]}}
 SMALL = {"fs": 256.0, "seed": 3, "unit": "N",
          "multisine": {"period": 256, "band": [1.0, 40.0], "lines": "random-odd", "realizations": 2, "periods": 2,
@@ -57,9 +63,13 @@ FIT_THREE = {"model": {**PLANT, "damping": 15.0, "stiffness": 1900.0, "nonlinear
              "simulation": {"substeps": 2},
              "free": {"model.nonlinearities[0].fc": {"lower": 1.0e-6, "upper": 5.0}, "model.damping": {"lower": 0.0},
                       "model.stiffness": {"lower": 1.0}}}
+FIT_FOUR = {"model": {**FIT_THREE["model"], "mass": 3.0, "damping": 10.0, "stiffness": 1500.0}, "simulation": {"substeps": 2},
+            "free": {**FIT_THREE["free"], "model.mass": {"lower": 0.1}}}
 STEPS = ["bla {recording} -o {out}/bla.h5",
          "fit --model fit_fc.yaml --data {recording} -o {out}/fc.yaml --workers 1",
-         "fit --model fit_three.yaml --data {recording} -o {out}/three.yaml --workers 1"]
+         "fit --model fit_three.yaml --data {recording} -o {out}/three.yaml --workers 1",
+         "fit --model fit_four.yaml --data {recording} -o {out}/four.yaml --workers 1"]
+BUSY = "import time\nt = time.perf_counter()\nx = 0\nfor i in range(4_000_000):\n    x += i\nprint(time.perf_counter() - t)"
 CHEAP = ["bla {recording} -o {out}/bla.h5"]
 
 
@@ -133,8 +143,19 @@ def step_seconds(fleet: Path) -> list[float]:
     return [sum(step["seconds"] for step in row["steps"]) for row in rows]
 
 
+def machine_parallelism() -> float:
+    """How many cores the machine gives two processes now: a pure-Python loop alone, then two of
+    them at once; 2 * alone / together (2.0 on an idle 2-core machine, 1.0 when other jobs leave
+    one core)."""
+    alone = float(subprocess.run([sys.executable, "-c", BUSY], capture_output=True, text=True).stdout)
+    both = [subprocess.Popen([sys.executable, "-c", BUSY], stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    together = max(float(p.communicate()[0]) for p in both)
+    return 2 * alone / together
+
+
 def main() -> None:
     load_start = os.getloadavg()
+    parallelism = [machine_parallelism()]
     with tempfile.TemporaryDirectory(prefix="nlsid_batch_bench_") as tmp:
         root = Path(tmp)
         stage = root / "stage"
@@ -142,17 +163,19 @@ def main() -> None:
         recordings = make_recordings(stage, STAGE, 8)
         (stage / "fit_fc.yaml").write_text(yaml.safe_dump(FIT_FC))
         (stage / "fit_three.yaml").write_text(yaml.safe_dump(FIT_THREE))
+        (stage / "fit_four.yaml").write_text(yaml.safe_dump(FIT_FOUR))
         (stage / "pipeline.yaml").write_text(yaml.safe_dump({"steps": STEPS}))
         # warm numba's on-disk cache for these model shapes, so that no run below compiles
         timed_batch(stage / "pipeline.yaml", recordings[:1], root / "warm", 1)
 
         ones, twos = [], []
         for _ in range(2):
-            ones.append(timed_batch(stage / "pipeline.yaml", recordings, root / "fleet1", 1))
-            twos.append(timed_batch(stage / "pipeline.yaml", recordings, root / "fleet2", 2))
-        one, summary_one = min(ones, key=lambda item: item[0])
-        two, summary_two = min(twos, key=lambda item: item[0])
-        steps_one = step_seconds(root / "fleet1")
+            for runs, workers in ((ones, 1), (twos, 2)):
+                seconds, summary = timed_batch(stage / "pipeline.yaml", recordings, root / f"fleet{workers}", workers)
+                runs.append((seconds, summary, sum(step_seconds(root / f"fleet{workers}"))))
+        parallelism.append(machine_parallelism())
+        one, summary_one, steps_one = min(ones, key=lambda item: item[0])
+        two, summary_two, steps_two = min(twos, key=lambda item: item[0])
 
         loop_started = time.perf_counter()
         for i, recording in enumerate(recordings):
@@ -180,9 +203,12 @@ def main() -> None:
         "speedup": {
             "recordings": len(recordings), "pipeline": STEPS,
             "seconds_1_worker": round(one, 2), "seconds_2_workers": round(two, 2),
-            "seconds_runs": [[round(t, 2) for t, _ in ones], [round(t, 2) for t, _ in twos]],
+            "seconds_runs": [[round(t, 2) for t, _, _ in ones], [round(t, 2) for t, _, _ in twos]],
             "speedup_2_workers": round(one / two, 3), "target_speedup": 1.7,
-            "seconds_steps_in_workers_1_worker": round(sum(steps_one), 2),
+            "machine_parallelism_before_after": [round(p, 2) for p in parallelism],
+            "seconds_steps_in_workers_1_worker": round(steps_one, 2),
+            "seconds_steps_in_workers_2_workers": round(steps_two, 2),
+            "steps_slowdown_when_2_run_at_once": round(steps_two / steps_one, 3),
             "seconds_shell_loop_nlsid_run": round(loop, 2), "speedup_vs_shell_loop": round(loop / two, 3),
             "batch_seconds_reported": [summary_one["seconds"], summary_two["seconds"]],
         },

@@ -77,13 +77,9 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
     batch_pipeline = BatchPipeline(pipeline)
     recordings = find_recordings(patterns, lists)
     fleet = _check_fleet_folder(output, [r.path for r in recordings] + [batch_pipeline.path])
-    first = recordings[0]
-    check_first(batch_pipeline, first.path, fleet / first.name, first.name)
-    fleet.mkdir(exist_ok=True)
 
-    lock = _lock(fleet)
-    try:
-        removed = _remove_work_folders(fleet)
+    def split() -> tuple[dict, list]:
+        """The stored records of the up-to-date recordings, and the tasks of the others."""
         argv = (Path(sys.argv[0]).name, *sys.argv[1:])
         stored, todo = {}, []
         for rec in recordings:
@@ -93,6 +89,20 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
             else:
                 todo.append(TaskSpec(pipeline=str(batch_pipeline.path), recording=str(rec.path), name=rec.name,
                                      fleet=str(fleet), argv=argv, version=__version__))
+        return stored, todo
+
+    if scheduler is None and split()[1]:
+        from nlsid.batch.pool import LocalPool  # work ahead: the fork server imports while the pipeline is checked
+
+        LocalPool.start_server(batch_pipeline.stages, _local_workers(workers, len(recordings)))
+    first = recordings[0]
+    check_first(batch_pipeline, first.path, fleet / first.name, first.name)
+    fleet.mkdir(exist_ok=True)
+
+    lock = _lock(fleet)
+    try:
+        removed = _remove_work_folders(fleet)
+        stored, todo = split()  # again, under the lock
         executor, notes = _executor(todo, workers, scheduler, source, fleet, __version__, batch_pipeline.stages)
         try:
             records = _run(executor, todo, len(recordings), len(stored))
@@ -103,10 +113,10 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
                 _remove_work_folders(fleet)
             raise
         removed += _remove_work_folders(fleet)
+        summary = _finish(batch_pipeline, recordings, fleet, stored, records, executor, notes, removed, parameter,
+                          fail_if_drift, time.perf_counter() - started, __version__)
     finally:
         lock.close()
-    summary = _finish(batch_pipeline, recordings, fleet, stored, records, executor, notes, removed, parameter,
-                      fail_if_drift, time.perf_counter() - started, __version__)
     if as_json:
         emit_json(summary)
     else:
@@ -182,7 +192,11 @@ def _executor(todo: list, workers: int | None, scheduler: str | None, source: st
         return cluster, cluster.notes
     from nlsid.batch.pool import LocalPool
 
-    return LocalPool(min(workers or os.cpu_count() or 1, len(todo)), stages), []
+    return LocalPool(_local_workers(workers, len(todo)), stages), []
+
+
+def _local_workers(workers: int | None, tasks: int) -> int:
+    return min(workers or os.cpu_count() or 1, tasks)
 
 
 def _run(executor, todo: list, total: int, skipped: int) -> dict[str, dict]:

@@ -54,6 +54,7 @@ def test_a_fleet_with_a_corrupt_recording_and_a_drifting_machine(run_cli, projec
     assert result.exit_code == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert lines[-1].startswith(f"nlsid: error: {fleet}: 2 of 8 recordings failed") and "Traceback" not in result.stderr
+    assert "ETA" not in result.stderr and "\r" not in result.stderr  # not a terminal: no progress bar
     summary = result.json()
     assert (summary["recordings"], summary["ran"], summary["up_to_date"]) == (8, 8, 0)
     assert (summary["ok"], summary["bad_input"], summary["check_failed"], summary["errors"]) == (6, 2, 0, 0)
@@ -110,6 +111,9 @@ def test_a_rerun_skips_everything_then_only_what_changed(run_cli, project):
     assert first.json()["ran"] == 7
     stamps = {p: p.stat().st_mtime_ns for p in fleet.rglob("*") if p.is_file() and p.parent != fleet}
 
+    quiet = run_cli("-q", *args)
+    assert quiet.stderr.strip().splitlines() == [f"nlsid: error: {fleet}: 1 of 7 recordings failed (bad input or error); "
+                                                  "their one-line errors are in results.csv"]
     again = run_cli(*args)
     summary = again.json()
     assert (summary["ran"], summary["up_to_date"]) == (0, 7)
@@ -209,6 +213,8 @@ def test_a_diagnosis_whose_check_fails_still_gets_its_report(run_cli, project):
     (["bla rec/A/night0.h5 -o {out}/bla.h5"], "no step reads {recording}"),
     (["bla {recording} -o bla.h5"], "-o bla.h5: a batch step writes inside the recording's folder"),
     (["bla {recording} -o {out}/{stem}.h5"], "unknown placeholder {stem}"),
+    (["bla {recording} -o {out}/bla.h5 --plots figures"], "figures figures: a batch step writes inside"),
+    (["bla {recording} -o {out}/../bla.h5"], "-o {out}/../bla.h5: a batch step writes inside"),
     (["batch x.yaml -o {out}/f"], "a batch step is one stage, not 'batch'"),
     (["bla {recording} --no-such-option -o {out}/bla.h5"], "steps[0] 'bla"),
     (["diagnose --model missing.yaml --data {recording} -o {out}/d"], "input missing.yaml does not exist"),
@@ -302,3 +308,71 @@ def test_ctrl_c_ends_the_workers_and_leaves_no_work_folder(project):
             os.kill(pid, 0)
     finished = [p.parent for p in fleet.rglob("task.json")]
     assert all((folder / "fitted.fit.json").is_file() for folder in finished)  # what finished is complete
+
+
+def test_the_fork_server_preloads_modules_that_exist_for_every_stage():
+    """multiprocessing skips a preload module that fails to import: each must import (else the
+    workers would silently pay the import in their first task again)."""
+    import importlib
+
+    from nlsid.batch.pool import PRELOAD, STAGE_PRELOAD, preload_modules
+    from nlsid.cli.main import cli
+
+    assert set(STAGE_PRELOAD) == set(cli.commands) - {"run", "batch", "info"}
+    for name in {*PRELOAD, *(m for modules in STAGE_PRELOAD.values() for m in modules)}:
+        importlib.import_module(name)
+    assert preload_modules(["bla", "fit", "fit"]) == [*PRELOAD, "nlsid.analysis.bla", "nlsid.fit.extension",
+                                                      "nlsid.fit.tf_fit", "nlsid.simulate.engine"]
+
+
+def test_a_progress_bar_with_eta_on_a_terminal(project):
+    """On a terminal (rich is told so by TTY_COMPATIBLE) the bar shows the count, the elapsed time
+    and the ETA; the other tests run without a terminal, where no bar is drawn (asserted there)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("TTY_INTERACTIVE", "CI")}
+    env["TTY_COMPATIBLE"] = "1"
+    done = subprocess.run([*NLSID, "batch", str(project / "pipeline.yaml"), "--inputs", str(project / "rec" / "A"),
+                           "-o", str(project / "fleet"), "--workers", "1"], capture_output=True, env=env)
+    stderr = done.stderr.decode()
+    assert done.returncode == 0, stderr
+    assert "ETA" in stderr and "3/3" in stderr and "elapsed" in stderr and "\r" in stderr  # redrawn in place
+
+
+def test_the_example_batch_pipeline_checks_on_the_sample_recording(tmp_path):
+    """configs/batch_stage.yaml (docs/configs.md) passes every check `nlsid batch` makes before work."""
+    from nlsid.batch.pipeline import BatchPipeline, check_first
+
+    root = Path(__file__).parents[1]
+    pipeline = BatchPipeline(str(root / "configs" / "batch_stage.yaml"))
+    assert pipeline.stages == ["bla", "fit", "diagnose", "report"]
+    check_first(pipeline, root / "sample_data" / "stage.h5", tmp_path / "fleet" / "stage", "stage")
+
+
+def test_an_unexpected_exception_in_a_step_is_the_recordings_error_and_runs_again(project, monkeypatch):
+    """A defect (not bad input) in a step: status `error`, the step named, its traceback in the
+    log, the folder published all the same; such a record is never up to date."""
+    import nlsid.cli.run
+    from nlsid import __version__
+    from nlsid.batch.pipeline import BatchPipeline, is_up_to_date
+    from nlsid.batch.task import TaskSpec, run_task
+
+    def broken(cli, root, step):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(nlsid.cli.run, "_invoke", broken)
+    fleet = project / "fleet"
+    fleet.mkdir()
+    recording = project / "rec" / "A" / "night0.h5"
+    spec = TaskSpec(pipeline=str(project / "pipeline.yaml"), recording=str(recording), name="A/night0",
+                    fleet=str(fleet), argv=("nlsid", "batch"), version=__version__)
+    cwd, stderr, argv = os.getcwd(), sys.stderr, list(sys.argv)
+    record = run_task(spec)
+    assert (os.getcwd(), sys.stderr, sys.argv) == (cwd, stderr, argv)  # the task put back what it changed
+    assert record["status"] == "error"
+    assert record["error"] == f"step 'bla {recording} -o {fleet / 'A' / 'night0'}/bla.h5': RuntimeError: boom"
+    assert record["steps"] == [{"step": f"bla {recording} -o {fleet / 'A' / 'night0'}/bla.h5", "status": "crashed",
+                                "seconds": record["steps"][0]["seconds"]}]
+    folder = fleet / "A" / "night0"
+    assert json.loads((folder / "task.json").read_text()) == record
+    assert "Traceback" in (folder / "log.txt").read_text() and "RuntimeError: boom" in (folder / "log.txt").read_text()
+    assert is_up_to_date(BatchPipeline(str(project / "pipeline.yaml")), recording, folder, "A/night0") is None
+    assert work_folders(fleet) == []

@@ -46,6 +46,10 @@ class DaskCluster:
             logging.getLogger("distributed").setLevel(logging.ERROR)
         self._distributed = distributed
         try:
+            distributed.comm.get_address_host_port(distributed.comm.normalize_address(address))
+        except ValueError as exc:
+            raise InputError(self.where, f"not a scheduler address ({exc}); expected e.g. tcp://10.0.0.1:8786") from None
+        try:
             self.client = distributed.Client(address, timeout=f"{CONNECT_TIMEOUT_S}s", set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(self.where, f"cannot connect to the Dask scheduler within {CONNECT_TIMEOUT_S} s: {_short(exc)}") from None

@@ -40,6 +40,7 @@ class BatchPipeline:
     """A checked batch pipeline: the file, its root folder and the step lines with placeholders."""
 
     def __init__(self, path: str):
+        from nlsid.cli.run import _figures
         from nlsid.io.config import config_error, load_yaml, validate
         from nlsid.io.pipeline_config import PipelineConfig
 
@@ -59,9 +60,14 @@ class BatchPipeline:
                                        f"unknown placeholder {found}; expected {', '.join(PLACEHOLDERS)}")
             flag = next(j for j, a in enumerate(args) if a in OUTPUT_FLAGS)
             output = args[flag + 1]
-            if not (output == "{out}" or output.startswith("{out}/")):
+            if not _inside_out(output):
                 raise config_error(path, lines, ("steps", i),
                                    f"-o {output}: a batch step writes inside the recording's folder: -o {{out}}/NAME")
+            for figures in _figures(args).values():
+                if not _inside_out(figures):
+                    raise config_error(path, lines, ("steps", i),
+                                       f"figures {figures}: a batch step writes inside the recording's folder: "
+                                       "--plots {out}/NAME")
             reads_recording = reads_recording or "{recording}" in line
         if not reads_recording:
             raise config_error(path, lines, ("steps",),
@@ -83,6 +89,11 @@ class BatchPipeline:
 
         config = SimpleNamespace(root=str(self.root), steps=self.substituted(recording, out, name))
         return plan(config, self.path)[1]
+
+
+def _inside_out(value: str) -> bool:
+    """``{out}`` or a path below it (no ``..`` leading out again)."""
+    return (value == "{out}" or value.startswith("{out}/")) and ".." not in value.split("/")
 
 
 def external_inputs(steps, out: Path) -> list[Path]:

@@ -156,13 +156,18 @@ class LocalPool:
             worker.kill()
 
     def _context(self):
-        """The fork server context, the server started (if it is not running yet: it stays for the
-        life of this process) with the preloaded modules and the thread variables."""
+        return self.start_server(self.stages, self.workers)
+
+    @staticmethod
+    def start_server(stages, workers: int):
+        """The fork server context, the server started if it is not running yet (it stays for the
+        life of this process, importing the preloaded modules in the background while the caller
+        goes on), with the thread variables for ``workers`` workers."""
         from multiprocessing import forkserver
 
         context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(preload_modules(self.stages))
-        threads = str(max(1, (os.cpu_count() or 1) // self.workers))
+        context.set_forkserver_preload(preload_modules(stages))
+        threads = str(max(1, (os.cpu_count() or 1) // workers))
         saved = {name: os.environ.get(name) for name in _THREAD_VARIABLES}
         try:
             for name in _THREAD_VARIABLES:

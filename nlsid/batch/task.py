@@ -169,7 +169,7 @@ def _steps(spec: TaskSpec, work: Path, record: dict, capture: _Capture) -> None:
     settings = Settings()
     configure_logging(settings)
     recording = Path(spec.recording)
-    facts = None
+    facts, current = None, None
     try:
         pipeline = BatchPipeline(spec.pipeline)
         record["pipeline_steps"] = pipeline.steps
@@ -180,8 +180,9 @@ def _steps(spec: TaskSpec, work: Path, record: dict, capture: _Capture) -> None:
             for step in steps:
                 step.output.parent.mkdir(parents=True, exist_ok=True)
                 errors_before = len(capture.error_lines)
-                began = time.perf_counter()
+                began, current = time.perf_counter(), step
                 code, headline = _invoke(cli, pipeline.root, step)
+                current = None
                 status = "ran" if code == EXIT_OK else f"failed ({code})"
                 done.append({"step": step, "status": status, "seconds": round(time.perf_counter() - began, 3),
                              "headline": headline, "code": code})
@@ -201,9 +202,12 @@ def _steps(spec: TaskSpec, work: Path, record: dict, capture: _Capture) -> None:
         record.update(status="bad input", error=str(exc), row=row_of(done, facts, recording))
     except Exception as exc:  # noqa: BLE001 - a defect, not the recording's fault: recorded, with its traceback in the log
         traceback.print_exc()
-        where = f"step '{done[-1]['step'].text}' " if done else ""
+        where = f"step '{current.text}': " if current is not None else ""
+        if current is not None:
+            done.append({"step": current, "status": "crashed", "seconds": round(time.perf_counter() - began, 3),
+                         "headline": None, "code": None})
         record.update(status="error", error=one_line(f"{where}{type(exc).__name__}: {exc}"),
-                      row=row_of([d for d in done if d["code"] == 0], facts, recording))
+                      row=row_of(done, facts, recording))
     finally:
         sys.argv = argv
     record["steps"] = [{"step": d["step"].text, "status": d["status"], "seconds": d["seconds"]} for d in done]
