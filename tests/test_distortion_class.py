@@ -28,17 +28,19 @@ def random_odd_bins(rng, top: int = 101) -> np.ndarray:
     return odd[keep]
 
 
+def realization(rng, bins, nonlinearity, noise: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two periods (a transient one, then the one kept) of u and of y for one random-phase realization."""
+    spectrum = np.zeros(N // 2 + 1, complex)
+    spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
+    u = np.fft.irfft(spectrum, n=N)
+    u = np.tile(0.5 * u / u.std(), 2)
+    x = signal.lfilter(B, A, u)
+    return u, nonlinearity(x) + noise * rng.standard_normal(2 * N) + 0.3   # DC offset of the converter
+
+
 def one_period_outputs(rng, nonlinearity, noise: float) -> tuple[np.ndarray, np.ndarray]:
     bins = random_odd_bins(rng)
-    powers = []
-    for _ in range(M):
-        spectrum = np.zeros(N // 2 + 1, complex)
-        spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
-        u = np.fft.irfft(spectrum, n=N)
-        u *= 0.5 / u.std()
-        x = signal.lfilter(B, A, np.tile(u, 2))[N:]          # one transient period dropped
-        y = nonlinearity(x) + noise * rng.standard_normal(N) + 0.3   # DC offset of the converter
-        powers.append(np.abs(np.fft.rfft(y) / N) ** 2)
+    powers = [np.abs(np.fft.rfft(realization(rng, bins, nonlinearity, noise)[1][N:]) / N) ** 2 for _ in range(M)]
     return bins, np.mean(powers, axis=0)
 
 
@@ -82,12 +84,7 @@ def test_bla_of_p1_multisines_states_the_class_and_no_noise_level(run_cli, tmp_p
     bins = random_odd_bins(rng)
     runs = []
     for m in range(M):
-        spectrum = np.zeros(N // 2 + 1, complex)
-        spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
-        u = np.fft.irfft(spectrum, n=N)
-        u = np.tile(0.5 * u / u.std(), 2)
-        x = signal.lfilter(B, A, u)
-        y = x + 0.3 * x ** 3 + 1e-4 * rng.standard_normal(2 * N)
+        u, y = realization(rng, bins, lambda x: x + 0.3 * x ** 3, noise=1e-4)
         runs.append(Run(run_id=f"ms_{m}", fs=FS, kind="multisine", u=u, y=y, period=N, transient_periods=1,
                         realization=m, excited_bins=bins))
     write_recording(tmp_path / "p1.h5", runs, provenance={})
