@@ -95,3 +95,13 @@ def test_bla_of_p1_multisines_states_the_class_and_no_noise_level(run_cli, tmp_p
     assert level["total_var_db"] is not None
     assert level["distortion_class"]["verdict"].startswith("odd nonlinear distortion dominant")
     assert level["distortion_class"]["noise_upper_bound_db"] is not None
+
+
+def test_the_p_value_is_the_f_survival_function():
+    from scipy.stats import f
+
+    from nlsid.analysis.distortion_class import LineClass, above
+
+    for n_a, n_b, m, x in [(10, 12, 3, 2.0), (4, 40, 10, 0.8), (25, 25, 1, 1.3)]:
+        got = above(LineClass("a", n_a, x), LineClass("b", n_b, 1.0), m)
+        assert got == pytest.approx(f.sf(x, 2 * n_a * m, 2 * n_b * m), rel=1e-10)

@@ -70,12 +70,16 @@ def line_classes(lines: Lines, y_power: np.ndarray) -> list[LineClass]:
 
 
 def above(a: LineClass, b: LineClass, realizations: int) -> float:
-    """One-sided p-value of ``P_a > P_b`` under equal levels: F(2 n_a M, 2 n_b M) survival."""
-    from scipy.stats import f
+    """One-sided p-value of ``P_a > P_b`` under equal levels: the F(d1, d2) survival function at
+    x = P_a / P_b, d1 = 2 n_a M, d2 = 2 n_b M, as the regularised incomplete beta function
+    ``I_{d2 / (d2 + d1 x)}(d2 / 2, d1 / 2)`` (scipy.special: ``bla`` need not load scipy.stats)."""
+    from scipy.special import betainc
 
     if not (a.power > 0 and b.power > 0):
         return float("nan")
-    return float(f.sf(a.power / b.power, 2 * a.lines * realizations, 2 * b.lines * realizations))
+    d1, d2 = 2 * a.lines * realizations, 2 * b.lines * realizations
+    x = a.power / b.power
+    return float(betainc(d2 / 2, d1 / 2, d2 / (d2 + d1 * x)))
 
 
 def classify(lines: Lines, y_power: np.ndarray, realizations: int) -> DistortionClass:
