@@ -42,7 +42,8 @@ def _load(name):
 def _summary(odd_db, even_db, noise_db, odd_grid=True, nl=-30.0, noise=-50.0):
     spectrum = {"odd_above_noise_db": odd_db - noise_db, "even_above_noise_db": even_db - noise_db,
                 "odd_above_even_db": odd_db - even_db}
-    return {"spectrum": spectrum, "odd_grid": odd_grid, "nl_var_db": nl, "noise_var_db": noise}
+    return {"spectrum": spectrum, "odd_grid": odd_grid, "nl_var_db": nl, "noise_var_db": noise,
+            "periods": 2, "noise_floor": "estimated"}  # a measured noise level, as bla.h5 summaries state
 
 
 def test_distortion_verdict_rules():
