@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from nlsid.errors import InputError
@@ -76,8 +78,10 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     result = fit_bla(bla_file, order_pair, domain, delay_samples, max_order, level)
     fit_ = result.fit
     report = result.report()
-    header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function",
-              f"cost {fit_.cost:.6g}, expected {fit_.expected_cost:.6g} +- {fit_.cost_std:.3g} ({fit_.lines} lines)",
+    header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function, {report['stability']}"
+              + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
+              f"cost {fit_.cost:.6g}, {_cost_check(fit_)} ({fit_.lines} lines)",
+              f"order: {report['order_reason']}",
               f"report: {report_path(output).name}"]
     if plot:
         from nlsid.report.fit_plots import tf_fit_png
@@ -93,15 +97,24 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     if as_json:
         emit_json({"output": output, "report": str(report_path(output)), "plot": plot,
                    **{k: report[k] for k in ("domain", "order", "delay_samples", "num", "den", "parameters", "cost",
-                                             "expected_cost", "cost_std", "lines", "stable", "order_reason", "order_scan",
+                                             "expected_cost", "cost_std", "cost_bound", "lines", "stable", "stability",
+                                             "integrators", "fit", "fit_note", "order_reason", "order_scan",
                                              "warnings")}})
         return
     console = settings().console
-    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, expected "
-                  f"{fit_.expected_cost:.5g} +- {fit_.cost_std:.3g} over {fit_.lines} lines")
+    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, {_cost_check(fit_)} over "
+                  f"{fit_.lines} lines")
     console.print(f"order: {report['order_reason']}")
     for name, value, std in zip(fit_.names, fit_.values, fit_.std):
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")
+
+
+def _cost_check(fit_) -> str:
+    """The cost's expected value, spread and bound in words; what has no finite value is said."""
+    if not math.isfinite(fit_.expected_cost):
+        return "no expected value and no cost check (M = 2 realizations)"
+    spread = f"+- {fit_.cost_std:.3g}" if math.isfinite(fit_.cost_std) else "(spread unbounded for M = 3)"
+    return f"expected {fit_.expected_cost:.6g} {spread}, bound {fit_.cost_bound:.6g}"
 
 
 def _fit_extension(model_config, data, validation, start_estimate, workers, mapping, output, force, as_json) -> None:

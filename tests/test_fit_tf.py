@@ -19,7 +19,7 @@ from scipy import signal, stats
 
 from nlsid.analysis.levels import analyse_runs
 from nlsid.fit.order import select_order
-from nlsid.fit.tf_fit import FRFData, TransferFunction, expected_cost, fit_order, fit_transfer_function
+from nlsid.fit.tf_fit import FRFData, TransferFunction, cost_bound, expected_cost, fit_order, fit_transfer_function
 from nlsid.io.run import Run
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -102,8 +102,30 @@ def test_cost_matches_its_expectation_for_the_true_order_and_not_for_a_too_low_o
 
 def test_expected_cost_with_sample_variances():
     # E{1/sigma_hat^2} = (M-1)/(M-2) / sigma^2 for a complex variance from M samples (digest 3.4).
-    assert expected_cost(100, 6, 7) == pytest.approx((6 / 5 * 97, 6 / 5 * np.sqrt(97)))
+    # Each term |e|^2 / sigma_hat^2 is the ratio of a chi^2_2/2 to an independent chi^2_{2M-2}/(2M-2):
+    # F(2, 2M-2), whose mean and variance scipy gives; over the F - n_theta/2 = 97 degrees of freedom
+    # the mean and the variance add up.
+    term = stats.f(2, 12)
+    assert expected_cost(100, 6, 7) == pytest.approx((97 * term.mean(), np.sqrt(97 * term.var())))
+    assert expected_cost(100, 6, 7)[0] == pytest.approx(6 / 5 * 97)
     assert expected_cost(100, 6, None) == pytest.approx((97, np.sqrt(97)))
+    # F(2, 4) (M = 3) has no variance, F(2, 2) (M = 2) no mean: no finite spread to check against
+    assert expected_cost(100, 6, 3)[1] == np.inf and expected_cost(100, 6, 2)[0] == np.inf
+
+
+def test_cost_bound_is_the_quantile_of_the_cost_distribution():
+    # Exact variances: V = (1/2) chi^2(2F - n_theta). Sample variances from M = 4 realizations:
+    # sums of 100 independent F(2, 6) terms drawn by scipy (independent of the code's numerical
+    # convolution), scaled to the 97 degrees of freedom; the 0.99865 quantile of 2e5 such sums has a
+    # Monte Carlo error of about 1 % (checked over seeds), so 3 % cannot fail by chance.
+    assert cost_bound(100, 6, None) == pytest.approx(stats.chi2.ppf(0.99865, 194) / 2)
+    sums = np.concatenate([stats.f(2, 6).rvs(size=(50000, 100), random_state=np.random.default_rng(k)).sum(axis=1)
+                           for k in range(4)])
+    empirical = np.quantile(sums, 0.99865) * 97 / 100
+    assert cost_bound(100, 6, 4) == pytest.approx(empirical, rel=0.03)
+    # the tail is heavier than a normal one: the bound lies beyond mean + 3 std
+    assert cost_bound(100, 6, 4) > expected_cost(100, 6, 4)[0] + 3 * expected_cost(100, 6, 4)[1]
+    assert np.isnan(cost_bound(100, 6, 2))  # M = 2: no expected value, no cost check
 
 
 def test_model_frequency_response_std_matches_monte_carlo():

@@ -12,8 +12,8 @@ continued inside the stable region from its reflected poles. Two checks per orde
   respectively of a sum of F(2, 2M - 2) terms; book 4.7 L and Chapter 7): a correct order stays
   below it with probability 0.99865 (3 std of a normal); a too-low order leaves model errors that
   make V clearly larger (book Ex 62, too-simple model);
-* validation on held-out lines: the model is fitted again (the same way) on every other excited
-  line and the mean weighted squared error (G_k - G(Omega_k))^2 / sigma_k^2 on the lines it did
+* validation on held-out lines: the model is fitted again on every other excited line (from the
+  parameters of the full fit, in the same model class) and the mean weighted squared error (G_k - G(Omega_k))^2 / sigma_k^2 on the lines it did
   not see is computed; about 1 (times (M-1)/(M-2)) for a model that predicts unseen
   frequencies, clearly more for an under- or a badly over-fitted one.
 
@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_stable, on_boundary
+from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_stable, on_boundary, refit
 
 
 @dataclass(frozen=True)
@@ -83,12 +83,12 @@ def candidate_orders(max_order: int) -> list[tuple[int, int]]:
     return sorted(orders, key=lambda o: (o[0] + o[1], o[1]))
 
 
-def holdout_error(data: FRFData, nb: int, na: int, domain: str, delay: int) -> float:
-    """Fit on even-indexed lines (as the order scan does: :func:`nlsid.fit.tf_fit.fit_stable`),
-    return the mean weighted squared error on the odd-indexed ones."""
+def holdout_error(data: FRFData, fit: TFFit) -> float:
+    """``fit``'s model class fitted again on the even-indexed lines (from ``fit``'s parameters:
+    :func:`nlsid.fit.tf_fit.refit`); the mean weighted squared error on the odd-indexed ones."""
     index = np.arange(data.bins.size)
     train, test = data.subset(index % 2 == 0), data.subset(index % 2 == 1)
-    fit = fit_stable(train, nb, na, domain, delay)
+    fit = refit(fit, train)
     error = test.G - fit.model.response(test.bins, test.period)
     return float(np.mean(np.abs(error) ** 2 / test.variance))
 
@@ -102,15 +102,18 @@ def _refusal(r: OrderResult) -> str:
 def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 0) -> OrderSelection:
     """Scan the candidate orders and choose one (module docstring); the reason is plain text."""
     scan, fits = [], {}
+    enough = None  # parameter count of the first stable order within its bound: larger ones cannot be chosen
     for nb, na in candidate_orders(max_order):
         if 2 * (data.bins.size // 2) <= na + nb + 1 or (domain == "s" and nb > na):
             continue
-        fit = fit_stable(data, nb, na, domain, delay)
+        fit = fit_stable(data, nb, na, domain, delay, thorough=enough is None or nb + na <= enough)
         fits[(nb, na)] = fit
         scan.append(OrderResult(nb, na, fit.cost, fit.expected_cost, fit.cost_std,
-                                holdout_error(data, nb, na, domain, delay), fit.accepted, fit.cost_bound,
+                                holdout_error(data, fit), fit.accepted, fit.cost_bound,
                                 fit.model.stability(), fit.how, fit.free_pole,
                                 fit.how == "stabilised" and on_boundary(fit)))
+        if enough is None and scan[-1].eligible and scan[-1].accepted:
+            enough = nb + na
     if not scan:
         raise InputError("--order auto", f"{data.bins.size} lines are too few for any model order")
     eligible = [r for r in scan if r.eligible]
@@ -121,12 +124,17 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         fewest = min(r.nb + r.na for r in passing)
         best = min((r for r in passing if r.nb + r.na == fewest), key=lambda r: r.holdout_error)
         lower = [r for r in eligible if r.nb + r.na < fewest and r.cost_bound > 0]
-        reason = (f"{best.nb}/{best.na} is the smallest stable model whose cost {best.cost:.4g} lies within its "
-                  f"statistical bound {best.cost_bound:.4g} (expected {best.expected_cost:.4g} +- {best.cost_std:.3g}); "
-                  f"held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
+        reason = (f"{best.nb}/{best.na} is the smallest model among the stable fits whose cost {best.cost:.4g} lies "
+                  f"within its statistical bound {best.cost_bound:.4g} (expected value {best.expected_cost:.4g} +- "
+                  f"{best.cost_std:.3g}); held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
         if lower:
             reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
                        "times its bound")
+    elif eligible and not any(math.isfinite(r.cost_bound) for r in eligible):
+        best = min(eligible, key=lambda r: r.holdout_error)
+        reason = (f"no cost check: with M = {data.realizations} realizations the cost has no finite expected value "
+                  f"(use M >= 3, the book advises M >= 7); {best.nb}/{best.na} predicts held-out lines best "
+                  f"({best.holdout_error:.3g} per line)")
     elif eligible:
         best = min(eligible, key=lambda r: r.holdout_error)
         reason = (f"no stable order up to {max_order} reaches its cost bound (the weights miss part of the error: "

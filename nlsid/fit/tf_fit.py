@@ -10,8 +10,10 @@ weighting"),
 
 Its expected value at the minimum of a correct model is F - n_theta/2 (book 4.7 L; Ex 76, 99, 100);
 with variances estimated from M realizations the weights are biased by E{1/sigma_hat^2} =
-(M-1)/(M-2) / sigma^2, so the expectation is (M-1)/(M-2) (F - n_theta/2). V is then
-(1/2) chi^2 with 2F - n_theta degrees of freedom: its standard deviation is sqrt(F - n_theta/2).
+(M-1)/(M-2) / sigma^2, so the expectation is (M-1)/(M-2) (F - n_theta/2). With exact variances V
+is (1/2) chi^2 with 2F - n_theta degrees of freedom (standard deviation sqrt(F - n_theta/2)); with
+variances from M realizations each term is F(2, 2M - 2) distributed (:func:`expected_cost`), and
+the acceptance bound of the cost is a quantile of that distribution (:func:`cost_bound`).
 
 Models (``domain``):
 
@@ -33,7 +35,11 @@ equation by |A_prev(Omega_k)|, so the linear cost approaches V); the candidate w
 starts a Levenberg-Marquardt minimisation of V itself (:func:`scipy.optimize.least_squares`,
 ``lm``, on the residuals stacked as real and imaginary parts). For ``s`` the linear start uses
 G_k e^{+j omega_k h / 2} (the hold's half-sample delay removed), the band-limited approximation of
-the ZOH response.
+the ZOH response. When the result is unstable or its cost lies above its bound, further starts
+follow and the lowest cost is kept: for ``s`` the z fit mapped to s (matched poles s = fs ln z),
+else, and for ``z``, poles spread over the band, each with its least-squares numerator
+(:func:`fit_order`). Integrators (poles fixed at z = 1 / s = 0) and fits kept inside the stable
+region serve the order selection (:func:`fit_stable`, :mod:`nlsid.fit.order`).
 
 Uncertainty: with the residuals r(theta) = [Re e_k, Im e_k], e_k = (G_k - G(Omega_k, theta))/sigma_k,
 each of variance 1/2, cov(theta) = (1/2) (J^T J)^{-1} at the optimum (Gauss-Newton form of the
@@ -328,18 +334,17 @@ def expected_cost(lines: int, n_theta: int, realizations: int | None) -> tuple[f
 
 
 ACCEPT_PROBABILITY = 0.99865  # one-sided, the probability of a normal variable below mean + 3 std
-_BOUND_SAMPLES = 20000
+_TAIL_MASS = 1e-5             # probability mass of the cost distribution allowed beyond the grid (wraps around)
 
 
 def cost_bound(lines: int, n_theta: int, realizations: int | None) -> float:
     """The cost a correct model stays below with probability ACCEPT_PROBABILITY (the cost check).
 
-    Exact variances: the chi^2(2F - n_theta) quantile over 2. Variances from M realizations: the
-    quantile of a sum of F - n_theta/2 independent F(2, 2M - 2) terms (the distribution of
-    :func:`expected_cost`), whose tail is heavy for small M (moments of order M - 1 and above are
-    infinite), so no normal approximation: the quantile of the sum of F terms is computed once by a
-    fixed-seed Monte Carlo integration (:data:`_BOUND_SAMPLES` sums, inverse-CDF draws
-    x = (d/2)(u^(-2/d) - 1), d = 2M - 2) and scaled to the F - n_theta/2 terms of the model.
+    Exact variances: the chi^2(2F - n_theta) quantile over 2. Variances from M >= 3 realizations:
+    the quantile of a sum of F - n_theta/2 independent F(2, 2M - 2) terms (the distribution behind
+    :func:`expected_cost`); its tail is heavy for small M (moments of order M - 1 and above are
+    infinite), so no normal approximation: :func:`_sum_quantile` computes it. M = 2: the cost has
+    no finite expected value and no cost check is possible (NaN: no order is accepted by cost).
     """
     from scipy.stats import chi2
 
@@ -348,21 +353,32 @@ def cost_bound(lines: int, n_theta: int, realizations: int | None) -> float:
         return math.nan
     if realizations is None:
         return float(chi2.ppf(ACCEPT_PROBABILITY, 2 * base) / 2)
+    if realizations <= 2:
+        return math.nan
     return _sum_quantile(int(realizations), int(lines)) * base / lines
 
 
 @functools.lru_cache(maxsize=64)
 def _sum_quantile(realizations: int, terms: int) -> float:
-    """ACCEPT_PROBABILITY quantile of a sum of ``terms`` independent F(2, 2M - 2) variables (Monte Carlo)."""
-    rng = np.random.default_rng(20240607)
+    """ACCEPT_PROBABILITY quantile of a sum of ``terms`` independent F(2, d) variables, d = 2M - 2.
+
+    The distribution of one term, P(X <= x) = 1 - (1 + 2x/d)^(-d/2), is put on a grid (midpoint
+    rule, step about 0.05 of its unit mean) that reaches past the sum's mean by the single-term
+    quantile at _TAIL_MASS / terms (a heavy-tailed sum exceeds its bulk by one large term); the
+    ``terms``-fold convolution is a power of its discrete Fourier transform."""
     d = 2.0 * (realizations - 1)
-    sums = np.empty(_BOUND_SAMPLES)
-    chunk = max(1, 2_000_000 // terms)
-    for start in range(0, _BOUND_SAMPLES, chunk):
-        n = min(chunk, _BOUND_SAMPLES - start)
-        u = 1.0 - rng.random((n, terms))  # in (0, 1]
-        sums[start:start + n] = np.sum((d / 2) * (u ** (-2.0 / d) - 1.0), axis=1)
-    return float(np.quantile(sums, ACCEPT_PROBABILITY))
+    mean = d / (d - 2)
+    tail = (d / 2) * ((terms / _TAIL_MASS) ** (2 / d) - 1)
+    spread = math.sqrt(terms * d**2 * (d + 0) / ((d - 2) ** 2 * (d - 4))) if d > 4 else 0.0  # std of the sum
+    top = terms * mean + tail + 10 * spread
+    size = int(2 ** math.ceil(math.log2(min(max(top / 0.05, 2.0**16), 2.0**22))))
+    h = top / size
+    edges = (np.arange(size + 1) - 0.5) * h
+    cdf = 1 - (1 + 2 * np.maximum(edges, 0.0) / d) ** (-d / 2)
+    pmf = np.diff(cdf)
+    total = np.fft.irfft(np.fft.rfft(pmf) ** terms, size)
+    cumulative = np.cumsum(total)
+    return float(np.searchsorted(cumulative, ACCEPT_PROBABILITY) * h)
 
 
 def _cost(basis: _Basis, theta: np.ndarray, weight: np.ndarray) -> float:
@@ -390,7 +406,11 @@ def _start(basis: _Basis, weight: np.ndarray) -> np.ndarray:
     return best
 
 
-def _refine(basis: _Basis, theta0: np.ndarray, weight: np.ndarray, stable_only: bool = False):
+EXTRA_EVALUATIONS = 60  # per parameter (+1): the budget of Levenberg-Marquardt from a further start
+
+
+def _refine(basis: _Basis, theta0: np.ndarray, weight: np.ndarray, stable_only: bool = False,
+            evaluations: int = 200):
     """Levenberg-Marquardt on V from theta0. ``stable_only``: a step to a parameter vector whose
     free factor is not strictly stable is refused (a huge residual, which LM treats as a failed
     step and answers with a shorter one), so the minimum found lies in the stable region."""
@@ -405,7 +425,7 @@ def _refine(basis: _Basis, theta0: np.ndarray, weight: np.ndarray, stable_only: 
 
     with np.errstate(over="ignore", invalid="ignore"):
         result = least_squares(residual, theta0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                               max_nfev=200 * (theta0.size + 1))
+                               max_nfev=evaluations * (theta0.size + 1))
     if stable_only:  # the optimiser's Jacobian may hold the barrier's values: the plain one at the optimum
         result.jac = _jacobian(basis, result.x, weight)
     return result
@@ -506,7 +526,7 @@ def _s_starts(data: FRFData, nb: int, na: int, delay: int, integrators: int, bas
 
 
 def fit_order(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 0, integrators: int = 0,
-              z_start: bool = True) -> TFFit:
+              z_start: bool = True, extra_starts: bool = True) -> TFFit:
     """Fit one model order ``nb``/``na`` with a given dead time (samples); see the module docstring.
 
     ``integrators`` of the ``na`` poles are fixed at z = 1 (s = 0). An s fit starts from Levy/SK
@@ -524,17 +544,35 @@ def fit_order(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 0
     weight = _weights(data)
     basis = _Basis(domain, data, nb, na - integrators, delay, integrators)
     result = _refine(basis, _start(basis, weight), weight)
-    note = ""
+    fit = _result(basis, result, data, nb, na, integrators, weight)
+    if not extra_starts or (fit.accepted and fit.model.stability() != "unstable"):
+        return fit  # a stable fit within its cost bound: no other start can be significantly better
+    # the linear start led to an unstable model or a cost above its bound (a local minimum, or a
+    # too-low order): other starts, the best cost kept
     if domain == "s" and z_start:
         starts, how = _s_starts(data, nb, na, delay, integrators, basis, weight)
     else:
         starts, how = _spread_starts(basis, weight), "poles spread over the band"
-    if starts:
-        for theta0 in starts:
-            other = _refine(basis, theta0, weight)
-            if math.isfinite(other.cost) and other.cost < result.cost * (1 - 1e-9):
-                result, note = other, f"start: {how}"
-    return _result(basis, result, data, nb, na, integrators, weight, note)
+    best = result
+    for theta0 in starts:
+        other = _refine(basis, theta0, weight, evaluations=EXTRA_EVALUATIONS)
+        if math.isfinite(other.cost) and other.cost < best.cost * (1 - 1e-9):
+            best = other
+    if best is result:
+        return fit
+    return _result(basis, best, data, nb, na, integrators, weight,
+                   f"start: {how} (the linear start gave cost {fit.cost:.4g}, {fit.model.stability()})")
+
+
+def refit(fit: TFFit, data: FRFData) -> TFFit:
+    """``fit``'s model class (order, delay, integrators, stabilisation) fitted to other data (the
+    held-out check's training lines), starting from ``fit``'s parameters."""
+    delay = fit.model.delay
+    weight = _weights(data)
+    basis = _Basis(fit.model.domain, data, fit.nb, fit.na - fit.integrators, delay, fit.integrators)
+    theta0 = fit.values / _scale(basis)
+    result = _refine(basis, theta0, weight, stable_only=fit.how == "stabilised")
+    return _result(basis, result, data, fit.nb, fit.na, fit.integrators, weight, fit.note, fit.how)
 
 
 def _result(basis: _Basis, result, data: FRFData, nb: int, na: int, integrators: int, weight: np.ndarray,
@@ -599,25 +637,32 @@ def on_boundary(fit: TFFit) -> bool:
     return False
 
 
-def fit_stable(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 0) -> TFFit:
+def fit_stable(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 0, thorough: bool = True) -> TFFit:
     """The fit of ``nb``/``na`` that ``--order auto`` may choose: never unstable.
 
     1. the free fit (:func:`fit_order`) when it is stable (or marginally: poles on the boundary);
     2. else, when every unstable pole is real and within BOUNDARY_STD standard deviations of z = 1
        (s = 0), the data ask for integrators (a free mass): those poles are fixed there and the rest
        refitted (``how = "integrator"``);
-    3. else the unstable poles are reflected into the stable region (z -> 1/conj z, s -> -conj s)
-       and Levenberg-Marquardt continues inside it (``how = "stabilised"``); its cost tells whether
-       a stable model of this order can describe the data.
+    3. else Levenberg-Marquardt inside the stable region (a step out of it is refused) from the
+       free fit's poles reflected into it (z -> 1/conj z, s -> -conj s), from the reflected linear
+       start and from poles spread over the band; the lowest cost of the fits that do not end within
+       BOUNDARY_STD std of the boundary is kept (``how = "stabilised"``); its cost tells whether a
+       stable model of this order can describe the data.
+
+    ``thorough=False``: the free fit from the linear start only (no further starts, no
+    stabilisation), for orders the scan no longer needs.
     """
-    free = fit_order(data, nb, na, domain, delay)
+    free = fit_order(data, nb, na, domain, delay, extra_starts=thorough)
     poles = free.model.poles()
     worst = math.nan if not poles.size else float(np.max(np.abs(poles))) if domain == "z" else float(np.max(poles.real))
     free.free_pole = worst
-    if free.model.stability() != "unstable":
+    if free.model.stability() != "unstable" or not thorough:
         return free
     bad = poles[(np.abs(poles) >= 1) if domain == "z" else (poles.real >= 0)]
     real = np.abs(bad.imag) <= 1e-9 * np.maximum(np.abs(bad), 1.0)
+    if domain == "z":
+        real &= bad.real > 0  # an integrator is a pole at z = +1; one near z = -1 is not
     distances = [(-d, sd) for d, sd in (_boundary_distance(free, complex(p.real)) for p in bad[real])]
     if bad.size and np.all(real) and all(d <= BOUNDARY_STD * sd for d, sd in distances):
         fit = fit_order(data, nb, na, domain, delay, integrators=bad.size)
@@ -638,10 +683,12 @@ def fit_stable(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 
     fits = []
     for theta in starts:
         if basis.stable(theta):
-            fit = _result(basis, _refine(basis, theta, weight, stable_only=True), data, nb, na, 0, weight, note,
-                          "stabilised")
+            fit = _result(basis, _refine(basis, theta, weight, stable_only=True, evaluations=EXTRA_EVALUATIONS),
+                          data, nb, na, 0, weight, note, "stabilised")
             fit.free_pole = worst
             fits.append(fit)
+    if not fits:
+        return free  # no stable start (cannot happen for na >= 1: the spread starts are stable)
     inside = [f for f in fits if not on_boundary(f)]
     return min(inside or fits, key=lambda f: f.cost)
 
