@@ -12,7 +12,11 @@ into the session's temporary folder, and copied into each test's folder.
 
 from __future__ import annotations
 
+import os
+import re
 import shutil
+import signal
+import time
 from pathlib import Path
 
 import h5py
@@ -89,3 +93,17 @@ def add_corrupt_recording(project: Path, relative: str = "rec/B/corrupt.h5") -> 
 def work_folders(fleet: Path) -> list[Path]:
     """Work folders of tasks left in the batch folder (there must be none after a batch)."""
     return [p for p in fleet.rglob("*") if p.is_dir() and (".partial-" in p.name or ".replaced-" in p.name)]
+
+
+def kill_first_task(fleet: Path, process, timeout: float = 60.0) -> tuple[int, Path] | None:
+    """SIGKILL the worker process of the first task seen running (its work folder names its pid)
+    while ``process`` (the batch) runs; return that pid and folder, or None if none was seen."""
+    deadline = time.time() + timeout
+    while time.time() < deadline and process.poll() is None:
+        for folder in work_folders(fleet):
+            match = re.search(r"\.partial-(\d+)-", folder.name)
+            if match:
+                os.kill(int(match.group(1)), signal.SIGKILL)
+                return int(match.group(1)), folder
+        time.sleep(0.02)
+    return None

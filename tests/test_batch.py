@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 sys.path.insert(0, str(Path(__file__).parent))
-from batch_cases import FIT_PARAMETER, add_corrupt_recording, fleet_project, work_folders  # noqa: E402
+from batch_cases import FIT_PARAMETER, add_corrupt_recording, fleet_project, kill_first_task, work_folders  # noqa: E402
 
 
 NLSID = (sys.executable, "-c", "from nlsid.cli.entry import main; main()")
@@ -152,16 +152,7 @@ def test_a_worker_killed_mid_batch_costs_only_its_task(project):
     process = subprocess.Popen([*NLSID, "batch", str(project / "pipeline.yaml"), "--inputs", f"{project}/rec/**/*.h5",
                                 "-o", str(fleet), "--workers", "2", "--json"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    killed = None
-    deadline = time.time() + 60
-    while killed is None and time.time() < deadline and process.poll() is None:
-        for folder in work_folders(fleet):
-            match = re.search(r"\.partial-(\d+)-", folder.name)
-            if match:
-                killed = (int(match.group(1)), folder)
-                os.kill(killed[0], signal.SIGKILL)
-                break
-        time.sleep(0.02)
+    killed = kill_first_task(fleet, process)
     out, err = process.communicate(timeout=120)
     assert killed is not None, "no task was seen running"
     assert process.returncode == 0, err

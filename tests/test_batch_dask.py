@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -20,7 +19,7 @@ import distributed  # the test extra brings dask[distributed]: pip install -e '.
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from batch_cases import add_corrupt_recording, fleet_project, work_folders  # noqa: E402
+from batch_cases import add_corrupt_recording, fleet_project, kill_first_task, work_folders  # noqa: E402
 
 NLSID = (sys.executable, "-c", "from nlsid.cli.entry import main; main()")
 DASK = (sys.executable, "-m", "dask")  # the `dask` command line of this environment
@@ -44,16 +43,8 @@ def test_local_cluster_with_a_killed_worker_a_corrupt_recording_and_a_rerun(proj
         args = (project / "pipeline.yaml", "--inputs", f"{project}/rec/B/*.h5", "-o", fleet,
                 "--scheduler", cluster.scheduler_address)
         process = batch(*args)
-        killed = None
-        deadline = time.time() + 60
-        while killed is None and time.time() < deadline and process.poll() is None:
-            for folder in work_folders(fleet):
-                match = re.search(r"\.partial-(\d+)-", folder.name)
-                if match:
-                    killed = int(match.group(1))
-                    os.kill(killed, signal.SIGKILL)  # the worker process running that task
-                    break
-            time.sleep(0.02)
+        seen = kill_first_task(fleet, process)  # the worker process running that task
+        killed = None if seen is None else seen[0]
         out, err = process.communicate(timeout=120)
         assert killed is not None, "no task was seen running"
         assert process.returncode == 2, err  # the corrupt recording

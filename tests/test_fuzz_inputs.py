@@ -21,6 +21,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import tempfile
 import traceback
 from pathlib import Path
@@ -31,11 +32,13 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
-from mcap.writer import Writer
 from scipy.io import savemat
 
 from nlsid.io.recording import write_recording
 from nlsid.io.run import make_run
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mcap_cases import write_json_mcap  # noqa: E402
 
 # Examples per reader; NLSID_FUZZ_EXAMPLES=1000 explores further (still reproducible), and
 # NLSID_FUZZ_SEED=N draws other examples (seeded) instead of the derandomized ones CI runs.
@@ -230,16 +233,7 @@ def test_hdf5_import(run_cli, recordings):
 def test_foreign_mcap_import(run_cli, tmp_path):
     path = tmp_path / "log.mcap"
     u = periodic_signal()
-    with open(path, "wb") as handle:
-        writer = Writer(handle)
-        writer.start(profile="", library="test-logger")
-        schema = writer.register_schema("Sample", "jsonschema", b'{"type": "object"}')
-        cmd, joint = (writer.register_channel(t, "json", schema) for t in ("/cmd", "/joint"))
-        for k in range(u.size):
-            t = 1_000_000_000 + round(k * 1e9 / FS)
-            writer.add_message(cmd, t, json.dumps({"effort": u[k]}).encode(), t)
-            writer.add_message(joint, t, json.dumps({"state": {"position": 2 * u[k]}}).encode(), t)
-        writer.finish()
+    write_json_mcap(path, FS, u, 2 * u)
     fuzz(run_cli, "log.mcap", path.read_bytes(), lambda source, out: [
         "-q", "import", source, "--u", "/cmd:effort", "--y", "/joint:state.position", "-o", out / "rec.h5"])
 

@@ -9,17 +9,20 @@ source, its SHA-256 and what was inferred or overridden.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
+import sys
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-from mcap.writer import Writer
 from scipy.io import savemat
 
-from nlsid.io.hdf5_recording import HDF5Recording
-from nlsid.io.recording import read_runs
+sys.path.insert(0, str(Path(__file__).parent))
+from mcap_cases import write_json_mcap  # noqa: E402
+
+from nlsid.io.hdf5_recording import HDF5Recording  # noqa: E402
+from nlsid.io.recording import read_runs  # noqa: E402
 
 FS = 1000.0
 N = 256
@@ -143,19 +146,6 @@ def test_foreign_hdf5_by_dataset_path(run_cli, tmp_path):
     steady = [37 + 2 * N * m for m in range(2)]
     for run, start in zip(runs, steady):
         np.testing.assert_array_equal(run.periods("u").ravel(), u[start:start + 2 * N])
-
-
-def write_json_mcap(path, fs: float, u: np.ndarray, y: np.ndarray) -> None:
-    with open(path, "wb") as handle:
-        writer = Writer(handle)
-        writer.start(profile="", library="test-logger")
-        schema = writer.register_schema("Sample", "jsonschema", b'{"type": "object"}')
-        cmd, joint = (writer.register_channel(t, "json", schema) for t in ("/cmd", "/joint"))
-        for k in range(u.size):
-            t = 1_000_000_000 + round(k * 1e9 / fs)
-            writer.add_message(cmd, t, json.dumps({"effort": u[k]}).encode(), t)
-            writer.add_message(joint, t, json.dumps({"state": {"position": y[k]}}).encode(), t)
-        writer.finish()
 
 
 def test_foreign_mcap_by_topic_and_field(run_cli, tmp_path):
