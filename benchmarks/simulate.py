@@ -107,7 +107,8 @@ def ivp_closed_loop(point, run: Run, samples: int, rtol: float) -> np.ndarray:
     m = point.config.model
     lug = m.nonlinearities[0]
     loop = from_config.closed_loop(point.config)
-    ctrl = tustin(loop.controller, 1 / FS)
+    (ctrl,) = loop.controller
+    ctrl = tustin(ctrl, 1 / FS)
     ff = feedforward(run.u, FS, True, loop.coulomb, loop.velocity)
     m1, m2, k, c, c1, c2, gain = m.motor_mass, m.load_mass, m.stiffness, m.damping, m.motor_damping, m.load_damping, m.gain
 

@@ -215,8 +215,8 @@ BAD = {
                     "sweep: {parameter: model.delay, values: []}\n", ":2: sweep.values: expected at least 1 items, got 0"),
     "long_delay": ("model: {type: transfer_function, num: [1.0], den: [1.0, 1.0], delay: 10.0}\n",
                    "model.delay: dead time of 10000 samples is not shorter than the record (4000 samples)"),
-    "fractional_delay": ("model: {type: transfer_function, num: [1.0], den: [1.0, 1.0], delay: 0.0005}\n",
-                         "it must be a whole number of samples"),
+    "fractional_delay": ("model: {type: transfer_function, domain: discrete, num: [0.0, 0.5], den: [1.0, -0.5], "
+                         "delay: 0.0005}\n", "it must be a whole number of samples"),  # fractional: continuous only
     "negative_friction": ("model:\n  type: mass_spring_damper\n  mass: 1.0\n  stiffness: 100.0\n"
                           "  nonlinearities:\n    - {type: coulomb, fc: -0.5}\n",
                           ":6: model.nonlinearities[0].fc: must be > 0"),

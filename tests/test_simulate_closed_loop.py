@@ -19,7 +19,7 @@ from nlsid.errors import InputError
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
-from nlsid.simulate.engine import closed_loop_poles, simulate_run
+from nlsid.simulate.engine import Timing, closed_loop_poles, simulate_run
 from nlsid.models.controller import tustin
 
 FS, N = 1000.0, 1000
@@ -68,8 +68,10 @@ def loop_spectra(run, ff, delay=0):
 
 def test_closed_loop_poles_decay_within_the_transient():
     cfg = config()
-    ctrl = tustin(from_config.closed_loop(cfg).controller, 1 / FS)
-    radius = np.max(np.abs(closed_loop_poles(from_config.model(cfg), ctrl, FS, 0)))
+    (ctrl,) = from_config.closed_loop(cfg).controller
+    ctrl = tustin(ctrl, 1 / FS)
+    as_drive = (ctrl.A, np.column_stack([ctrl.B, np.zeros(ctrl.order)]), ctrl.C, np.array([ctrl.D, 0.0]))
+    radius = np.max(np.abs(closed_loop_poles(from_config.model(cfg).ss, as_drive, FS, Timing())))
     assert radius ** (5 * N) < 1e-13
 
 

@@ -13,7 +13,7 @@ system of the book's Exercise 79, Eq. 5-12) and a cubic stiffness may be negativ
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Optional, Union
+from typing import Annotated, ClassVar, Literal, Optional, Union
 
 from pydantic import Field, field_validator, model_validator
 
@@ -114,15 +114,31 @@ BlockConfig = Annotated[
 ]
 
 
-class _PlantBlocks(StrictModel):
-    """Static or hysteretic blocks at a plant's input and output, in open and closed loop.
+class _Offsets(StrictModel):
+    """Converter offsets of every model: the plant gets u + ``input_offset`` (a DAC or actuator
+    offset; the recorded u stays the command) and the recorded y is the model output +
+    ``output_offset`` (a sensor offset, seen by a controller too). ``input_channels`` adds measured
+    channels of the recording (``channel name: gain``) to the plant input: u + input_offset + sum
+    gain * channel."""
+
+    input_offset: float = 0.0
+    output_offset: float = 0.0
+    input_channels: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")], float] = {}
+
+
+class _PlantBlocks(_Offsets):
+    """Static or hysteretic blocks at a plant's input and output, in open and closed loop, and the
+    timing of the sampled output.
 
     ``input_nonlinearity`` maps the plant input (the actuator: the recorded u stays the command, the
     plant gets f(u)); ``output_nonlinearity`` maps the plant output before it is recorded and fed back.
+    ``output_timing`` (samples, -1 < t < 1) is when the output is sampled against the held input:
+    y[k] is the model output at t_k + t Ts (t > 0: the recorded output leads).
     """
 
     input_nonlinearity: Optional[BlockConfig] = None
     output_nonlinearity: Optional[BlockConfig] = None
+    output_timing: Annotated[float, Field(gt=-1, lt=1)] = 0.0
 
 
 class TransferFunctionPlant(TransferFunctionConfig, _PlantBlocks):
@@ -137,36 +153,98 @@ class StateSpacePlant(StateSpaceConfig, _PlantBlocks):
     """A state-space model as the model, with optional input and output blocks."""
 
 
-class CoulombConfig(StrictModel):
-    """Coulomb + viscous friction F = fc sign(v) + fv v on the velocity of mass ``at``."""
+def _check_sides(config, name: str, required: bool) -> None:
+    """A friction quantity is given either symmetric (``name``) or per direction (``name_pos`` for
+    v > 0 and ``name_neg`` for v < 0, both), never both forms and never half a pair."""
+    sym, pos, neg = (getattr(config, name + suffix) for suffix in ("", "_pos", "_neg"))
+    if sym is not None and (pos is not None or neg is not None):
+        raise ValueError(f"give {name} or {name}_pos and {name}_neg, not both")
+    if (pos is None) != (neg is None):
+        given, other = (f"{name}_pos", f"{name}_neg") if pos is not None else (f"{name}_neg", f"{name}_pos")
+        raise ValueError(f"{given} without {other}: give both, or {name} alone")
+    if required and sym is None and pos is None:
+        raise ValueError(f"give {name}, or {name}_pos and {name}_neg")
 
+
+class _SidedFriction(StrictModel):
+    """Friction whose levels may differ by direction (``docs/configs.md``, Nonlinear forces)."""
+
+    SIDED: ClassVar[tuple[tuple[str, bool], ...]] = ()  # (quantity, required); not required: 0 if not given
+
+    @model_validator(mode="after")
+    def _sides(self):
+        for name, required in self.SIDED:
+            _check_sides(self, name, required)
+        return self
+
+    def sides(self, name: str) -> tuple[float, float]:
+        """(value for v > 0, value for v < 0) of a sided quantity: the symmetric key for both
+        directions, else its ``_pos`` and ``_neg`` keys; 0 for an optional quantity not given."""
+        sym = getattr(self, name)
+        if sym is not None:
+            return float(sym), float(sym)
+        pos, neg = getattr(self, name + "_pos"), getattr(self, name + "_neg")
+        return (0.0, 0.0) if pos is None else (float(pos), float(neg))
+
+    def mean(self, name: str) -> float:
+        """The mean of the two directions' values: the symmetric level of a sided quantity, for a
+        consumer that takes one level."""
+        pos, neg = self.sides(name)
+        return 0.5 * (pos + neg)
+
+
+class CoulombConfig(_SidedFriction):
+    """Coulomb + viscous friction F = fc sign(v) + fv v on the velocity of mass ``at``; per direction
+    F = fc_pos + fv_pos v (v > 0), -fc_neg + fv_neg v (v < 0), sticking within [-fc_neg, fc_pos]."""
+
+    SIDED = (("fc", True), ("fv", False))
     type: Literal["coulomb"]
-    fc: Positive
-    fv: NonNegative = 0.0
+    fc: Optional[Positive] = None
+    fc_pos: Optional[Positive] = None
+    fc_neg: Optional[Positive] = None
+    fv: Optional[NonNegative] = None  # 0 when neither fv nor fv_pos / fv_neg is given
+    fv_pos: Optional[NonNegative] = None
+    fv_neg: Optional[NonNegative] = None
     at: Optional[str] = None
 
 
-class StribeckConfig(StrictModel):
-    """Stribeck friction F = (fc + (fs - fc) exp(-|v/vs|^delta)) sign(v) + fv v."""
+class StribeckConfig(_SidedFriction):
+    """Stribeck friction F = (fc + (fs - fc) exp(-|v/vs|^delta)) sign(v) + fv v; fc, fs and fv may be
+    given per direction (``_pos`` for v > 0, ``_neg`` for v < 0), vs and delta are common."""
 
+    SIDED = (("fc", True), ("fs", True), ("fv", False))
     type: Literal["stribeck"]
-    fc: Positive
-    fs: Positive
+    fc: Optional[Positive] = None
+    fc_pos: Optional[Positive] = None
+    fc_neg: Optional[Positive] = None
+    fs: Optional[Positive] = None
+    fs_pos: Optional[Positive] = None
+    fs_neg: Optional[Positive] = None
     vs: Positive
     delta: Positive = 2.0
-    fv: NonNegative = 0.0
+    fv: Optional[NonNegative] = None  # 0 when neither fv nor fv_pos / fv_neg is given
+    fv_pos: Optional[NonNegative] = None
+    fv_neg: Optional[NonNegative] = None
     at: Optional[str] = None
 
 
-class LuGreConfig(StrictModel):
-    """LuGre friction with bristle state z (Canudas de Wit et al. 1995)."""
+class LuGreConfig(_SidedFriction):
+    """LuGre friction with bristle state z (Canudas de Wit et al. 1995); the levels fc, fs and the
+    viscous sigma2 may be given per direction (``_pos`` for v > 0, ``_neg`` for v < 0)."""
 
+    SIDED = (("fc", True), ("fs", True), ("sigma2", False))
     type: Literal["lugre"]
     sigma0: Positive
     sigma1: NonNegative = 0.0
-    sigma2: NonNegative = 0.0
-    fc: Positive
-    fs: Positive
+    sigma2: Optional[NonNegative] = None  # 0 when neither sigma2 nor sigma2_pos / sigma2_neg is given
+    sigma2_pos: Optional[NonNegative] = None
+    sigma2_neg: Optional[NonNegative] = None
+    fc: Optional[Positive] = None
+    fc_pos: Optional[Positive] = None
+    fc_neg: Optional[Positive] = None
+    fs: Optional[Positive] = None
+    fs_pos: Optional[Positive] = None
+    fs_neg: Optional[Positive] = None
     vs: Positive
     at: Optional[str] = None
 
@@ -208,6 +286,7 @@ class MassSpringDamperConfig(_PlantBlocks):
     initial: InitialState = InitialState()
     nonlinearities: list[ForceConfig] = []
     delay: NonNegative = 0.0
+    force_offset: float = 0.0  # a constant force on the driven mass (where the actuator acts)
 
 
 class TwoMassStageConfig(_PlantBlocks):
@@ -225,11 +304,13 @@ class TwoMassStageConfig(_PlantBlocks):
     output_at: Literal["motor", "load"] = "load"
     nonlinearities: list[ForceConfig] = []
     delay: NonNegative = 0.0
+    force_offset: float = 0.0  # a constant force on the driven mass (where the actuator acts)
 
 
 class NonlinearFeedbackConfig(_PlantBlocks):
-    """Forces fed back around a continuous LTI ``linear`` from force to position:
-    p = G(s) (gain u - sum F), each F reading p (cubic stiffness) or v = p' (friction)."""
+    """Forces fed back around an LTI ``linear`` from force to position: p = G (gain u - sum F), each
+    F reading p (cubic stiffness) or the velocity v (friction): v = p' for a continuous G, the
+    backward difference (p[k] - p[k-1]) fs for a discrete one."""
 
     type: Literal["nonlinear_feedback"]
     linear: LTIConfig
@@ -237,21 +318,22 @@ class NonlinearFeedbackConfig(_PlantBlocks):
     output: Literal["position", "velocity"] = "position"
     nonlinearities: list[ForceConfig] = []
     delay: NonNegative = 0.0
+    force_offset: float = 0.0  # a constant force on the driven mass (where the actuator acts)
 
 
-class WienerConfig(StrictModel):
+class WienerConfig(_Offsets):
     type: Literal["wiener"]
     linear: LTIConfig
     nonlinear: BlockConfig
 
 
-class HammersteinConfig(StrictModel):
+class HammersteinConfig(_Offsets):
     type: Literal["hammerstein"]
     nonlinear: BlockConfig
     linear: LTIConfig
 
 
-class WienerHammersteinConfig(StrictModel):
+class WienerHammersteinConfig(_Offsets):
     type: Literal["wiener_hammerstein"]
     first: LTIConfig
     nonlinear: BlockConfig
@@ -266,7 +348,7 @@ class BranchConfig(StrictModel):
     after: Optional[LTIConfig] = None
 
 
-class LPLConfig(StrictModel):
+class LPLConfig(_Offsets):
     type: Literal["lpl"]
     branches: list[BranchConfig] = Field(min_length=1)
 
@@ -296,21 +378,49 @@ class PIDConfig(StrictModel):
         return self
 
 
-ControllerConfig = Annotated[
+LinearControllerConfig = Annotated[
     Union[PIDConfig, TransferFunctionConfig, ZPKConfig, StateSpaceConfig], Field(discriminator="type")
 ]
 
 
-class FeedforwardConfig(StrictModel):
-    """u_ff = coulomb * sign(r') + velocity * r' (seed 003, Fig. 1: K_fc = coulomb)."""
+class CascadeConfig(StrictModel):
+    """A position loop inside a velocity loop, as a drive computes it:
+    u = C_v(C_p(e) - v_hat), e = r - y, v_hat a causal difference of the measured y:
+    ``backward`` (y[k] - y[k-1]) fs, ``two_tap`` (y[k] - y[k-2]) fs / 2."""
 
-    coulomb: NonNegative = 0.0
-    velocity: NonNegative = 0.0
+    type: Literal["cascade"]
+    position: LinearControllerConfig
+    velocity: LinearControllerConfig
+    velocity_estimate: Literal["backward", "two_tap"] = "two_tap"
+
+
+ControllerConfig = Annotated[
+    Union[PIDConfig, TransferFunctionConfig, ZPKConfig, StateSpaceConfig, CascadeConfig], Field(discriminator="type")
+]
+
+
+class FeedforwardConfig(StrictModel):
+    """u_ff = coulomb * sign(r') + velocity * r' (seed 003, Fig. 1: K_fc = coulomb); signed gains."""
+
+    coulomb: float = 0.0
+    velocity: float = 0.0
 
 
 class ClosedLoopConfig(StrictModel):
-    controller: ControllerConfig
+    """u[k] = C(e)[k] - M(y)[k] + u_ff[k], e = F(r) - y, applied after ``computation_delay`` samples."""
+
+    controller: ControllerConfig               # on the error e
+    measurement: Optional[LinearControllerConfig] = None  # on the measured y, subtracted from u
+    prefilter: Optional[LTIConfig] = None      # on the reference r before the error
+    computation_delay: Annotated[int, Field(ge=0)] = 0  # whole samples from u[k] to the plant input
     feedforward: FeedforwardConfig = FeedforwardConfig()
+
+    @model_validator(mode="after")
+    def _one_measurement_path(self):
+        if self.controller.type == "cascade" and self.measurement is not None:
+            raise ValueError("a cascade controller already acts on the measurement (its velocity estimate); "
+                             "remove measurement")
+        return self
 
 
 class DisturbancesConfig(StrictModel):

@@ -1,7 +1,12 @@
 """Digital controllers and feed-forward of the closed loop (seed 003, Fig. 1).
 
-The controller runs once per sample on e[k] = r[k] - y[k]; its output is held by the DAC (ZOH)
-together with the feed-forward. A continuous controller C(s) is implemented through its Tustin
+The drive computes once per sample, from the measured y[k] and the reference r[k],
+
+    u[k] = C(e)[k] - M(y)[k] + u_ff[k],   e[k] = F(r)[k] - y[k],
+
+with C the controller on the error, M optional terms on the measurement (e.g. the velocity loop
+of a cascade, acting on a difference of y, :func:`difference`), F an optional reference
+prefilter; u[k] is held by the DAC (ZOH) from sample k + computation delay on. A continuous controller C(s) is implemented through its Tustin
 (bilinear) equivalent, s = (2/Ts) (z - 1)/(z + 1), the usual digital implementation; its frequency
 response at the sample rate is C(j (2/Ts) tan(w Ts / 2)). A discrete controller is used as given.
 
@@ -54,6 +59,51 @@ def tustin(ss: StateSpace, ts: float) -> StateSpace:
     C = ss.C @ q
     D = ss.D + ss.C @ q @ ss.B * ts / 2
     return StateSpace(A, B, C, float(D), True)
+
+
+def difference(name: str, fs: float) -> StateSpace:
+    """A causal velocity estimate of a sampled signal as a discrete model: ``backward``
+    fs (1 - z^-1), i.e. (y[k] - y[k-1]) fs, or ``two_tap`` fs/2 (1 - z^-2), i.e. (y[k] - y[k-2]) fs / 2."""
+    num = {"backward": [fs, -fs], "two_tap": [fs / 2, 0.0, -fs / 2]}[name]
+    return from_transfer_function(num, [1.0], True, 0.0, name)
+
+
+def series(first: StateSpace, second: StateSpace) -> StateSpace:
+    """Discrete ``second`` after ``first``: state [x1; x2],
+
+        x1+ = A1 x1 + B1 u,  x2+ = A2 x2 + B2 (C1 x1 + D1 u),  y = D2 C1 x1 + C2 x2 + D2 D1 u.
+    """
+    n1, n2 = first.order, second.order
+    A = np.zeros((n1 + n2, n1 + n2))
+    A[:n1, :n1] = first.A
+    A[n1:, :n1] = np.outer(second.B, first.C)
+    A[n1:, n1:] = second.A
+    B = np.concatenate([first.B, second.B * first.D])
+    C = np.concatenate([second.D * first.C, second.C])
+    return StateSpace(A, B, C, float(second.D * first.D), True)
+
+
+def discrete_path(stages: list, fs: float) -> StateSpace | None:
+    """The series connection of a controller path at the sample rate ``fs`` (continuous stages by
+    Tustin, velocity estimates by :func:`difference`); None for an empty path."""
+    out = None
+    for stage in stages:
+        ss = difference(stage, fs) if isinstance(stage, str) else tustin(stage, 1.0 / fs)
+        out = ss if out is None else series(out, ss)
+    return out
+
+
+def two_input(error: StateSpace, measurement: StateSpace | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C, D) of u = C_e(e) - C_m(y) with input [e, y]: B is (n, 2), D is (2,)."""
+    m = measurement if measurement is not None else StateSpace(np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0.0, True)
+    ne, nm = error.order, m.order
+    A = np.zeros((ne + nm, ne + nm))
+    A[:ne, :ne], A[ne:, ne:] = error.A, m.A
+    B = np.zeros((ne + nm, 2))
+    B[:ne, 0], B[ne:, 1] = error.B, m.B
+    C = np.concatenate([error.C, -m.C])
+    D = np.array([error.D, -m.D])
+    return A, B, C, D
 
 
 def reference_velocity(r: np.ndarray, fs: float, periodic: bool) -> np.ndarray:

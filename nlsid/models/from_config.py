@@ -35,18 +35,40 @@ class Force:
     params: np.ndarray
     column: np.ndarray
     row: np.ndarray
+    difference: bool = False  # the row is a backward difference per sample (times fs: a velocity)
+
+
+@dataclass(frozen=True)
+class Offsets:
+    """Constant and measured terms at a model's input and output (:class:`nlsid.io.model_config._Offsets`):
+    the plant gets u + input + sum gain * run.channels[name]; the recorded y is the output + output."""
+
+    input: float = 0.0
+    output: float = 0.0
+    channels: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class Plant:
     """A state-space plant with forces fed back, and the blocks (kind, parameters) of
-    :mod:`nlsid.models.blocks` at its input and output (identity by default)."""
+    :mod:`nlsid.models.blocks` at its input and output (identity by default).
+
+    ``force_bias`` is a constant added to the plant input after the input block (a mechanical
+    template's ``force_offset`` / ``gain``: a constant force on the driven mass); ``output_timing``
+    the sampling instant of the output in samples (y[k] = y(t_k + t Ts)); ``difference_rows``:
+    the velocity read-outs (and a velocity output) are backward differences per sample, to be
+    multiplied by fs (a discrete linear part, :func:`nlsid.models.mechanical.force_feedback`).
+    """
 
     ss: StateSpace
     x0: np.ndarray
     forces: list[Force] = field(default_factory=list)
     input_block: tuple[int, np.ndarray] = field(default_factory=lambda: blocks.encode(None))
     output_block: tuple[int, np.ndarray] = field(default_factory=lambda: blocks.encode(None))
+    offsets: Offsets = field(default_factory=Offsets)
+    force_bias: float = 0.0
+    output_timing: float = 0.0
+    difference_output: bool = False
 
 
 Stage = Union[StateSpace, Callable[[np.ndarray], np.ndarray]]
@@ -57,13 +79,24 @@ class Structure:
     """Sum over branches of the series connection of each branch's stages (applied left to right)."""
 
     branches: list[list[Stage]]
+    offsets: Offsets = field(default_factory=Offsets)
 
 
 @dataclass(frozen=True)
 class ClosedLoop:
-    controller: StateSpace
+    """The drive's computation (:mod:`nlsid.models.controller`): u = C(e) - M(y) + u_ff, e = F(r) - y.
+
+    ``controller`` and ``measurement`` are stages in series (state-space models, continuous ones
+    run as their Tustin equivalent, or the name of a velocity estimate of
+    :func:`nlsid.models.controller.difference`); ``measurement`` is empty without terms on y.
+    """
+
+    controller: list
     coulomb: float
     velocity: float
+    measurement: list = field(default_factory=list)
+    prefilter: StateSpace | None = None
+    computation_delay: int = 0
 
 
 def lti(config, where: str) -> StateSpace:
@@ -92,11 +125,25 @@ def _force(config, plant: MechanicalPlant, where: str) -> Force:
     if at not in plant.force_columns:
         raise InputError(f"{where}.at", f"expected one of {', '.join(plant.masses)}, got {at!r}")
     kind, params = forces.encode(config)
-    rows = plant.position_rows if kind in forces.POSITION_KINDS else plant.velocity_rows
+    position = kind in forces.POSITION_KINDS
+    rows = plant.position_rows if position else plant.velocity_rows
     if at not in rows:
-        raise InputError(where, f"a {config.type} force reads the velocity, which needs a linear part of "
-                                "relative degree >= 2 (force to position; C B = 0)")
-    return Force(kind, params, plant.force_columns[at], rows[at])
+        raise InputError(where, f"a {config.type} force reads the velocity, which "
+                         + (plant.no_velocity or "needs a linear part of relative degree >= 2 (force to position; C B = 0)"))
+    return Force(kind, params, plant.force_columns[at], rows[at], plant.difference and not position)
+
+
+def _offsets(config) -> Offsets:
+    return Offsets(config.input_offset, config.output_offset, dict(config.input_channels))
+
+
+def _force_bias(config, where: str) -> float:
+    """force_offset / gain: the constant force as a term of the plant input (which enters by gain)."""
+    if not config.force_offset:
+        return 0.0
+    if config.gain == 0:
+        raise InputError(f"{where}.force_offset", "needs a nonzero gain (the force enters where the actuator does)")
+    return config.force_offset / config.gain
 
 
 MECHANICAL = ("mass_spring_damper", "two_mass_stage", "nonlinear_feedback")
@@ -106,14 +153,19 @@ def plant(config, closed: bool) -> Plant:
     """The plant of an LTI or mechanical config; a plant without forces in open loop must be stable."""
     where = "model"
     ends = dict(input_block=blocks.encode(config.input_nonlinearity),
-                output_block=blocks.encode(config.output_nonlinearity))
+                output_block=blocks.encode(config.output_nonlinearity),
+                offsets=_offsets(config), output_timing=config.output_timing)
     if config.type in MECHANICAL:
         mech = _mechanical(config, where)
         elements = [_force(f, mech, f"{where}.nonlinearities[{i}]") for i, f in enumerate(config.nonlinearities)]
-        result = Plant(mech.ss, mech.x0, elements, **ends)
+        result = Plant(mech.ss, mech.x0, elements, force_bias=_force_bias(config, where),
+                       difference_output=mech.difference and config.output == "velocity", **ends)
     else:
         ss = lti(config, where)
         result = Plant(ss, np.zeros(ss.order), **ends)
+    if result.output_timing and result.ss.discrete:
+        raise InputError(f"{where}.output_timing", "a discrete model has no values between its samples; "
+                                                   "output_timing needs a continuous one")
     if not closed and not result.forces:
         check_stable(result.ss, where)
     return result
@@ -128,13 +180,14 @@ def _stage_lti(config, where: str) -> StateSpace:
 def structure(config) -> Structure:
     """The block structure of a wiener / hammerstein / wiener_hammerstein / lpl config."""
     where = "model"
+    offsets = _offsets(config)
     if config.type == "wiener":
-        return Structure([[_stage_lti(config.linear, f"{where}.linear"), static_map(config.nonlinear)]])
+        return Structure([[_stage_lti(config.linear, f"{where}.linear"), static_map(config.nonlinear)]], offsets)
     if config.type == "hammerstein":
-        return Structure([[static_map(config.nonlinear), _stage_lti(config.linear, f"{where}.linear")]])
+        return Structure([[static_map(config.nonlinear), _stage_lti(config.linear, f"{where}.linear")]], offsets)
     if config.type == "wiener_hammerstein":
         return Structure([[_stage_lti(config.first, f"{where}.first"), static_map(config.nonlinear),
-                           _stage_lti(config.second, f"{where}.second")]])
+                           _stage_lti(config.second, f"{where}.second")]], offsets)
     branches = []
     for i, branch in enumerate(config.branches):
         stages: list[Stage] = []
@@ -144,7 +197,7 @@ def structure(config) -> Structure:
         if branch.after is not None:
             stages.append(_stage_lti(branch.after, f"{where}.branches[{i}].after"))
         branches.append(stages)
-    return Structure(branches)
+    return Structure(branches, offsets)
 
 
 STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
@@ -159,17 +212,40 @@ def model(config: mc.SimulateConfig) -> Union[Plant, Structure]:
     return plant(config.model, closed=config.closed_loop is not None)
 
 
+def _controller(c, where: str) -> StateSpace:
+    """One linear controller config (pid or an LTI without dead time) as a state-space model."""
+    if c.type == "pid":
+        return pid(c.kp, c.ki, c.kd, c.tau)
+    if c.delay:
+        raise InputError(f"{where}.delay", "a controller has no dead time; put it on closed_loop.computation_delay")
+    return lti(c, where)
+
+
 def closed_loop(config: mc.SimulateConfig) -> ClosedLoop | None:
-    """The controller and feed-forward gains of a closed-loop config (None in open loop)."""
+    """The drive's computation of a closed-loop config (None in open loop).
+
+    A cascade u = C_v(C_p(e) - v_hat) is the two-degree-of-freedom law with C = C_v C_p on the
+    error and M = C_v D on the measurement, D the velocity estimate: the same numbers, sample by
+    sample, as the drive's nested computation (the loops are linear).
+    """
     loop = config.closed_loop
     if loop is None:
         return None
     where = "closed_loop.controller"
     c = loop.controller
-    if c.type == "pid":
-        controller = pid(c.kp, c.ki, c.kd, c.tau)
+    measurement = []
+    if c.type == "cascade":
+        inner = _controller(c.velocity, f"{where}.velocity")
+        error = [_controller(c.position, f"{where}.position"), inner]
+        measurement = [c.velocity_estimate, inner]
     else:
-        if c.delay:
-            raise InputError(f"{where}.delay", "a controller has no dead time; put the delay on the plant")
-        controller = lti(c, where)
-    return ClosedLoop(controller, loop.feedforward.coulomb, loop.feedforward.velocity)
+        error = [_controller(c, where)]
+        if loop.measurement is not None:
+            measurement = [_controller(loop.measurement, "closed_loop.measurement")]
+    prefilter = None
+    if loop.prefilter is not None:
+        prefilter = _stage_lti(loop.prefilter, "closed_loop.prefilter")
+        if prefilter.delay:
+            raise InputError("closed_loop.prefilter.delay", "a prefilter has no dead time")
+    return ClosedLoop(error, loop.feedforward.coulomb, loop.feedforward.velocity, measurement, prefilter,
+                      loop.computation_delay)

@@ -27,7 +27,9 @@ a position force would form an algebraic loop), driven by gain u - F:
 
 The velocity is a state read-out v = (C A) x exactly when C B = 0, i.e. G has relative degree >= 2
 (a force then accelerates, as in Newton's law); only then can a friction force or a velocity
-output be fed back. The single point where the forces act is named ``plant``.
+output be fed back. The single point where the forces act is named ``plant``. A discrete G(z)
+(the model ``nlsid fit`` writes) reads the velocity as the backward difference of the position
+(:func:`_discrete_feedback`).
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ class MechanicalPlant:
     force_columns: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> dx'/dF
     position_rows: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> p = row . x
     velocity_rows: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> v = row . x
+    difference: bool = False  # velocity rows are backward differences per sample (times fs: a velocity)
+    no_velocity: str = ""     # why there is no velocity read-out (when velocity_rows is empty)
 
     @property
     def masses(self) -> list[str]:
@@ -100,13 +104,13 @@ def two_mass_stage(motor_mass: float, load_mass: float, stiffness: float, dampin
 
 
 def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:
-    """Forces fed back around a continuous, strictly proper G from force to position (module docstring)."""
-    if G.discrete:
-        raise InputError(f"{where}.linear.domain", "forces act in continuous time: the linear part must be continuous")
+    """Forces fed back around a strictly proper G from force to position (module docstring)."""
     if G.delay:
         raise InputError(f"{where}.linear.delay", f"put the actuator dead time on {where}.delay")
     if G.D != 0 or G.order == 0:
         raise InputError(f"{where}.linear", "the linear part (force to position) must be strictly proper (D = 0)")
+    if G.discrete:
+        return _discrete_feedback(G, gain, output, delay, where)
     C_velocity = G.C @ G.A
     velocity_rows = {}
     if abs(G.C @ G.B) <= 1e-12 * np.linalg.norm(G.C) * np.linalg.norm(G.B):
@@ -118,4 +122,37 @@ def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where:
     return MechanicalPlant(
         StateSpace(G.A, gain * G.B, C, 0.0, False, delay), np.zeros(G.order),
         force_columns={"plant": G.B}, position_rows={"plant": G.C}, velocity_rows=velocity_rows,
+    )
+
+
+def _discrete_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:
+    """Forces fed back around a discrete G(z) from force to position, one step per sample.
+
+    The force F[k] is held over sample k like the input: x[k+1] = A x[k] + B (gain u[k] - F[k]),
+    p[k] = C x[k]. The velocity is the backward difference v[k] = (p[k] - p[k-1]) fs, a read-out of
+    the state augmented by the previous position q[k] = p[k-1]:
+
+        [x; q][k+1] = [[A, 0], [C, 0]] [x; q][k] + [B; 0] (gain u - F),   v = fs [C, -1] [x; q].
+
+    A friction force is chosen implicitly for the velocity at the end of its sample (the Moreau
+    step of :mod:`nlsid.models.forces`, sensitivity g = fs C B): it needs C B != 0, a force that
+    moves the position within the sample it acts (the ZOH equivalent of a mass has C B = Ts^2 / 2m).
+    """
+    n = G.order
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n] = G.A
+    A[n, :n] = G.C
+    B = np.append(G.B, 0.0)
+    position = np.append(G.C, 0.0)
+    difference = np.append(G.C, -1.0)
+    moves = abs(G.C @ G.B) > 1e-12 * np.linalg.norm(G.C) * np.linalg.norm(G.B)
+    reason = "" if moves else ("needs C B != 0 on a discrete linear part (a force that moves the position "
+                               "within the sample it acts)")
+    if output == "velocity" and not moves:
+        raise InputError(f"{where}.output", "a velocity output " + reason)
+    C = position if output == "position" else difference
+    return MechanicalPlant(
+        StateSpace(A, gain * B, C, 0.0, True, delay), np.zeros(n + 1),
+        force_columns={"plant": B}, position_rows={"plant": position},
+        velocity_rows={"plant": difference} if moves else {}, difference=True, no_velocity=reason,
     )

@@ -189,8 +189,12 @@ def render_model(path: Path) -> Page:
         loop_config = closed_loop(config)
     except InputError as exc:
         raise InputError(f"{path}: {exc.where}", exc.what) from None
+    simple_loop = loop_config is not None and len(loop_config.controller) == 1 and not loop_config.measurement
     if loop_config is not None:
-        linear.append(Element("controller C", loop_config.controller))
+        stages = [c for c in loop_config.controller if not isinstance(c, str)]
+        linear += [Element("controller C" + (f" ({i + 1} of {len(stages)})" if len(stages) > 1 else ""), c)
+                   for i, c in enumerate(stages)]
+        linear += [Element("measurement term M", c) for c in loop_config.measurement if not isinstance(c, str)]
     title = _TITLES[config.model.type]
     setting = "in closed loop" if loop_config is not None else "in open loop"
     headline = f"{title} {setting}: {describe_modes(linear[0].ss)}"
@@ -208,8 +212,8 @@ def render_model(path: Path) -> Page:
             continue
         frequency = frequency_axis(group)
         loop = None
-        if loop_config is not None and not domain and not linear[0].ss.discrete and not linear[-1].ss.discrete:
-            loop = response(linear[0].ss, frequency) * response(loop_config.controller, frequency)
+        if simple_loop and not domain and not linear[0].ss.discrete and not loop_config.controller[0].discrete:
+            loop = response(linear[0].ss, frequency) * response(loop_config.controller[0], frequency)
             found = crossover(frequency, loop)
             if found is not None:
                 findings.append(f"loop gain crossover {found[0]:.3g} Hz, phase margin {found[1]:.0f} deg "

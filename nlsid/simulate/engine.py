@@ -9,13 +9,15 @@ Numerical method: :mod:`nlsid.simulate.kernels` and :mod:`nlsid.models.forces`.
 from __future__ import annotations
 
 import dataclasses
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
-from nlsid.models import blocks
-from nlsid.models.controller import feedforward, tustin
+from nlsid.models import blocks, forces
+from nlsid.models.controller import discrete_path, feedforward, tustin, two_input
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
 from nlsid.simulate.kernels import SIZED_SAMPLES, simulate_loop
@@ -60,26 +62,95 @@ def _signal(a) -> np.ndarray:
     return a if a.flags.writeable else a.copy()
 
 
-def _run_kernel(Phi, Gu, ss: StateSpace, x0, forces_, substeps: int, h: float, delay: int,
-                controller: StateSpace | None, r, ff, u, process, y_noise,
-                input_block=_IDENTITY, output_block=_IDENTITY) -> tuple[np.ndarray, np.ndarray]:
-    n_el = len(forces_)
-    n = ss.order
-    kinds = np.array([f.kind for f in forces_], dtype=np.int64) if n_el else _EMPTY_I
-    params = np.array([f.params for f in forces_]) if n_el else np.zeros((0, 6))
-    rows = np.array([f.row for f in forces_]) if n_el else np.zeros((0, n))
-    cols = zoh(ss.A, np.array([f.column for f in forces_]).T, h)[1].T.copy() if n_el else np.zeros((0, n))
-    prop = propagation(Phi, Gu, rows, cols, substeps)
+@dataclass(frozen=True)
+class Timing:
+    """The recorded output against the held input: ``delay`` whole samples of dead time on the
+    plant input, and the output read at the fraction ``phi`` of a sample (``lag``: of the previous one)."""
+
+    delay: int = 0
+    phi: float = 0.0
+    lag: bool = False
+
+
+def timing(plant: Plant, fs: float, n: int, closed: bool, computation_delay: int = 0) -> Timing:
+    """The dead time and output timing of a plant at ``fs`` as one shift of the output.
+
+    The plant is time-invariant and starts at rest, so a dead time of tau seconds on its input and
+    an output read at t_k + t Ts give the same samples as a read at t_k + (t - tau fs) Ts without
+    the dead time: the total shift T = t - tau fs - computation_delay (samples) is split into
+    d = floor(-T) >= 0 whole samples of input delay and a fraction: a lead phi = T in [0, 1) when
+    T >= 0, else a lag phi = 1 + T + d, read in the previous sample. This makes a fractional dead
+    time exact for a ZOH input. In closed loop the output must not need this sample's input, so
+    T <= 0: a lead needs at least as much dead time (else the loop would be algebraic).
+    """
+    if plant.ss.discrete:
+        total = -float(delay_samples(plant.ss.delay, fs, "model.delay") + computation_delay)
+    else:
+        total = plant.output_timing - plant.ss.delay * fs - computation_delay
+    whole = max(0, math.floor(-total + 1e-9))
+    fraction = total + whole
+    if abs(fraction) <= 1e-9:
+        fraction = 0.0
+    if whole >= n:
+        raise InputError("model.delay", f"dead time of {whole} samples is not shorter than the record ({n} samples)")
+    if closed and fraction > 0:
+        raise InputError("model.output_timing",
+                         f"an output leading the input by {fraction:g} samples makes the loop algebraic: in closed "
+                         "loop a lead needs a dead time (model.delay, closed_loop.computation_delay) at least as long")
+    return Timing(whole, fraction if fraction >= 0 else 1.0 + fraction, fraction < 0)
+
+
+def readout(ss: StateSpace, force_columns: np.ndarray, h: float, substeps: int, phi: float, fs: float):
+    """Coefficients of the output at t_k + phi Ts: y = c_x x(t_k) + c_p p - sum_{j,e} c_f[j, e] F_j[e].
+
+    With t = phi Ts, the ZOH solution gives c_x = C e^{A t}, c_p = C Gamma(t) + D, and a force of
+    element e held over sub-step j, [j h, (j + 1) h], enters by its part within [0, t]:
+    c_f[j, e] = C e^{A (t - b)} Gamma_F[e](b - j h), b = min((j + 1) h, t) (Gamma_F(s) the ZOH
+    column over a length s). Rows of c_f stop at the last sub-step that starts before t.
+    """
+    E = force_columns.shape[0]
+    if phi == 0.0:
+        return ss.C, ss.D, np.zeros((0, E))
+    t = phi / fs
+    Phi_t, Gamma_t = zoh(ss.A, ss.B, t)
+    rows = []
+    for j in range(substeps if E else 0):
+        start = j * h
+        if start >= t * (1 - 1e-12):
+            break
+        end = min(start + h, t)
+        remaining = zoh(ss.A, ss.B, t - end)[0] if t - end > 0 else np.eye(ss.order)
+        rows.append(ss.C @ remaining @ zoh(ss.A, force_columns.T.copy(), end - start)[1])
+    return ss.C @ Phi_t, float(ss.C @ Gamma_t + ss.D), np.array(rows).reshape(len(rows), E)
+
+
+def _force_rows(plant: Plant, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the forces, (E, n): a backward-difference row times fs is a velocity."""
+    n = plant.ss.order
+    if not plant.forces:
+        return np.zeros((0, n)), np.zeros((0, n))
+    rows = np.array([f.row * fs if f.difference else f.row for f in plant.forces])
+    return rows, np.array([f.column for f in plant.forces])
+
+
+def _run_kernel(Phi, Gu, ss: StateSpace, x0, kinds, params, rows, columns, substeps: int, h: float,
+                shift: Timing, fs: float, controller, r, ff, u, process, y_noise,
+                input_block=_IDENTITY, output_block=_IDENTITY, p_bias: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    n_el, n = len(kinds), ss.order
+    force_gammas = columns if ss.discrete else (zoh(ss.A, columns.T.copy(), h)[1].T.copy() if n_el else columns)
+    prop = propagation(Phi, Gu, rows, force_gammas, substeps)
+    c_x, c_p, c_f = readout(ss, columns, h, substeps, shift.phi, fs)
     closed = controller is not None
-    c = controller if closed else StateSpace(_EMPTY_2, _EMPTY_1, _EMPTY_1, 0.0, True)
+    Ac, Bc, Cc, Dc = controller if closed else (_EMPTY_2, np.zeros((0, 2)), _EMPTY_1, np.zeros(2))
     length = (r if closed else u).shape[0]
     u_out, y_out = np.empty(length), np.empty(length)
-    sizes = (n, c.order) if length >= SIZED_SAMPLES else None
-    simulate_loop(n_el, sizes)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), float(ss.D), _f64(x0), kinds, _f64(params),
+    sizes = (n, Ac.shape[0]) if length >= SIZED_SAMPLES else None
+    simulate_loop(n_el, sizes)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), _f64(x0), kinds, _f64(params),
                   _f64(prop.row_pow), _f64(prop.row_gamma), _f64(prop.coupling), _f64(prop.col_pow),
-                  float(h), int(delay), closed, _f64(c.A), _f64(c.B), _f64(c.C), float(c.D),
+                  float(h), int(shift.delay), closed, _f64(Ac), _f64(Bc), _f64(Cc), _f64(Dc),
                   _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),
-                  int(input_block[0]), _f64(input_block[1]), int(output_block[0]), _f64(output_block[1]), u_out, y_out)
+                  int(input_block[0]), _f64(input_block[1]), int(output_block[0]), _f64(output_block[1]),
+                  float(p_bias), bool(shift.lag), _f64(c_x), float(c_p), _f64(c_f), u_out, y_out)
     return u_out, y_out
 
 
@@ -90,54 +161,90 @@ def _check_finite(y: np.ndarray, run_id: str) -> None:
         raise InputError("model", f"run {run_id}: the simulation diverged (an unstable model or loop?)")
 
 
-def closed_loop_poles(plant: Plant, controller: StateSpace, fs: float, delay: int) -> np.ndarray:
-    """Poles (z) of the linear part of the sampled closed loop: plant (ZOH), dead time, controller
-    (forces and blocks left out).
+def closed_loop_poles(ss: StateSpace, controller, fs: float, shift: Timing) -> np.ndarray:
+    """Poles (z) of the linear part of the sampled closed loop: plant (ZOH), dead time, output
+    timing, controller (forces, blocks and offsets left out).
 
-    State [x, q_1..q_d, xc]; with r = 0: u = Cc xc - Dc C x, the plant gets q_d (or u if d = 0).
+    State [x, q_1..q_d, xc, c] (c: the lagging output read in the previous sample, if any). With
+    r = 0 the controller (Ac, Bc, Cc, Dc) of inputs [e, y] = [-y, y] reads y = c (lag) or C x, and
+    outputs u = Cc xc + (Dc[1] - Dc[0]) y; the plant gets q_d (or u if d = 0).
     """
-    Phi, Gam = stepped(plant.ss, 1.0 / fs)
-    C = plant.ss.C
-    n, nc = plant.ss.order, controller.order
-    N = n + delay + nc
-    M = np.zeros((N, N))
-    u_row = np.zeros(N)
-    u_row[:n] = -controller.D * C
-    u_row[n + delay:] = controller.C
-    M[:n, :n] = Phi
-    if delay:
-        M[:n, n + delay - 1] += Gam
-        M[n, :] = u_row
-        for i in range(1, delay):
-            M[n + i, n + i - 1] = 1.0
+    Ac, Bc, Cc, Dc = controller
+    Phi, Gam = stepped(ss, 1.0 / fs)
+    n, nc, d, lag = ss.order, Ac.shape[0], shift.delay, int(shift.lag)
+    N = n + d + nc + lag
+    read = np.zeros(N)
+    if lag:
+        read[-1] = 1.0
     else:
-        M[:n, :] += np.outer(Gam, u_row)
-    M[n + delay:, :n] = -np.outer(controller.B, C)
-    M[n + delay:, n + delay:] = controller.A
+        read[:n] = ss.C
+    u_row = (Dc[1] - Dc[0]) * read
+    u_row[n + d:n + d + nc] += Cc
+    p_row = np.zeros(N)
+    if d:
+        p_row[n + d - 1] = 1.0
+    else:
+        p_row = u_row
+    M = np.zeros((N, N))
+    M[:n, :n] = Phi
+    M[:n] += np.outer(Gam, p_row)
+    if d:
+        M[n] = u_row
+        for i in range(1, d):
+            M[n + i, n + i - 1] = 1.0
+    M[n + d:n + d + nc, n + d:n + d + nc] = Ac
+    M[n + d:n + d + nc] += np.outer(Bc[:, 1] - Bc[:, 0], read)
+    if lag:
+        c_x, c_p, _ = readout(ss, np.zeros((0, n)), 1.0 / fs, 1, shift.phi, fs)
+        M[-1, :n] = c_x
+        M[-1] += c_p * p_row
     return np.linalg.eigvals(M) if N else np.zeros(0)
+
+
+def plant_input_terms(offsets, run: Run, process: np.ndarray) -> np.ndarray:
+    """process + input offset + sum gain * channel: everything added to the command at the plant input."""
+    out = process + offsets.input
+    for name, gain in offsets.channels.items():
+        if name not in run.channels:
+            have = ", ".join(sorted(run.channels)) or "none"
+            raise InputError(f"model.input_channels.{name}", f"run {run.run_id} records no channel {name!r} "
+                                                             f"(its channels: {have})")
+        out = out + gain * run.channels[name]
+    return out
+
+
+def _controller(loop: ClosedLoop, fs: float):
+    """(Ac, Bc, Cc, Dc) of the drive's law at fs, inputs [e, y] (:func:`nlsid.models.controller.two_input`)."""
+    return two_input(discrete_path(loop.controller, fs), discrete_path(loop.measurement, fs))
 
 
 def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> Run:
     """Run ``plant`` on ``run`` (open loop: u is the plant input; closed loop: u is the reference)."""
-    ss, n = plant.ss, run.n_samples
+    ss, n, fs = plant.ss, run.n_samples, run.fs
+    if plant.difference_output:
+        ss = dataclasses.replace(ss, C=ss.C * fs)
     m = _substeps(substeps, ss, bool(plant.forces))
-    h = 1.0 / (run.fs * m)
-    delay = _delay(ss, run.fs, n, "model")
+    h = 1.0 / (fs * m)
+    shift = timing(plant, fs, n, loop is not None, loop.computation_delay if loop else 0)
     Phi, Gu = stepped(ss, h)
     controller = None
     r = ff = _EMPTY_1
     if loop is not None:
         if ss.D != 0:
             raise InputError("model", "a closed loop needs a strictly proper plant (no direct feed-through D)")
-        controller = tustin(loop.controller, 1.0 / run.fs)
-        worst = np.max(np.abs(closed_loop_poles(plant, controller, run.fs, delay)), initial=0.0)
+        controller = _controller(loop, fs)
+        worst = np.max(np.abs(closed_loop_poles(ss, controller, fs, shift)), initial=0.0)
         if worst >= 1.0:
-            raise InputError("closed_loop", f"the linear closed loop is unstable at fs = {run.fs:g} Hz "
+            raise InputError("closed_loop", f"the linear closed loop is unstable at fs = {fs:g} Hz "
                                             f"(pole with |z| = {worst:.6g} >= 1)")
-        r = run.u
-        ff = feedforward(r, run.fs, run.period is not None, loop.coulomb, loop.velocity)
-    u_out, y_out = _run_kernel(Phi, Gu, ss, plant.x0, plant.forces, m, h, delay, controller, r, ff,
-                               run.u, noise.process, noise.y, plant.input_block, plant.output_block)
+        r = run.u if loop.prefilter is None else _filter(tustin(loop.prefilter, 1.0 / fs), run.u, fs, 0)
+        ff = feedforward(run.u, fs, run.period is not None, loop.coulomb, loop.velocity)
+    kinds = np.array([f.kind for f in plant.forces], dtype=np.int64) if plant.forces else _EMPTY_I
+    params = np.array([f.params for f in plant.forces]) if plant.forces else np.zeros((0, forces.MAX_PARAMS))
+    rows, columns = _force_rows(plant, fs)
+    u_out, y_out = _run_kernel(Phi, Gu, ss, plant.x0, kinds, params, rows, columns, m, h, shift, fs, controller,
+                               r, ff, run.u, plant_input_terms(plant.offsets, run, noise.process),
+                               noise.y + plant.offsets.output, plant.input_block, plant.output_block, plant.force_bias)
     _check_finite(y_out, run.run_id)
     u_out += noise.u  # in place: a fresh 8 MB array costs ~2 ms of page faults per 1e6 samples
     if loop is None:
@@ -149,10 +256,12 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
 
 
 def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int) -> np.ndarray:
+    """An LTI block alone on the held signal x at the rate fs_step, with ``delay`` samples of dead time."""
     Phi, Gu = stepped(ss, 1.0 / fs_step)
     zero = np.zeros_like(x)
-    return _run_kernel(Phi, Gu, ss, np.zeros(ss.order), [], 1, 1.0 / fs_step, delay, None, _EMPTY_1, _EMPTY_1,
-                       x, zero, zero)[1]
+    none = np.zeros((0, ss.order))
+    return _run_kernel(Phi, Gu, ss, np.zeros(ss.order), _EMPTY_I, np.zeros((0, forces.MAX_PARAMS)), none, none, 1,
+                       1.0 / fs_step, Timing(delay), fs_step, None, _EMPTY_1, _EMPTY_1, x, zero, zero)[1]
 
 
 def simulate_structure(structure: Structure, run: Run, substeps: int | None, noise: Noise) -> Run:
@@ -166,7 +275,7 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
     if m > 1 and any(s.discrete for s in stages):
         raise InputError("simulation.substeps", "a structure with discrete-time blocks runs one step per sample")
     n = run.n_samples
-    x = np.repeat(run.u + noise.process, m)
+    x = np.repeat(run.u + plant_input_terms(structure.offsets, run, noise.process), m)
     y = np.zeros_like(x)
     for i, branch in enumerate(structure.branches):
         signal = x
@@ -177,7 +286,7 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
             else:
                 signal = stage(signal)
         y += signal
-    y = y[::m] + noise.y
+    y = y[::m] + noise.y + structure.offsets.output
     _check_finite(y, run.run_id)
     return dataclasses.replace(run, u=run.u + noise.u, y=y, r=None)
 

@@ -2,14 +2,22 @@
 
 One call simulates one run, sample by sample (k = 0 .. N-1, t_k = k Ts):
 
-1. closed loop: the controller (discrete state space, Ac, Bc, Cc, Dc) reads the measured output
-   y_m[k] = C x(t_k) + n_y[k] and the reference r[k], and outputs u[k] = Cc xc + Dc e + ff[k],
-   e = r[k] - y_m[k]; open loop: u[k] is the given input.
-2. the plant input p[k] = f_in(u[k - d] + n_p[k]) (dead time of d samples, zero before the start,
-   process noise n_p, input block f_in, :func:`block`) is held constant over [t_k, t_k+1) (the
-   DAC's zero-order hold).
-3. the output recorded is y[k] = f_out(C x(t_k) + D p[k]) + n_y[k] (output block f_out; in closed
-   loop D = 0 and the controller reads this y[k]).
+1. closed loop: the controller (discrete state space with inputs [e, y_m]: Ac, Bc (nc x 2), Cc,
+   Dc (2)) reads the measured output y_m[k] (the recorded y below, noise included) and the
+   reference r[k] (already through the prefilter), and outputs
+   u[k] = Cc xc + Dc[0] e + Dc[1] y_m + ff[k], e = r[k] - y_m[k] (:mod:`nlsid.models.controller`);
+   open loop: u[k] is the given input.
+2. the plant input p[k] = f_in(u[k - d] + n_p[k]) + p_bias (dead time of d samples, zero before
+   the start; n_p the process noise, input offset and measured input channels; input block f_in,
+   :func:`block`; p_bias a constant force term, a template's force_offset / gain) is held
+   constant over [t_k, t_k+1) (the DAC's zero-order hold).
+3. the output recorded is y[k] = f_out(y(t_k + phi Ts)) + n_y[k] (output block f_out, n_y the
+   noise and output offset), read from the state, the input and the forces of the sample by the
+   coefficients c_x, c_p, c_f: y(t_k + phi Ts) = c_x x(t_k) + c_p p[k] - sum c_f F. Without
+   ``lag``, phi = the output timing in [0, 1) (phi = 0: c_x = C, c_p = D, no c_f); with ``lag``
+   (a timing t < 0) the value read with phi = 1 + t in sample k is recorded as y[k + 1], and
+   y[0] = C x(0). In closed loop the output must not depend on this sample's input (D = 0 and
+   phi = 0, or a lag).
 4. the plant state is advanced over ``substeps`` sub-steps of h = Ts / substeps: exact ZOH
    propagation x+ = Phi x + Gamma p, then each nonlinear force in turn (:func:`force`) is
    held over the sub-step, x+ -= Gamma_F F (the laws and their numerical treatment are in
@@ -81,23 +89,26 @@ def apply_block(kind: int, p: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def _stick_or_slip(v_free: float, g: float, breakaway: float) -> bool:
-    return abs(v_free) <= g * breakaway
+def _stick_or_slip(v_free: float, g: float, breakaway: float, breakaway_neg: float) -> bool:
+    """Whether the mass sticks: the force that holds it, v_free / g, lies in [-breakaway_neg, breakaway]."""
+    return -(g * breakaway_neg) <= v_free <= g * breakaway
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True)
 def _derived(kinds: np.ndarray, p: np.ndarray, h: float, gains: np.ndarray) -> np.ndarray:
     """Per-element constants of the LuGre step for sub-step h and force gain g (computed once per
-    run): theta (:mod:`nlsid.models.forces`), 1/vs, sigma0 h, sigma1/h, 1/fc."""
-    d = np.zeros((p.shape[0], 5))
+    run): theta (:mod:`nlsid.models.forces`; the stiffness with the larger side of sigma2), 1/vs,
+    sigma0 h, sigma1/h, 1/fc for v > 0 and 1/fc for v < 0."""
+    d = np.zeros((p.shape[0], 6))
     for e in range(p.shape[0]):
         if kinds[e] == forces.LUGRE:
-            stiffness = gains[e] * (p[e, 0] * h + p[e, 1] + p[e, 2])
+            stiffness = gains[e] * (p[e, 0] * h + p[e, 1] + max(p[e, 2], p[e, 2] + p[e, 6]))
             d[e, 0] = max(0.5, 1.0 - 0.5 / stiffness) if stiffness > 0.0 else 0.5
             d[e, 1] = 1.0 / p[e, 5]
             d[e, 2] = p[e, 0] * h
             d[e, 3] = p[e, 1] / h
             d[e, 4] = 1.0 / p[e, 3]
+            d[e, 5] = 1.0 / (p[e, 3] + p[e, 7])
     return d
 
 
@@ -163,10 +174,11 @@ def _lugre(p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: 
     (an iterate that crosses zero is replaced by half the previous one), from the prediction
     v_free - g F_prev with F_prev the ``previous`` sub-step's force, until the step is below
     LUGRE_TOLERANCE (|vv| + vs). ``p`` holds the element's parameters, ``d`` its constants of
-    :func:`_derived`.
+    :func:`_derived`. The levels fc, fs and the viscous sigma2 are those of the side of zero the
+    root lies on (a continuous law: lambda and sigma2 vv vanish at vv = 0 on both sides).
     """
-    sigma0, sigma1, sigma2, fc, fs, vs = p
-    theta, inv_vs, s0h, s1h, inv_fc = d
+    sigma0, sigma1, sigma2, fc, fs, vs, d_sigma2, d_fc, d_fs = p
+    theta, inv_vs, s0h, s1h, inv_fc, inv_fc_neg = d
     a = 2.0 - 2.0 * theta  # weights of the mean and of the end value of z in the spring force
     b = 2.0 * theta - 1.0
     tg = theta * g
@@ -175,6 +187,8 @@ def _lugre(p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: 
     if r0 == 0.0:
         return sigma0 * z, z
     sd = -1.0 if r0 > 0.0 else 1.0
+    if r0 > 0.0:  # the root lies at vv < 0: that side's levels
+        sigma2, fc, fs, inv_fc = sigma2 + d_sigma2, fc + d_fc, fs + d_fs, inv_fc_neg
     vv = s_now + theta * (s_free - g * previous - s_now)
     if vv * sd <= 0.0:  # the prediction is on the wrong side: the root of R linearised at x = 0
         vv = -r0 / (1.0 + tg * (s0h * (0.5 * a + b) + sigma1 + sigma2))
@@ -212,16 +226,20 @@ def _lugre(p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: 
 def _stribeck(p: tuple, s_free: float, g: float) -> float:
     """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
 
-    Sticks while |v_free| <= g fs. Otherwise the speed w solves
+    Sticks while -g fs- <= v_free <= g fs+. Otherwise it slides on the side s, with that side's
+    fc, fs and fv (vs and delta are common), and the speed w solves
     psi(w) = w (1 + g fv) + g level(w) - |v_free| = 0 with psi(0) = g fs - |v_free| < 0 and
     psi(|v_free|) > 0, so a root is bracketed in (0, |v_free|): Newton's method, with bisection
     whenever a step leaves the bracket (the Stribeck curve's negative slope can make psi
     non-monotone when g |level'| > 1, where a plain fixed-point iteration would diverge).
     """
     fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
-    if _stick_or_slip(s_free, g, fs):
+    fs_neg = fs + p[6]
+    if _stick_or_slip(s_free, g, fs, fs_neg):
         return s_free / g
     s = 1.0 if s_free > 0 else -1.0
+    if s_free < 0:
+        fc, fs, fv = fc + p[5], fs_neg, fv + p[7]
     target = abs(s_free)
     lo, hi = 0.0, target
     w = target
@@ -256,17 +274,22 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
 
     ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
     sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
-    force held over the sub-step, ``h`` the sub-step length.
+    force held over the sub-step, ``h`` the sub-step length. The friction laws take their levels
+    for v > 0 from ``p`` and those for v < 0 as these plus the offsets of :mod:`nlsid.models.forces`.
     """
     if kind == forces.LUGRE:
         return _lugre(p, d, z, previous, s_free, s_now, g, h)
     if kind == forces.COULOMB:
         fc, fv = p[0], p[1]
-        if _stick_or_slip(s_free, g, fc):
+        fc_neg = fc + p[2]
+        if _stick_or_slip(s_free, g, fc, fc_neg):
             return s_free / g, z
-        s = 1.0 if s_free > 0 else -1.0
-        v = (s_free - g * fc * s) / (1.0 + g * fv)
-        return fc * s + fv * v, z
+        if s_free > 0:  # slides forward: F = fc+ + fv+ v
+            level = fc
+        else:  # backward: F = -fc- + fv- v
+            level, fv = -fc_neg, fv + p[3]
+        v = (s_free - g * level) / (1.0 + g * fv)
+        return level + fv * v, z
     if kind == forces.STRIBECK:
         return _stribeck(p, s_free, g), z
     # CUBIC
@@ -303,14 +326,15 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
     constants of the compiled code the force loops fold away and the state loops unroll (measured
     on the sample stage: docs/commands.md, Speed).
 
-    The kernel ``loop(phi, gamma, C, D, x0, kinds, ...)`` runs the loop described in the module
+    The kernel ``loop(phi, gamma, C, x0, kinds, ...)`` runs the loop described in the module
     docstring, fills ``u_out`` and ``y_out`` and returns the final state. ``phi`` .. ``col_pow`` are
     the closed-form coefficients of :class:`nlsid.simulate.propagation.Propagation` (their first
     axis is the number of sub-steps + 1).
     """
 
-    def loop(phi, gamma, C, D, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay, closed, Ac, Bc,
-             Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params, u_out, y_out):
+    def loop(phi, gamma, C, x0, kinds, params, row_pow, row_gamma, coupling, col_pow, h, delay, closed, Ac, Bc,
+             Cc, Dc, r, ff, u_in, process, y_noise, in_kind, in_params, out_kind, out_params, p_bias, lag, c_x, c_p,
+             c_f, u_out, y_out):
         substeps = row_pow.shape[0] - 1
         n = fixed_n if fixed_n >= 0 else phi.shape[0]
         nc = fixed_nc if fixed_nc >= 0 else Ac.shape[0]
@@ -325,20 +349,26 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
             gains[e] = coupling[0, e, e]
         derived = _derived(kinds, params, h, gains)
         buf = np.zeros(max(delay, 1))
-        p = 0.0  # plant input: the input block's output (also its memory)
+        p = 0.0  # the input block's output (also its memory); the plant input is p + p_bias
         y_m = 0.0  # plant output through the output block (also its memory)
+        carried = 0.0  # with a lagging output: the output read in the previous sample
+        for i in range(n):
+            carried += C[i] * x[i]
         for k in range(y_out.shape[0]):
-            y_now = 0.0
-            for i in range(n):
-                y_now += C[i] * x[i]
-            if closed:  # D = 0: the output does not depend on this sample's input
+            if closed:  # the output read does not depend on this sample's input (lagging, or at t_k with D = 0)
+                y_now = carried
+                if not lag:
+                    y_now = 0.0
+                    for i in range(n):
+                        y_now += C[i] * x[i]
                 y_m = block(out_kind, out_params, y_now, y_m)
-                err = r[k] - (y_m + y_noise[k])
-                u = Dc * err + ff[k]
+                measured = y_m + y_noise[k]
+                err = r[k] - measured
+                u = Dc[0] * err + Dc[1] * measured + ff[k]
                 for i in range(nc):
                     u += Cc[i] * xc[i]
                 for i in range(nc):
-                    acc = Bc[i] * err
+                    acc = Bc[i, 0] * err + Bc[i, 1] * measured
                     for j in range(nc):
                         acc += Ac[i, j] * xc[j]
                     xcn[i] = acc
@@ -353,12 +383,10 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
             else:
                 command = u
             p = block(in_kind, in_params, command + process[k], p)
-            if not closed:
-                y_m = block(out_kind, out_params, y_now + D * p, y_m)
-            y_out[k] = y_m + y_noise[k]
+            pp = p + p_bias
             for j in range(substeps if n_el else 0):
                 for e in range(n_el):
-                    s_free = row_gamma[j + 1, e] * p
+                    s_free = row_gamma[j + 1, e] * pp
                     for i in range(n):
                         s_free += row_pow[j + 1, e, i] * x[i]
                     for i in range(j + 1):
@@ -366,7 +394,7 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
                             s_free -= coupling[j - i, e, e2] * f[i, e2]
                     s_now = 0.0
                     if kinds[e] in forces.START_KINDS:  # the only laws that read the start value
-                        s_now = row_gamma[j, e] * p if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
+                        s_now = row_gamma[j, e] * pp if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
                         for i in range(n):
                             s_now += row_pow[j, e, i] * x[i]
                         for i in range(j):
@@ -375,11 +403,24 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
                     previous = f[j - 1 if j else substeps - 1, e]
                     # scalars, not array rows: an array passed to the inlined law costs two atomic
                     # reference-count updates each way per call (11 % of the kernel's time)
-                    pe = (params[e, 0], params[e, 1], params[e, 2], params[e, 3], params[e, 4], params[e, 5])
-                    de = (derived[e, 0], derived[e, 1], derived[e, 2], derived[e, 3], derived[e, 4])
+                    pe = (params[e, 0], params[e, 1], params[e, 2], params[e, 3], params[e, 4], params[e, 5],
+                          params[e, 6], params[e, 7], params[e, 8])
+                    de = (derived[e, 0], derived[e, 1], derived[e, 2], derived[e, 3], derived[e, 4], derived[e, 5])
                     f[j, e], state[e] = force(kinds[e], pe, de, state[e], previous, s_free, s_now, gains[e], h)
+            if lag or not closed:  # the output at t_k + phi Ts (phi = 0 at t_k, else the timing's fraction)
+                y_now = c_p * pp
+                for i in range(n):
+                    y_now += c_x[i] * x[i]
+                for j in range(c_f.shape[0] if n_el else 0):
+                    for e in range(n_el):
+                        y_now -= c_f[j, e] * f[j, e]
+                if lag:
+                    y_now, carried = carried, y_now
+                if not closed:
+                    y_m = block(out_kind, out_params, y_now, y_m)
+            y_out[k] = y_m + y_noise[k]
             for i in range(n):
-                acc = gamma[i] * p
+                acc = gamma[i] * pp
                 for j in range(n):
                     acc += phi[i, j] * x[j]
                 for j in range(substeps if n_el else 0):
