@@ -70,7 +70,11 @@ class ModelRunner:
         return self.kind in MECHANICAL
 
     def excitation(self, run: Run) -> Run:
-        """The run the engine needs: u is the excitation (the reference r in closed loop)."""
+        """The run the engine needs: u is the excitation (the reference r in closed loop); a range
+        part is simulated as the record it was cut from (:func:`nlsid.io.ranges.record`)."""
+        from nlsid.io.ranges import record
+
+        run = record(run)
         if not self.closed:
             return dataclasses.replace(run, r=None)
         if run.r is None:
@@ -95,8 +99,18 @@ class ModelRunner:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 
     def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
-        """Recorded-output response to a plant-input and/or output disturbance, excitation zero."""
-        return self.simulate(run, process, output, excite=False).y
+        """Recorded-output response to a plant-input and/or output disturbance, excitation zero
+        (less the response to the model's own offsets and input channels, when it has any)."""
+        y = self.simulate(run, process, output, excite=False).y
+        if self.has_offsets:
+            y = y - self.simulate(run, excite=False).y
+        return y
+
+    @property
+    def has_offsets(self) -> bool:
+        """The model moves without excitation: offsets or measured channels at its input or output."""
+        m = self.config.model
+        return bool(m.input_offset or m.output_offset or getattr(m, "force_offset", 0.0) or m.input_channels)
 
     def internal(self, run: Run) -> dict[str, np.ndarray]:
         """Signals inside the model on ``run``: ``input`` (the plant input), and for a mechanical
@@ -146,8 +160,9 @@ def _probe(data: dict, signal: str) -> dict:
 
 
 def steady_periods(run: Run, signal: np.ndarray) -> np.ndarray:
-    """The steady-state periods (P, N) of a signal of ``run``'s length (transient periods dropped)."""
-    return signal[run.transient_periods * run.period:].reshape(run.n_periods, run.period)
+    """The steady-state periods (P, N) of a signal of ``run``'s length: its last P periods (the
+    transient periods dropped; of a range part, :mod:`nlsid.io.ranges`, its range)."""
+    return signal[run.n_samples - run.n_periods * run.period:].reshape(run.n_periods, run.period)
 
 
 def steady_mean(run: Run, signal: np.ndarray) -> np.ndarray:
