@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from nlsid.errors import InputError
+
 from .common import StageCommand, emit_json, force_option, json_option, settings
 
 
@@ -14,6 +16,9 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
                                                 "HDF5 dataset path, or MCAP /topic:field. Default: u.")
 @click.option("--y", "y", metavar="NAME", help="Measured output, named like --u. Default: y, if the file has it.")
 @click.option("--r", "r", metavar="NAME", help="Reference of a closed loop, named like --u. Default: r, if the file has it.")
+@click.option("--channel", "channels", metavar="NAME=SOURCE", multiple=True,
+              help="A further measured channel NAME (e.g. d, a force the rig injects), from SOURCE named like --u "
+                   "(column, variable, dataset or /topic:field). Repeat per channel.")
 @click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5); fs is derived and checked uniform.")
 @click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors, CSV sample-rate columns and MCAP log times).")
 @click.option("--period", type=click.IntRange(min=2), help="Samples per period (skips the period search; must fit the data).")
@@ -26,7 +31,8 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @click.option("--format", "fmt", type=click.Choice(["csv", "mat", "hdf5", "mcap"]), help="Source format (default: from the file).")
 @force_option
 @json_option
-def import_(source: str, output: str, u: str | None, y: str | None, r: str | None, time: str | None, fs: float | None,
+def import_(source: str, output: str, u: str | None, y: str | None, r: str | None, channels: tuple[str, ...],
+            time: str | None, fs: float | None,
             period: int | None, transient_periods: int, split: bool, layout: str, fmt: str | None, force: bool,
             as_json: bool) -> None:
     """Import measured data from CSV/TSV, MATLAB .mat, plain HDF5 or foreign MCAP files.
@@ -42,6 +48,7 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
       nlsid import scope.csv --u CH1 --y CH2 -o recording.h5
       nlsid import old_toolbox.mat --u data.u --y data.y --fs 2048 -o recording.h5
       nlsid import log.mcap --u /cmd:effort --y /joint_states:position -o recording.h5
+      nlsid import rig.csv --u u --y y --channel d=force -o recording.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.io.importers.convert import ImportOptions, import_file, provenance_record
@@ -51,7 +58,7 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
     check_suffix(output, RECORDING_SUFFIXES)
     check_writable(output, force)
     names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
-    options = ImportOptions(names=names, time=time, fs=fs, period=period, transient_periods=transient_periods,
+    options = ImportOptions(names=names, channels=_channels(channels), time=time, fs=fs, period=period, transient_periods=transient_periods,
                             split=split, layout=layout, format=fmt)
     imported = import_file(source, options)
     record = provenance(input_paths=[source])
@@ -59,7 +66,8 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
     write_recording(output, imported.runs, provenance=record, force=force)
     summary = {
         "output": output, "source": source, "format": imported.source.format, "fs": imported.fs,
-        "fs_from": imported.fs_from, "signals": sorted(imported.source.arrays), "records": imported.records,
+        "fs_from": imported.fs_from, "signals": sorted(set(imported.source.arrays) & {"u", "y", "r"}),
+        "channels": sorted(options.channels), "records": imported.records,
         "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
     }
     if as_json:
@@ -68,10 +76,24 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
         _print(summary)
 
 
+def _channels(items: tuple[str, ...]) -> dict[str, str]:
+    """``--channel d=force`` options as ``{"d": "force"}`` (names are checked by the importer)."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, where = item.partition("=")
+        if not sep or not name or not where:
+            raise InputError("--channel", f"expected NAME=SOURCE (e.g. d=force), got {item!r}")
+        if name in out:
+            raise InputError("--channel", f"channel {name} is given twice")
+        out[name] = where
+    return out
+
+
 def _print(summary: dict) -> None:
     console = settings().console
+    channels = f", channels {', '.join(summary['channels'])}" if summary["channels"] else ""
     console.print(f"{summary['source']} ({summary['format']}, fs = {summary['fs']:.9g} Hz from {summary['fs_from']}, "
-                  f"signals {', '.join(summary['signals'])}) -> {summary['output']}: {summary['runs']} run(s)")
+                  f"signals {', '.join(summary['signals'])}{channels}) -> {summary['output']}: {summary['runs']} run(s)")
     for record in summary["records"]:
         inf = record["inference"]
         console.print(f"  {record['record']}: {_headline(inf)} (inferred from {record['inferred_from']})")

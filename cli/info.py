@@ -16,6 +16,7 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     """Check a recording (HDF5 or MCAP) against the format, list its runs and the stages it can feed.
 
     Every run is read and validated, so a zero exit code means every later stage can read it.
+    Each run's signals (u, y, r) and further measured channels are listed.
     Each stage that reads recordings (bla, hosidf, diagnose, fit --model, simulate --excitation)
     is then checked with the stage's own checks: whether the file can feed it, the stage's error
     when not, and notes on what depends on options (for the default options).
@@ -41,7 +42,7 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
                 "level": run.level, "frequency": run.frequency, "realization": run.realization,
                 "excited_lines": None if run.excited_bins is None else int(run.excited_bins.size),
                 "signals": [name for name in ("u", "y", "r") if getattr(run, name) is not None],
-                "params": run.params,
+                "channels": sorted(run.channels), "params": run.params,
             })
     stages = {stage: verdict.summary() for stage, verdict in survey.verdicts().items()}
     if as_json:
@@ -54,9 +55,15 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     table.add_column("run", no_wrap=True)
     for column in ("kind", "fs", "period", "periods", "level", "frequency", "signals"):
         table.add_column(column)
+    channels = any(row["channels"] for row in runs)
+    if channels:
+        table.add_column("channels", overflow="fold")  # names in full, one a line
     for row in runs:
-        table.add_row(*[Text(_cell(row[c])) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")],
-                      ",".join(row["signals"]))
+        cells = [Text(_cell(row[c])) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")]
+        cells.append(",".join(row["signals"]))
+        if channels:
+            cells.append(Text("\n".join(row["channels"]) or "-"))
+        table.add_row(*cells)
     console = settings().console
     console.print(table)
     feeds = Table(title="stages this recording can feed")

@@ -12,7 +12,8 @@ from .common import StageCommand, emit_json, force_option, json_option, progress
 @click.command(cls=StageCommand)
 @click.argument("config", type=click.Path(dir_okay=False))
 @click.option("--excitation", "excitation", required=True, type=click.Path(dir_okay=False),
-              help="Excitation file from `nlsid design` (its u is the plant input, or the reference in closed loop).")
+              help="Excitation file from `nlsid design`, or a recording (its u is the plant input; in closed loop "
+                   "the reference is r where a run has one, else u).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Recording to write (.h5 or .mcap).")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
@@ -26,7 +27,8 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
 
     Each excitation run gives one recording run with the same id and attributes (one per sweep
     value, ``<id>_s<k>``, with the value in the run's params). Closed loop: the recording holds
-    r (the excitation), u (controller output + feed-forward) and y.
+    r (the reference: the input run's r where it has one, else its u), u (controller output +
+    feed-forward) and y. Further measured channels of an input run are copied unchanged.
 
     Example:
 

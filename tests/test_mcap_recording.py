@@ -120,7 +120,7 @@ def test_layout_read_with_the_mcap_package_alone(tmp_path):
         assert {s.name for s in summary.schemas.values()} == {"nlsid.Run", "nlsid.SampleBlock"}
         (meta,) = list(reader.iter_metadata())
         assert meta.name == "nlsid" and meta.metadata["nlsid_format"] == "recording"
-        assert meta.metadata["nlsid_format_version"] == "1"
+        assert meta.metadata["nlsid_format_version"] == "2"
         starts = {json.loads(m.data)["run"]: m.log_time for _, _, m in reader.iter_messages(topics=["/nlsid/run"])}
         # ms_00: 768 samples at 1 kHz end at 0.768 s -> next run at the first whole second >= 1.768 s = 2 s.
         # sine_03: 400 samples at 3333.3 Hz end at 2.12 s -> next at 4 s (first whole second >= 3.12 s).

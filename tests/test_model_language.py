@@ -148,6 +148,26 @@ def test_input_and_output_offsets():
     assert np.array_equal(out.u, u)  # the recorded u stays the command
 
 
+def test_a_measured_channel_enters_the_plant_input_with_its_gain():
+    u, d = excitation(), excitation(seed=2)
+    out = simulate({"model": {**RESONANCE, "input_offset": 0.1, "input_channels": {"d": 2.5}}}, u, channels={"d": d})
+    assert close(out.y, delayed_response(u + 0.1 + 2.5 * d, 0.0))
+
+
+def test_a_channel_the_run_lacks_is_named():
+    with pytest.raises(InputError, match="records no channel 'd'"):
+        simulate({"model": {**RESONANCE, "input_channels": {"d": 1.0}}}, excitation(100))
+
+
+def test_a_structure_takes_offsets_and_channels():
+    u, d = excitation(), excitation(seed=3)
+    wiener = {"type": "wiener", "linear": RESONANCE, "nonlinear": {"type": "polynomial", "coefficients": [0.0, 1.0, 0.5]},
+              "input_offset": -0.2, "output_offset": 0.05, "input_channels": {"d": -1.0}}
+    out = simulate({"model": wiener}, u, channels={"d": d})
+    x = delayed_response(u - 0.2 - d, 0.0)
+    assert close(out.y, x + 0.5 * x ** 2 + 0.05)
+
+
 def test_force_offset_is_a_constant_force_on_the_mass():
     """m p'' + c p' + k p = gain u + F0: the ZOH solution with the input u + F0 / gain."""
     m, c, k, gain, f0 = 2.0, 30.0, 5e3, 4.0, -3.0

@@ -5,10 +5,12 @@ output gives the missing force directly,
 
     F_nl(t) = gain u(t) - m p''(t) - c p'(t) - k p(t),
 
-and each force law of the config is linear in its parameters: Coulomb fc sign(v) + fv v, cubic
-stiffness k3 p^3. Least squares of F_nl on those candidate signals gives fc, fv and k3 without a
-single simulation. Signals: the mean over the steady-state periods of each run (noise down by P);
-derivatives by the DFT (exact for a periodic band-limited signal: X'(k) = j 2 pi k fs/N X(k)),
+and each force law of the config is linear in its parameters: Coulomb fc sign(v) + fv v (per
+direction: fc_pos [v > 0] - fc_neg [v < 0] + fv_pos v [v > 0] + fv_neg v [v < 0]), cubic
+stiffness k3 p^3. Least squares of F_nl on those candidate signals gives fc, fv (or their sides)
+and k3 without a single simulation. Signals: the mean over the steady-state periods of each run
+(noise down by P); derivatives by the DFT (exact for a periodic band-limited signal:
+X'(k) = j 2 pi k fs/N X(k)),
 keeping the lines up to HARMONICS times the highest excited line, which holds the forces'
 low harmonics and drops the noise that differentiation amplifies. Samples at low speed are left out: while a mass
 sticks the friction force is anything within +-fc (not fc sign(v)), and the band-limited
@@ -28,7 +30,8 @@ from nlsid.io.run import Run
 
 HARMONICS = 7
 SLIDING = 0.2   # samples with |v| below SLIDING x rms(v) are left out (sticking, sign changes)
-_CANDIDATES = {"coulomb": ("fc", "fv"), "cubic_stiffness": ("k3",)}
+_FRICTION = ("fc", "fv", "fc_pos", "fc_neg", "fv_pos", "fv_neg")
+_CANDIDATES = {"coulomb": _FRICTION, "cubic_stiffness": ("k3",)}
 
 
 def _kinematics(y: np.ndarray, fs: float, keep: int, output: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -46,8 +49,8 @@ def _kinematics(y: np.ndarray, fs: float, keep: int, output: str) -> tuple[np.nd
 
 def force_regression(config_data: dict, runs: Sequence[Run], paths: Sequence[str]) -> dict[str, float]:
     """Start values of the free force parameters ``paths`` (``model.nonlinearities[i].fc``, ``.fv``,
-    ``.k3``) of a mass-spring-damper config from periodic runs (``u`` is the plant input, in open
-    or closed loop). The other force parameters keep their config values; their forces are
+    their sides ``.fc_pos`` ... ``.fv_neg``, ``.k3``) of a mass-spring-damper config from periodic
+    runs (``u`` is the plant input, in open or closed loop). The other force parameters keep their config values; their forces are
     subtracted from the residual force first."""
     model = config_data.get("model", {})
     if model.get("type") != "mass_spring_damper":
@@ -57,11 +60,11 @@ def force_regression(config_data: dict, runs: Sequence[Run], paths: Sequence[str
     free = [(i, name) for i, name in names if f"model.nonlinearities[{i}].{name}" in paths]
     missing = set(paths) - {f"model.nonlinearities[{i}].{name}" for i, name in free}
     if missing:
-        raise InputError("free", f"{sorted(missing)[0]}: force regression estimates only fc, fv (coulomb) and k3 "
-                                 "(cubic_stiffness) of a mass_spring_damper")
+        raise InputError("free", f"{sorted(missing)[0]}: force regression estimates only fc, fv, fc_pos, fc_neg, "
+                                 "fv_pos, fv_neg (coulomb) and k3 (cubic_stiffness) of a mass_spring_damper")
     m, c, k = model["mass"], model.get("damping", 0.0), model.get("stiffness", 0.0)
     gain = model.get("gain", 1.0)
-    friction = any(name in ("fc", "fv") for _, name in free)
+    friction = any(name in _FRICTION for _, name in free)
     rows, target = [], []
     for run in runs:
         if run.period is None or run.excited_bins is None:
@@ -69,7 +72,9 @@ def force_regression(config_data: dict, runs: Sequence[Run], paths: Sequence[str
         keep = min(HARMONICS * int(run.excited_bins[-1]), run.period // 2 - 1)
         p, v, a = _kinematics(run.periods("y").mean(axis=0), run.fs, keep, model.get("output", "position"))
         u = run.periods("u").mean(axis=0)
-        signals = {"fc": np.sign(v), "fv": v, "k3": p ** 3}
+        forward, backward = v > 0, v < 0
+        signals = {"fc": np.sign(v), "fv": v, "fc_pos": forward * 1.0, "fc_neg": -1.0 * backward,
+                   "fv_pos": v * forward, "fv_neg": v * backward, "k3": p ** 3}
         force = gain * u - m * a - c * v - k * p
         for i, name in names:
             if (i, name) not in free:

@@ -2,9 +2,12 @@
 
 Layout::
 
-    /                 attrs nlsid_format ("recording" or "excitation"), nlsid_format_version=1, provenance
+    /                 attrs nlsid_format ("recording" or "excitation"), nlsid_format_version=2, provenance
     /runs/<run-id>/   attrs fs, kind, period, transient_periods, realization, level, frequency,
                       excited_bins, params; datasets u, y, r (attr unit)
+    /runs/<run-id>/channels/<name>   further measured channels (attr unit); version 2, absent if none
+
+Version 1 files (no channels) are read as before: their ``channels`` member, if any, is ignored.
 """
 
 from __future__ import annotations
@@ -21,9 +24,10 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import SIGNALS, Run, make_run
+from nlsid.io.run import SIGNALS, Run, check_channel_name, make_run
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)  # version 2 added /runs/<run-id>/channels
 FORMATS = ("recording", "excitation")
 
 # What h5py raises for a damaged file (HDF5 library errors, found by tests/test_fuzz_inputs.py):
@@ -95,13 +99,13 @@ class HDF5Recording(RecordingReader):
         self.require_y = require_y
         self._file = _open(self.path)
         try:
-            self.format, self.provenance = self._check_root()
+            self.format, self.version, self.provenance = self._check_root()
             self.run_ids = self._list_runs()
         except Exception:
             self._file.close()
             raise
 
-    def _check_root(self) -> tuple[str, dict]:
+    def _check_root(self) -> tuple[str, int, dict]:
         where = f"{self.path}:/"
         with hdf5_damage(where):
             attrs = self._file.attrs
@@ -110,9 +114,10 @@ class HDF5Recording(RecordingReader):
             found = "is missing" if fmt is None else f"is {fmt!r}"
             raise InputError(where, f"attribute nlsid_format {found}, expected 'recording' (see docs/formats.md)")
         first = _first(version)
-        if first is None or first != FORMAT_VERSION:
+        if first is None or first not in READ_VERSIONS:
             found = "is missing" if version is None else f"is {first}"
-            raise InputError(where, f"attribute nlsid_format_version {found}, expected {FORMAT_VERSION}")
+            raise InputError(where, f"attribute nlsid_format_version {found}, expected "
+                                    f"{' or '.join(map(str, READ_VERSIONS))} (a file of a newer nlsid?)")
         if self.require_y and fmt == "excitation":
             raise _excitation_error(self.path)
         text = _text(text)
@@ -122,7 +127,7 @@ class HDF5Recording(RecordingReader):
             raise InputError(where, f"attribute provenance is not JSON ({exc})") from None
         if not isinstance(provenance, dict):
             raise InputError(where, f"attribute provenance is JSON of a {type(provenance).__name__}, expected an object")
-        return fmt, provenance
+        return fmt, int(first), provenance
 
     def _list_runs(self) -> list[str]:
         with hdf5_damage(f"{self.path}:/runs"):
@@ -147,20 +152,36 @@ class HDF5Recording(RecordingReader):
             group = self._file["runs"][run_id]
             attrs = dict(group.attrs)
             present = [name for name in SIGNALS if name in group]
-        signals, units = {}, {}
-        for name in present:
-            with hdf5_damage(f"{where}/{name}"):
-                dataset = group[name]
-                if not isinstance(dataset, h5py.Dataset):
-                    raise InputError(f"{where}/{name}", "expected a dataset")
-                signals[name] = dataset[()]
-                unit = _text(dataset.attrs.get("unit"))
-            if unit is not None:
-                units[name] = unit
-        return make_run(run_id, attrs, signals, where, self.require_y, units)
+            extra = self.version >= 2 and "channels" in group
+        units: dict[str, str] = {}
+        signals = {name: _dataset(group, name, f"{where}/{name}", units) for name in present}
+        channels = {}
+        if extra:
+            with hdf5_damage(f"{where}/channels"):
+                folder = group["channels"]
+                if not isinstance(folder, h5py.Group):
+                    raise InputError(f"{where}/channels", "expected a group of channel datasets")
+                names = [link_name(name) for name in folder]
+            for name in names:  # before reading: a name that is not UTF-8 could not be looked up
+                check_channel_name(name, f"{where}/channels/{name}")
+            channels = {name: _dataset(folder, name, f"{where}/channels/{name}", units) for name in names}
+        return make_run(run_id, attrs, signals, where, self.require_y, units, channels)
 
     def close(self) -> None:
         self._file.close()
+
+
+def _dataset(group: h5py.Group, name: str, where: str, units: dict[str, str]):
+    """The samples of dataset ``name`` of ``group``; its unit, if any, goes to ``units[name]``."""
+    with hdf5_damage(where):
+        dataset = group[name]
+        if not isinstance(dataset, h5py.Dataset):
+            raise InputError(where, "expected a dataset")
+        samples = dataset[()]
+        unit = _text(dataset.attrs.get("unit"))
+    if unit is not None:
+        units[name] = unit
+    return samples
 
 
 def write_hdf5_recording(
@@ -195,6 +216,14 @@ def _write_run(parent: h5py.Group, run: Run) -> None:
     for name in SIGNALS:
         signal = getattr(run, name)
         if signal is not None:
-            dataset = group.create_dataset(name, data=np.asarray(signal, dtype=np.float64))
-            if name in run.units:
-                dataset.attrs["unit"] = run.units[name]
+            _write_samples(group, name, signal, run.units.get(name))
+    if run.channels:
+        folder = group.create_group("channels")
+        for name, samples in run.channels.items():
+            _write_samples(folder, name, samples, run.units.get(name))
+
+
+def _write_samples(group: h5py.Group, name: str, samples: np.ndarray, unit: str | None) -> None:
+    dataset = group.create_dataset(name, data=np.asarray(samples, dtype=np.float64))
+    if unit is not None:
+        dataset.attrs["unit"] = unit

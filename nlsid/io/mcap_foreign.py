@@ -1,6 +1,7 @@
 """Read a foreign MCAP file (JSON topics, ROS 2 topics) as one arbitrary run.
 
 A mapping names where each signal lives: ``{"u": "/cmd:effort", "y": "/joint:state.position"}``,
+and each further measured channel (key ``channels.NAME``, e.g. ``{"channels.d": "/rig:force"}``),
 a topic and a dotted path into each decoded message (a JSON object or a ROS 2 message,
 :mod:`nlsid.io.mcap_messages`); a path element that is a whole number indexes a list
 (``/joint_states:position.0``, joint 0). A message holds one sample (a number) or several (a list
@@ -21,7 +22,7 @@ from mcap.reader import SeekingReader
 from nlsid.errors import InputError
 from nlsid.io.mcap_file import channels_and_schemas, checked
 from nlsid.io.mcap_messages import READABLE, decoder_for, message_fields, shown, unreadable
-from nlsid.io.run import SIGNALS, Run, make_run
+from nlsid.io.run import CHANNEL_KEY, SIGNALS, Run, check_channel_name, make_run
 from nlsid.io.timestamps import check_aligned, uniform_sampling
 
 
@@ -101,18 +102,22 @@ def unmapped_output() -> InputError:
 def read_foreign_run(
     path: Path, handle: BinaryIO, reader: SeekingReader, mapping: dict[str, str], require_y: bool
 ) -> tuple[Run, dict]:
-    """Read the mapped signals of a foreign MCAP file into one ``"arbitrary"`` run.
+    """Read the mapped signals and channels of a foreign MCAP file into one ``"arbitrary"`` run.
 
     Returns the run (named after the file) and a provenance record naming the source and mapping.
     """
-    unknown = sorted(set(mapping) - set(SIGNALS))
+    unknown = sorted(k for k in mapping if k not in SIGNALS and not k.startswith(CHANNEL_KEY))
     if unknown:
-        raise InputError("--map", f"signals are u, y and r, got {', '.join(unknown)}")
+        raise InputError("--map", f"signals are u, y and r, got {', '.join(unknown)} "
+                                  f"(map a further measured channel NAME as {CHANNEL_KEY}NAME)")
+    for key in mapping:
+        if key.startswith(CHANNEL_KEY):
+            check_channel_name(key[len(CHANNEL_KEY):], f"--map {key}")
     if "u" not in mapping:
         raise InputError("--map", "map the input too: --map u=/topic:field")
     if require_y and "y" not in mapping:
         raise unmapped_output()
-    sources = {name: parse_source(name, mapping[name]) for name in SIGNALS if name in mapping}
+    sources = {name: parse_source(name, source) for name, source in mapping.items()}
     channels, schemas = channels_and_schemas(handle, reader, str(path))
     for name, (topic, _) in sources.items():
         channel = channels.get(topic)
@@ -141,7 +146,9 @@ def read_foreign_run(
     for name in sampling:
         if name != "u":
             check_aligned(sampling["u"], sampling[name], ("u", name), f"{path}: --map {mapping['u']} and {mapping[name]}")
-    run = make_run(path.stem, {"fs": sampling["u"].fs, "kind": "arbitrary"}, signals, str(path), require_y)
+    measured = {name[len(CHANNEL_KEY):]: signals.pop(name) for name in list(signals) if name.startswith(CHANNEL_KEY)}
+    run = make_run(path.stem, {"fs": sampling["u"].fs, "kind": "arbitrary"}, signals, str(path), require_y,
+                   channels=measured)
     header = reader.get_header()
     provenance = {
         "source": str(path),

@@ -2,11 +2,15 @@
 
 Layout (every message JSON-encoded, every channel with a JSON schema, zstd-compressed chunks)::
 
-    metadata "nlsid"   nlsid_format ("recording"/"excitation"), nlsid_format_version ("1"), provenance (JSON)
+    metadata "nlsid"   nlsid_format ("recording"/"excitation"), nlsid_format_version ("2"), provenance (JSON)
     /nlsid/run         one message per run: the HDF5 run attributes (fs, kind, period, ...,
-                       excited_bins as integers, params as an object) plus run, n_samples, signals, units
+                       excited_bins as integers, params as an object) plus run, n_samples, signals,
+                       channels (version 2; absent if none), units
     /nlsid/u, /y, /r   sample blocks {"run", "start", "data"}: up to BLOCK_SAMPLES samples from
                        sample index ``start``, ``data`` = base64 of little-endian IEEE 754 float64
+    /nlsid/channel/<name>  sample blocks of a further measured channel (version 2)
+
+Version 1 files (no channels) are read as before: a ``channels`` field of their run messages is ignored.
 
 Time line: log times are nanoseconds on a synthetic clock; they do not say when the data were
 measured (the recording format does not carry that). The first run starts at ``t0 = 0``; each
@@ -38,13 +42,15 @@ from nlsid.io.atomic import atomic_path
 from nlsid.io.mcap_file import channels_by_topic, checked, open_mcap
 from nlsid.io.mcap_foreign import read_foreign_run, unmapped_output
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import SIGNALS, Run, make_run
+from nlsid.io.run import SIGNALS, Run, check_channel_name, make_run
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = ("1", "2")  # version 2 added channels
 FORMATS = ("recording", "excitation")
 METADATA_NAME = "nlsid"
 RUN_TOPIC = "/nlsid/run"
 SIGNAL_TOPICS = {name: f"/nlsid/{name}" for name in SIGNALS}
+CHANNEL_TOPIC = "/nlsid/channel/"  # + channel name
 BLOCK_SAMPLES = 4096  # 32 KiB of float64 per message: about 0.07 s per 1e6 samples to write or read
 SECOND_NS = 1_000_000_000
 SAMPLE_DTYPE = np.dtype("<f8")
@@ -69,6 +75,8 @@ RUN_SCHEMA = {
         "params": {"type": "object", "description": "experiment parameters, e.g. {\"K_fc\": 0.12}"},
         "n_samples": {"type": "integer", "minimum": 1},
         "signals": {"type": "array", "items": {"enum": ["u", "y", "r"]}, "description": "signals with sample blocks"},
+        "channels": {"type": "array", "items": {"type": "string", "pattern": "^[A-Za-z_][A-Za-z0-9_]*$"},
+                     "description": "further measured channels, with sample blocks on /nlsid/channel/<name>"},
         "units": {"type": "object", "additionalProperties": {"type": "string"}},
     },
 }
@@ -84,7 +92,7 @@ BLOCK_SCHEMA = {
         "data": {"type": "string", "contentEncoding": "base64", "description": "little-endian IEEE 754 float64 samples"},
     },
 }
-_OWN_KEYS = ("run", "n_samples", "signals", "units")
+_OWN_KEYS = ("run", "n_samples", "signals", "channels", "units")
 
 
 def _excitation_error(path: Path) -> InputError:
@@ -111,14 +119,14 @@ class MCAPRecording(RecordingReader):
                 self.run_ids = [run.run_id]
             else:
                 self._foreign = {}
-                self.format, self.provenance = self._check_metadata()
+                self.format, self.version, self.provenance = self._check_metadata()
                 self._runs = self._list_runs()
                 self.run_ids = sorted(self._runs)
         except BaseException:
             self._handle.close()
             raise
 
-    def _check_metadata(self) -> tuple[str, dict]:
+    def _check_metadata(self) -> tuple[str, int, dict]:
         records = [m for m in checked(self._reader.iter_metadata(), str(self.path)) if m.name == METADATA_NAME]
         if len(records) != 1:
             topics = ", ".join(sorted(channels_by_topic(self._handle, self._reader, str(self.path)))) or "(none)"
@@ -132,11 +140,13 @@ class MCAPRecording(RecordingReader):
         fmt = meta.get("nlsid_format")
         if fmt not in FORMATS:
             raise InputError(where, f"nlsid_format must be 'recording' or 'excitation', got {fmt!r}")
-        if meta.get("nlsid_format_version") != str(FORMAT_VERSION):
-            raise InputError(where, f"nlsid_format_version must be '{FORMAT_VERSION}', got {meta.get('nlsid_format_version')!r}")
+        version = meta.get("nlsid_format_version")
+        if version not in READ_VERSIONS:
+            expected = " or ".join(f"'{v}'" for v in READ_VERSIONS)
+            raise InputError(where, f"nlsid_format_version must be {expected}, got {version!r} (a file of a newer nlsid?)")
         if self.require_y and fmt == "excitation":
             raise _excitation_error(self.path)
-        return fmt, _json_object(meta.get("provenance", "{}"), f"{where}.provenance")
+        return fmt, int(version), _json_object(meta.get("provenance", "{}"), f"{where}.provenance")
 
     def _list_runs(self) -> dict[str, tuple[dict, int, int | None]]:
         """Each run's message and time window ``[start, end)`` (``end`` None for the last run)."""
@@ -175,16 +185,20 @@ class MCAPRecording(RecordingReader):
             return self._foreign[run_id]
         meta, start, end = self._runs[run_id]
         where = self.run_where(run_id)
-        n_samples, names, units = _own_fields(meta, where)
-        signals = self._read_signals(run_id, names, n_samples, start, end)
+        n_samples, names, channel_names, units = _own_fields(meta, where, self.version)
+        topics = {name: SIGNAL_TOPICS[name] for name in names} | {name: CHANNEL_TOPIC + name for name in channel_names}
+        samples = self._read_signals(run_id, topics, n_samples, start, end)
         attrs = {k: v for k, v in meta.items() if k not in _OWN_KEYS}
         if "params" in attrs and not isinstance(attrs["params"], str):
             attrs["params"] = json.dumps(attrs["params"])
-        return make_run(run_id, attrs, signals, where, self.require_y, units)
+        signals = {name: samples[name] for name in names}
+        channels = {name: samples[name] for name in channel_names}
+        return make_run(run_id, attrs, signals, where, self.require_y, units, channels)
 
-    def _read_signals(self, run_id: str, names: list[str], n_samples: int, start: int, end: int | None) -> dict[str, np.ndarray]:
-        blocks: dict[str, list[tuple[int, bytes]]] = {name: [] for name in names}
-        topic_names = {SIGNAL_TOPICS[name]: name for name in names}
+    def _read_signals(self, run_id: str, topics: dict[str, str], n_samples: int, start: int, end: int | None) -> dict[str, np.ndarray]:
+        """The samples of each signal or channel (name -> its topic) of one run."""
+        blocks: dict[str, list[tuple[int, bytes]]] = {name: [] for name in topics}
+        topic_names = {topic: name for name, topic in topics.items()}
         messages = self._reader.iter_messages(
             topics=sorted(topic_names), starting_at=start, ending_before=end, log_time_order=False)
         for _, channel, message in checked(messages, str(self.path)):
@@ -196,7 +210,7 @@ class MCAPRecording(RecordingReader):
             if isinstance(first, bool) or not isinstance(first, int) or first < 0:
                 raise InputError(where, f"field 'start' must be an integer >= 0, got {first!r}")
             blocks[topic_names[channel.topic]].append((first, _decode_samples(block.get("data"), where)))
-        return {name: _assemble(parts, n_samples, f"{self.path}:{SIGNAL_TOPICS[name]}[{run_id}]") for name, parts in blocks.items()}
+        return {name: _assemble(parts, n_samples, f"{self.path}:{topics[name]}[{run_id}]") for name, parts in blocks.items()}
 
     def close(self) -> None:
         self._handle.close()
@@ -212,18 +226,24 @@ def _json_object(data: bytes | str, where: str) -> dict:
     return obj
 
 
-def _own_fields(meta: dict, where: str) -> tuple[int, list[str], dict[str, str]]:
-    """The run message's fields beyond the HDF5 attributes: n_samples, signals, units."""
+def _own_fields(meta: dict, where: str, version: int) -> tuple[int, list[str], list[str], dict[str, str]]:
+    """The run message's fields beyond the HDF5 attributes: n_samples, signals, channels (from
+    version 2 on; [] before), units."""
     n_samples = meta.get("n_samples")
     if isinstance(n_samples, bool) or not isinstance(n_samples, int) or n_samples < 1:
         raise InputError(f"{where}.n_samples", f"expected an integer >= 1, got {n_samples!r}")
     names = meta.get("signals")
     if not isinstance(names, list) or "u" not in names or not set(names) <= set(SIGNALS) or len(set(names)) != len(names):
         raise InputError(f"{where}.signals", f"expected a list of distinct names from u, y, r including u, got {names!r}")
+    channels = meta.get("channels", []) if version >= 2 else []
+    if not isinstance(channels, list) or len(set(map(str, channels))) != len(channels):
+        raise InputError(f"{where}.channels", f"expected a list of distinct channel names, got {channels!r}")
+    for name in channels:
+        check_channel_name(name, f"{where}/channels/{name}")
     units = meta.get("units", {})
     if not isinstance(units, dict) or not all(isinstance(v, str) for v in units.values()):
         raise InputError(f"{where}.units", f"expected an object of unit strings, got {units!r}")
-    return n_samples, names, units
+    return n_samples, names, channels, units
 
 
 def _decode_samples(data: Any, where: str) -> bytes:
@@ -309,6 +329,8 @@ def run_message(run: Run) -> dict[str, Any]:
         meta["params"] = run.params
     meta["n_samples"] = run.n_samples
     meta["signals"] = [name for name in SIGNALS if getattr(run, name) is not None]
+    if run.channels:
+        meta["channels"] = list(run.channels)
     if run.units:
         meta["units"] = dict(run.units)
     return meta
@@ -316,14 +338,15 @@ def run_message(run: Run) -> dict[str, Any]:
 
 def _write_run(writer: Writer, channels: _Channels, run: Run, t0: int) -> None:
     writer.add_message(channels[RUN_TOPIC], t0, json.dumps(run_message(run)).encode(), t0)
-    signals = {name: np.asarray(getattr(run, name), dtype=SAMPLE_DTYPE)
+    signals = {SIGNAL_TOPICS[name]: np.asarray(getattr(run, name), dtype=SAMPLE_DTYPE)
                for name in SIGNALS if getattr(run, name) is not None}
+    signals |= {CHANNEL_TOPIC + name: np.asarray(x, dtype=SAMPLE_DTYPE) for name, x in run.channels.items()}
     for first in range(0, run.n_samples, BLOCK_SAMPLES):
         log_time = t0 + round(first * SECOND_NS / run.fs)
-        for name, samples in signals.items():
+        for topic, samples in signals.items():
             data = base64.b64encode(samples[first:first + BLOCK_SAMPLES].tobytes()).decode("ascii")
             block = json.dumps({"run": run.run_id, "start": first, "data": data}).encode()
-            writer.add_message(channels[SIGNAL_TOPICS[name]], log_time, block, log_time)
+            writer.add_message(channels[topic], log_time, block, log_time)
 
 
 def _next_start(t0: int, run: Run) -> int:

@@ -186,12 +186,6 @@ class _SidedFriction(StrictModel):
         pos, neg = getattr(self, name + "_pos"), getattr(self, name + "_neg")
         return (0.0, 0.0) if pos is None else (float(pos), float(neg))
 
-    def mean(self, name: str) -> float:
-        """The mean of the two directions' values: the symmetric level of a sided quantity, for a
-        consumer that takes one level."""
-        pos, neg = self.sides(name)
-        return 0.5 * (pos + neg)
-
 
 class CoulombConfig(_SidedFriction):
     """Coulomb + viscous friction F = fc sign(v) + fv v on the velocity of mass ``at``; per direction

@@ -12,7 +12,7 @@ from typing import Iterable
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import HDF5Recording, write_hdf5_recording
-from nlsid.io.run import SIGNALS, Run
+from nlsid.io.run import SIGNALS, Run, check_channel_name
 
 MCAP_MAGIC = b"\x89MCAP"
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -41,7 +41,8 @@ def container_of(path: str | os.PathLike) -> str:
 def open_recording(path: str | os.PathLike, require_y: bool = True, mapping: dict[str, str] | None = None):
     """Open a recording for reading run by run (a context manager with ``run_ids`` and ``load``).
 
-    ``mapping`` reads a foreign MCAP file: signal name (``u``, ``y``, ``r``) to ``/topic:field``.
+    ``mapping`` reads a foreign MCAP file: signal name (``u``, ``y``, ``r``, or ``channels.NAME`` for a
+    further measured channel) to ``/topic:field``.
     """
     if container_of(path) == "mcap":
         from nlsid.io.mcap_recording import MCAPRecording
@@ -61,8 +62,9 @@ def read_runs(path: str | os.PathLike, require_y: bool = True, mapping: dict[str
 def write_recording(path: str | os.PathLike, runs: Iterable[Run], provenance: dict | None = None, force: bool = False) -> Path:
     """Write runs atomically, in MCAP when ``path`` ends in ``.mcap`` and in HDF5 otherwise.
 
-    A run with a NaN or Inf sample is refused (InputError naming the run and signal) and nothing
-    is written: no stage writes non-finite samples as if they were measured or designed.
+    A run with a NaN or Inf sample is refused (InputError naming the run and signal or channel)
+    and nothing is written: no stage writes non-finite samples as if they were measured or designed.
+    Neither is a channel whose name the readers refuse.
     """
     runs = _finite(path, runs)
     if Path(path).suffix.lower() == ".mcap":
@@ -77,8 +79,10 @@ def _finite(path: str | os.PathLike, runs: Iterable[Run]) -> Iterable[Run]:
     import numpy as np
 
     for run in runs:
-        for name in SIGNALS:
-            signal = getattr(run, name)
+        for name in run.channels:
+            check_channel_name(name, f"{path}:/runs/{run.run_id}/channels/{name}")
+        named = [(name, getattr(run, name)) for name in SIGNALS] + [(f"channels/{k}", v) for k, v in run.channels.items()]
+        for name, signal in named:
             if signal is None:
                 continue
             bad = ~np.isfinite(signal)

@@ -1,4 +1,5 @@
-"""One run of a recording: a continuous record of u, y (and r) with its excitation metadata.
+"""One run of a recording: a continuous record of u, y (and r, and further measured channels) with
+its excitation metadata.
 
 This is the in-memory form of the recording format of ``docs/formats.md``. The HDF5 and MCAP
 readers both parse their attributes through :func:`parse_run_attrs` and check the arrays through
@@ -9,7 +10,8 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+import re
+from dataclasses import dataclass, field, fields
 from typing import Any, Mapping
 
 import numpy as np
@@ -27,7 +29,9 @@ class Run:
     """A continuous record and its excitation metadata (see ``docs/formats.md``).
 
     ``u`` is always present; ``y`` is ``None`` in an excitation file (before simulation or
-    measurement); ``r`` is the reference of closed-loop experiments.
+    measurement); ``r`` is the reference of closed-loop experiments. ``channels`` holds further
+    measured signals by name (e.g. ``d``, a force pulse injected by the rig), each as long as
+    ``u``; ``units`` may give the unit of a channel as of a signal.
     """
 
     run_id: str
@@ -44,6 +48,7 @@ class Run:
     excited_bins: np.ndarray | None = None
     params: dict = field(default_factory=dict)
     units: dict = field(default_factory=dict)
+    channels: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n_samples(self) -> int:
@@ -227,6 +232,26 @@ def check_lengths(n: dict[str, int], kw: Mapping, where: str) -> None:
         )
 
 
+CHANNEL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+#: ``CHANNEL_KEY + NAME`` names channel NAME beside u, y, r in a mapping of sources (``--map``, importers).
+CHANNEL_KEY = "channels."
+#: Names a channel may not have: the signals, and the names of the run's fields, properties and
+#: methods and of the attributes a file stores beside them (MCAP ``run``, ``n_samples``, ``signals``).
+RESERVED_CHANNEL_NAMES = frozenset(
+    {*SIGNALS, *(f.name for f in fields(Run)), *(n for n in vars(Run) if not n.startswith("_")),
+     "run", "n_samples", "signals"})
+
+
+def check_channel_name(name: Any, where: str) -> str:
+    """Refuse a channel name that is not an identifier, or is a signal or run attribute name."""
+    if not isinstance(name, str) or not CHANNEL_NAME.fullmatch(name):
+        raise InputError(where, f"channel name {name!r} is not an identifier ([A-Za-z_][A-Za-z0-9_]*)")
+    if name in RESERVED_CHANNEL_NAMES:
+        raise InputError(where, f"channel name {name!r} is reserved (not a channel name: "
+                                f"{', '.join(sorted(RESERVED_CHANNEL_NAMES))})")
+    return name
+
+
 def make_run(
     run_id: str,
     attrs: Mapping,
@@ -234,8 +259,13 @@ def make_run(
     where: str,
     require_y: bool,
     units: Mapping[str, str] | None = None,
+    channels: Mapping[str, Any] | None = None,
 ) -> Run:
-    """Build a validated :class:`Run` from raw attributes, signal arrays and their units."""
+    """Build a validated :class:`Run` from raw attributes, signal and channel arrays and their units.
+
+    Each channel (errors name ``WHERE/channels/NAME``) must have a valid name and be a 1-D real
+    array of finite numbers as long as u; this is the one check of channels for every format.
+    """
     kw = parse_run_attrs(run_id, attrs, where)
     if "u" not in signals:
         raise InputError(where, "missing dataset 'u'")
@@ -243,4 +273,11 @@ def make_run(
         raise InputError(where, MISSING_Y)
     arrays = {name: validate_signal(signals[name], f"{where}/{name}") for name in SIGNALS if name in signals}
     check_lengths({k: v.shape[0] for k, v in arrays.items()}, kw, where)
-    return Run(**kw, **arrays, units=dict(units or {}))
+    checked = {}
+    for name, x in (channels or {}).items():
+        at = f"{where}/channels/{name}"
+        check_channel_name(name, at)
+        checked[name] = validate_signal(x, at)
+        if checked[name].shape[0] != arrays["u"].shape[0]:
+            raise InputError(at, f"channel has {checked[name].shape[0]} samples, u has {arrays['u'].shape[0]}")
+    return Run(**kw, **arrays, units=dict(units or {}), channels=checked)

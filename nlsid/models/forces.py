@@ -11,21 +11,35 @@ end of the sub-step are
     v+ = v_free - g_v F,      p+ = p_free - g_p F,
 
 with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), g_p = row_p . Gamma_F
-(about h^2 / 2m) the effect of a unit force held over the sub-step. Each law below chooses F:
+(about h^2 / 2m) the effect of a unit force held over the sub-step. Each law below chooses F.
 
-* ``coulomb`` F = fc sign(v) + fv v, with sign(0) the set [-1, 1]. Solved implicitly (Moreau
-  time stepping): if |v_free| <= g_v fc the mass sticks (v+ = 0, F = v_free / g_v, which then
-  satisfies |F| <= fc); otherwise v+ = (v_free - g_v fc s) / (1 + g_v fv) with s = sign(v_free).
-  No chattering around v = 0 and no event location; the error is first order in h at the
-  stick/slip transitions and zero while sticking.
-* ``stribeck`` F = (fc + (fs - fc) e^{-|v/vs|^delta}) sign(v) + fv v: sticks while
-  |v_free| <= g_v fs (break-away force fs); in slip the same implicit equation in the end speed is
+The friction laws take their levels per direction (real axes differ by 5-20 %): fc, fv (Coulomb),
+fc, fs, fv (Stribeck) and fc, fs, sigma2 (LuGre) have a value for v > 0 (``fc_pos``, ...) and
+one for v < 0 (``fc_neg``, ...), magnitudes all; a symmetric config (``fc``, ...) is the case of
+equal sides, encoded to the same parameter vector and run by the same code. Below, fc+ and fc-
+stand for the two sides of fc, and "the side" for the direction of the motion.
+
+* ``coulomb`` F = fc+ + fv+ v for v > 0, -fc- + fv- v for v < 0, and any F in [-fc-, fc+] at
+  v = 0 (symmetric: F = fc sign(v) + fv v, sign(0) the set [-1, 1]). Solved implicitly (Moreau
+  time stepping): if -g_v fc- <= v_free <= g_v fc+ the mass sticks (v+ = 0, F = v_free / g_v,
+  which then lies in [-fc-, fc+]); otherwise it slides on the side s = sign(v_free),
+  v+ = (v_free - g_v c) / (1 + g_v fv_s) with c = fc+ or -fc- and fv_s that side's fv: the end
+  velocity keeps the sign of v_free, so the side chosen is consistent. No chattering around
+  v = 0 and no event location; the error is first order in h at the stick/slip transitions and
+  zero while sticking.
+* ``stribeck`` F = (fc + (fs - fc) e^{-|v/vs|^delta}) sign(v) + fv v with fc, fs, fv those of the
+  side (vs and delta common): sticks while -g_v fs- <= v_free <= g_v fs+ (break-away forces fs+,
+  fs-); in slip the same implicit equation in the end speed, with the side of v_free, is
   bracketed in (0, |v_free|) and solved by Newton's method with bisection fallback (robust also
   when the Stribeck curve is steeper than 1/g_v, where a fixed-point iteration diverges).
 * ``lugre`` (Canudas de Wit, Olsson, Astrom, Lischinsky 1995): bristle state z,
 
       z' = v - lambda(v) z,   lambda(v) = sigma0 |v| / s(v),   s(v) = fc + (fs - fc) e^{-(v/vs)^2},
-      F = sigma0 z + sigma1 z' + sigma2 v.
+      F = sigma0 z + sigma1 z' + sigma2 v,
+
+  with fc, fs and sigma2 those of the side of v. The law stays continuous at v = 0 with unequal
+  sides (lambda -> 0 and sigma2 v -> 0 from both), and the Newton solve below works on one side
+  of zero at a time, so the side's levels are fixed before it starts.
 
   Step over a sub-step with the velocity held at the weighted value vv = v + theta (v+ - v) and
   the rate lambda = lambda(vv): z' = vv - lambda z is linear, so exactly (x = lambda h)
@@ -42,8 +56,9 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   S = g_v (sigma0 h + sigma1 + sigma2) is large (the mode is not resolved by h); theta = 1/2 then
   rings at the Nyquist frequency (A- but not L-stable), so theta = max(1/2, 1 - 1/(2 S)): 1/2
   while S <= 1, tending to 1 (backward Euler in the spring and damper, L-stable) as S grows,
-  continuous in the parameters. With v+ = v_free - g_v F the step is one equation in vv, solved
-  by Newton's method on the side of zero where the root lies, from the prediction
+  continuous in the parameters (S with the larger of the two sides' sigma2). With
+  v+ = v_free - g_v F the step is one equation in vv, solved by Newton's method on the side of
+  zero where the root lies (with that side's levels), from the prediction
   v_free - g_v F_prev, until the step is below LUGRE_TOLERANCE (|vv| + vs) = 1e-5 (|vv| + vs);
   F and z+ are then carried to the last iterate to first order, which leaves an error O(step^2),
   about 1e-10 relative (the outputs move by 3e-13 against a 1e-10 step; on the sample stage
@@ -55,10 +70,14 @@ with v_free, p_free the values without F and g_v = row_v . Gamma_F (about h/m), 
   second order for this smooth force (the Duffing oscillator of the book's Exercise 79, Eq. 5-12,
   is a unit mass with damping 1, stiffness -10 and k3 = 100).
 
-Kinds and parameter vectors (the numba kernel's encoding):
+Kinds and parameter vectors (the numba kernel's encoding): the sided values are those for v > 0,
+followed by the offsets d = (value for v < 0) - (value for v > 0) in the same order, so that a
+symmetric law has zero offsets (and a vector of the symmetric layout, padded with zeros, is the
+symmetric law). The kernel takes the v < 0 side as value + d, exact while the two sides are within
+a factor 2 of each other (Sterbenz's lemma), within about one rounding otherwise.
 
-    0 coulomb  [fc, fv]     1 stribeck [fc, fs, vs, delta, fv]
-    2 lugre    [sigma0, sigma1, sigma2, fc, fs, vs]     3 cubic_stiffness [k3]
+    0 coulomb  [fc, fv, dfc, dfv]     1 stribeck [fc, fs, vs, delta, fv, dfc, dfs, dfv]
+    2 lugre    [sigma0, sigma1, sigma2, fc, fs, vs, dsigma2, dfc, dfs]     3 cubic_stiffness [k3]
 """
 
 from __future__ import annotations
@@ -69,7 +88,7 @@ import numpy as np
 # keyed on kernels.py alone: after editing a value here, touch kernels.py (or delete its
 # __pycache__/*.nbi) or the old value stays in force. An installed package is unaffected.
 COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
-MAX_PARAMS = 6
+MAX_PARAMS = 9
 MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
 TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
 LUGRE_TOLERANCE = 1e-5  # LuGre: its step is carried to first order, an error O(step^2) ~ TOLERANCE
@@ -77,12 +96,26 @@ POSITION_KINDS = (CUBIC,)
 START_KINDS = (LUGRE, CUBIC)  # laws that read their signal at the start of the sub-step too
 
 
+def _pos(config, name: str) -> float:
+    """The value of a sided quantity for v > 0."""
+    return config.sides(name)[0]
+
+
+def _offsets(config, *names: str) -> list[float]:
+    """(value for v < 0) - (value for v > 0) of the sided quantities ``names``: 0 for a symmetric
+    config and for an asymmetric one with equal sides."""
+    return [neg - pos for pos, neg in map(config.sides, names)]
+
+
 def encode(config) -> tuple[int, np.ndarray]:
-    """(kind, parameter vector padded to MAX_PARAMS) of a force config."""
+    """(kind, parameter vector padded to MAX_PARAMS) of a force config (layout in the module
+    docstring: a symmetric config and the asymmetric one with equal sides give the same vector)."""
     kind, values = {
-        "coulomb": (COULOMB, lambda c: [c.fc, c.fv]),
-        "stribeck": (STRIBECK, lambda c: [c.fc, c.fs, c.vs, c.delta, c.fv]),
-        "lugre": (LUGRE, lambda c: [c.sigma0, c.sigma1, c.sigma2, c.fc, c.fs, c.vs]),
+        "coulomb": (COULOMB, lambda c: [_pos(c, "fc"), _pos(c, "fv"), *_offsets(c, "fc", "fv")]),
+        "stribeck": (STRIBECK, lambda c: [_pos(c, "fc"), _pos(c, "fs"), c.vs, c.delta, _pos(c, "fv"),
+                                          *_offsets(c, "fc", "fs", "fv")]),
+        "lugre": (LUGRE, lambda c: [c.sigma0, c.sigma1, _pos(c, "sigma2"), _pos(c, "fc"), _pos(c, "fs"), c.vs,
+                                    *_offsets(c, "sigma2", "fc", "fs")]),
         "cubic_stiffness": (CUBIC, lambda c: [c.k3]),
     }[config.type]
     params = np.zeros(MAX_PARAMS)

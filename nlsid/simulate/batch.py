@@ -3,6 +3,10 @@
 The numba kernel releases the GIL, so worker threads run simulations truly in parallel without
 copying the signals to other processes. Output order (and each run's noise stream) depends only on
 the inputs: run i of the excitation with sweep point j is output number i * n_points + j.
+
+In closed loop the reference is the run's ``r`` when it has one (a recording re-simulated), else its
+``u`` (an excitation from ``nlsid design``). The measured channels of a run (``Run.channels``, with
+their units) are carried unchanged into the simulated run.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from typing import Callable
 from nlsid.errors import InputError
 from nlsid.io.run import Run
 from nlsid.models import from_config
+from nlsid.models.from_config import ClosedLoop
 from nlsid.simulate.engine import simulate_run
 from nlsid.simulate.noise import NoiseLevels, draw, run_streams
 from nlsid.simulate.sweep import SweepPoint
@@ -39,6 +44,15 @@ def _build(point: SweepPoint):
         raise point.locate(exc) from None
 
 
+def _excitation(run: Run, loop: ClosedLoop | None) -> Run:
+    """The run the simulator gets: in closed loop with a reference r, r in the place of u (the
+    simulator takes u as the reference), with r's unit; otherwise ``run`` itself."""
+    if loop is None or run.r is None:
+        return run
+    units = {"u": run.units["r"]} if "r" in run.units else {}
+    return dataclasses.replace(run, u=run.r, r=None, units=units)
+
+
 def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = None, workers: int | None = None,
                  step: Callable[[], None] | None = None) -> list[Run]:
     """Simulate each excitation run for each sweep point; ``seed`` overrides the config's seed."""
@@ -56,10 +70,12 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
         model, loop = models[j]
         noise = draw(levels[j], streams[j][index], run.n_samples)
         try:
-            out = simulate_run(model, loop, run, points[j].config.simulation.substeps, noise)
+            out = simulate_run(model, loop, _excitation(run, loop), points[j].config.simulation.substeps, noise)
         except InputError as exc:
             raise points[j].locate(exc) from None
-        out = dataclasses.replace(out, run_id=run_id(run.run_id, j, len(points)), params={**run.params, **points[j].params})
+        units = {**out.units, **{name: unit for name, unit in run.units.items() if name in run.channels}}
+        out = dataclasses.replace(out, run_id=run_id(run.run_id, j, len(points)), params={**run.params, **points[j].params},
+                                  channels=dict(run.channels), units=units)
         if step is not None:
             step()
         return out

@@ -2,8 +2,8 @@
 
 The excitation is inferred from the reference r when it is selected (closed loop: r is what was
 designed), else from the input u (:func:`nlsid.signals.inference.infer_excitation`). Each
-realization found becomes one run holding its transient and steady periods of u, y and r; a record
-that is not periodic becomes one ``arbitrary`` run. Several records that are realizations of one
+realization found becomes one run holding its transient and steady periods of u, y and r (and of
+the further measured channels selected, ``channels``); a record that is not periodic becomes one ``arbitrary`` run. Several records that are realizations of one
 multisine (same period and lines, levels within 1 %) share one level, and realization indices are
 numbered across all records, so ``nlsid bla`` takes them as M realizations of that level. Overrides (``period``, ``transient_periods``,
 ``fs``, ``split``) are applied and recorded.
@@ -18,7 +18,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.importers.source import LAYOUTS, Record, Source, records_of
-from nlsid.io.run import Run, make_run
+from nlsid.io.run import CHANNEL_KEY, Run, check_channel_name, make_run
 from nlsid.signals.inference import Inference, infer_excitation
 
 FORMATS = ("csv", "mat", "hdf5", "mcap")
@@ -31,9 +31,11 @@ SHARED_LEVEL_TOL = 0.01  # records whose levels agree this closely (relative) ar
 
 @dataclass(frozen=True)
 class ImportOptions:
-    """What the user selected or overrode (``None``: infer it)."""
+    """What the user selected or overrode (``None``: infer it). ``channels``: channel name -> its
+    name in the file (like ``names`` of u, y, r)."""
 
     names: dict[str, str]
+    channels: dict[str, str] = field(default_factory=dict)
     time: str | None = None
     fs: float | None = None
     period: int | None = None
@@ -81,6 +83,8 @@ def read_source(path: Path, options: ImportOptions) -> Source:
     names = dict(options.names)
     optional: set[str] = set()
     defaulted = frozenset(key for key in ("u", "y", "r") if key not in names)
+    for name, column in options.channels.items():
+        names[CHANNEL_KEY + check_channel_name(name, f"--channel {name}={column}")] = column
     if fmt == "mcap":
         if "u" not in names:
             raise InputError("--u", "name the input of an MCAP log as /topic:field")
@@ -175,7 +179,7 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
     replaces the record's own level), or one arbitrary run."""
     signals = record.signals
     if inference.kind == "arbitrary":
-        return [make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where, require_y=False)]
+        return [_make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where)]
     period = inference.period
     runs = []
     several = len(inference.realizations) > 1
@@ -192,8 +196,15 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
             attrs["realization"] = first_realization + index
         run_id = f"{record.name}_m{index:02d}" if several else record.name
         cut = {name: x[real.start:real.stop(period)] for name, x in signals.items()}
-        runs.append(make_run(run_id, attrs, cut, f"{where}/{run_id}", require_y=False))
+        runs.append(_make_run(run_id, attrs, cut, f"{where}/{run_id}"))
     return runs
+
+
+def _make_run(run_id: str, attrs: dict, arrays: dict[str, np.ndarray], where: str) -> Run:
+    """A run of the signals and (keys ``channels.NAME``) channels in ``arrays``."""
+    channels = {key[len(CHANNEL_KEY):]: x for key, x in arrays.items() if key.startswith(CHANNEL_KEY)}
+    signals = {key: x for key, x in arrays.items() if not key.startswith(CHANNEL_KEY)}
+    return make_run(run_id, attrs, signals, where, require_y=False, channels=channels)
 
 
 def describe_overrides(options: ImportOptions) -> dict:

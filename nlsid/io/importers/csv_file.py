@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import NotFound, Source, sample_rate, source_from
+from nlsid.io.importers.source import NotFound, Source, option, sample_rate, source_from
 from nlsid.io.timestamps import REL_TOL
 
 TIME_HEADER = re.compile(r"^\s*(t|time|timestamp)\s*([\[(].*[\])])?\s*$", re.IGNORECASE)
@@ -179,7 +179,7 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
     passed_over: dict[str, list[int]] = {}
     for key, name in names.items():
         try:
-            indices, numbers, passed_over[key] = _columns(header, width, name, f"{path}: --{key} {name}")
+            indices, numbers, passed_over[key] = _columns(header, width, name, f"{path}: {option(key, name)}")
         except NotFound:
             if key not in optional:
                 raise

@@ -9,7 +9,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
-from nlsid.io.importers.source import NotFound, Source, pick, source_from
+from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
 
 LISTED = 20
 
@@ -22,7 +22,7 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
     except H5PY_ERRORS as exc:
         raise InputError(str(path), f"cannot open as HDF5 ({' '.join(str(exc).split())})") from None
     with handle:
-        values = pick(wanted, optional, lambda key, name: _checked_dataset(handle, name, f"{path}: --{key} {name}"))
+        values = pick(wanted, optional, lambda key, name: _checked_dataset(handle, name, f"{path}: {option(key, name)}"))
     return source_from(path, "hdf5", wanted, values, {"datasets": {k: wanted[k] for k in values}})
 
 

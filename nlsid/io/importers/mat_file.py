@@ -15,7 +15,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
-from nlsid.io.importers.source import NotFound, Source, pick, source_from
+from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
 
@@ -123,7 +123,7 @@ def _read_v5(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str
         raise InputError(str(path), problem)
     content = _loadmat_isolated(path)
     variables = {k: v for k, v in content.items() if not k.startswith("__")}
-    return pick(wanted, optional, lambda key, name: _lookup(variables, name, f"{path}: --{key} {name}"))
+    return pick(wanted, optional, lambda key, name: _lookup(variables, name, f"{path}: {option(key, name)}"))
 
 
 def _loadmat(path: Path) -> dict:
@@ -222,7 +222,7 @@ def _read_v73(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[st
     except H5PY_ERRORS as exc:
         raise InputError(str(path), f"cannot open MATLAB v7.3 file ({' '.join(str(exc).split())})") from None
     with handle:
-        return pick(wanted, optional, lambda key, name: _v73_variable(handle, name, f"{path}: --{key} {name}"))
+        return pick(wanted, optional, lambda key, name: _v73_variable(handle, name, f"{path}: {option(key, name)}"))
 
 
 def _v73_variable(handle: h5py.File, name: str, where: str) -> np.ndarray:

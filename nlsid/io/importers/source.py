@@ -1,6 +1,7 @@
 """What every importer returns: named arrays from a foreign file, cut into records, with a sample rate.
 
-A foreign file gives, for each selected signal (u, y, r), a vector or a matrix. A matrix holds
+A foreign file gives, for each selected signal (u, y, r, and ``channels.NAME`` for a further measured
+channel), a vector or a matrix. A matrix holds
 several records side by side; time runs along its longer axis (a 4096 x 4 matrix holds 4 records
 of 4096 samples, as does a 4 x 4096 one). ``layout="realizations"`` makes each record its own
 run(s); ``layout="periods"`` says the records are consecutive periods of one experiment, joined in
@@ -19,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.run import CHANNEL_KEY
 from nlsid.io.timestamps import NS, uniform_sampling
 
 LAYOUTS = ("realizations", "periods")
@@ -29,6 +31,13 @@ MAX_MAGNITUDE = 1e100
 
 class NotFound(InputError):
     """A named column, variable or dataset that the file does not hold (the message lists those it does)."""
+
+
+def option(key: str, name: str) -> str:
+    """How the command line selected ``name`` for ``key``: ``--u CH1``, ``--time t``, ``--channel d=force``."""
+    if key.startswith(CHANNEL_KEY):
+        return f"--channel {key[len(CHANNEL_KEY):]}={name}"
+    return f"--{key} {name}"
 
 
 def pick(wanted: dict[str, str], optional: set[str], read: Callable[[str, str], np.ndarray]) -> dict[str, np.ndarray]:
