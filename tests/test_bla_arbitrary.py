@@ -114,6 +114,7 @@ def test_fit_reads_an_lpm_level_and_recovers_the_poles(run_cli, tmp_path):
     # q = 9: costs weighted by variances of 9 degrees of freedom, as for M = 10 realizations
     summary = result.json()
     assert summary["expected_cost"] == pytest.approx(9 / 8 * (summary["lines"] - 5 / 2))
+    assert "Local Polynomial Method" in summary["weights"] and "upper bound of the noise" in summary["weights"]
 
 
 def test_report_renders_an_lpm_only_bla_file(run_cli, tmp_path):

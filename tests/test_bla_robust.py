@@ -282,3 +282,33 @@ def test_frf_method_with_a_recorded_reference_warns():
     assert any("--method frf while the runs carry the reference r" in w for w in with_r.warnings)
     without = analyse(runs_of_level(3, 256, bins, 1.0, lambda u: 0.5 * u, 2, rng, noise_y=0.01), "frf")[0]
     assert not any("reference r" in w for w in without.warnings)
+
+
+def test_plant_distortion_fed_back_is_not_called_an_actuator_nonlinearity():
+    """Closed loop u = r - y around a plant with a cubic term and a linear actuator: the plant's
+    distortion reaches u through the controller, so u varies over realizations far beyond its
+    noise (book (6-40)-(6-43)). The warning states what was measured, distortion at the plant input,
+    and that in closed loop the plant's own distortion fed back explains it as well as an actuator."""
+    rng = np.random.default_rng(21)
+    N, M, P, rms = 512, 8, 3, 0.6
+    bins = np.arange(1, 121)
+
+    def loop(r):  # y[k+1] = 0.7 y[k] + 0.5 u[k] - 0.3 y[k]^3, u[k] = r[k] - y[k] (noise on y)
+        y, u = np.zeros(r.size), np.zeros(r.size)
+        for k in range(r.size - 1):
+            u[k] = r[k] - y[k]
+            y[k + 1] = 0.7 * y[k] + 0.5 * u[k] - 0.3 * y[k] ** 3
+        u[-1] = r[-1] - y[-1]
+        return u, y
+
+    runs = []
+    for m in range(M):
+        r_period = multisine(N, bins, rms, rng)
+        run = simulate(f"r{m}", r_period, lambda x: x, P, rng, realization=m, bins=bins, reference=True)
+        u, y = loop(run.r)
+        run.u, run.y = u, y + 1e-3 * rng.standard_normal(y.size)
+        runs.append(run)
+    warnings = analyse(runs)[0].warnings
+    text = " ".join(warnings)
+    assert "reaches the plant input" in text and "fed back by the controller" in text, warnings
+    assert "the actuator is nonlinear" not in text

@@ -256,6 +256,7 @@ def test_order_auto_through_the_command_line(run_cli, bla_file, tmp_path):
     summary = result.json()
     assert summary["order"] in ("0/2", "1/2")  # the true 0/2, or 1/2 with b1 ~ 0: both have a passing cost
     assert summary["order_scan"] and "expected value" in summary["order_reason"]
+    assert summary["weights"].startswith("var_total of the robust method")  # M >= 2 multisine realizations
 
 
 @pytest.mark.parametrize("args, message", [

@@ -52,6 +52,7 @@ def test_grid_with_model_and_plots(run_cli, lpl_recording, tmp_path):
     assert result.exit_code == 0, result.stderr
     summary = result.json()
     assert summary["grid"]["cells"] == 4 and summary["input_signal"] == "u"
+    assert summary["grid"]["noise_bound"].startswith("measured")
     data = read_hosidf(out)
     grid = data["grid"]
     np.testing.assert_allclose(grid["frequency"], np.array(LINES) * cases.FS / cases.N)

@@ -214,7 +214,13 @@ def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u:
         # actuator's, but it has no ratio to a noise level to be given in dB
         if negligible(total, power_u):
             return []
-        return ["the projected input varies over realizations and has no noise (noise-free data): the actuator is "
-                "nonlinear (book (6-40)-(6-43)) and the BLA from r is H_BLA/A_BLA"]
+        return ["the projected input varies over realizations and has no noise (noise-free data): " + _INPUT_DISTORTION]
     return [f"the projected input varies over realizations {10 * np.log10(total / noise):.1f} dB more than its noise: "
-            "the actuator is nonlinear (book (6-40)-(6-43)) and the BLA from r is H_BLA/A_BLA"]
+            + _INPUT_DISTORTION]
+
+
+# What the test measures (book (6-40)-(6-43)): distortion at the plant input. In closed loop the
+# controller feeds the plant's own distortion back to it, so this alone does not locate it.
+_INPUT_DISTORTION = ("nonlinear distortion reaches the plant input (a nonlinear actuator, or in closed loop the "
+                     "plant's distortion fed back by the controller; book (6-40)-(6-43)), so the BLA from r is "
+                     "H_BLA/A_BLA")

@@ -33,12 +33,24 @@ def _finite(values) -> bool:
 @dataclass(frozen=True)
 class BLALevel:
     """The FRF to fit, the standard deviations of the averaged BLA's noise and nonlinear parts
-    (sqrt(var_noise), sqrt(var_nl / M), for the figure; NaN where unknown) and warnings."""
+    (sqrt(var_noise), sqrt(var_nl / M), for the figure; NaN where unknown), warnings, and what the
+    weights (the variances the cost check compares with) are: :data:`WEIGHTS`."""
 
     data: FRFData
     noise_std: np.ndarray
     nl_std: np.ndarray
     warnings: list[str]
+    weights: str = ""
+
+
+#: What the fit's weights measure, by source: the cost check compares the model error with these.
+WEIGHTS = {
+    "robust": "var_total of the robust method: noise plus stochastic nonlinear distortion, measured over realizations",
+    "fast": "var_total of the fast method: noise plus stochastic nonlinear distortion, from one realization",
+    "noise": "var_noise only: noise measured over periods, nonlinear distortion not included",
+    "lpm": "var_G of the Local Polynomial Method: noise plus stochastic nonlinear distortion, from the local "
+           "residuals (an upper bound of the noise)",
+}
 
 
 def _std(values, divisor: float, size: int) -> np.ndarray:
@@ -67,17 +79,17 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
     where = f"{path}:/levels/{chosen['name']}"
     warnings = []
     if _finite(robust.get("var_total")):
-        G, variance = robust["G"], robust["var_total"]
+        G, variance, weights = robust["G"], robust["var_total"], WEIGHTS["robust"]
         realizations = int(attrs["n_realizations"])
         if realizations < 7:
             warnings.append(f"weights from M = {realizations} realizations: the variance estimates are rough and the "
                             "cost check approximate (the book advises M >= 7)")
     elif fast is not None and _finite(fast.get("var_total")):
-        G, variance = fast["G"], fast["var_total"]
+        G, variance, weights = fast["G"], fast["var_total"], WEIGHTS["fast"]
         realizations = None
         warnings.append("weights: the fast method's total variance (one realization): the cost check is approximate")
     elif _finite(robust.get("var_noise")):
-        G, variance = robust["G"], robust["var_noise"]
+        G, variance, weights = robust["G"], robust["var_noise"], WEIGHTS["noise"]
         realizations = None
         warnings.append("weights: noise variance only (one realization, no detection lines): nonlinear distortions "
                         "are not in the weight and raise the cost above its expected value")
@@ -89,7 +101,8 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
                    np.asarray(variance, dtype=float), float(attrs["fs"]), period, realizations)
     m = max(int(attrs["n_realizations"]), 1)
     size = data.bins.size
-    return BLALevel(data, _std(robust.get("var_noise"), 1.0, size), _std(robust.get("var_nl"), m, size), warnings)
+    return BLALevel(data, _std(robust.get("var_noise"), 1.0, size), _std(robust.get("var_nl"), m, size), warnings,
+                    weights)
 
 
 def _lpm_level(path, chosen: dict) -> BLALevel:
@@ -111,4 +124,4 @@ def _lpm_level(path, chosen: dict) -> BLALevel:
     data = FRFData(np.asarray(chosen["bins"], dtype=np.int64)[usable], np.asarray(chosen["G"], dtype=complex)[usable],
                    variance[usable], float(attrs["fs"]), int(attrs["n_samples"]), dof + 1)
     size = data.bins.size
-    return BLALevel(data, np.full(size, np.nan), np.full(size, np.nan), warnings)
+    return BLALevel(data, np.full(size, np.nan), np.full(size, np.nan), warnings, WEIGHTS["lpm"])
