@@ -22,6 +22,11 @@ nlsid <= 1.5x); and both again with OPENBLAS_NUM_THREADS=1 (``*_openblas_1_threa
 worker threads spin after a BLAS call (np.dot of a run's samples), which on 2 cores costs CPU
 and takes a core from the main thread.
 
+``lpm_end_to_end``: one arbitrary record of 10^6 samples (filtered noise through a Wiener system);
+the whole ``nlsid bla`` process (the Local Polynomial Method, docs/lpm.md) against a plain script
+that reads u and y with h5py and takes numpy's rfft of the record, both fresh processes (target:
+nlsid <= 5x).
+
 Peak memory: ru_maxrss of a process counts the memory it held before exec, so a child of this
 (large) process would report this process's peak (a bare interpreter started from a 331 MB parent
 reports 331 MB). Each measured process is therefore spawned by a small launcher interpreter and
@@ -208,6 +213,54 @@ def end_to_end(folder: Path, repeat: int) -> dict:
     return out
 
 
+#: The plain alternative for arbitrary records: read u and y of every run, numpy's rfft of the record.
+PLAIN_RECORD_SCRIPT = (
+    "import sys\n"
+    "import h5py\n"
+    "import numpy as np\n"
+    "with h5py.File(sys.argv[1], 'r') as handle:\n"
+    "    for group in handle['runs'].values():\n"
+    "        for name in ('u', 'y'):\n"
+    "            np.fft.rfft(group[name][()])\n"
+)
+
+
+def make_arbitrary_recording(path: Path, samples: int) -> None:
+    """One arbitrary record of ``samples`` instants: filtered Gaussian noise through a Wiener system
+    (the Butterworth of :func:`make_recording`, then x + 0.1 x^3), noise on u and y."""
+    from scipy import signal
+
+    from nlsid.io.hdf5_recording import write_hdf5_recording
+    from nlsid.io.run import Run
+
+    rng = np.random.default_rng(1)
+    u0 = signal.lfilter(*signal.butter(4, 0.25), rng.standard_normal(samples))
+    x = signal.lfilter(*signal.butter(2, 0.2), u0)
+    y = x + 0.1 * x**3 + 1e-3 * rng.standard_normal(samples)
+    write_hdf5_recording(path, [Run("noise", 1000.0, "arbitrary", u0 + 1e-3 * rng.standard_normal(samples), y)])
+
+
+def lpm_end_to_end(folder: Path, repeat: int, samples: int = 10**6) -> dict:
+    """``nlsid bla`` on one arbitrary record (the Local Polynomial Method) against the plain h5py read
+    + rfft of the same samples, both whole fresh processes, interleaved after one warm-up each."""
+    path = folder / "arbitrary.h5"
+    make_arbitrary_recording(path, samples)
+    commands = {"nlsid": [nlsid_command(), "bla", str(path), "-o", str(folder / "bla_lpm.h5"), "--force"],
+                "plain": [sys.executable, "-c", PLAIN_RECORD_SCRIPT, str(path)]}
+    for argv in commands.values():
+        fresh_process(argv, folder)
+    wall = {name: [] for name in commands}
+    for _ in range(repeat):
+        for name, argv in commands.items():
+            wall[name].append(fresh_process(argv, folder)["wall_s"])
+    return {"samples": samples, "excitation": "filtered Gaussian noise, one record (kind arbitrary)",
+            "nlsid_wall_s_best": round(min(wall["nlsid"]), 3), "plain_wall_s_best": round(min(wall["plain"]), 3),
+            "nlsid_wall_s_all": [round(w, 3) for w in wall["nlsid"]],
+            "plain_wall_s_all": [round(w, 3) for w in wall["plain"]],
+            "wall_ratio_nlsid_over_plain": round(min(wall["nlsid"]) / min(wall["plain"]), 2),
+            "target_wall_ratio": 5.0}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=float, default=1e8)
@@ -219,6 +272,7 @@ def main() -> None:
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(dir=args.dir) as folder:
         end = end_to_end(Path(folder), args.repeat)  # first, while this process is still small
+        lpm = lpm_end_to_end(Path(folder), args.repeat)
         path = Path(folder) / "bench.h5"
         start = time.perf_counter()
         make_recording(path, args.runs, -(-int(args.samples) // (args.runs * args.period)), args.period)
@@ -245,6 +299,7 @@ def main() -> None:
             },
             "memory_vs_runs": memory,
             "end_to_end": end,
+            "lpm_end_to_end": lpm,
             "calibration": calibration(),
             "cpu_count": os.cpu_count(),
             "load_average": {"start": load_start, "end": os.getloadavg()},
