@@ -1,0 +1,78 @@
+"""The library of causes: each a named physical or structural hypothesis with its signature, a first
+estimate of its parameters from the residual, and its model extension.
+
+Every hypothesis h adds a block with parameters theta to the user's model. For a small effect the
+residual of the nominal model is, to first order in the effect (exactly for an input or output
+block on a linear model in open loop),
+
+    e(t) = y(t) - y_model(t) ~ S_h[ d_h(theta; signals of the model) ](t) + noise,
+
+where d_h is the missing signal (a force at the driven mass, an input error at the actuator, an
+output error) computed from the model's internal signals, and S_h the model's response to it at the
+measured output (:meth:`~nlsid.diagnose.simulation.ModelRunner.response`: G d in open loop, the
+loop's sensitivity in closed loop). This is the residual "against the model's internal signals"
+made quantitative: parameters that enter linearly are the least-squares regression of e on the
+responses (over the mean steady-state periods of the estimation runs), one shape parameter
+is chosen by the same residual sum of squares: a threshold by a bounded scalar search, a Stribeck
+velocity on a grid (:func:`_estimate_stribeck`). The standard errors are those of ordinary least squares, ``s^2 (X^T X)^-1``.
+
+Library (signature = what the evidence shows when it is the cause; extension = the config keys):
+
+=================== ========================================= ====================================
+name                signature                                 extension (parameters)
+=================== ========================================= ====================================
+coulomb             odd distortion; BLA gain rises with       ``nonlinearities: coulomb`` (fc)
+                    level; residual force jumps at v = 0
+stribeck            as coulomb, with a break-away peak at     ``nonlinearities: stribeck``
+                    low velocity                              (fs, fc, vs; delta = 2)
+lugre               as stribeck, with presliding: a stiff     ``nonlinearities: lugre`` (sigma0,
+                    force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0)
+cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
+                    level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
+input_saturation    odd distortion; BLA gain falls with       ``input_nonlinearity: saturation``
+                    level; residual where abs(u) is large     (limit a: lower = -a, upper = a)
+deadzone            odd distortion; BLA gain rises with       ``input_nonlinearity: deadzone``
+                    level; residual where abs(u) is small     (half width a: lower = -a, upper = a)
+backlash            odd distortion and a phase lag that       ``input_nonlinearity: backlash``
+                    shrinks with level                        (width)
+quadratic_output    even distortion                           ``output_nonlinearity: polynomial``
+                                                              [0, 1, a2] (a2)
+missing_resonance   BLA differs from the model around one     transfer function times
+                    frequency, no distortion                  b0 / (s^2 + 2 zeta wr s + wr^2)
+                                                              (fr = wr / 2 pi in Hz, zeta, b0); a
+                                                              mass_spring_damper or two_mass_stage
+                                                              becomes its transfer function (mode
+                                                              in series)
+wrong_mechanics     BLA differs around the model's own        ``mass``, ``damping``, ``stiffness``
+                    resonance (height, frequency), no         of a mass_spring_damper corrected
+                    distortion                                (main: damping)
+delay               BLA phase error growing linearly with     ``delay`` (seconds, whole samples)
+                    frequency, gain right, no distortion
+=================== ========================================= ====================================
+
+Friction is one family of nested laws: Coulomb (fc) in Stribeck (fs = fc) in LuGre (sigma0 to
+infinity); the verdict names the richer law only when it is significantly better
+(:mod:`nlsid.diagnose.verdict`), and each richer law starts from the simpler one's fit. The
+mechanics correction starts at the model's own values and is refined by the fit engine like the
+forces. The delay and the missing resonance are linear: they are estimated from the ratio
+``G_BLA / G_model`` of the measured and the model's BLA (evidence), the delay from the slope of its
+phase (weighted least squares, weights ``2 |G|^2 / var(G)``, the inverse variance of the phase),
+the resonance by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
+Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std(R)``).
+"""
+
+from __future__ import annotations
+
+from nlsid.diagnose.hypotheses import delay, friction, input_blocks, mechanics, output_blocks, resonance, stiffness
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
+
+__all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
+
+#: The hypotheses in the order they are tried (a family's simpler members first).
+LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + input_blocks.HYPOTHESES
+                                   + output_blocks.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
+                                   + delay.HYPOTHESES)
+
+
+def by_name(name: str) -> Hypothesis:
+    return next(h for h in LIBRARY if h.name == name)

@@ -1,0 +1,96 @@
+"""What every hypothesis of the library is made of: its estimate, its definition, the context it is
+estimated in, and the regression and search tools the estimates share."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from nlsid.diagnose.simulation import ModelRunner, steady_mean
+from nlsid.io.run import Run
+
+
+@dataclass
+class Context:
+    """What the estimates need: the nominal model, the estimation runs, their residual periods, the
+    model's internal signals on them (full length), the BLA levels (measured, model) and the
+    final estimates of the hypotheses before this one in :data:`LIBRARY`, by name."""
+
+    runner: ModelRunner
+    runs: list[Run]
+    residuals: list[np.ndarray]
+    internal: list[dict[str, np.ndarray]]
+    bla_levels: tuple = ()
+    fitted: dict = field(default_factory=dict)
+
+    def target(self) -> np.ndarray:
+        return np.concatenate(self.residuals)
+
+    def simulation_rss(self, data: dict) -> float:
+        """Sum of squares of measured minus simulated mean steady-state periods of the model ``data``."""
+        runner = self.runner.with_changes(data)
+        return float(sum(np.sum((steady_mean(run, run.y) - steady_mean(run, runner.simulate(run).y)) ** 2)
+                         for run in self.runs))
+
+    def response(self, signals: list[np.ndarray], where: str) -> np.ndarray:
+        """Stacked mean steady-state response of every run to its disturbance (``process`` or ``output``)."""
+        return np.concatenate([steady_mean(run, self.runner.response(run, **{where: signal}))
+                               for run, signal in zip(self.runs, signals)])
+
+@dataclass(frozen=True)
+class Estimate:
+    """Parameter values and standard errors; ``explained_db`` is the drop of the estimation
+    residual's sum of squares the signature predicts (10 log10 of before over after; NaN when
+    either is zero: :func:`explained_db`)."""
+
+    values: dict[str, float]
+    std: dict[str, float]
+    explained_db: float
+    note: str = ""
+
+@dataclass(frozen=True)
+class Hypothesis:
+    name: str
+    title: str
+    family: str
+    main: str
+    unit: str
+    signature: str
+    applies: Callable[[ModelRunner], str | None]
+    estimate: Callable[[Context], Estimate | str]
+    extend: Callable[[dict, dict], dict]
+    parameters: tuple[str, ...] = field(default=())
+    paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
+
+def explained_db(before: float, after: float) -> float:
+    """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite
+    value (a zero residual to begin with, or one explained exactly, as on noise-free data)."""
+    return 10 * math.log10(before / after) if before > 0 and after > 0 else float("nan")
+
+def regress(y: np.ndarray, columns: list[np.ndarray], names: list[str]) -> Estimate:
+    X = np.column_stack(columns)
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    rss = float(np.sum((y - X @ theta) ** 2))
+    dof = max(y.size - len(names), 1)
+    cov = np.linalg.pinv(X.T @ X) * rss / dof
+    before = float(np.sum(y**2))
+    return Estimate({n: float(v) for n, v in zip(names, theta)},
+                    {n: float(math.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)},
+                    explained_db(before, rss))
+
+def scan(cost: Callable[[float], float], lower: float, upper: float) -> float:
+    """The shape parameter in [lower, upper] that minimises ``cost`` (bounded Brent search)."""
+    from scipy.optimize import minimize_scalar
+
+    result = minimize_scalar(cost, bounds=(lower, upper), method="bounded",
+                             options={"xatol": 1e-4 * (upper - lower)})
+    return float(result.x)
+
+def always(runner: ModelRunner) -> str | None:
+    return None
+
+def quantile(q: float) -> Callable[[np.ndarray], float]:
+    return lambda x: float(np.quantile(x, q))

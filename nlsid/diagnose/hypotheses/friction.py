@@ -1,0 +1,103 @@
+"""Friction, one family of nested laws: Coulomb (fc) in Stribeck (fs = fc) in LuGre (sigma0 to
+infinity). The verdict names the richer law only when it is significantly better, and each richer
+law starts from the simpler one's fit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, regress
+from nlsid.diagnose.hypotheses.mass_forces import add_force, force_columns, force_paths, mechanical, needs
+
+STRIBECK_DELTA = 2.0
+
+STRIBECK_START_RATIO = 1.5  # fs / fc at the start of the fit when the signature shows no break-away peak
+
+LUGRE_DEFLECTIONS = (1e-1, 1e-2, 1e-3, 1e-4)  # fs / sigma0 over the rms position, LuGre start grid
+
+STRIBECK_GRID = 25         # Stribeck velocities tried for the start values (a factor 1.21 apart)
+
+
+def _estimate_coulomb(ctx: Context) -> Estimate | str:
+    if needs(ctx, "velocity"):
+        return needs(ctx, "velocity")
+    est = regress(ctx.target(), force_columns(ctx, [lambda s: np.sign(s["velocity"])]), ["fc"])
+    return est if est.values["fc"] > 0 else "the residual correlates negatively with sign(v): not friction"
+
+def _stribeck_columns(ctx: Context, vs: float) -> list[np.ndarray]:
+    def weight(s):
+        return np.exp(-np.abs(s["velocity"] / vs) ** STRIBECK_DELTA)
+    return force_columns(ctx, [lambda s: np.sign(s["velocity"]) * weight(s),
+                                lambda s: np.sign(s["velocity"]) * (1 - weight(s))])
+
+def _estimate_stribeck(ctx: Context) -> Estimate | str:
+    """Stribeck start values: for each Stribeck velocity vs of a log grid (:data:`STRIBECK_GRID`
+    values from 1e-2 to 1 times the model's rms velocity) the levels fs and fc enter linearly and
+    are regressed; the start is the grid point of least residual among those with a break-away
+    peak, fs > fc > 0. A continuous search of vs is not used: the first-order cost has spurious
+    minima at small vs with fs < 0 (the force then cancels part of the Coulomb step), and a start
+    at a tiny vs leaves fs without effect on the simulation, so the fit engine cannot move it.
+    Without a physical grid point the start is Coulomb's fc with fs = STRIBECK_START_RATIO fc and
+    vs the median model speed (where fs acts on half of the samples).
+    """
+    if needs(ctx, "velocity"):
+        return needs(ctx, "velocity")
+    y = ctx.target()
+    speed = np.abs(np.concatenate([s["velocity"] for s in ctx.internal]))
+    v_rms = float(np.sqrt(np.mean(speed**2)))
+    best = None
+    for vs in np.geomspace(1e-2 * v_rms, v_rms, STRIBECK_GRID):
+        est = regress(y, _stribeck_columns(ctx, vs), ["fs", "fc"])
+        if est.values["fs"] > est.values["fc"] > 0 and (best is None or est.explained_db > best[1].explained_db):
+            best = (float(vs), est)
+    if best is not None:
+        vs, est = best
+        return Estimate({**est.values, "vs": vs}, {**est.std, "vs": float("nan")}, est.explained_db,
+                        f"vs on a grid of {STRIBECK_GRID} values (no standard error)")
+    coulomb = _estimate_coulomb(ctx)
+    if isinstance(coulomb, str):
+        return coulomb
+    fc = coulomb.values["fc"]
+    return Estimate({"fs": STRIBECK_START_RATIO * fc, "fc": fc, "vs": float(np.median(speed))},
+                    {k: float("nan") for k in ("fs", "fc", "vs")}, float("nan"),
+                    f"no break-away peak to first order: start fc from Coulomb, fs = {STRIBECK_START_RATIO:g} fc, "
+                    f"vs the median model speed")
+
+def _estimate_lugre(ctx: Context) -> Estimate | str:
+    """LuGre start values: the levels and the Stribeck velocity of the fitted Stribeck hypothesis
+    (LuGre's steady-state friction is that Stribeck curve with delta = 2), and the bristle
+    stiffness sigma0 from a log grid by the simulation error of the estimation runs: sigma0 such
+    that the presliding deflection fs / sigma0 is 10^-1 .. 10^-4 of the model's rms position (the
+    LuGre law reduces to Stribeck's when it is far smaller than the motion). The bristle damping
+    sigma1 and the viscous sigma2 are 0 (viscous damping is the model's own)."""
+    stribeck = ctx.fitted.get("stribeck")
+    if stribeck is None:
+        return "needs the Stribeck hypothesis's estimate to start from"
+    if needs(ctx, "position"):
+        return needs(ctx, "position")
+    position = np.concatenate([s["position"] for s in ctx.internal])
+    levels = {k: stribeck.values[k] for k in ("fc", "fs", "vs")}
+    spread = float(np.std(position))
+    grid = [levels["fs"] / (spread * ratio) for ratio in LUGRE_DEFLECTIONS]
+    extend = LUGRE.extend
+    costs = [ctx.simulation_rss(extend(ctx.runner.data, {"sigma0": sigma0, **levels})) for sigma0 in grid]
+    sigma0 = grid[int(np.argmin(costs))]
+    return Estimate({"sigma0": sigma0, **levels}, {"sigma0": float("nan"), **{k: stribeck.std[k] for k in levels}},
+                    explained_db(float(np.sum(ctx.target() ** 2)), min(costs)),
+                    "levels from the Stribeck fit; sigma0 on a grid of presliding deflections")
+
+def _extend_stribeck(data: dict, values: dict) -> dict:
+    return add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, values)
+
+
+COULOMB = Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
+               "odd distortion; BLA gain rises with level; residual force jumps at zero velocity",
+               mechanical, _estimate_coulomb, add_force({"type": "coulomb"}), ("fc",), force_paths(("fc",)))
+STRIBECK = Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
+               "as Coulomb friction, with a break-away peak at low velocity",
+               mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs"), force_paths(("fs", "fc", "vs")))
+LUGRE = Hypothesis("lugre", "LuGre friction", "friction", "sigma0", "N/m",
+               "as Stribeck friction, with presliding: a stiff friction force (bristles) after each velocity "
+               "reversal", mechanical, _estimate_lugre, add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0}),
+               ("sigma0", "fc", "fs", "vs"), force_paths(("sigma0", "fc", "fs", "vs")))
+HYPOTHESES = (COULOMB, STRIBECK, LUGRE)

@@ -1,0 +1,43 @@
+"""Wrong mass, damping or stiffness of a mass_spring_damper, corrected by the fit engine from the
+model's own values."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
+from nlsid.diagnose.simulation import ModelRunner
+
+
+MECHANICS = ("mass", "damping", "stiffness")
+
+def _mass_spring_damper(runner: ModelRunner) -> str | None:
+    return None if runner.kind == "mass_spring_damper" else "needs a mass_spring_damper model"
+
+def _estimate_mechanics(ctx: Context) -> Estimate | str:
+    """Start values: the model's own mass, damping and stiffness (the fit engine corrects them). A
+    zero damping starts at 5 % of critical, 0.1 sqrt(k m), so that it has an effect to fit."""
+    model = ctx.runner.data["model"]
+    values = {"mass": float(model["mass"]), "damping": float(model.get("damping", 0.0)),
+              "stiffness": float(model.get("stiffness", 0.0))}
+    if values["damping"] == 0:
+        if values["stiffness"] <= 0:
+            return "no damping and no positive stiffness to start a damping correction from"
+        values["damping"] = 0.1 * math.sqrt(values["stiffness"] * values["mass"])
+    if values["stiffness"] == 0:
+        return "no stiffness to start a stiffness correction from (the fit keeps the sign of each start)"
+    return Estimate(values, {k: float("nan") for k in values}, float("nan"), "start at the model's own values")
+
+def _set_keys(data: dict, values: dict) -> dict:
+    out = copy.deepcopy(data)
+    out["model"].update({k: float(v) for k, v in values.items()})
+    return out
+
+
+HYPOTHESES = (
+    Hypothesis("wrong_mechanics", "Wrong damping, stiffness or mass", "linear", "damping", "N s/m",
+               "BLA differs from the model around its resonance (height, frequency); no distortion",
+               _mass_spring_damper, _estimate_mechanics, _set_keys, MECHANICS,
+               lambda data: {k: f"model.{k}" for k in MECHANICS}),
+)
