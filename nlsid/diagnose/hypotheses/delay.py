@@ -12,6 +12,12 @@ from nlsid.diagnose.hypotheses.bla_ratio import bla_ratios
 
 
 def _estimate_delay(ctx: Context) -> Estimate | str:
+    """The dead time tau from the phase of G_BLA / G_model, -w tau, by weighted least squares
+    (weights 2 |R|^2 / var(R), the inverse variance of the phase): a real number of samples,
+    simulated exactly (:func:`nlsid.simulate.engine.timing`), then refined by the fit engine. Below
+    one sample it is a converter skew, a nuisance estimated before any hypothesis
+    (:mod:`nlsid.diagnose.nuisances`), not a cause. A discrete model has no values between samples:
+    its dead time is rounded to whole samples."""
     ratios = bla_ratios(ctx)
     if not ratios:
         return "needs multisine runs (the BLA phase)"
@@ -23,12 +29,23 @@ def _estimate_delay(ctx: Context) -> Estimate | str:
         den += float(np.sum(weight * w * w))
     tau = -num / den
     fs = ctx.runs[0].fs
-    samples = int(round(tau * fs))
-    if samples < 1:
-        return f"the BLA phase shows no dead time (slope {tau * fs:.2f} samples)"
+    samples = tau * fs
+    if samples < 1 - 3 * fs / math.sqrt(den):
+        return f"the BLA phase shows no dead time of a sample or more (slope {samples:.2f} samples)"
     current = float(ctx.runner.data["model"].get("delay", 0.0))
-    return Estimate({"delay": current + samples / fs}, {"delay": 1 / math.sqrt(den)}, float("nan"),
-                    f"{samples} more samples from the BLA phase slope ({tau * fs:.2f} samples before rounding)")
+    if ctx.runner.data["model"].get("domain") == "discrete":
+        whole = max(int(round(samples)), 1)
+        return Estimate({"delay": current + whole / fs}, {"delay": 1 / math.sqrt(den)}, float("nan"),
+                        f"{whole} more samples from the BLA phase slope ({samples:.2f} before rounding: a discrete "
+                        "model has no values between samples)")
+    return Estimate({"delay": current + tau}, {"delay": 1 / math.sqrt(den)}, float("nan"),
+                    f"{samples:.3f} more samples from the BLA phase slope")
+
+
+def _delay_paths(data: dict) -> dict[str, str] | None:
+    """The fit engine refines a continuous model's dead time (a discrete one keeps whole samples)."""
+    return {} if data["model"].get("domain") == "discrete" else {"delay": "model.delay"}
+
 
 def _extend_delay(data: dict, values: dict) -> dict:
     out = copy.deepcopy(data)
@@ -39,5 +56,5 @@ def _extend_delay(data: dict, values: dict) -> dict:
 HYPOTHESES = (
     Hypothesis("delay", "A dead time", "delay", "delay", "s",
                "BLA phase error growing linearly with frequency, gain right; no distortion",
-               always, _estimate_delay, _extend_delay, ("delay",)),
+               always, _estimate_delay, _extend_delay, ("delay",), _delay_paths),
 )
