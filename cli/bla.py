@@ -50,6 +50,7 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     from nlsid.io.bla_file import write_bla
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import open_recording
+    from nlsid.io.units import common_units
 
     check_suffix(output)
     if not 0 < confidence < 1:
@@ -58,22 +59,26 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         raise InputError("--lpm-lines", f"expected an odd number of lines (a window centred on its line), got {lpm_lines}")
     check_writable(output, force)
     plot_dir = plot_folder(plots)
+    units_seen = []
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
             levels, lpm_levels, warnings = analyse_bla(recording_runs(rec, recording), method, confidence,
-                                                       on_run=lambda run: step(), source=recording,
+                                                       on_run=lambda run: (step(), units_seen.append(run.units)),
+                                                       source=recording,
                                                        lpm_half_width=lpm_lines // 2, lpm_degree=lpm_degree)
     across = across_levels(levels) if levels else {"reference_level": None, "levels": []}
+    units = common_units(units_seen)
     figures = {}
     if plot_dir is not None:
         from nlsid.report.bla_plots import render_figures
+        from nlsid.report.units import Units
 
-        figures = render_figures(levels)
+        figures = render_figures(levels, Units(units))
         plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)
     write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force,
-              lpm_levels=lpm_levels)
+              lpm_levels=lpm_levels, units=units)
     for name, data in figures.items():
         with atomic_path(plot_dir / name, force) as tmp:
             tmp.write_bytes(data)

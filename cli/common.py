@@ -93,7 +93,18 @@ def progress(description: str, total: int) -> Iterator[Any]:
     )
     with bar:
         task = bar.add_task(description, total=total)
-        yield lambda advance=1: bar.advance(task, advance)
+        done, planned = 0, total
+
+        def step(advance: int = 1) -> None:
+            # a stage that takes further rounds (diagnose's chain of causes) extends the bar by a round
+            nonlocal done, planned
+            done += advance
+            if done > planned:
+                planned += total
+                bar.update(task, total=planned)
+            bar.advance(task, advance)
+
+        yield step
 
 
 OUTPUT_PARAMETERS = ("output", "plots", "plot")  # the parameters that name what a command writes

@@ -9,7 +9,7 @@ import click
 from nlsid.errors import CheckFailed
 
 from .common import StageCommand, emit_json, force_option, json_option, progress, settings
-from .options import map_option, parse_map
+from .options import map_option, parse_map, read_split, split_options
 
 
 @click.command(cls=StageCommand)
@@ -25,11 +25,13 @@ from .options import map_option, parse_map
               help="Exit 1 when the model's simulation error is more than DB dB above the noise floor.")
 @click.option("--fail-if-distortion-above", type=float, metavar="DB",
               help="Exit 1 when odd or even distortion the model does not produce exceeds the noise by DB dB.")
+@split_options
 @map_option
 @force_option
 @json_option
 def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
-             fail_if_distortion_above: float | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+             fail_if_distortion_above: float | None, validate_on: tuple[str, ...], estimation_range: str | None,
+             validation_range: str | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -38,12 +40,14 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     cubic stiffness, input saturation, deadzone, backlash, quadratic output, a missing resonance,
     wrong damping/stiffness/mass, a delay) is estimated
     on half of the runs and scored on the others; a cause is named only when its gain is
-    significant. The outputs are written before any --fail-if check exits 1.
+    significant. The outputs are written before any --fail-if check exits 1. --validate-on and
+    the ranges choose what is estimated on and what is validated on, as in fit --model.
 
-    Example:
+    Examples:
 
     \b
       nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/
+      nlsid diagnose --model model.yaml --data long.h5 --estimation-range :60000 --validation-range 60000: -o diagnosis/
     """
     from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
     from nlsid.diagnose.hypotheses import LIBRARY
@@ -51,20 +55,23 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     from nlsid.io.diagnosis_file import extended_yaml, write_diagnosis
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import read_runs
+    from nlsid.io.units import common_units
 
     data, _ = load_yaml(model_path)
     if not isinstance(data, dict):
         from nlsid.errors import InputError
 
         raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
+    estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping))
     runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
-    with progress("diagnose", len(LIBRARY) + 1) as step:
-        result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step())
-    winner = result.winner
-    extended = extended_yaml(winner.extended, result.extended_header()) if winner is not None else None
-    summary = result.summary()
+    with progress("diagnose", len(LIBRARY) + 2) as step:  # evidence, nuisances, each hypothesis
+        result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step(), validate_on=extra,
+                               estimation_range=estimation, validation_range=validation)
+    final = result.final
+    extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
+    summary = {**result.summary(), "units": common_units(run.units for run in [*runs, *extra])}
     write_diagnosis(output, summary, result.arrays(), extended,
-                    provenance(config_paths=[model_path], input_paths=[data_path]), force=force)
+                    provenance(config_paths=[model_path], input_paths=[data_path, *validate_on]), force=force)
     if as_json:
         emit_json({"output": output, **summary})
     else:
@@ -79,19 +86,21 @@ def _print(result, output: str) -> None:
         console.print(f"  - {line}", markup=False)
     from rich.table import Table
 
+    from nlsid.report.render_diagnosis import floor_text
+
     table = Table(title="Hypotheses (validation runs)")
-    for column in ("hypothesis", "main parameter", "gain dB", "above floor dB", "distortion explained", "note"):
+    for column in ("hypothesis", "main parameter", "gain dB", "vs noise floor", "distortion gain dB", "note"):
         table.add_column(column)
     for o in result.outcomes:
         if o.score is None:
             table.add_row(o.hypothesis.title, "-", "-", "-", "-", o.reason)
             continue
         main = o.hypothesis.main
-        explained = o.score.distortion_explained
+        distortion = o.score.distortion_gain_db
         gain = f"{o.score.gain_db:+.1f}" if math.isfinite(o.score.gain_db) else "exact" if o.score.exact else "-"
-        floor = ("exact" if o.score.exact else "zero floor") if o.score.noise_zero else f"{o.score.above_floor_db:.1f}"
-        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain, floor,
-                      "-" if math.isnan(explained) else f"{100 * explained:.0f} %",
+        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain,
+                      floor_text(o.score.summary()),
+                      "-" if math.isnan(distortion) else f"{distortion:+.1f}",
                       "winner" if o is result.winner else "")
     console.print(table)
     console.print(f"-> {output}", markup=False)

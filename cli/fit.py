@@ -9,7 +9,7 @@ import click
 from nlsid.errors import InputError
 
 from .common import StageCommand, emit_json, force_option, json_option, settings
-from .options import map_option, parse_map
+from .options import map_option, parse_map, read_split, split_options
 
 
 @click.command(cls=StageCommand)
@@ -25,7 +25,12 @@ from .options import map_option, parse_map
               help="Model config with a free: section (fit its free parameters to --data).")
 @click.option("--data", "data", type=click.Path(dir_okay=False), default=None, help="Recording to fit --model to (.h5 or .mcap).")
 @click.option("--validation", multiple=True, metavar="RUN_ID",
-              help="Run held out for validation (repeat). Default: the highest realization of each level, else the last run.")
+              help="Run held out for validation (repeat). Default: the highest realization of each level, else the last "
+                   "run; with --validate-on, none.")
+@split_options
+@click.option("--fit-on", type=click.Choice(["y", "u"]), default="y", show_default=True,
+              help="The simulated signal fitted to the recorded one: the output y, or in closed loop the plant input u "
+                   "(the controller's output).")
 @click.option("--start-estimate", is_flag=True,
               help="Start free force parameters (fc, fv, k3 of a mass_spring_damper) without a start: value at a "
                    "regression of the residual force instead of the config's value.")
@@ -35,16 +40,17 @@ from .options import map_option, parse_map
               help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")
 @force_option
 @json_option
-def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, start_estimate,
-        workers, mapping, output, force, as_json) -> None:
+def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, validate_on,
+        estimation_range, validation_range, fit_on, start_estimate, workers, mapping, output, force, as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
-    maximum likelihood, book ch. 7), with the cost against its expected value, parameter
-    standard deviations and an order scan with --order auto.
+    maximum likelihood, Schoukens, Pintelon and Rolain 2012, Chapter 7), with the cost against
+    its expected value, parameter standard deviations and an order scan with --order auto.
 
     From a model and data: the parameters under the config's free: key minimise the simulation
-    error on estimation runs; the error on held-out validation runs is reported.
+    error on estimation runs (or sample ranges of them); the error on held-out validation runs,
+    ranges or recordings is reported.
 
     Examples:
 
@@ -52,15 +58,20 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
       nlsid fit bla.h5 --order 2/2 --domain s -o model.yaml --plot fit.png
       nlsid fit bla.h5 --order auto -o model.yaml
       nlsid fit --model stage.yaml --data recording.h5 -o fitted.yaml
+      nlsid fit --model stage.yaml --data long.h5 --estimation-range 0:60000 --validation-range 60000: -o fitted.yaml
+      nlsid fit --model axis.yaml --data estimation.h5 --validate-on validation.h5 --fit-on u -o fitted.yaml
     """
     if model_config is not None or data is not None:
         if bla_file is not None or order is not None:
             raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
         if model_config is None or data is None:
             raise InputError("nlsid fit", "--model and --data go together")
-        _fit_extension(model_config, data, list(validation), start_estimate, workers, parse_map(mapping), output,
-                       force, as_json)
+        _fit_extension(model_config, data, list(validation), validate_on, estimation_range, validation_range, fit_on,
+                       start_estimate, workers, parse_map(mapping), output, force, as_json)
         return
+    if validate_on or estimation_range or validation_range or fit_on != "y":
+        raise InputError("nlsid fit", "--validate-on, --estimation-range, --validation-range and --fit-on go with "
+                                      "--model and --data")
     if bla_file is None or order is None:
         raise InputError("nlsid fit", "give BLA_FILE and --order NB/NA (or auto), or --model with --data")
     _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
@@ -81,14 +92,17 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function, {report['stability']}"
               + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
               f"cost {fit_.cost:.6g}, {_cost_check(fit_)} ({fit_.lines} lines)",
+              f"weights: {result.level.weights}",
               f"order: {report['order_reason']}",
               f"report: {report_path(output).name}"]
     if plot:
+        from nlsid.io.bla_file import read_units
         from nlsid.report.fit_plots import tf_fit_png
+        from nlsid.report.units import Units
 
         data = result.level.data
         png = tf_fit_png(data.frequency, data.G, fit_.response, fit_.response_std, result.level.noise_std,
-                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})")
+                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})", Units(read_units(bla_file)))
         with atomic_path(plot, force) as tmp:
             tmp.write_bytes(png)
     write_fit(output, {"model": fit_.model.config()}, header, report, provenance(input_paths=[bla_file]), force=force)
@@ -97,7 +111,8 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     if as_json:
         emit_json({"output": output, "report": str(report_path(output)), "plot": plot,
                    **{k: report[k] for k in ("domain", "order", "delay_samples", "num", "den", "parameters", "cost",
-                                             "expected_cost", "cost_std", "cost_bound", "lines", "stable", "stability",
+                                             "expected_cost", "cost_std", "cost_bound", "weights", "lines", "stable",
+                                             "stability",
                                              "integrators", "fit", "fit_note", "order_reason", "order_scan",
                                              "warnings")}})
         return
@@ -117,7 +132,8 @@ def _cost_check(fit_) -> str:
     return f"expected {fit_.expected_cost:.6g} {spread}, bound {fit_.cost_bound:.6g}"
 
 
-def _fit_extension(model_config, data, validation, start_estimate, workers, mapping, output, force, as_json) -> None:
+def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on,
+                   start_estimate, workers, mapping, output, force, as_json) -> None:
     from nlsid.fit.extension import fit_config_file
     from nlsid.io.fit_file import report_path, write_fit
     from nlsid.io.provenance import provenance
@@ -126,15 +142,17 @@ def _fit_extension(model_config, data, validation, start_estimate, workers, mapp
 
     check_writable(output, force)
     check_writable(report_path(output), force)
+    estimation, validation_part, extra = read_split(validate_on, estimation_range, validation_range, mapping)
     runs = read_runs(data, require_y=True, mapping=mapping)
-    result = fit_config_file(model_config, runs, validation or None, workers, start_estimate)
+    result = fit_config_file(model_config, runs, validation or None, workers, start_estimate, validate_on=extra,
+                             estimation_range=estimation, validation_range=validation_part, fit_on=fit_on, where=data)
     summary = result.summary()
     header = [f"nlsid fit --model {model_config} --data {data}",
               "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),
-              f"validation rms error {result.validation_rms:.4g} (noise {result.noise_rms_validation:.4g}); "
+              f"validation rms error of {fit_on} {result.validation_rms:.4g} (noise {result.noise_rms_validation:.4g}); "
               f"report: {report_path(output).name}"]
     write_fit(output, result.config, header, {"kind": "extension", **summary},
-              provenance(config_paths=[model_config], input_paths=[data]), force=force)
+              provenance(config_paths=[model_config], input_paths=[data, *validate_on]), force=force)
     for warning in result.warnings:
         settings().console.print(f"warning: {warning}")
     if as_json:
@@ -143,6 +161,9 @@ def _fit_extension(model_config, data, validation, start_estimate, workers, mapp
     console = settings().console
     for name, value, std, start in zip(result.names, result.values, result.std, result.start):
         console.print(f"  {name} = {value:.6g} +- {std:.2g} (start {start:.6g})")
-    console.print(f"rms error: estimation {result.estimation_rms:.4g} (start {result.start_estimation_rms:.4g}), "
-                  f"validation {result.validation_rms:.4g} (start {result.start_validation_rms:.4g}); "
-                  f"noise level {result.noise_rms_validation:.4g}")
+    console.print(f"rms error of {fit_on} (fitted): estimation {result.estimation_rms:.4g} (start "
+                  f"{result.start_estimation_rms:.4g}), validation {result.validation_rms:.4g} (start "
+                  f"{result.start_validation_rms:.4g}); noise level {result.noise_rms_validation:.4g}")
+    for signal, rms in result.signal_rms.items():
+        if signal != fit_on:
+            console.print(f"rms error of {signal}: estimation {rms['estimation']:.4g}, validation {rms['validation']:.4g}")

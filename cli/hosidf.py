@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Iterator
 
 import click
 
+from nlsid.citations import FRICTION_COMPENSATION, SPECTRAL_ANALYSIS
 from nlsid.errors import InputError
 from nlsid.io.atomic import check_suffix, check_writable
 
@@ -17,8 +18,9 @@ from .common import LOGGER, StageCommand, emit_json, force_option, json_option, 
 from .options import map_option, parse_map, plot_folder, plots_option
 
 
-def _sine_runs(recording) -> Iterator[Run]:
-    """The single-sine runs of a recording, read one at a time; other runs are skipped with a warning."""
+def _sine_runs(recording, units: list) -> Iterator[Run]:
+    """The single-sine runs of a recording, read one at a time (their units appended to ``units``);
+    other runs are skipped with a warning."""
     skipped, found = [], False
     with progress("reading runs", len(recording.run_ids)) as step:
         for run_id in recording.run_ids:
@@ -26,6 +28,7 @@ def _sine_runs(recording) -> Iterator[Run]:
             step()
             if run.kind == "sine":
                 found = True
+                units.append(run.units)
                 yield run
             else:
                 skipped.append(run_id)
@@ -63,9 +66,9 @@ def _analytic(branches, grid):
 @click.option("--input", "input_choice", type=click.Choice(["auto", "u", "r"]), default="auto", show_default=True,
               help="Signal whose tone normalises the HOSIDFs (auto: r when the runs have a reference).")
 @click.option("--sweep", "parameter", metavar="PARAM",
-              help="Linearity cost over runs that differ in run parameter PARAM (seed 003), e.g. K_fc.")
+              help=f"Linearity cost ({FRICTION_COMPENSATION}) over runs that differ in run parameter PARAM, e.g. K_fc.")
 @click.option("--model", type=click.Path(dir_okay=False),
-              help="Model config (polynomial block structure): add its analytic HOSIDFs (seed 002 Lemma 2).")
+              help=f"Model config (polynomial block structure): add its analytic HOSIDFs ({SPECTRAL_ANALYSIS}, Lemma 2).")
 @plots_option
 @map_option
 @force_option
@@ -92,6 +95,7 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     from nlsid.io.hosidf_file import write_hosidf
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import open_recording
+    from nlsid.io.units import common_units
 
     check_suffix(output)
     check_writable(output, force)
@@ -99,8 +103,9 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     if parameter is not None and model is not None:
         raise InputError("--model", "analytic HOSIDFs apply to a frequency x amplitude grid, not to --sweep")
     grid = analytic = result = None
+    units_seen = []
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
-        first, runs = _first_and_all(_sine_runs(rec), recording)
+        first, runs = _first_and_all(_sine_runs(rec, units_seen), recording)
         signal = hosidf_input(first, input_choice)
         if parameter is None:
             branches = None
@@ -115,14 +120,17 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
         else:
             result = sweep(runs, parameter, harmonics, signal, recording)
     prov = provenance(config_paths=[model] if model else [], input_paths=[recording])
-    write_hosidf(output, harmonics, signal, prov, grid=grid, analytic=analytic, sweep=result, force=force)
+    units = common_units(units_seen)
+    write_hosidf(output, harmonics, signal, prov, grid=grid, analytic=analytic, sweep=result, force=force,
+                 units=units)
     figures = []
     if folder is not None:
         from nlsid.report import hosidf_plots
+        from nlsid.report.units import Units
 
         folder.mkdir(parents=True, exist_ok=True)
-        figures = (hosidf_plots.grid_figures(grid, spectrum_of, folder, analytic) if grid is not None
-                   else hosidf_plots.sweep_figures(result, folder))
+        figures = (hosidf_plots.grid_figures(grid, spectrum_of, folder, Units(units), analytic, signal)
+                   if grid is not None else hosidf_plots.sweep_figures(result, folder, Units(units), signal))
     summary = _summary(output, signal, grid, result, figures)
     if as_json:
         emit_json(summary)
@@ -131,8 +139,8 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
 
 
 #: Where the harmonics' noise bound comes from: it is measured, never assumed (seed 003, Eq. (6)).
-NOISE_BOUND = ("measured: seed 003 Eq. (6), eps_k = sigma(k) + 2 varsigma, from the spread of the spectra over the "
-               "repeats and periods of each cell (noise, and whatever changes from repeat to repeat)")
+NOISE_BOUND = (f"measured: {FRICTION_COMPENSATION}, Eq. 6, eps_k = sigma(k) + 2 varsigma, from the spread of the "
+               "spectra over the repeats and periods of each cell (noise, and whatever changes from repeat to repeat)")
 
 
 def _summary(output: str, signal: str, grid, result, figures) -> dict:

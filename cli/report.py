@@ -1,4 +1,4 @@
-"""``nlsid report``: one self-contained HTML page of a result (bla.h5, hosidf.h5, model.yaml)."""
+"""``nlsid report``: one self-contained HTML page of a result (diagnosis/, bla.h5, hosidf.h5, model.yaml)."""
 
 from __future__ import annotations
 
@@ -19,8 +19,10 @@ def report(source: str, output: str, force: bool, as_json: bool) -> dict:
     """Render a diagnosis, BLA, HOSIDF or model as one self-contained HTML page.
 
     The page opens with the verdict, then the evidence figures with captions, then the tables of
-    numbers and the provenance. Figures are embedded, so the page can be mailed as it is.
-    With --json, the verdict and the numbers are also printed to stdout.
+    numbers, the references and the provenance. Figures are inline vector graphics (their text is
+    searchable), each with its data as a CSV link, and every axis carries the recording's units;
+    the page is one file that opens offline and can be mailed as it is. With --json, the verdict
+    and the numbers are also printed to stdout.
 
     Examples:
 

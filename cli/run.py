@@ -169,14 +169,15 @@ def check_steps(cli: click.Group, pipeline: str, root: Path, steps: list[Step]) 
                 value = params.get(param.name)
                 if value is None or not isinstance(param.type, click.Path) or param.name in OUTPUT_PARAMETERS:
                     continue
-                path = root / value
-                if path in written:
-                    continue
-                if not path.exists():
-                    raise InputError(where, f"input {value} does not exist (in {root}) and no earlier step writes it")
-                kind = CONFIG_PARAMETERS.get((step.args[0], param.name))
-                if kind is not None:
-                    _check_config(value, kind)
+                for one in value if getattr(param, "multiple", False) else (value,):  # each path of a repeatable option
+                    path = root / one
+                    if path in written:
+                        continue
+                    if not path.exists():
+                        raise InputError(where, f"input {one} does not exist (in {root}) and no earlier step writes it")
+                    kind = CONFIG_PARAMETERS.get((step.args[0], param.name))
+                    if kind is not None:
+                        _check_config(one, kind)
             written.update([step.output, *step.figures])
     finally:
         os.chdir(previous)

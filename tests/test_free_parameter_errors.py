@@ -34,8 +34,9 @@ def recording(tmp_path_factory):
 
 
 @pytest.mark.parametrize("key, what", [
-    ("model.num[0]", "must end in a key of a mapping"),
-    ("model.den[5].x", "no item [5] in the config"),
+    ("model.num[1]", "no item [1]: model.num has 1 item"),
+    ("model.den[5].x", "no item [5]: model.den has 3 items"),
+    ("model.type[0]", "model.type is not a list: no item [0]"),
 ])
 def test_free_key_path_errors_name_the_free_key(run_cli, tmp_path, recording, key, what):
     config = tmp_path / "m.yaml"
@@ -48,6 +49,6 @@ def test_free_key_path_errors_name_the_free_key(run_cli, tmp_path, recording, ke
 
 def test_sweep_key_path_errors_still_name_the_sweep(run_cli, tmp_path, recording):
     config = tmp_path / "s.yaml"
-    config.write_text(MODEL + "sweep:\n  parameter: model.num[0]\n  values: [1.0, 2.0]\n")
+    config.write_text(MODEL + "sweep:\n  parameter: model.num[2]\n  values: [1.0, 2.0]\n")
     result = run_cli("simulate", config, "--excitation", recording, "-o", tmp_path / "s.h5")
-    result.assert_one_line_error("sweep.parameter: model.num[0]: must end in a key of a mapping")
+    result.assert_one_line_error("sweep.parameter: model.num[2]: no item [2]: model.num has 1 item")

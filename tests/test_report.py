@@ -7,7 +7,6 @@ read independently, never from the renderer's own output.
 
 from __future__ import annotations
 
-import base64
 import cmath
 import importlib.util
 import math
@@ -30,6 +29,7 @@ from nlsid.report.render_bla import distortion_verdict  # noqa: E402
 
 CONFIGS = Path(__file__).parents[1] / "configs"
 B, A = signal.butter(2, 0.25)
+INTERNAL = re.compile(r"\bseed[ -]?0\d\d\b|\bbook\b", re.I)  # the source files' labels, not a reader's citation
 
 
 def _load(name):
@@ -111,6 +111,8 @@ def test_bla_report_classifies_distortion(tmp_path, run_cli, name, static, expec
     assert f"BLA changes by up to {rows[1]['bla_change_max_db']:+.1f} dB over 2 levels" in summary["headline"]
     page = (tmp_path / "report.html").read_text(encoding="utf-8")
     assert page.index('id="verdict"') < page.index('id="figures"') < page.index('id="numbers"')
+    assert not INTERNAL.search(page) and "Rijlaarsdam et al., ACC 2010, Fig. 3" in page
+    assert page.index('id="numbers"') < page.index('id="references"')
     assert summary["figures"] == ["bla_vs_level", "spectrum_level_01", "bla_level_01", "spectrum_level_00",
                                   "bla_level_00"]
 
@@ -153,6 +155,8 @@ def test_hosidf_report_h1_change_and_harmonics_from_lemma_2(lpl_hosidf_file, run
     significance = {row["k"]: row for row in summary["numbers"]["grid"]["significance"]}
     assert significance[2]["significant_cells"] == significance[3]["significant_cells"] == 4
     assert "k = 2 in 4/4 cells, k = 3 in 4/4 cells" in summary["headline"]
+    page = (tmp_path / "hosidf.html").read_text(encoding="utf-8")
+    assert not INTERNAL.search(page) and "Rijlaarsdam et al., ACC 2010, Fig. 7" in page
 
 
 def test_hosidf_sweep_report_names_the_friction_optimum(run_cli, tmp_path):
@@ -167,6 +171,8 @@ def test_hosidf_sweep_report_names_the_friction_optimum(run_cli, tmp_path):
     summary = result.json()
     assert summary["headline"] == "Optimum K_fc = 0.92 by the linearity cost; 0.92 by the time-domain error"
     assert len(summary["figures"]) == 4
+    page = (tmp_path / "sweep.html").read_text(encoding="utf-8")
+    assert not INTERNAL.search(page) and "Rijlaarsdam et al., ACC 2011, Fig. 6" in page
 
 
 def _modes(summary):
@@ -206,18 +212,25 @@ def test_model_report_loop_crossover_of_an_integrator(run_cli, tmp_path):
 
 
 def test_page_is_self_contained_and_escaped():
-    png = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAF"
-                           "BQIAX8jx0gAAAABJRU5ErkJggg==")  # a 1 x 1 PNG
+    svg = '<svg width="10pt" height="10pt" viewBox="0 0 10 10"><defs><path id="m1" d="M 0 0"/></defs>' \
+          '<use xlink:href="#m1" x="1" y="1"/></svg>'
     page = Page(kind="Test", title="A <b> title", source="a&b.h5", headline="<script>alert(1)</script>",
-                findings=["x < y"], figures=[Figure(png, "First part. Second part.", "fig")],
+                findings=["x < y"], figures=[Figure(svg, "x,y\n1,2\n", "First part. Second part.", "fig")],
                 tables=[Table("caption", ["a"], [["<i>"]])], warnings=["w > 0"], provenance={"inputs": {"f.h5": "abc"}})
     text = render_html(page, "nlsid test")
     assert "<script" not in text and "&lt;script&gt;alert(1)&lt;/script&gt;" in text
     assert "A &lt;b&gt; title" in text and "a&amp;b.h5" in text and "&lt;i&gt;" in text and "w &gt; 0" in text
-    # No external resource: every src is a data: URI, no href at all, no url() in the CSS.
-    assert re.findall(r'src="([^"]*)"', text) == ["data:image/png;base64," + base64.b64encode(png).decode()]
-    assert "href=" not in text and "url(" not in text and "@import" not in text
+    # No external resource: no src at all, every link a data: URL (the figure's CSV) or a reference
+    # inside the figure (its ids prefixed, unique on the page), no url() in the CSS.
+    assert "src=" not in text and "url(" not in text and "@import" not in text
+    assert re.findall(r'href="([^"]*)"', text) == ["#figure-1-m1", "data:text/csv;charset=utf-8,x,y%0A1,2%0A"]
+    assert 'id="figure-1-m1"' in text and '<svg role="img" aria-label="fig" ' in text
     assert "<b>Figure 1. First part.</b> Second part." in text
+
+
+def test_a_table_row_has_a_cell_under_every_header():
+    with pytest.raises(ValueError, match="a row of 1 cells under 2 headers"):
+        Table("caption", ["a", "b"], [["1"]])
 
 
 def test_bad_inputs_fail_cleanly_without_output(run_cli, tmp_path):
@@ -305,3 +318,5 @@ def test_log_axes_carry_plain_number_labels():
     assert {"1", "2", "3", "4"} <= set(narrow) and not any("10^" in s or "times" in s for s in narrow)
     wide = [s for s in labels(0.5, 200.0) if s]  # several decades: the powers of ten only
     assert set(wide) == {"1", "10", "100"}
+    band = [s for s in labels(1.5, 60.0) if s]  # a band of the sample stage: more than a lone "10"
+    assert {"2", "5", "10", "20", "50"} <= set(band) and "3" not in band

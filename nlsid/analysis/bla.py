@@ -47,6 +47,7 @@ import numpy as np
 from nlsid.analysis.confidence import Bounds, circle_bounds
 from nlsid.analysis.period_stats import PeriodStats
 from nlsid.analysis.precision import negligible
+from nlsid.citations import BOOK
 
 METHODS = ("frf", "io", "reference")
 
@@ -190,7 +191,7 @@ def _sample_size_warnings(M: int, P: int) -> list[str]:
     out = []
     if M < 2:
         out.append("one realization (M = 1): the total and nonlinear variances of the robust method "
-                   "cannot be estimated (book Section 6.1.1); use several realizations or the fast method")
+                   f"cannot be estimated ({BOOK}, Section 6.1.1); use several realizations or the fast method")
     if P < 2:
         out.append("one period per realization (P = 1): the noise variance cannot be estimated, so noise "
                    "and nonlinear distortion are not separated (var_total holds both)")
@@ -222,5 +223,5 @@ def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u:
 # What the test measures (book (6-40)-(6-43)): distortion at the plant input. In closed loop the
 # controller feeds the plant's own distortion back to it, so this alone does not locate it.
 _INPUT_DISTORTION = ("nonlinear distortion reaches the plant input (a nonlinear actuator, or in closed loop the "
-                     "plant's distortion fed back by the controller; book (6-40)-(6-43)), so the BLA from r is "
-                     "H_BLA/A_BLA")
+                     f"plant's distortion fed back by the controller; {BOOK}, Eqs. 6-40 to 6-43), so the BLA "
+                     "from r is H_BLA/A_BLA")

@@ -39,6 +39,7 @@ from nlsid.analysis.bla import eiv_variance
 from nlsid.analysis.confidence import Bounds, circle_bounds, f_quantile_2
 from nlsid.analysis.lines import EVEN, ODD, Lines
 from nlsid.analysis.period_stats import PeriodStats
+from nlsid.citations import BOOK
 
 #: Minimum margin (10 dB) read into the book's "much smaller than" in (6-72)/(6-74) and its
 #: 10 dB validity rules for the input detection lines and the input signal-to-distortion ratio (6-78).
@@ -211,7 +212,7 @@ def _warnings(checks: dict) -> list[str]:
     out = []
     if checks["input_detection_db"] > -MARGIN:
         out.append(f"fast method: the input detection lines are only {-checks['input_detection_db']:.1f} dB below "
-                   f"the excited lines (need {MARGIN:g} dB, book Section 6.1.2): the actuator distorts")
+                   f"the excited lines (need {MARGIN:g} dB, {BOOK}, Section 6.1.2): the actuator distorts")
     if checks["input_sdr_db"] < MARGIN:
         out.append(f"fast method: input signal-to-(noise + distortion) ratio {checks['input_sdr_db']:.1f} dB is below "
                    f"{MARGIN:g} dB (6-78): the BLA is biased")

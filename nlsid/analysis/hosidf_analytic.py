@@ -53,6 +53,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from nlsid.citations import SPECTRAL_ANALYSIS
+
 Response = Callable[[float], complex]
 
 
@@ -190,7 +192,7 @@ def lpl_spectrum(branches: Sequence[Branch], omega0: float, gamma: float, phi0: 
 def fhosidf(branches: Sequence[Branch], omega: float) -> np.ndarray:
     """fHOSIDFs ``F_p(w) = sum_n G_n^+(w) alpha_p^[n]``, p = 1..max P_n, of a PL system (Eq. 14)."""
     if any(b.pre is not None for b in branches):
-        raise ValueError("fHOSIDFs (seed 002 Definition 3) exist for PL systems only (every G_n^- = 1)")
+        raise ValueError(f"fHOSIDFs ({SPECTRAL_ANALYSIS}, Definition 3) exist for PL systems only (every G_n^- = 1)")
     degree = max(b.degree for b in branches)
     out = np.zeros(degree, dtype=complex)
     for branch in branches:

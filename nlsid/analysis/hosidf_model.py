@@ -17,6 +17,7 @@ import os
 import numpy as np
 
 from nlsid.analysis.hosidf_analytic import Branch, Response
+from nlsid.citations import SPECTRAL_ANALYSIS
 from nlsid.errors import InputError
 
 
@@ -34,11 +35,13 @@ def _response(config, fs: float, where: str) -> Response:
 
 def _branch(before, nonlinear, after, fs: float, where: str) -> Branch:
     if nonlinear.type != "polynomial":
-        raise InputError(f"{where}.nonlinear", f"analytic HOSIDFs (seed 002) need a polynomial block, got '{nonlinear.type}'")
+        raise InputError(f"{where}.nonlinear",
+                         f"analytic HOSIDFs ({SPECTRAL_ANALYSIS}) need a polynomial block, got '{nonlinear.type}'")
     coefficients = list(nonlinear.coefficients)
     if coefficients[0] != 0:
         raise InputError(f"{where}.nonlinear.coefficients[0]",
-                         "seed 002 Eq. 1 has no constant term; analytic HOSIDFs need coefficients[0] = 0")
+                         f"{SPECTRAL_ANALYSIS}, Eq. 1, has no constant term; analytic HOSIDFs need "
+                         "coefficients[0] = 0")
     if len(coefficients) < 2:
         raise InputError(f"{where}.nonlinear.coefficients", "the polynomial has no term of degree >= 1")
     pre = _response(before, fs, f"{where}.before") if before is not None else None

@@ -26,6 +26,7 @@ from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
 from nlsid.analysis.output_spectrum import OutputSpectrum, SpectrumAccumulator, db
 from nlsid.analysis.period_stats import run_period_stats
 from nlsid.analysis.precision import negligible
+from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.io.feeds import BlaRuns, LevelShape
 from nlsid.io.run import Run
@@ -140,7 +141,7 @@ class _LevelAccumulator:
                             "(in closed loop the noise is fed back into u, up to 100x); use --method reference")
         if fast is None:
             warnings.append("no in-band detection lines: the fast method and the odd/even classification need a "
-                            "random-grid multisine (book Section 6.1.2)")
+                            f"random-grid multisine ({BOOK}, Section 6.1.2)")
         else:
             warnings += fast.warnings
         return LevelResult(

@@ -13,13 +13,15 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
+from nlsid.diagnose import nuisances
 from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.simulation import ModelRunner
-from nlsid.diagnose.split import ESTIMATION, VALIDATION, split_runs
+from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
 from nlsid.errors import InputError
+from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
 
 
@@ -57,6 +59,21 @@ class Diagnosis:
     original: Score
     outcomes: list[Outcome]
     verdict: rules.Verdict
+    nuisances: nuisances.Nuisances = field(default_factory=nuisances.Nuisances)
+    baseline: Score | None = None  # the user's model with the nuisances, on the validation runs
+    chain: list[Outcome] = field(default_factory=list)  # the causes accepted, one per round
+
+    @property
+    def final(self) -> Outcome | None:
+        """The last accepted cause: its extended model holds every cause of the chain."""
+        return self.chain[-1] if self.chain else None
+
+    def final_score(self) -> Score | None:
+        """The final extended model's validation score against the user's model."""
+        if self.final is None:
+            return None
+        val = [res for res in self.evidence.residuals if res.role == VALIDATION]
+        return score(val, self.final.residuals)
 
     @property
     def winner(self) -> Outcome | None:
@@ -69,6 +86,11 @@ class Diagnosis:
                 return (f"No discrepancy: the simulation reproduces the measured output exactly (error "
                         f"{ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms, within numerical precision); "
                         "the noise floor is zero")
+            if ev.overall.significant:  # the nuisances explain what the evidence saw
+                b = self.baseline
+                found = ", ".join(f"{k} = {v:.4g}" for k, v in self.nuisances.values.items())
+                return (f"No significant discrepancy beyond the nuisances ({found}): with them the validation "
+                        f"error is within the noise ({b.above_floor_db:+.1f} dB, p = {b.p_above_noise:.2g})")
             return (f"No significant discrepancy: the simulation error is within the noise "
                     f"({ev.overall.above_noise_db:+.1f} dB, p = {ev.overall.p_value:.2g})")
         if status == rules.UNDETERMINED:
@@ -76,10 +98,11 @@ class Diagnosis:
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
                     "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
-            w = self.winner
-            main = w.hypothesis.main
-            return (f"Cause: {w.hypothesis.title} ({main} = {w.estimate.values[main]:.4g} {w.hypothesis.unit}); "
-                    f"the extended model's validation error is {gain_text(w.score)}, {versus_floor(w.score)}")
+            causes = ", then ".join(f"{o.hypothesis.title} ({o.hypothesis.main} = "
+                                    f"{o.estimate.values[o.hypothesis.main]:.4g} {o.hypothesis.unit})" for o in self.chain)
+            final = self.final_score()
+            return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
+                    f"{gain_text(final)}, {versus_floor(final)}")
         if ev.noise_zero:
             seen = f"the simulation error is {ev.error_rms:.3g} rms against a zero noise floor: noise-free data"
         elif not ev.overall.noise_known:
@@ -90,8 +113,14 @@ class Diagnosis:
             return f"Discrepancy ({seen}); equally good explanations: {', '.join(self.verdict.tied)}"
         return f"Discrepancy ({seen}); no hypothesis of the library explains it"
 
+    def _chain_summary(self) -> list[dict]:
+        """Each accepted cause: its values, the gain over the model before it, the distance to the floor."""
+        return [{"cause": o.hypothesis.name, "title": o.hypothesis.title, "values": o.estimate.values,
+                 "std": o.estimate.std, "error_rms": o.score.error_rms, "gain_db": o.score.gain_db,
+                 "above_floor_db": o.score.above_floor_db} for o in self.chain]
+
     def findings(self) -> list[str]:
-        out = self.evidence.findings()
+        out = self.nuisances.findings() + self.evidence.findings()
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
             gain = f"{o.score.gain_db:+.1f} dB" if math.isfinite(o.score.gain_db) else "error zero within numerical precision"
@@ -113,34 +142,38 @@ class Diagnosis:
                              "model_power": model.y_power, "noise": measured.y_noise})
         first = next(res for res in ev.residuals if res.role == VALIDATION)
         validation = {"run_id": first.run_id, "fs": first.fs, "original_error": first.residual}
-        if self.winner is not None:
-            validation["extended_error"] = self.winner.residuals[0].residual
+        if self.final is not None:
+            validation["extended_error"] = self.final.residuals[0].residual
         return {"bla": bla, "spectrum": spectrum, "time": ev.time, "validation": validation}
 
     def extended_header(self) -> list[str]:
-        """Header comment of the extended model: the cause, the values with standard errors, the gain."""
-        w = self.winner
-        lines = [f"Extended by nlsid diagnose: {w.hypothesis.title} added to {self.model_source}"]
-        for name, value in w.estimate.values.items():
-            lines.append(f"  {name} = {value:.6g} +- {w.estimate.std[name]:.2g} (one standard error)")
-        gain = f"{w.score.gain_db:+.1f} dB" if math.isfinite(w.score.gain_db) else "zero within numerical precision"
-        lines.append(f"Validation error {w.score.error_rms:.4g} rms ({gain} against the original "
-                     f"model, {versus_floor(w.score)})")
+        """Header comment of the extended model: each cause, its values with standard errors, the gain."""
+        lines = [f"Extended by nlsid diagnose: {', then '.join(o.hypothesis.title for o in self.chain)} added to "
+                 f"{self.model_source}"]
+        for outcome in self.chain:
+            for name, value in outcome.estimate.values.items():
+                lines.append(f"  {name} = {value:.6g} +- {outcome.estimate.std[name]:.2g} (one standard error)")
+        final = self.final_score()
+        gain = f"{final.gain_db:+.1f} dB" if math.isfinite(final.gain_db) else "zero within numerical precision"
+        lines.append(f"Validation error {final.error_rms:.4g} rms ({gain} against the original "
+                     f"model, {versus_floor(final)})")
         return lines
 
     def summary(self) -> dict:
         split = {role: sorted(k for k, v in self.roles.items() if v == role) for role in (ESTIMATION, VALIDATION)}
-        winner = self.winner
+        final = self.final_score()
         gain = None
-        if winner is not None:
-            gain = {"original": self.original.summary(), "extended": winner.score.summary(),
-                    "gain_db": winner.score.gain_db, "distortion_explained": winner.score.distortion_explained,
-                    "extended_above_floor_db": winner.score.above_floor_db}
+        if final is not None:
+            gain = {"original": self.original.summary(), "extended": final.summary(),
+                    "gain_db": final.gain_db, "distortion_explained": final.distortion_explained,
+                    "distortion_gain_db": final.distortion_gain_db,
+                    "extended_above_floor_db": final.above_floor_db}
         return {
             "headline": self.headline(), "findings": self.findings(), "model": self.model_source,
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
-            "gain": gain,
+            "nuisances": self.nuisances.summary(), "baseline": self.baseline.summary() if self.baseline else None,
+            "chain": self._chain_summary(), "gain": gain,
         }
 
 
@@ -164,8 +197,15 @@ def gain_text(score: Score) -> str:
     return "zero within numerical precision"
 
 
-def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str) -> Estimate:
-    """The signature estimate refined by the fit engine (simulation error of the estimation runs).
+def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
+           nominal: dict) -> tuple[Estimate, dict]:
+    """The signature estimate refined by the fit engine (simulation error of the estimation runs),
+    together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
+    ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
+    a friction's phase lag), so each hypothesis re-fits them with its own parameters. A dead time
+    and the output timing are one shift: the delay hypothesis takes it whole (the timing back at
+    its value in the user's ``nominal`` model, not fitted). Returns the estimate and the extended
+    config with every fitted value written in.
 
     Each parameter keeps its sign and stays within three decades of its signature estimate. The
     optimiser gets :data:`FIT_STEPS` cost evaluations (besides its finite-difference Jacobians):
@@ -173,20 +213,26 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     wander into parameters the simulator is slow on (a Stribeck curve steeper than the mass can
     follow), and is then scored where the budget stopped it, with the optimiser's warning.
     """
-    from nlsid.fit.extension import FreeParameter, fit_free_parameters
+    from nlsid.fit.extension import FreeParameter, fit_free_parameters, value_at
 
-    paths = hypothesis.paths(data)
-    free = {}
-    for name, path in paths.items():
-        start = estimate.values[name]
+    extended = hypothesis.extend(data, estimate.values)
+    timing = hypothesis.family != "delay"
+    if not timing:
+        extended["model"].pop("output_timing", None)
+        if "output_timing" in nominal["model"]:
+            extended["model"]["output_timing"] = nominal["model"]["output_timing"]
+    paths = hypothesis.paths(data) if hypothesis.paths is not None else {}
+    free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
+    for name, path in paths.items():  # a parameter without a signature estimate starts at the model's value
+        start = estimate.values[name] if name in estimate.values else float(value_at(extended, path))
         bounds = sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
-    fit = fit_free_parameters(hypothesis.extend(data, estimate.values), free, runs, [], source=source,
-                              max_evaluations=FIT_STEPS)
+    fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=FIT_STEPS)
     values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
     std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
-    note = "; ".join(filter(None, [estimate.note, "refined by the fit engine (simulation error)", *fit.warnings]))
-    return Estimate(values, std, estimate.explained_db, note)
+    what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
+    note = "; ".join(filter(None, [estimate.note, what, *fit.warnings]))
+    return Estimate(values, std, estimate.explained_db, note), fit.config
 
 
 def sufficient_simpler(hypothesis: Hypothesis, outcomes: list[Outcome]) -> Outcome | None:
@@ -221,24 +267,65 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
     outcome.score = score(val_res, outcome.residuals)
 
 
+MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits the whole library)
+
+
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
-             step: Callable[[str], None] | None = None) -> Diagnosis:
-    """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``)."""
+             step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
+             estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None) -> Diagnosis:
+    """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``);
+    ``validate_on`` (runs of further recordings) and the ranges: :func:`nlsid.diagnose.split.assign`.
+
+    Several effects: once a cause is named, the extended model is diagnosed again (the families
+    already accepted left out), until its validation error is at the noise floor, no hypothesis
+    improves it significantly, or :data:`MAX_CAUSES` are named. The result is the first round's
+    diagnosis (the evidence against the user's model) with the ``chain`` of accepted causes; the
+    extended model is the last one's.
+    """
     step = step or (lambda name: None)
+    ModelRunner.from_data(data, source)  # the model is valid before the data are looked at
+    runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
+    first = current = _round(data, source, runs, roles, where, step, ())
+    while current.verdict.status == rules.EXPLAINED:
+        first.chain.append(current.winner)
+        done = current.winner.score.within_floor or not current.evidence.overall.noise_known
+        if done or len(first.chain) == MAX_CAUSES:
+            break
+        accepted = tuple(o.hypothesis.family for o in first.chain)
+        current = _round(current.winner.extended, source, runs, roles, where, step, accepted)
+    return first
+
+
+def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], where: str,
+           step: Callable[[str], None], accepted: tuple[str, ...]) -> Diagnosis:
+    """One diagnosis of the model ``data``: evidence, nuisances, every hypothesis of a family not in
+    ``accepted``, the verdict.
+
+    The evidence and the hypotheses' signatures are those of the model as given. The nuisances
+    (:mod:`nlsid.diagnose.nuisances`) are fitted to it first; the model with them is the baseline:
+    at the noise floor it means nothing beyond noise (and the nuisances), and a hypothesis is a
+    cause only when it beats the baseline significantly (each re-fits the nuisances with its own
+    parameters, :func:`refine`).
+    """
     runner = ModelRunner.from_data(data, source)
-    roles = split_runs(runs, where)
     evidence, _ = gather(runner, runs, roles, where)
     step("evidence")
     by_id = {run.run_id: run for run in runs}
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
     val = [res for res in evidence.residuals if res.role == VALIDATION]
     est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
+    adjusted, found = (data, nuisances.Nuisances()) if evidence.exact else nuisances.estimate(data, source, est_runs)
+    baseline = score(val, model_residuals(ModelRunner.from_data(adjusted, source), val_runs, val))
+    step("nuisances")
     context = Context(runner, est_runs, [r.residual for r in est], [runner.internal(run) for run in est_runs],
                       evidence.bla_levels)
     outcomes = []
     for hypothesis in LIBRARY:
         outcome = Outcome(hypothesis)
         outcomes.append(outcome)
+        if hypothesis.family in accepted:
+            outcome.reason = f"not fitted: a {hypothesis.family} cause is already in the model (an earlier step)"
+            continue
         reason = hypothesis.applies(runner)
         if reason is not None:
             outcome.reason = f"does not apply: {reason}"
@@ -257,14 +344,13 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         if isinstance(estimate, str):
             outcome.reason = estimate
             continue
-        if hypothesis.paths is not None:
-            try:
-                estimate = refine(hypothesis, data, estimate, est_runs, source)
-            except InputError as exc:
-                outcome.reason = f"the fit failed: {exc}"
-                continue
+        try:
+            estimate, extended = refine(hypothesis, adjusted, estimate, est_runs, source, data)
+        except InputError as exc:
+            outcome.reason = f"the fit failed: {exc}"
+            continue
         outcome.estimate = context.fitted[hypothesis.name] = estimate
-        outcome.extended = hypothesis.extend(data, estimate.values)
+        outcome.extended = extended
         _score(outcome, runner, val_runs, val)
         step(hypothesis.name)
     outcomes.sort(key=lambda o: (o.score is None, o.score.error_rms if o.score else math.inf))
@@ -273,5 +359,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
                                   o.score.error_rms ** 2) for o in outcomes if o.score is not None]
     dof = verdict_dof(val)
     discrepancy = evidence.overall.significant if evidence.overall.noise_known else None
-    verdict = rules.decide(discrepancy, original.error_rms ** 2, candidates, dof)
-    return Diagnosis(source, roles, evidence, original, outcomes, verdict)
+    if discrepancy and found.values and baseline.within_floor:
+        discrepancy = False  # the nuisances explain what the evidence saw
+    verdict = rules.decide(discrepancy, baseline.error_rms ** 2, candidates, dof)
+    return Diagnosis(source, roles, evidence, original, outcomes, verdict, found, baseline)

@@ -25,7 +25,12 @@ lines but DC and Nyquist). Per model:
   multisines, the part of the original residual's power above the noise that the model removes,
   ``(B - A) / (B - N)`` with B and A the residual powers of the original and of this model and N
   this model's noise power there (1 = all of it; NaN when the original model leaves nothing above
-  the noise there).
+  the noise there). It is negative when the model adds distortion there: -0.48 is an excess above
+  the noise 48 % larger than the original's, a share that readers misread;
+- ``distortion_gain_db`` = 10 log10(B / A), the same two powers as a change in dB with the sign
+  of ``gain_db``: > 0 the model leaves less at the detection lines than the original (+60 dB: it
+  removes the distortion down to the noise), < 0 more (-1.7 dB: it adds distortion). 0 for the
+  original; NaN without detection lines or when either power is zero.
 
 With a zero noise floor (noise-free data, :mod:`nlsid.diagnose.evidence`) ``noise_zero`` is set,
 ``above_floor_db`` is NaN (no ratio to a zero floor) and ``p_above_noise`` is 0, or NaN with
@@ -54,6 +59,7 @@ class Score:
     gain_db: float
     above_floor_db: float
     distortion_explained: float
+    distortion_gain_db: float
     p_above_noise: float
     noise_zero: bool = False   # the noise floor is zero within numerical precision (noise-free data)
     exact: bool = False        # ... and so is this model's error
@@ -71,7 +77,7 @@ class Score:
         return {"error_rms": self.error_rms, "error_db": self.error_db, "noise_rms": self.noise_rms,
                 "noise_db": _db20(self.noise_rms), "gain_db": self.gain_db,
                 "above_floor_db": self.above_floor_db, "distortion_explained": self.distortion_explained,
-                "p_above_noise": self.p_above_noise, "noise_floor_zero": self.noise_zero, "exact_match": self.exact}
+                "distortion_gain_db": self.distortion_gain_db, "p_above_noise": self.p_above_noise, "noise_floor_zero": self.noise_zero, "exact_match": self.exact}
 
 
 def _db20(rms: float) -> float:
@@ -104,6 +110,7 @@ def score(original: list[Residual], model: list[Residual] | None = None) -> Scor
     before, _ = _detection_power(original)
     after, noise_lines = _detection_power(model)
     explained = (before - after) / (before - noise_lines) if before > noise_lines else float("nan")
+    distortion_gain = 10 * math.log10(before / after) if before > 0 and after > 0 else float("nan")
     test = error_test(model)
     if model is original:
         gain = 0.0
@@ -112,4 +119,5 @@ def score(original: list[Residual], model: list[Residual] | None = None) -> Scor
     else:
         gain = 10 * math.log10(original_power / power)
     above = 10 * math.log10(power / noise) if power > 0 and noise > 0 and not test.noise_zero else float("nan")
-    return Score(math.sqrt(power), math.sqrt(noise), gain, above, explained, test.p_value, test.noise_zero, test.exact)
+    return Score(math.sqrt(power), math.sqrt(noise), gain, above, explained, distortion_gain, test.p_value,
+                 test.noise_zero, test.exact)

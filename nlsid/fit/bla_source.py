@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.fit.tf_fit import FRFData
 from nlsid.io.bla_file import read_bla
@@ -83,7 +84,7 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
         realizations = int(attrs["n_realizations"])
         if realizations < 7:
             warnings.append(f"weights from M = {realizations} realizations: the variance estimates are rough and the "
-                            "cost check approximate (the book advises M >= 7)")
+                            f"cost check approximate ({BOOK}, Section 6.1.1, advise M >= 7)")
     elif fast is not None and _finite(fast.get("var_total")):
         G, variance, weights = fast["G"], fast["var_total"], WEIGHTS["fast"]
         realizations = None

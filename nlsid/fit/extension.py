@@ -1,17 +1,33 @@
 """Free parameters of a model config estimated by minimising the simulation error on measured runs.
 
 Given a model config (the loaded YAML as a dict), a set of *free* parameters named by dotted key
-paths into it (``model.nonlinearities[0].fc``, ``closed_loop.feedforward.coulomb``), and measured
+paths into it (``model.nonlinearities[0].fc``, ``closed_loop.feedforward.coulomb``, or any number
+of a list: ``model.num[0]``, ``model.A[1][0]``, ``model.nonlinear.coefficients[3]``), and measured
 runs, the estimate is
 
-    theta_hat = argmin_theta  sum_{runs r in E} sum_{n in steady state of r} (y_sim,r(n; theta) - y_r(n))^2
+    theta_hat = argmin_theta  sum_{runs r in E} sum_{n in steady state of r} (s_sim,r(n; theta) - s_r(n))^2
 
-over the estimation runs E: each run's recorded input (open loop: ``u``; closed loop: the
-reference ``r``) is simulated through the noise-free model with the parameters written into the
-config (the ``sweep`` mechanism: :func:`nlsid.simulate.sweep._set`, then the full config
-validation), and compared with the recorded ``y`` over the steady-state periods
-(``run.periods("y")``; the whole record for a run without periods). In closed loop this is the
-error of y with the loop closed in the simulation.
+over the estimation runs E, for the fitted signal s: the output ``y`` (default), or in closed loop
+the plant input ``u`` (``fit_on="u"``: the controller's output, the criterion of closed-loop
+benchmarks such as EMPS, where the position error is kept small by the loop itself). Each run's
+recorded excitation (open loop: ``u``; closed loop: the reference ``r``) is simulated through the
+noise-free model with the parameters written into the config (the ``sweep`` mechanism:
+:func:`nlsid.simulate.sweep._set`, then the full config validation), and compared with the
+recorded signal over the steady-state periods (the last ``n_periods`` periods; the whole record
+of an arbitrary run; the range of a part cut by :mod:`nlsid.io.ranges`). In closed loop the
+simulated ``u`` is the plant input as the simulated controller computed it, with the loop closed
+in the simulation. The rms errors of y and (closed loop) u are both reported, whichever is fitted.
+
+A trial value the model refuses (the config validation, building the model or simulating it
+raises :class:`~nlsid.errors.InputError`: an unstable denominator, an unstable loop, a diverged
+simulation) is a rejected step: the evaluation returns the residual vector with every element
+equal to ``c = 10 rms(e_start)`` (1 for a zero start error), whose cost ``n c^2 / 2`` is 100 times
+the start's. The trust-region method accepts a step only when it lowers the cost, and every
+accepted point costs at most the start's (the cost never rises from there), so such a step is
+never accepted: the actual reduction is negative, the ratio to the predicted one below 1/4, and
+the trust radius shrinks to a quarter of the step, so the next try is a shorter step from the last
+accepted (valid) point.
+The start itself must be valid (it is evaluated first; its error stops the fit).
 
 The minimisation is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) in
 normalised coordinates x_i = theta_i / s_i (s_i the start value's magnitude), with a forward
@@ -32,8 +48,8 @@ below 1e-6), a pair with correlation above 0.99 in magnitude, a relative standar
 50 %, or an estimate at a bound.
 
 The validation runs are never used by the optimiser: their rms errors, and each run's noise level
-(the period-to-period standard deviation of y, a lower limit no model can beat), tell how well the
-fitted model predicts data it has not seen.
+(the period-to-period standard deviation of the fitted signal, a lower limit no model can beat),
+tell how well the fitted model predicts data it has not seen.
 """
 
 from __future__ import annotations
@@ -49,7 +65,8 @@ from nlsid.errors import InputError
 from nlsid.io.feeds import check_run_count
 from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
-from nlsid.simulate.sweep import SweepPoint, _deep_copy, _keys, _set
+from nlsid.io.ranges import SampleRange, check_sources, check_unique, cut, record
+from nlsid.simulate.sweep import SweepPoint, _deep_copy, _keys, _set, check_step
 
 IDENTIFIABLE_RATIO = 1e-6   # singular value ratio of J below which a parameter combination is not identifiable
 CORRELATION_LIMIT = 0.99
@@ -67,8 +84,9 @@ class FreeParameter:
 
 @dataclass(frozen=True)
 class RunError:
-    """Simulation error of one run: rms of y_sim - y over the steady state, the rms of y itself and
-    the noise level (period-to-period std of y, NaN with fewer than two periods)."""
+    """Simulation error of one run: rms of s_sim - s (the fitted signal s) over the steady state, the
+    rms of y itself and the noise level (period-to-period std of s, NaN with fewer than two
+    periods); the rms errors of y and u (NaN in open loop, where u is the recorded input)."""
 
     run_id: str
     role: str            # "estimation" or "validation"
@@ -77,6 +95,8 @@ class RunError:
     noise_rms: float
     start_rms: float     # the same error with the start values
     samples: int
+    y_error_rms: float = math.nan
+    u_error_rms: float = math.nan
 
 
 @dataclass
@@ -102,6 +122,8 @@ class ExtensionFit:
     message: str
     samples: int = 0
     bounds: list[tuple[float, float]] = field(default_factory=list)
+    fit_on: str = "y"
+    signal_rms: dict = field(default_factory=dict)  # "y"/"u" -> {"estimation": rms, "validation": rms}
 
     def value(self, name: str) -> float:
         return float(self.values[self.names.index(name)])
@@ -121,6 +143,9 @@ class ExtensionFit:
             "start_validation_rms": self.start_validation_rms,
             "noise_rms_estimation": self.noise_rms_estimation,
             "noise_rms_validation": self.noise_rms_validation,
+            "fit_on": self.fit_on,
+            **{f"{signal}_{role}_rms": self.signal_rms.get(signal, {}).get(role, math.nan)
+               for signal in ("y", "u") for role in ("estimation", "validation")},
             "runs": [dataclasses.asdict(r) for r in self.runs],
             "samples": self.samples,
             "evaluations": self.evaluations,
@@ -138,33 +163,45 @@ def free_from_config(free_config: dict) -> dict[str, FreeParameter]:
 
 
 def value_at(data: dict, path: str):
-    """The value at a dotted key path of a config dict (None when a mapping key along it is absent)."""
+    """The value at a dotted key path of a config dict, list elements included (``model.den[2]``);
+    None when a mapping key along it is absent. An index beyond a list, or into something that is
+    not a list, is an error naming the path (:func:`nlsid.simulate.sweep.check_step`)."""
     keys = _keys(path)
     if keys is None:
         raise InputError(f"free.{path}", "expected a dotted key path such as model.nonlinearities[0].fc")
     node = data
-    for key in keys:
-        if isinstance(key, int):
-            if not isinstance(node, list) or key >= len(node):
-                raise InputError(f"free.{path}", f"no item [{key}] in the config")
-            node = node[key]
-        elif isinstance(node, dict):
-            if key not in node:
-                return None
-            node = node[key]
-        else:
-            raise InputError(f"free.{path}", f"{key!r} is not a key of a mapping in the config")
+    for depth, key in enumerate(keys):
+        check_step(node, key, keys[:depth], lambda what: InputError(f"free.{path}", what))
+        if not isinstance(key, int) and key not in node:
+            return None
+        node = node[key]
     return node
 
 
-def split_runs(runs: Sequence[Run], validation_ids: Sequence[str] | None = None) -> tuple[list[Run], list[Run]]:
-    """Estimation and validation runs.
+def split_runs(runs: Sequence[Run], validation_ids: Sequence[str] | None = None, validate_on: Sequence[Run] = (),
+               estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
+               where: str = "") -> tuple[list[Run], list[Run]]:
+    """Estimation and validation runs (or parts of runs) of the recording ``where``.
 
-    With ``validation_ids``: those runs are held out. Default: when the runs carry two or more
-    realization indices, the highest realization of every level is held out (each level stays in
-    the estimation set); otherwise the last run is held out. One run alone cannot be split.
+    With ``validation_ids``: those runs are held out. With ranges (:mod:`nlsid.io.ranges`): every
+    run is cut into its estimation and validation part (no run is held out whole). Otherwise,
+    without ``validate_on`` (the runs of further recordings, validation only), the default: when
+    the runs carry two or more realization indices, the highest realization of every level is held
+    out (each level stays in the estimation set); otherwise the last run is held out. One run alone
+    cannot be split. The runs of ``validate_on`` are added to the validation runs.
     """
     runs = list(runs)
+    check_sources(estimation_range, validation_range, bool(validate_on))
+    if estimation_range is not None:
+        if validation_ids:
+            raise InputError("--validation", "holds out whole runs, --estimation-range cuts every run: give one of them")
+        estimation, validation = cut(runs, estimation_range, validation_range, where)
+        validation += validate_on
+        check_unique(estimation + validation)
+        return estimation, validation
+    if validate_on and not validation_ids:
+        check_unique(runs + list(validate_on))
+        return runs, list(validate_on)
     if validation_ids:
         known = {r.run_id for r in runs}
         missing = [i for i in validation_ids if i not in known]
@@ -183,31 +220,33 @@ def split_runs(runs: Sequence[Run], validation_ids: Sequence[str] | None = None)
         else:
             held = {runs[-1].run_id}
     estimation = [r for r in runs if r.run_id not in held]
-    validation = [r for r in runs if r.run_id in held]
+    validation = [r for r in runs if r.run_id in held] + list(validate_on)
     if not estimation:
         raise InputError("validation runs", "every run is held out for validation: none is left to fit")
+    check_unique(estimation + validation)
     return estimation, validation
 
 
 def _steady(run: Run, x: np.ndarray) -> np.ndarray:
-    """The samples of ``x`` (a signal of ``run``) that the error is measured on."""
+    """The samples of ``x`` (a signal of ``run``) that the error is measured on: the last
+    ``n_periods`` whole periods (the steady state; a range part's range), an arbitrary run's whole record."""
     if run.period is None:
         return x
-    return x[run.transient_periods * run.period:]
+    return x[run.n_samples - run.n_periods * run.period:]
 
 
-def noise_rms(run: Run) -> float:
-    """Period-to-period standard deviation of y (pooled over the samples of a period), NaN if P < 2."""
+def noise_rms(run: Run, signal: str = "y") -> float:
+    """Period-to-period standard deviation of a signal (pooled over the samples of a period), NaN if P < 2."""
     if run.period is None or run.n_periods < 2:
         return math.nan
-    return float(np.sqrt(np.mean(np.var(run.periods("y"), axis=0, ddof=1))))
+    return float(np.sqrt(np.mean(np.var(run.periods(signal), axis=0, ddof=1))))
 
 
 class _Problem:
     """The config, the free keys and the runs; evaluates simulation errors for parameter values."""
 
     def __init__(self, config_data: dict, free: dict[str, FreeParameter], source: str, lines: dict,
-                 workers: int | None):
+                 workers: int | None, fit_on: str = "y"):
         if "sweep" in config_data:
             raise InputError(_where(source, lines, ("sweep",)), "sweep: a config with free parameters cannot sweep; remove sweep")
         base = {k: _deep_copy(v) for k, v in config_data.items() if k not in ("free", "disturbances")}
@@ -218,7 +257,10 @@ class _Problem:
         starts = []
         for name, p in free.items():
             where = _where(source, self.lines, ("free", name))
-            start = p.start if p.start is not None else value_at(base, name)
+            try:
+                start = p.start if p.start is not None else value_at(base, name)
+            except InputError as exc:  # named by the free: key the user wrote, at its line
+                raise InputError(where, f"{exc.where}: {exc.what}") from None
             if isinstance(start, bool) or not isinstance(start, (int, float)) or not math.isfinite(start):
                 raise InputError(where, f"free.{name}: no number at this key path of the config; give a start value")
             if not p.lower <= start <= p.upper:
@@ -228,6 +270,12 @@ class _Problem:
         self.lower = np.array([free[n].lower for n in self.names])
         self.upper = np.array([free[n].upper for n in self.names])
         self.closed = "closed_loop" in base
+        if fit_on not in ("y", "u"):
+            raise InputError("--fit-on", f"expected y or u, got {fit_on!r}")
+        if fit_on == "u" and not self.closed:
+            raise InputError("--fit-on", "u is fitted only in closed loop (the model has no closed_loop): in open "
+                                         "loop the recorded u is the input the simulation is driven by")
+        self.signals = ("y", "u") if self.closed else ("y",)  # the errors reported
         self.point(self.start)  # the start must give a valid config
 
     def data(self, theta: np.ndarray) -> dict:
@@ -256,15 +304,16 @@ class _Problem:
                 raise InputError(run.run_id, "run has no measured y to fit to")
             if self.closed and run.r is None:
                 raise InputError(run.run_id, "the model has a closed_loop but the run has no reference r")
-            out.append(dataclasses.replace(run, u=run.r if self.closed else run.u, y=None, r=None))
+            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, y=None, r=None))
         return out
 
-    def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> list[np.ndarray]:
-        """Per run, y_sim - y over the steady state."""
+    def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:
+        """Per reported signal s (y, and u in closed loop) and run, s_sim - s over the steady state."""
         from nlsid.simulate.batch import simulate_all
 
         simulated = simulate_all([self.point(theta)], list(excitations), workers=self.workers)
-        return [_steady(run, sim.y) - _steady(run, run.y) for run, sim in zip(runs, simulated)]
+        return {s: [_steady(run, getattr(sim, s)) - _steady(run, getattr(run, s)) for run, sim in zip(runs, simulated)]
+                for s in self.signals}
 
 
 def _where(source: str, lines: dict, key_path: tuple) -> str:
@@ -339,7 +388,7 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
 def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estimation: Sequence[Run],
                         validation: Sequence[Run], *, source: str = "", lines: dict | None = None,
                         workers: int | None = None, diff_step: float = 1e-3, max_evaluations: int = 100,
-                        tolerance: float = 1e-8) -> ExtensionFit:
+                        tolerance: float = 1e-8, fit_on: str = "y") -> ExtensionFit:
     """Estimate the free parameters of a model config by minimising the simulation error.
 
     ``config_data``: the model config as loaded YAML (a dict, e.g. from
@@ -348,45 +397,60 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     (:func:`free_from_config` converts a config's ``free:`` section). ``estimation``: runs with a
     measured ``y`` the optimiser sees; ``validation``: runs it does not (may be empty).
     ``source`` and ``lines`` (from ``load_yaml``) let errors name the config file and line.
+    ``fit_on``: the signal whose simulation error is minimised, ``y`` or (closed loop) ``u``.
 
     Returns an :class:`ExtensionFit`: values, std, covariance and correlation, rms errors (with
     the fitted and the start values) on the estimation and validation runs and per run, the
-    noise levels, warnings (identifiability, bounds, convergence), and the completed config dict
-    (fitted values written in, ``free`` removed) that ``nlsid simulate`` runs unchanged.
-    Raises :class:`~nlsid.errors.InputError` for a bad key path, start, bound or run.
+    noise levels, warnings (identifiability, bounds, convergence, refused trial values), and the
+    completed config dict (fitted values written in, ``free`` removed) that ``nlsid simulate``
+    runs unchanged. Raises :class:`~nlsid.errors.InputError` for a bad key path, start, bound or
+    run, and when the model refuses the start values.
     """
     from scipy.optimize import least_squares
 
-    problem = _Problem(config_data, free, source, lines or {}, workers)
+    problem = _Problem(config_data, free, source, lines or {}, workers, fit_on)
     est_inputs, val_inputs = problem.inputs(estimation), problem.inputs(validation)
     scale = _scales(problem.start, problem.lower, problem.upper)
-    evaluations = 0
+    est_start = problem.errors(problem.start, estimation, est_inputs)  # the start must run: its error stops the fit
+    start_residual = np.concatenate(est_start[fit_on])
+    start_rms = _rms([start_residual])
+    penalty = np.full(start_residual.size, 10.0 * start_rms if start_rms > 0 else 1.0)
+    x0 = problem.start / scale
+    evaluations, refused = 0, []
 
     def residual(x: np.ndarray) -> np.ndarray:
         nonlocal evaluations
         evaluations += 1
-        return np.concatenate(problem.errors(x * scale, estimation, est_inputs))
+        if np.array_equal(x, x0):  # the start, simulated already
+            return start_residual.copy()
+        try:
+            return np.concatenate(problem.errors(x * scale, estimation, est_inputs)[fit_on])
+        except InputError as exc:  # a value the model refuses: a rejected step (module docstring)
+            refused.append(exc)
+            return penalty
 
-    x0 = problem.start / scale
     result = least_squares(residual, x0, bounds=(problem.lower / scale, problem.upper / scale), method="trf",
                            diff_step=diff_step, x_scale=1.0, max_nfev=max_evaluations, xtol=tolerance,
                            ftol=tolerance, gtol=tolerance)
     values = result.x * scale
     warnings = [] if result.status > 0 else [f"optimiser stopped after {evaluations} simulations without converging: {result.message}"]
+    if refused:
+        warnings.append(f"{len(refused)} trial value(s) refused by the model were rejected steps (first: {refused[0]})")
     cov, corr, ident = _uncertainty(result.jac, result.fun, scale, problem.names, values, problem.lower, problem.upper)
     warnings += ident
 
     est_errors = problem.errors(values, estimation, est_inputs)
-    est_start = problem.errors(problem.start, estimation, est_inputs)
-    val_errors = problem.errors(values, validation, val_inputs) if validation else []
-    val_start = problem.errors(problem.start, validation, val_inputs) if validation else []
+    val_errors = problem.errors(values, validation, val_inputs) if validation else {s: [] for s in problem.signals}
+    val_start = problem.errors(problem.start, validation, val_inputs) if validation else {s: [] for s in problem.signals}
     runs = []
     for role, rs, errs, starts in (("estimation", estimation, est_errors, est_start),
                                    ("validation", validation, val_errors, val_start)):
-        for run, e, e0 in zip(rs, errs, starts):
+        for i, run in enumerate(rs):
+            e = errs[fit_on][i]
             y = _steady(run, run.y)
-            runs.append(RunError(run.run_id, role, _rms([e]), float(np.sqrt(np.mean(y * y))), noise_rms(run),
-                                 _rms([e0]), int(e.size)))
+            runs.append(RunError(run.run_id, role, _rms([e]), float(np.sqrt(np.mean(y * y))), noise_rms(run, fit_on),
+                                 _rms([starts[fit_on][i]]), int(e.size), _rms([errs["y"][i]]),
+                                 _rms([errs["u"][i]]) if "u" in errs else math.nan))
     noise = {role: _pooled([r.noise_rms for r in runs if r.role == role], [r.samples for r in runs if r.role == role])
              for role in ("estimation", "validation")}
     completed = {k: _deep_copy(v) for k, v in config_data.items() if k != "free"}
@@ -395,21 +459,26 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     return ExtensionFit(
         names=problem.names, start=problem.start, values=values, std=np.sqrt(np.abs(np.diag(cov))),
         covariance=cov, correlation=corr,
-        estimation_rms=_rms(est_errors), validation_rms=_rms(val_errors),
-        start_estimation_rms=_rms(est_start), start_validation_rms=_rms(val_start),
+        estimation_rms=_rms(est_errors[fit_on]), validation_rms=_rms(val_errors[fit_on]),
+        start_estimation_rms=start_rms, start_validation_rms=_rms(val_start[fit_on]),
         noise_rms_estimation=noise["estimation"], noise_rms_validation=noise["validation"],
         runs=runs, warnings=warnings, config=completed, evaluations=evaluations, message=str(result.message),
         samples=int(result.fun.size), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
+        fit_on=fit_on, signal_rms={s: {"estimation": _rms(est_errors[s]), "validation": _rms(val_errors[s])}
+                                   for s in problem.signals},
     )
 
 
 def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequence[str] | None = None,
-                    workers: int | None = None, estimate_start: bool = False) -> ExtensionFit:
+                    workers: int | None = None, estimate_start: bool = False, *, validate_on: Sequence[Run] = (),
+                    estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
+                    fit_on: str = "y", where: str = "") -> ExtensionFit:
     """``nlsid fit --model``: the free parameters of a model config file fitted to recorded runs.
 
     ``estimate_start``: free parameters without a ``start`` begin at the force regression of
     :func:`nlsid.fit.start.force_regression` on the estimation runs (clipped into the bounds)
-    instead of the value written in the config.
+    instead of the value written in the config. ``validate_on``, the ranges and ``where`` (the
+    recording, for messages): :func:`split_runs`; ``fit_on``: :func:`fit_free_parameters`.
     """
     from nlsid.io.config import load_yaml
 
@@ -417,7 +486,7 @@ def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequen
     config = validate_simulate_config(data, model_path, lines)
     if not config.free:
         raise InputError(str(model_path), "free: no free parameters to fit; mark them under a top-level free: key")
-    estimation, validation = split_runs(runs, validation_ids)
+    estimation, validation = split_runs(runs, validation_ids, validate_on, estimation_range, validation_range, where)
     free = free_from_config(config.free)
     if estimate_start:
         from nlsid.fit.start import force_regression
@@ -427,4 +496,4 @@ def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequen
         free = {key: dataclasses.replace(p, start=float(np.clip(estimates[key], p.lower, p.upper)))
                 if key in estimates else p for key, p in free.items()}
     return fit_free_parameters(data, free, estimation, validation, source=str(model_path), lines=lines,
-                               workers=workers)
+                               workers=workers, fit_on=fit_on)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_stable, on_boundary, refit
 
@@ -133,7 +134,8 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
     elif eligible and not any(math.isfinite(r.cost_bound) for r in eligible):
         best = min(eligible, key=lambda r: r.holdout_error)
         reason = (f"no cost check: with M = {data.realizations} realizations the cost has no finite expected value "
-                  f"(use M >= 3, the book advises M >= 7); {best.nb}/{best.na} predicts held-out lines best "
+                  f"(use M >= 3; {BOOK}, Section 6.1.1, advise M >= 7); {best.nb}/{best.na} predicts held-out "
+                  "lines best "
                   f"({best.holdout_error:.3g} per line)")
     elif eligible:
         best = min(eligible, key=lambda r: r.holdout_error)

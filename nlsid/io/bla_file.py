@@ -5,7 +5,8 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
 
     /                    attrs nlsid_format = "bla", nlsid_format_version = 1,
                                provenance (JSON), confidence (probability of the bounds),
-                               warnings (JSON list), across_levels (JSON, see levels.across_levels)
+                               warnings (JSON list), across_levels (JSON, see levels.across_levels),
+                               units (JSON: signal -> unit of the recording, nlsid.io.units)
     /levels/level_NN/    one group per excitation level, sorted by level (NN = 00, 01, ...)
         attrs   level (NaN when the runs carry none), u_rms, fs, period, n_periods,
                 n_realizations, method, odd_grid, base, run_ids (JSON), warnings (JSON),
@@ -63,11 +64,12 @@ def _put_bounds(group: h5py.Group, bounds) -> None:
 
 
 def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: float, warnings: list[str],
-              across: dict, force: bool = False, lpm_levels=()) -> Path:
+              across: dict, force: bool = False, lpm_levels=(), units: dict | None = None) -> Path:
     """Write the :class:`~nlsid.analysis.levels.LevelResult` list and the
     :class:`~nlsid.analysis.arbitrary.LPMLevel` list atomically in the layout above."""
     with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
         handle.attrs["confidence"] = float(probability)
+        handle.attrs["units"] = json.dumps(units or {}, sort_keys=True)
         handle.attrs["warnings"] = json.dumps(warnings)
         handle.attrs["across_levels"] = json.dumps(json_safe(across), sort_keys=True)
         root = handle.create_group("levels")
@@ -175,7 +177,13 @@ def read_bla(path: str | os.PathLike) -> dict:
     return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels}
 
 
-_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary")
+def read_units(path: str | os.PathLike) -> dict[str, str]:
+    """The ``units`` root attribute of a ``bla.h5`` file (empty for files written before it existed)."""
+    with open_result(path, FORMAT, READ_VERSIONS, "nlsid bla") as handle:
+        return json.loads(text(handle.attrs.get("units", "{}")))
+
+
+_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary", "units")
 
 
 def _attr(key: str, value):

@@ -29,6 +29,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from nlsid.citations import MOTION_STAGES
 from nlsid.errors import InputError
 from nlsid.io.run import MISSING_Y, Run
 
@@ -253,7 +254,7 @@ def check_variance_counts(cells: Iterable, variance: str, source: str) -> None:
     for cell in cells:
         where = f"{source}: cell {cell.frequency:g} Hz, amplitude {cell.level:g}"
         if variance in ("repeats", "both") and cell.n_repeats < 2:
-            raise InputError(where, f"{cell.n_repeats} repeat; the variance over repeats (seed 000 Eq. 12) "
+            raise InputError(where, f"{cell.n_repeats} repeat; the variance over repeats ({MOTION_STAGES}, Eq. 12) "
                                     "needs at least 2 (or ask for the variance over periods only)")
         if variance in ("periods", "both") and cell.n_periods < 2:
             raise InputError(where, f"{cell.n_periods} steady-state period per run; the variance over periods "
@@ -262,19 +263,20 @@ def check_variance_counts(cells: Iterable, variance: str, source: str) -> None:
 
 # --- diagnose and fit --model -------------------------------------------------------------------
 
-def excitation_key(run: Run) -> tuple | None:
-    """What a run excites, for the estimation/validation split: (kind, level, frequency); None for
-    an arbitrary run, which ``diagnose`` does not use."""
+def excitation_key(run: Run) -> tuple:
+    """What a run excites, for the estimation/validation split: (kind, level, frequency); the
+    arbitrary records form one group of their own."""
     if run.period is None:
-        return None
+        return ("arbitrary", None, None)
     return (run.kind, run.level, run.frequency)
 
 
 def check_repeated_excitation(group_sizes: Iterable[int], where: str) -> None:
     """``diagnose`` needs one excitation with two runs: one to estimate on, one to validate on."""
     if max(group_sizes, default=0) < 2:
-        raise InputError(where, "needs two runs (realizations) of one excitation at least: one to estimate the "
-                                "model extensions, one to validate them")
+        raise InputError(where, "needs two runs (realizations) of one excitation, or two arbitrary records, at "
+                                "least: one to estimate the model extensions, one to validate them (or "
+                                "--validate-on FILE, or --estimation-range with --validation-range)")
 
 
 def check_run_count(n_runs: int) -> None:
@@ -392,8 +394,6 @@ class Survey:
             self.diagnose_y = self.diagnose_y or no_y
             return
         key = excitation_key(run)
-        if key is None:
-            return
         self.groups[key] = self.groups.get(key, 0) + 1
         try:
             if self.diagnose_bla_error is None and run.kind == "multisine":

@@ -3,7 +3,8 @@
 Layout (``docs/formats.md``; F frequencies, A amplitudes, K+1 harmonics k = 0..K, M sweep values)::
 
     /                     attrs nlsid_format = "hosidf", nlsid_format_version = 1, provenance (JSON),
-                          harmonics (K), input_signal ("u" or "r")
+                          harmonics (K), input_signal ("u" or "r"), units (JSON: signal -> unit
+                          of the recording, nlsid.io.units; absent in files of earlier versions)
     /grid/                present for a frequency x amplitude grid
         frequency (F,) Hz, bin (F,) int64 DFT bin of the tone in one period, level (A,) amplitude,
         harmonic (K+1,) int64, n_repeats (F, A) int64, n_periods (F, A) int64 (0: cell not measured)
@@ -85,11 +86,12 @@ def _write_sweep(group: h5py.Group, result: Sweep) -> None:
 
 def write_hosidf(path: str | os.PathLike, harmonics: int, input_signal: str, provenance: dict,
                  grid: HOSIDFGrid | None = None, analytic: np.ndarray | None = None,
-                 sweep: Sweep | None = None, force: bool = False) -> Path:
+                 sweep: Sweep | None = None, force: bool = False, units: dict | None = None) -> Path:
     """Write a grid and/or a sweep atomically in the layout above."""
     with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
         handle.attrs["harmonics"] = int(harmonics)
         handle.attrs["input_signal"] = input_signal
+        handle.attrs["units"] = json.dumps(units or {}, sort_keys=True)
         if grid is not None:
             _write_grid(handle.create_group("grid"), grid, analytic)
         if sweep is not None:
@@ -111,4 +113,5 @@ def read_hosidf(path: str | os.PathLike) -> dict:
     with open_result(path, FORMAT, FORMAT_VERSION, "nlsid hosidf") as handle:
         out = _read_group(handle, f"{path}:")
     out["provenance"] = json.loads(out["provenance"])
+    out["units"] = json.loads(out.get("units", "{}"))
     return out

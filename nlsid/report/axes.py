@@ -3,7 +3,11 @@ plain-number tick labels."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+FEW_DECADES = 2.5
 
 
 def unwrapped_phase(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -19,11 +23,17 @@ def unwrapped_phase(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def plain_log_ticks(axis) -> None:
     """Label a log-scaled axis (``ax.xaxis`` or ``ax.yaxis``) with plain numbers (0.5, 2, 100), not
-    powers of ten; while it spans less than a decade the minor ticks (2, 3, 4, ...) are labelled
-    too, so that a narrow range such as rms levels 1 .. 4 still shows numbers."""
-    from matplotlib.ticker import FuncFormatter, NullFormatter
+    powers of ten, and with enough of them: while it spans less than a decade every minor tick
+    (2, 3, 4, ...) is labelled, while it spans less than :data:`FEW_DECADES` the minor ticks at 2
+    and 5 times a power of ten, so that 1.5 to 60 Hz reads 2, 5, 10, 20, 50 rather than a lone 10.
+    The span is judged when the axis is drawn, after every curve is in."""
+    from matplotlib.ticker import FuncFormatter
 
-    label = FuncFormatter(lambda value, _: f"{value:g}")
-    axis.set_major_formatter(label)
-    low, high = sorted(axis.get_view_interval())
-    axis.set_minor_formatter(label if 0 < low and high < 10 * low else NullFormatter())
+    def minor(value: float, _) -> str:
+        low, high = sorted(axis.get_view_interval())
+        decades = math.log10(high / low) if low > 0 else math.inf
+        mantissa = round(value / 10 ** math.floor(math.log10(value)), 6) if value > 0 else 0.0
+        return f"{value:g}" if decades < 1 or (decades < FEW_DECADES and mantissa in (2.0, 5.0)) else ""
+
+    axis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    axis.set_minor_formatter(FuncFormatter(minor))

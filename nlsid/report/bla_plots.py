@@ -1,4 +1,4 @@
-"""Figures of the ``bla`` stage (PNG, rendered off-screen with matplotlib's Agg canvas).
+"""Figures of the ``bla`` stage: matplotlib figures for the report page (SVG) and for ``--plots`` (PNG).
 
 - ``spectrum_<level>.png``: the output spectrum as seed 000 Fig. 3: excited lines, odd and even
   detection lines, non-harmonic lines and the noise level, distinguished by marker and colour.
@@ -8,7 +8,8 @@
 - ``bla_vs_level.png``: |G_BLA| of every level and the band-mean distortion versus the rms input
   (seed 000 Figs. 4-5).
 
-matplotlib is imported inside the functions so that importing this module stays cheap.
+Axis labels carry the units of the recording (:class:`~nlsid.report.units.Units`). matplotlib is
+imported inside the functions so that importing this module stays cheap.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import numpy as np
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
 from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.units import Units
+from nlsid.report.vector import band, fit_labels, new_figure
 
 
 def _db(power: np.ndarray) -> np.ndarray:
@@ -29,24 +32,23 @@ def _db(power: np.ndarray) -> np.ndarray:
 
 
 def _figure(rows: int = 1):
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(8, 3.2 * rows), layout="constrained")
-    return figure, [figure.add_subplot(rows, 1, i + 1) for i in range(rows)]
+    return new_figure(rows, height=3.2)
 
 
 def _png(figure) -> bytes:
+    fit_labels(figure)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=110)
     return buffer.getvalue()
 
 
-def _title(level: LevelResult) -> str:
+def _title(level: LevelResult, units: Units) -> str:
     name = "no level" if level.level is None else f"level {level.level:g}"
-    return f"{name}, u rms {level.u_rms:.3g}, M = {level.n_realizations}, P = {level.n_periods}"
+    rms = units.value(format(level.u_rms, ".3g"), "u")
+    return f"{name}, u rms {rms}, M = {level.n_realizations}, P = {level.n_periods}"
 
 
-def spectrum_figure(level: LevelResult):
+def spectrum_figure(level: LevelResult, units: Units):
     """Output spectrum (rms over realizations) with the line classes distinguished (seed 000 Fig. 3)."""
     figure, (axis,) = _figure()
     lines, spectrum = level.lines, level.spectrum
@@ -60,21 +62,21 @@ def spectrum_figure(level: LevelResult):
     bins = lines.bins
     axis.plot(lines.frequency(bins), _db(spectrum.y_noise[bins]), color="tab:green", linewidth=1,
               label="noise (variance of the P-mean)")
-    axis.set_xlabel("frequency [Hz]")
-    axis.set_ylabel("output power [dB]")
-    axis.set_title(f"Output spectrum: {_title(level)}")
+    axis.set_xlabel("frequency (Hz)")
+    axis.set_ylabel(f"output power ({units.power_db('y')})")
+    axis.set_title(f"Output spectrum: {_title(level, units)}")
     axis.legend(fontsize="small", loc="best")
     return figure
 
 
-def bla_figure(level: LevelResult):
+def bla_figure(level: LevelResult, units: Units):
     """|G_BLA| and phase with confidence bounds and noise / nonlinear standard deviations."""
     figure, (magnitude, phase) = _figure(2)
     robust, f = level.robust, level.lines.frequency(level.lines.excited)
     M = robust.n_realizations
     magnitude.plot(f, _db(np.abs(robust.G) ** 2), color="k", label="|G_BLA|")
-    magnitude.fill_between(f, _db(robust.bounds.mag_lo**2), _db(robust.bounds.mag_hi**2), color="k", alpha=0.15,
-                           label="95% bounds")
+    band(magnitude, f, _db(robust.bounds.mag_lo**2), _db(robust.bounds.mag_hi**2), "95% bounds", color="k",
+         alpha=0.15)
     magnitude.plot(f, _db(robust.var_nl / M), "--", color="tab:red", label="std nonlinear (of the estimate)")
     magnitude.plot(f, _db(robust.var_noise), ":", color="tab:green", label="std noise (of the estimate)")
     if level.fast is not None:
@@ -83,44 +85,45 @@ def bla_figure(level: LevelResult):
         if level.fast.var_nl_even is not None:
             magnitude.plot(f, _db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
                            label="fast method: std nonlinear (even)")
-    magnitude.set_ylabel("[dB]")
-    magnitude.set_title(f"BLA ({robust.method}): {_title(level)}")
+    magnitude.set_xlabel("frequency (Hz)")
+    magnitude.set_ylabel(f"|G_BLA|, std ({units.ratio_db('y', 'u')})")
+    magnitude.set_title(f"BLA ({robust.method}): {_title(level, units)}")
     # beside the axes: six curves spread over the whole height leave no free corner
     magnitude.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
     degrees, shift = unwrapped_phase(robust.G)
-    phase.plot(f, degrees, color="k")
-    phase.fill_between(f, np.degrees(robust.bounds.phase_lo + shift), np.degrees(robust.bounds.phase_hi + shift),
-                       color="k", alpha=0.15)
-    phase.set_xlabel("frequency [Hz]")
-    phase.set_ylabel("phase [deg]")
+    phase.plot(f, degrees, color="k", label="phase of G_BLA")
+    band(phase, f, np.degrees(robust.bounds.phase_lo + shift), np.degrees(robust.bounds.phase_hi + shift),
+         "95% bounds", color="k", alpha=0.15)
+    phase.set_xlabel("frequency (Hz)")
+    phase.set_ylabel("phase (deg)")
     return figure
 
 
-def levels_figure(levels: list[LevelResult]):
+def levels_figure(levels: list[LevelResult], units: Units):
     """|G_BLA| per level, and band-mean nonlinear and noise variances versus the rms input."""
     figure, (curves, trend) = _figure(2)
     for level in levels:
         curves.plot(level.lines.frequency(level.lines.excited), _db(np.abs(level.robust.G) ** 2),
-                    label=f"u rms {level.u_rms:.3g}")
-    curves.set_xlabel("frequency [Hz]")
-    curves.set_ylabel("|G_BLA| [dB]")
+                    label=f"u rms {units.value(format(level.u_rms, '.3g'), 'u')}")
+    curves.set_xlabel("frequency (Hz)")
+    curves.set_ylabel(f"|G_BLA| ({units.ratio_db('y', 'u')})")
     curves.legend(fontsize="small", loc="best")
     rows = across_levels(levels)["levels"]
     rms = [row["u_rms"] for row in rows]
     trend.semilogx(rms, [row["nl_var_db"] for row in rows], "o--", color="tab:red", label="nonlinear variance")
     trend.semilogx(rms, [row["noise_var_db"] for row in rows], "s:", color="tab:green", label="noise variance")
     plain_log_ticks(trend.xaxis)
-    trend.set_xlabel("u rms")
-    trend.set_ylabel("band mean, relative to |G_BLA|^2 [dB]")
+    trend.set_xlabel(units.label("u rms", "u"))
+    trend.set_ylabel("band mean (dB re |G_BLA|²)")
     trend.legend(fontsize="small", loc="best")
     return figure
 
 
-def render_figures(levels: list[LevelResult]) -> dict[str, bytes]:
+def render_figures(levels: list[LevelResult], units: Units) -> dict[str, bytes]:
     """Every figure of the stage as PNG bytes, keyed by file name (render first, write later)."""
     out = {}
     for index, level in enumerate(levels):
-        out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level))
-        out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level))
-    out["bla_vs_level.png"] = _png(levels_figure(levels))
+        out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level, units))
+        out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level, units))
+    out["bla_vs_level.png"] = _png(levels_figure(levels, units))
     return out

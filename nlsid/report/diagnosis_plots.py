@@ -1,4 +1,4 @@
-"""Figures of a diagnosis folder (PNG bytes, matplotlib's off-screen Figure; imported lazily).
+"""Figures of a diagnosis folder (matplotlib figures, off-screen; matplotlib imported lazily).
 
 - ``model_vs_bla``: |G| and phase of the measured BLA with its 95% confidence circle's bounds and
   the model's BLA on the same lines; lines where the model lies outside the circle are marked.
@@ -6,8 +6,11 @@
   the same lines and the measured noise variance (seed 000 Fig. 3 with the model added).
 - ``bla_vs_level``: |G_BLA| of every level, measured (solid) and model (dashed).
 - ``residual_vs_state``: the mean residual period against the model's velocity and position
-  (mechanical models) or its input: a jump at zero velocity, a cubic trend, a threshold.
+  (mechanical models, in the templates' SI units m and m/s) or its input: a jump at zero
+  velocity, a cubic trend, a threshold.
 - ``before_after``: one validation period's error of the original and of the extended model.
+
+Axis labels carry the units of the recording (:class:`~nlsid.report.units.Units`).
 """
 
 from __future__ import annotations
@@ -16,14 +19,11 @@ import numpy as np
 
 from nlsid.analysis.lines import EVEN, EXCITED, ODD
 from nlsid.report.axes import plain_log_ticks, unwrapped_phase
-from nlsid.report.html import png
+from nlsid.report.units import Units
+from nlsid.report.vector import band, new_figure
 
-
-def _figure(rows: int = 1, cols: int = 1, height: float = 3.0):
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(8, height * rows), layout="constrained")
-    return figure, [figure.add_subplot(rows, cols, i + 1) for i in range(rows * cols)]
+#: units of the mechanical templates' internal signals (docs/configs.md: masses in kg, forces in N)
+STATE_UNITS = {"position": "m", "velocity": "m/s"}
 
 
 def _db(x: np.ndarray) -> np.ndarray:
@@ -31,81 +31,82 @@ def _db(x: np.ndarray) -> np.ndarray:
         return 10 * np.log10(np.asarray(x, dtype=float))
 
 
-def model_vs_bla(level: dict) -> bytes:
-    figure, (mag, phase) = _figure(2)
+def _frequency_axes(*axes) -> None:
+    for axis in axes:
+        axis.set_xscale("log")
+        axis.set_xlabel("frequency (Hz)")
+        axis.grid(True, which="both", alpha=0.3)
+        plain_log_ticks(axis.xaxis)
+
+
+def model_vs_bla(level: dict, units: Units):
+    figure, (mag, phase) = new_figure(2)
     f, G, Gm, radius = level["frequency"], level["G"], level["G_model"], level["radius"]
     lo = np.maximum(np.abs(G) - radius, np.abs(G) * 1e-3)
-    mag.fill_between(f, 20 * np.log10(lo), 20 * np.log10(np.abs(G) + radius), color="C0", alpha=0.25,
-                     label="BLA 95% bounds")
+    band(mag, f, 20 * np.log10(lo), 20 * np.log10(np.abs(G) + radius), "BLA 95% bounds", color="C0", alpha=0.25)
     mag.plot(f, 20 * np.log10(np.abs(G)), "C0.-", label="measured BLA")
     mag.plot(f, 20 * np.log10(np.abs(Gm)), "C3--", label="model")
     out = level["outside"].astype(bool)
     mag.plot(f[out], 20 * np.log10(np.abs(G[out])), "kx", label="model outside bounds")
-    mag.set_ylabel("|G| (dB)")
+    mag.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
     mag.legend(fontsize=8)
-    phase.plot(f, unwrapped_phase(G)[0], "C0.-")
-    phase.plot(f, unwrapped_phase(Gm)[0], "C3--")
+    phase.plot(f, unwrapped_phase(G)[0], "C0.-", label="measured BLA")
+    phase.plot(f, unwrapped_phase(Gm)[0], "C3--", label="model")
     phase.set_ylabel("phase (deg)")
-    phase.set_xlabel("frequency (Hz)")
-    for axis in (mag, phase):
-        axis.set_xscale("log")
-        axis.grid(True, alpha=0.3)
-        plain_log_ticks(axis.xaxis)
-    return png(figure)
+    _frequency_axes(mag, phase)
+    return figure
 
 
-def spectrum(level: dict) -> bytes:
-    figure, (axis,) = _figure(height=3.4)
-    f, kind, band = level["frequency"], level["kind"], level["in_band"].astype(bool)
+def spectrum(level: dict, units: Units):
+    figure, (axis,) = new_figure(height=3.4)
+    f, kind, band_ = level["frequency"], level["kind"], level["in_band"].astype(bool)
     for cls, style, name in ((EXCITED, "C0o", "excited"), (ODD, "C3s", "odd"), (EVEN, "C2^", "even")):
         k = kind == cls
         axis.plot(f[k], _db(level["y_power"][k]), style, ms=3.5, label=f"measured, {name}")
     k = kind >= 0
     axis.plot(f[k], _db(level["model_power"][k]), "k.", ms=2, alpha=0.6, label="model")
     axis.plot(f[k], _db(level["noise"][k]), color="0.5", lw=1, label="noise variance")
-    if band.any():
-        axis.axvspan(f[band].min(), f[band].max(), color="C0", alpha=0.05)
+    if band_.any():
+        axis.axvspan(f[band_].min(), f[band_].max(), color="C0", alpha=0.05)
     axis.set_xlabel("frequency (Hz)")
-    axis.set_ylabel("power (dB)")
+    axis.set_ylabel(f"output power ({units.power_db('y')})")
     axis.grid(True, alpha=0.3)
     axis.legend(fontsize=8, ncol=3)
-    return png(figure)
+    return figure
 
 
-def bla_vs_level(levels: list[dict]) -> bytes:
-    figure, (axis,) = _figure(height=3.2)
+def bla_vs_level(levels: list[dict], units: Units):
+    figure, (axis,) = new_figure(height=3.2)
     for i, level in enumerate(levels):
         name = "-" if np.isnan(level["level"]) else f"{level['level']:g}"
         axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G"])), f"C{i}-", label=f"measured, level {name}")
         axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G_model"])), f"C{i}--", label=f"model, level {name}")
-    axis.set_xscale("log")
-    plain_log_ticks(axis.xaxis)
-    axis.set_xlabel("frequency (Hz)")
-    axis.set_ylabel("|G| (dB)")
-    axis.grid(True, alpha=0.3)
+    axis.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
+    _frequency_axes(axis)
     axis.legend(fontsize=8, ncol=2)
-    return png(figure)
+    return figure
 
 
-def residual_vs_state(time: dict) -> bytes:
+def residual_vs_state(time: dict, units: Units):
     states = [name for name in ("velocity", "position", "input") if name in time]
-    figure, axes = _figure(1, len(states), height=3.2)
+    figure, axes = new_figure(1, len(states), height=3.2)
     for axis, name in zip(axes, states):
-        axis.plot(time[name], time["residual"], ".", ms=2, alpha=0.5)
-        axis.set_xlabel(f"model {name}")
+        axis.plot(time[name], time["residual"], ".", ms=2, alpha=0.5, label="residual")
+        unit = units.unit("u") if name == "input" else STATE_UNITS[name]
+        axis.set_xlabel(f"model {name} ({unit})")
+        axis.set_ylabel(units.label("residual y - y_model", "y"))
         axis.grid(True, alpha=0.3)
-    axes[0].set_ylabel("residual y - y_model")
-    return png(figure)
+    return figure
 
 
-def before_after(validation: dict) -> bytes:
-    figure, (axis,) = _figure(height=3.0)
+def before_after(validation: dict, units: Units):
+    figure, (axis,) = new_figure(height=3.0)
     t = np.arange(validation["original_error"].size) / float(validation["fs"])
     axis.plot(t, validation["original_error"], "C3", lw=1, label="original model")
     if "extended_error" in validation:
         axis.plot(t, validation["extended_error"], "C0", lw=1, label="extended model")
     axis.set_xlabel("time in the period (s)")
-    axis.set_ylabel("error y - y_model")
+    axis.set_ylabel(units.label("error y - y_model", "y"))
     axis.grid(True, alpha=0.3)
     axis.legend(fontsize=8)
-    return png(figure)
+    return figure

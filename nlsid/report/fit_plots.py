@@ -12,6 +12,8 @@ import io
 import numpy as np
 
 from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.units import Units
+from nlsid.report.vector import fit_labels, new_figure
 
 
 def _db(magnitude: np.ndarray) -> np.ndarray:
@@ -21,19 +23,17 @@ def _db(magnitude: np.ndarray) -> np.ndarray:
 
 
 def tf_fit_png(frequency: np.ndarray, data: np.ndarray, model: np.ndarray, model_std: np.ndarray,
-               noise_std: np.ndarray, nl_std: np.ndarray, title: str) -> bytes:
-    """PNG bytes of the two-panel figure (dB magnitudes; phase in degrees)."""
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(8, 6.4), layout="constrained")
-    magnitude, phase = figure.add_subplot(2, 1, 1), figure.add_subplot(2, 1, 2, sharex=None)
+               noise_std: np.ndarray, nl_std: np.ndarray, title: str, units: Units) -> bytes:
+    """PNG bytes of the two-panel figure (dB magnitudes in the BLA's units; phase in degrees)."""
+    figure, (magnitude, phase) = new_figure(2, height=3.2)
     magnitude.plot(frequency, _db(np.abs(data)), "k.", markersize=3, label="BLA")
     magnitude.plot(frequency, _db(np.abs(model)), color="tab:blue", linewidth=1.2, label="model")
     magnitude.plot(frequency, _db(np.abs(data - model)), "r.", markersize=2, label="|residual|")
     magnitude.plot(frequency, _db(model_std), color="tab:blue", linestyle=":", linewidth=1, label="model std")
     magnitude.plot(frequency, _db(noise_std), color="tab:green", linewidth=1, label="noise std")
     magnitude.plot(frequency, _db(nl_std), color="tab:orange", linewidth=1, label="nonlinear std")
-    magnitude.set_ylabel("dB")
+    magnitude.set_ylabel(f"|G|, std ({units.ratio_db('y', 'u')})")
+    magnitude.set_xlabel("frequency (Hz)")
     magnitude.set_title(title)
     magnitude.legend(fontsize="small", ncol=3)
     magnitude.grid(True, alpha=0.3)
@@ -46,6 +46,7 @@ def tf_fit_png(frequency: np.ndarray, data: np.ndarray, model: np.ndarray, model
         for axis in (magnitude, phase):
             axis.set_xscale("log")
             plain_log_ticks(axis.xaxis)
+    fit_labels(figure)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=110)
     return buffer.getvalue()

@@ -1,20 +1,24 @@
 """One self-contained HTML page: the verdict first, then the evidence figures, then the numbers.
 
-The page needs nothing but itself: the CSS is inline, every figure is a PNG embedded as a base64
-``data:`` URI, there is no script and no external resource (no fonts, no stylesheets, no images by
-address), so it can be mailed to a colleague and opened offline. Every piece of text that comes from
-a file (run ids, parameter names, warnings, provenance) is HTML-escaped.
+The page needs nothing but itself: the CSS is inline, every figure is inline SVG (its text is text:
+it zooms and can be searched) with its data as a CSV ``data:`` link, there is no script and no
+external resource (no fonts, no stylesheets, no images by address), so it can be mailed to a
+colleague and opened offline. Every piece of text that comes from a file (run ids, parameter
+names, warnings, provenance) is HTML-escaped. Tables wrap their text, so that nothing runs off
+the page at any window width; the sources cited on the page are listed in full at its end.
 
 A renderer builds a :class:`Page` from a result file; :func:`render_html` turns it into the text.
 """
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import math
+import re
+import urllib.parse
 from dataclasses import dataclass, field
+
+from nlsid.citations import cited
 
 _CSS = """
 :root { --ink: #1d2733; --muted: #5b6875; --line: #d8dee5; --accent: #1f5f99; --panel: #f5f7fa; }
@@ -35,17 +39,20 @@ h2 { font-size: 18px; margin: 30px 0 10px; border-bottom: 1px solid var(--line);
 .warnings { background: #fff8e6; border-left: 6px solid #d39b00; padding: 10px 16px; border-radius: 4px;
             margin-top: 14px; font-size: 14px; }
 .warnings ul { margin: 4px 0 0; padding-left: 20px; }
+main { overflow-wrap: break-word; }
 figure { margin: 18px 0 26px; }
-figure img { display: block; max-width: 100%; height: auto; margin: 0 auto; border: 1px solid var(--line); }
+figure svg { display: block; max-width: 100%; height: auto; margin: 0 auto; border: 1px solid var(--line); }
 figcaption { color: var(--muted); font-size: 13.5px; margin-top: 6px; }
 figcaption b { color: var(--ink); }
+figcaption a.data { white-space: nowrap; }
 table { border-collapse: collapse; margin: 8px 0 22px; font-size: 13.5px; width: 100%; }
 caption { text-align: left; font-weight: 600; padding: 4px 0 6px; }
-th, td { border-bottom: 1px solid var(--line); padding: 4px 8px; text-align: right; white-space: nowrap; }
+th, td { border-bottom: 1px solid var(--line); padding: 4px 8px; text-align: right; vertical-align: top; }
 th { background: var(--panel); font-weight: 600; }
 th:first-child, td:first-child { text-align: left; }
-td.text { text-align: left; white-space: normal; }
+td.text, th.text { text-align: left; overflow-wrap: anywhere; }
 p.note { color: var(--muted); font-size: 13px; }
+ol.references { font-size: 13px; padding-left: 22px; }
 footer { margin-top: 36px; color: var(--muted); font-size: 12px; border-top: 1px solid var(--line);
          padding-top: 8px; }
 """
@@ -53,21 +60,30 @@ footer { margin-top: 36px; color: var(--muted); font-size: 12px; border-top: 1px
 
 @dataclass(frozen=True)
 class Figure:
-    """A PNG figure with a caption (first sentence in bold) and an alternative text."""
+    """A figure: its ``<svg>`` element, the CSV of the data it draws (:mod:`nlsid.report.vector`),
+    a caption (first sentence in bold) and an alternative text (also its name)."""
 
-    png: bytes
+    svg: str
+    csv: str
     caption: str
     alt: str
 
 
 @dataclass(frozen=True)
 class Table:
-    """A table of numbers: ``rows`` are already formatted strings (see :func:`number`)."""
+    """A table of numbers: ``rows`` are already formatted strings (see :func:`number`), one per
+    column of ``header``; the columns listed in ``text`` hold words (left-aligned, wrapped anywhere)."""
 
     caption: str
     header: list[str]
     rows: list[list[str]]
     note: str = ""
+    text: tuple[int, ...] = ()
+
+    def __post_init__(self):
+        for row in self.rows:
+            if len(row) != len(self.header):
+                raise ValueError(f"table '{self.caption}': a row of {len(row)} cells under {len(self.header)} headers")
 
 
 @dataclass
@@ -103,31 +119,40 @@ def number(value, spec: str = ".3g") -> str:
     return format(value, spec)
 
 
-def png(figure, dpi: int = 110) -> bytes:
-    """A matplotlib figure as PNG bytes."""
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi)
-    return buffer.getvalue()
-
-
 def _e(text) -> str:
     return html.escape(str(text), quote=True)
 
 
+_ID = re.compile(r'(\bid="|xlink:href="#|url\(#)')
+
+
+def _scoped(svg: str, prefix: str, alt: str) -> str:
+    """``svg`` with every id (and reference to one) prefixed, unique on the page, and its alt text."""
+    svg = _ID.sub(lambda m: m.group(1) + prefix, svg)
+    return svg.replace("<svg ", f'<svg role="img" aria-label="{_e(alt)}" ', 1)
+
+
+def _csv_link(item: Figure, index: int) -> str:
+    """The figure's data as a link to a CSV ``data:`` URL (saved as ``figure-<index>-<alt>.csv``)."""
+    url = "data:text/csv;charset=utf-8," + urllib.parse.quote(item.csv, safe=",")
+    return f'<a class="data" download="figure-{index}-{_e(item.alt)}.csv" href="{url}">Data (CSV)</a>'
+
+
 def _figure(item: Figure, index: int) -> str:
-    data = base64.b64encode(item.png).decode("ascii")
     first, _, rest = item.caption.partition(". ")
     if rest:
         caption = f"<b>Figure {index}. {_e(first)}.</b> {_e(rest)}"
     else:
         caption = f"<b>Figure {index}.</b> {_e(item.caption)}"
-    return (f'<figure id="figure-{index}"><img src="data:image/png;base64,{data}" alt="{_e(item.alt)}">'
-            f"<figcaption>{caption}</figcaption></figure>")
+    return (f'<figure id="figure-{index}">{_scoped(item.svg, f"figure-{index}-", item.alt)}'
+            f"<figcaption>{caption} {_csv_link(item, index)}</figcaption></figure>")
 
 
 def _table(item: Table) -> str:
-    head = "".join(f"<th>{_e(h)}</th>" for h in item.header)
-    body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in item.rows)
+    head = "".join(f'<th class="text">{_e(h)}</th>' if i in item.text else f"<th>{_e(h)}</th>"
+                   for i, h in enumerate(item.header))
+    body = "".join("<tr>" + "".join(f'<td class="text">{_e(c)}</td>' if i in item.text else f"<td>{_e(c)}</td>"
+                                    for i, c in enumerate(row)) + "</tr>" for row in item.rows)
     note = f'<p class="note">{_e(item.note)}</p>' if item.note else ""
     return (f"<table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead>"
             f"<tbody>{body}</tbody></table>{note}")
@@ -143,7 +168,17 @@ def _provenance(provenance: dict) -> str:
 
     rows = "".join(f'<tr><td>{_e(key)}</td><td class="text">{_e(text(value))}</td></tr>'
                    for key, value in sorted(provenance.items()))
-    return f'<h2>Provenance</h2><table class="provenance"><tbody>{rows}</tbody></table>'
+    return (f'<h2>Provenance</h2><table class="provenance"><thead><tr><th>item</th><th>value</th></tr></thead>'
+            f"<tbody>{rows}</tbody></table>")
+
+
+def _references(body: str) -> str:
+    """The full reference of every source ``body`` cites (:mod:`nlsid.report.citations`)."""
+    found = cited(body)
+    if not found:
+        return ""
+    items = "".join(f"<li>{_e(reference)}</li>" for reference in found)
+    return f'<h2>References</h2><ol class="references" id="references">{items}</ol>'
 
 
 def render_html(page: Page, generator: str) -> str:
@@ -155,17 +190,19 @@ def render_html(page: Page, generator: str) -> str:
         warnings = f'<div class="warnings" id="warnings"><b>Warnings of the analysis</b><ul>{items}</ul></div>'
     figures = "".join(_figure(item, i + 1) for i, item in enumerate(page.figures))
     tables = "".join(_table(item) for item in page.tables)
-    return (
-        "<!DOCTYPE html>\n"
-        '<html lang="en"><head><meta charset="utf-8">'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>{_e(page.title)}</title><style>{_CSS}</style></head><body><main>"
+    body = (
         f'<header><div class="kind">{_e(page.kind)}</div><h1>{_e(page.title)}</h1>'
         f'<div class="source">{_e(page.source)}</div></header>'
         f'<section id="verdict"><p class="headline">{_e(page.headline)}</p><ul>{findings}</ul></section>'
         f"{warnings}"
         + (f'<h2>Evidence</h2><section id="figures">{figures}</section>' if figures else "")
         + (f'<h2>Numbers</h2><section id="numbers">{tables}</section>' if tables else "")
-        + _provenance(page.provenance)
+    )
+    return (
+        "<!DOCTYPE html>\n"
+        '<html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{_e(page.title)}</title><style>{_CSS}</style></head><body><main>"
+        + body + _references(body) + _provenance(page.provenance)
         + f"<footer>Generated by {_e(generator)}.</footer></main></body></html>\n"
     )

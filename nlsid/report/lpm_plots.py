@@ -10,33 +10,35 @@ from __future__ import annotations
 import numpy as np
 
 from nlsid.report.axes import plain_log_ticks, unwrapped_phase
-from nlsid.report.bla_plots import _db, _figure, _png
+from nlsid.report.bla_plots import _db, _figure
+from nlsid.report.units import Units
+from nlsid.report.vector import band
 
 
-def lpm_figure(stored: dict, probability: float) -> bytes:
-    """PNG of one stored ``lpm_levels`` group (nlsid.io.bla_file.read_bla)."""
+def lpm_figure(stored: dict, probability: float, units: Units):
+    """The figure of one stored ``lpm_levels`` group (nlsid.io.bla_file.read_bla)."""
     figure, (magnitude, phase) = _figure(rows=2)
     f, G = stored["frequency"], stored["G"]
     radius = stored["radius"]
     magnitude.plot(f, _db(np.abs(G) ** 2), color="k", linewidth=1, label="|G| (LPM)")
-    magnitude.fill_between(f, _db(np.maximum(np.abs(G) - radius, 0.0) ** 2), _db((np.abs(G) + radius) ** 2),
-                           color="tab:blue", alpha=0.25, linewidth=0, label=f"{probability:.0%} bounds")
+    band(magnitude, f, _db(np.maximum(np.abs(G) - radius, 0.0) ** 2), _db((np.abs(G) + radius) ** 2),
+         f"{probability:.0%} bounds", color="tab:blue", alpha=0.25, linewidth=0)
     magnitude.plot(f, _db(stored["var_G"]), color="tab:red", linewidth=0.8,
                    label="std of G: noise + distortion (upper bound of noise)")
-    magnitude.set_ylabel("dB re 1 (y unit)/(u unit)")
+    magnitude.set_ylabel(f"|G|, std ({units.ratio_db('y', 'u')})")
     magnitude.legend(fontsize=8, loc="best")
     degrees, _ = unwrapped_phase(G)
-    phase.plot(f, degrees, color="k", linewidth=1)
+    phase.plot(f, degrees, color="k", linewidth=1, label="phase of G (LPM)")
     phase.set_ylabel("phase (deg)")
-    phase.set_xlabel("frequency (Hz)")
     attrs = stored["attrs"]
     level = "no level" if not np.isfinite(attrs["level"]) else f"level {attrs['level']:g}"
     magnitude.set_title(f"{level}: {attrs['n_records']} records of {attrs['n_samples']} samples, "
                         f"window {2 * attrs['half_width'] + 1} lines, degree {attrs['degree']}, q = {attrs['dof']}",
                         fontsize=9)
     for axis in (magnitude, phase):
+        axis.set_xlabel("frequency (Hz)")
         if np.all(f > 0):
             axis.set_xscale("log")
             plain_log_ticks(axis.xaxis)
         axis.grid(True, which="both", alpha=0.3)
-    return _png(figure)
+    return figure

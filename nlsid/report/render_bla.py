@@ -47,7 +47,9 @@ from nlsid.analysis.lines import EVEN, ODD, classify_lines
 from nlsid.analysis.output_spectrum import OutputSpectrum
 from nlsid.analysis.precision import PRECISION_DB
 from nlsid.errors import InputError
+from nlsid.citations import BOOK, MOTION_STAGES
 from nlsid.report.html import Figure, Page, Table, number
+from nlsid.report.units import Units, units_of
 
 DETECTED_DB = 3.0
 
@@ -122,7 +124,7 @@ def _noise_free_verdict(summary: dict, detection: bool) -> tuple[str, list[str]]
     if not detection:
         nl = summary["nl_var_db"]
         findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
-                        "multisine, book Section 6.1.2)")
+                        f"multisine, {BOOK}, Section 6.1.2)")
         if _finite(nl) and nl > PRECISION_DB:
             return f"Nonlinear distortion: its variance is {nl:.0f} dB relative to |G_BLA|²; {zero}", findings
         return f"No nonlinear distortion beyond numerical precision; {zero}", findings
@@ -151,7 +153,7 @@ def _noise_unknown_verdict(summary: dict) -> tuple[str, list[str]]:
     spectrum = summary["spectrum"]
     head = "Noise level unknown (one period per realization, P = 1): distortion cannot be compared with the noise"
     findings = ["P = 1: the noise variance cannot be estimated, so noise and nonlinear distortion are not "
-                "separated (book Section 6.1.1)"]
+                f"separated ({BOOK}, Section 6.1.1)"]
     if summary["realizations"] >= 2:
         findings.append(f"the BLA's confidence bounds come from the total variance over the {summary['realizations']} "
                         "realizations (noise and nonlinear distortion together)")
@@ -186,7 +188,7 @@ def distortion_verdict(summary: dict, detection: bool | None = None) -> tuple[st
         if not _finite(excess):
             return "Nonlinear distortion not measurable (needs M >= 2 realizations and P >= 2 periods)", findings
         findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
-                        "multisine, book Section 6.1.2)")
+                        f"multisine, {BOOK}, Section 6.1.2)")
         if excess > DETECTED_DB:
             return f"Nonlinear distortion {excess:.0f} dB above the noise (robust-method variances)", findings
         return f"No nonlinear distortion detected: its variance is within {DETECTED_DB:g} dB of the noise", findings
@@ -209,7 +211,7 @@ def distortion_verdict(summary: dict, detection: bool | None = None) -> tuple[st
     return f"No nonlinear distortion detected: odd and even lines within {DETECTED_DB:g} dB of the noise", findings
 
 
-def level_verdict(across: dict) -> str:
+def level_verdict(across: dict, units: Units) -> str:
     """The change of |G_BLA| over the levels (seed 000 Figs. 4-5), or why it is not available."""
     rows = across["levels"]
     if len(rows) < 2:
@@ -219,14 +221,14 @@ def level_verdict(across: dict) -> str:
         return "the levels excite different lines: their BLAs are compared in the figure only"
     largest = max(changes, key=abs)
     return (f"BLA changes by up to {largest:+.1f} dB over {len(rows)} levels "
-            f"(u rms {rows[0]['u_rms']:.3g} to {rows[-1]['u_rms']:.3g})")
+            f"(u rms {rows[0]['u_rms']:.3g} to {units.value(format(rows[-1]['u_rms'], '.3g'), 'u')})")
 
 
 def _name(summary: dict, index: int) -> str:
     return f"level {summary['level']:g}" if summary["level"] is not None else f"level {index:02d}"
 
 
-def _tables(summaries: list[dict], across: dict, probability: float) -> list[Table]:
+def _tables(summaries: list[dict], across: dict, probability: float, units: Units) -> list[Table]:
     change = {i: row for i, row in enumerate(across["levels"])}
     bla_rows, spectrum_rows = [], []
     for i, s in enumerate(summaries):
@@ -246,37 +248,43 @@ def _tables(summaries: list[dict], across: dict, probability: float) -> list[Tab
                               number(sp["excited_above_odd_db"], ".1f")])
     return [
         Table("BLA per level (robust method)",
-              ["level", "u rms", "M x P", "method", "lines", "|G|² dB", "NL var dB", "noise var dB",
+              [units.label("level", "u"), units.label("u rms", "u"), "M x P", "method", "lines",
+               f"|G|² ({units.ratio_db('y', 'u')})", "NL var (dB re |G|²)", "noise var (dB re |G|²)",
                "ΔG mean dB", "ΔG max dB"], bla_rows,
-              note=(f"|G|²: band mean of |G_BLA|². NL var: var(G_S) of one realization (book 6-7); noise var: "
-                    f"var(N_G) of one period (6-21); both relative to |G|². ΔG: 20 log10 |G/G_first level|, "
-                    f"mean and largest over the lines. Confidence bounds in the figures: {probability:.0%}.")),
-        Table("Output spectrum per level: band means in band (dB)",
-              ["level", "excited", "odd", "even", "non-harm.", "noise", "odd−even", "odd−noise", "even−noise",
-               "excited−odd"], spectrum_rows,
-              note="Powers of the P-averaged output spectrum, rms over realizations (seed 000 Eq. 7); noise: "
-                   "variance of the P-mean on the same scale (book 6-12)."),
+              note=(f"|G|²: band mean of |G_BLA|². NL var: var(G_S) of one realization ({BOOK}, Eq. 6-7); "
+                    f"noise var: var(N_G) of one period (Eq. 6-21); both relative to |G|². ΔG: 20 log10 "
+                    f"|G/G_first level| (dB re 1, a ratio of like transfer functions), mean and largest over the "
+                    f"lines. Confidence bounds in the figures: {probability:.0%}.")),
+        Table(f"Output spectrum per level: band means in band ({units.power_db('y')})",
+              ["level", "excited", "odd", "even", "non-harm.", "noise", "odd−even dB", "odd−noise dB",
+               "even−noise dB", "excited−odd dB"], spectrum_rows,
+              note=f"Powers of the P-averaged output spectrum, rms over realizations ({MOTION_STAGES}, Eq. 7); "
+                   f"noise: variance of the P-mean on the same scale ({BOOK}, Eq. 6-12). The differences are "
+                   "ratios of powers of y (dB re 1 y²/y²)."),
     ]
 
 
 _CAPTIONS = {
     "bla_vs_level": ("BLA versus excitation level. Top: |G_BLA| of every level; bottom: band-mean nonlinear "
-                     "and noise variances relative to |G_BLA|² versus the rms input (seed 000 Figs. 4-5)."),
+                     f"and noise variances relative to |G_BLA|² versus the rms input (as in {MOTION_STAGES}, "
+                     "Figs. 4-5)."),
     "spectrum": ("Output spectrum at {name}. Excited lines, odd and even detection lines, non-harmonic lines "
-                 "and the noise variance of the averaged spectrum (seed 000 Fig. 3)."),
+                 f"and the noise variance of the averaged spectrum (as in {MOTION_STAGES}, Fig. 3)."),
     "bla": ("BLA at {name} with its {p:.0%} confidence bounds. The standard deviations of the estimate due to "
-            "the nonlinear distortion and to the noise are shown with it (seed 000 Fig. 5, book Ex. 92)."),
+            f"the nonlinear distortion and to the noise are shown with it (as in {MOTION_STAGES}, Fig. 5; "
+            f"bounds as in {BOOK}, Ex. 92)."),
 }
 
 
-def _figures(levels: list[LevelResult], summaries: list[dict], probability: float) -> list[Figure]:
-    from nlsid.report.bla_plots import render_figures
+def _figures(levels: list[LevelResult], summaries: list[dict], probability: float, units: Units) -> list[Figure]:
+    from nlsid.report.bla_plots import bla_figure, levels_figure, spectrum_figure
+    from nlsid.report.vector import figure
 
-    rendered = render_figures(levels)
+    drawn = {"spectrum": spectrum_figure, "bla": bla_figure}
     order = [len(levels) - 1, *range(len(levels) - 1)]  # the highest level first
     out = []
     if len(levels) > 1:
-        out.append(Figure(rendered["bla_vs_level.png"], _CAPTIONS["bla_vs_level"], "bla_vs_level"))
+        out.append(figure(levels_figure(levels, units), _CAPTIONS["bla_vs_level"], "bla_vs_level"))
     for index in order:
         name = _name(summaries[index], index)
         for key in ("spectrum", "bla"):
@@ -285,7 +293,7 @@ def _figures(levels: list[LevelResult], summaries: list[dict], probability: floa
                                    "noise level is drawn, and the bounds hold noise and distortion together.",
                         "zero": " The data are noise-free: the noise floor is zero (not drawn)."}.get(
                             noise_floor(summaries[index]), "")
-            out.append(Figure(rendered[f"{key}_level_{index:02d}.png"], caption, f"{key}_level_{index:02d}"))
+            out.append(figure(drawn[key](levels[index], units), caption, f"{key}_level_{index:02d}"))
     return out
 
 
@@ -302,13 +310,15 @@ def render_bla(path: Path) -> Page:
     summaries = [stored["attrs"]["summary"] for stored in data["levels"]]
     across = data["attrs"]["across_levels"]
     probability = float(data["attrs"]["confidence"])
+    units = units_of(data["attrs"].get("units"))
     top = summaries[-1]
     top_lines = levels[-1].lines
     detection = bool(np.any(((top_lines.kind == ODD) | (top_lines.kind == EVEN)) & top_lines.in_band))
     distortion, findings = distortion_verdict(top, detection)
-    headline = f"{distortion}; {level_verdict(across)}"
+    headline = f"{distortion}; {level_verdict(across, units)}"
     spectrum = top["spectrum"]
-    findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, u rms {top['u_rms']:.3g})"] + findings
+    findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, "
+                f"u rms {units.value(format(top['u_rms'], '.3g'), 'u')})"] + findings
     if _finite(spectrum["excited_above_odd_db"]) and not (noise_floor(top) == "zero"
                                                           and spectrum["excited_above_odd_db"] > -PRECISION_DB):
         findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the "
@@ -317,36 +327,37 @@ def render_bla(path: Path) -> Page:
                     f"variance {_variance_text(top['noise_var_db'], top)} relative to |G_BLA|² (band means)")
     warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)
                                                   for w in s["warnings"]]
-    lpm_figures, lpm_tables, lpm_warnings = _lpm_parts(data, probability)
+    lpm_figures, lpm_tables, lpm_warnings = _lpm_parts(data, probability, units)
     return Page(
         kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
-        headline=headline, findings=findings, figures=_figures(levels, summaries, probability) + lpm_figures,
-        tables=_tables(summaries, across, probability) + lpm_tables, warnings=warnings + lpm_warnings,
+        headline=headline, findings=findings, figures=_figures(levels, summaries, probability, units) + lpm_figures,
+        tables=_tables(summaries, across, probability, units) + lpm_tables, warnings=warnings + lpm_warnings,
         provenance=data["attrs"]["provenance"],
         numbers={"levels": summaries, "across_levels": across, "confidence": probability,
-                 "detected_threshold_db": DETECTED_DB,
+                 "detected_threshold_db": DETECTED_DB, "units": units.known,
                  "lpm_levels": [stored["attrs"]["summary"] for stored in data["lpm_levels"]]})
 
 
-def lpm_headline(summary: dict) -> str:
+def lpm_headline(summary: dict, units: Units) -> str:
     """The verdict of a level of arbitrary runs: what the LPM measured, with its floor as a bound."""
     lo, hi = summary["band_hz"]
     return (f"FRF of arbitrary excitation by the Local Polynomial Method over {lo:.3g} to {hi:.3g} Hz: "
-            f"|G|² {summary['bla_db']:.1f} dB on average; noise plus nonlinear distortion "
+            f"|G|² {summary['bla_db']:.1f} {units.ratio_db('y', 'u')} on average; noise plus nonlinear distortion "
             f"{summary['total_var_db']:.1f} dB relative to |G|² (an upper bound of the noise: the two "
             "cannot be separated without periodic excitation)")
 
 
-def _lpm_parts(data: dict, probability: float) -> tuple[list[Figure], list[Table], list[str]]:
+def _lpm_parts(data: dict, probability: float, units: Units) -> tuple[list[Figure], list[Table], list[str]]:
     from nlsid.report.lpm_plots import lpm_figure
+    from nlsid.report.vector import figure
 
     figures, rows, warnings = [], [], []
     for index, stored in enumerate(data["lpm_levels"]):
         summary = stored["attrs"]["summary"]
         name = _name(summary, index)
-        figures.append(Figure(lpm_figure(stored, probability),
-                              f"FRF of the arbitrary runs at {name} by the Local Polynomial Method (Schoukens, "
-                              f"Pintelon and Rolain 2012, Section 3.7) with its {probability:.0%} confidence "
+        figures.append(figure(lpm_figure(stored, probability, units),
+                              f"FRF of the arbitrary runs at {name} by the Local Polynomial Method ({BOOK}, "
+                              f"Section 3.7) with its {probability:.0%} confidence "
                               "bounds, F(2, 2q) with q degrees of freedom. The red curve is the standard "
                               "deviation of the estimate: noise and nonlinear distortion together.",
                               f"lpm_level_{index:02d}"))
@@ -356,8 +367,8 @@ def _lpm_parts(data: dict, probability: float) -> tuple[list[Figure], list[Table
                      number(summary["total_var_db"], ".1f"), str(summary["lpm"]["dof"])])
         warnings += [f"arbitrary {name}: {w}" for w in summary["warnings"]]
     tables = [Table("BLA of arbitrary runs per level (Local Polynomial Method)",
-                    ["level", "u rms", "records", "method", "band Hz", "lines", "|G|² dB",
-                     "noise+NL var dB (upper bound)", "dof q"], rows,
+                    [units.label("level", "u"), units.label("u rms", "u"), "records", "method", "band Hz", "lines",
+                     f"|G|² ({units.ratio_db('y', 'u')})", "noise+NL var (dB re |G|², upper bound)", "dof q"], rows,
                     note="noise+NL var: band mean of the variance of G relative to |G|²; it bounds the noise "
                          "from above.")] if rows else []
     return figures, tables, warnings
@@ -366,12 +377,13 @@ def _lpm_parts(data: dict, probability: float) -> tuple[list[Figure], list[Table
 def _lpm_page(path: Path, data: dict) -> Page:
     """The page of a bla.h5 holding only levels of arbitrary runs."""
     probability = float(data["attrs"]["confidence"])
+    units = units_of(data["attrs"].get("units"))
     summaries = [stored["attrs"]["summary"] for stored in data["lpm_levels"]]
-    figures, tables, warnings = _lpm_parts(data, probability)
+    figures, tables, warnings = _lpm_parts(data, probability, units)
     top = summaries[-1]
     findings = [f"{_name(s, i)}: {s['realizations']} records, q = {s['lpm']['dof']} degrees of freedom, window "
                 f"{s['lpm']['lines']} lines, degree {s['lpm']['degree']}" for i, s in enumerate(summaries)]
     return Page(kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
-                headline=lpm_headline(top), findings=findings, figures=figures, tables=tables,
+                headline=lpm_headline(top, units), findings=findings, figures=figures, tables=tables,
                 warnings=list(data["attrs"]["warnings"]) + warnings, provenance=data["attrs"]["provenance"],
                 numbers={"levels": [], "lpm_levels": summaries, "confidence": probability})

@@ -3,7 +3,10 @@
 The verdict and the findings are those of ``summary.json`` (rules in :mod:`nlsid.diagnose.verdict`
 and :mod:`nlsid.diagnose.evidence`); the figures come from ``results.h5``
 (:mod:`nlsid.report.diagnosis_plots`); the tables rank the hypotheses by their validation error and
-give the evidence per level and the gain.
+give the evidence per level and the gain, and, when the summary has a ``chain`` of causes, each of
+its steps. A validation error's distance to the noise floor reads as in the verdict ("0.2 dB
+below", :func:`floor_text`), and the distortion a hypothesis removes as a change in dB
+(``distortion_gain_db``, :mod:`nlsid.diagnose.gain`).
 """
 
 from __future__ import annotations
@@ -11,46 +14,68 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from nlsid.citations import BOOK, MOTION_STAGES
 from nlsid.report.html import Figure, Page, Table, number
+from nlsid.report.units import Units, units_of
 
 
 def _level(value) -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:g}"
 
 
-def _figures(arrays: dict) -> list[Figure]:
+def floor_text(score: dict | None) -> str:
+    """Where a validation error lies against the noise floor, worded and rounded as the verdict
+    (:func:`nlsid.diagnose.diagnosis.versus_floor`): ``0.2 dB below``, ``56.7 dB above``."""
+    if not score:
+        return "-"
+    if score.get("noise_floor_zero"):
+        return "exact match" if score.get("exact_match") else "zero floor (noise-free)"
+    x = score.get("above_floor_db")
+    if x is None or not math.isfinite(x):
+        return "floor unknown"
+    return f"{abs(x):.1f} dB {'above' if x >= 0 else 'below'}"
+
+
+def _figures(arrays: dict, units: Units) -> list[Figure]:
     from nlsid.report import diagnosis_plots as plots
+    from nlsid.report.vector import figure
 
     out = []
     if arrays["bla"]:
         top = arrays["bla"][-1]
-        out.append(Figure(plots.model_vs_bla(top),
+        out.append(figure(plots.model_vs_bla(top, units),
                           f"Model against the measured BLA at level {_level(top['level'])}. The band is the BLA's 95% "
-                          "confidence region (book Ex. 92); crosses mark lines where the model lies outside it.",
+                          f"confidence region ({BOOK}, Ex. 92); crosses mark lines where the model lies outside it.",
                           "model_vs_bla"))
     if arrays["spectrum"]:
         top = arrays["spectrum"][-1]
-        out.append(Figure(plots.spectrum(top),
+        out.append(figure(plots.spectrum(top, units),
                           f"Output spectrum at level {_level(top['level'])}. Measured power at the excited, odd and even "
-                          "lines, the model's at the same lines, and the noise variance (seed 000 Fig. 3).",
-                          "spectrum"))
+                          "lines, the model's at the same lines, and the noise variance (as in "
+                          f"{MOTION_STAGES}, Fig. 3).", "spectrum"))
     if len(arrays["bla"]) > 1:
-        out.append(Figure(plots.bla_vs_level(arrays["bla"]),
+        out.append(figure(plots.bla_vs_level(arrays["bla"], units),
                           "BLA versus excitation level. Measured (solid) and model (dashed) per level: a model without "
                           "the nonlinearity shows no change with level.", "bla_vs_level"))
-    if "residual" in arrays["time"]:
-        out.append(Figure(plots.residual_vs_state(arrays["time"]),
-                          f"Residual against the model's internal signals. Mean period of run {arrays['time']['run_id']}: "
-                          "a jump at zero velocity is friction, a cubic trend in position a cubic spring.",
-                          "residual_vs_state"))
-    if "original_error" in arrays["validation"]:
-        out.append(Figure(plots.before_after(arrays["validation"]),
-                          f"Simulation error before and after. Validation run {arrays['validation']['run_id']}, "
-                          "mean period: the original model and the extended one.", "before_after"))
+    time = arrays["time"]
+    if "residual" in time:
+        states = (" Positions in m and velocities in m/s, the SI units of the mechanical templates."
+                  if "position" in time or "velocity" in time else "")
+        out.append(figure(plots.residual_vs_state(time, units),
+                          f"Residual against the model's internal signals. Mean steady-state period of run "
+                          f"{time['run_id']}, the estimation run with the largest input, where the hypotheses are "
+                          "estimated and a nonlinearity shows most: a jump at zero velocity is friction, a cubic "
+                          f"trend in position a cubic spring.{states}", "residual_vs_state"))
+    validation = arrays["validation"]
+    if "original_error" in validation:
+        out.append(figure(plots.before_after(validation, units),
+                          f"Simulation error before and after. Mean period of validation run {validation['run_id']}, "
+                          "held out of every estimate (unlike the run of the residual figure), for the original "
+                          "model and the extended one.", "before_after"))
     return out
 
 
-def _tables(summary: dict) -> list[Table]:
+def _hypothesis_table(summary: dict, units: Units) -> Table:
     rows = []
     for h in summary["hypotheses"]:
         v = h.get("validation")
@@ -58,51 +83,89 @@ def _tables(summary: dict) -> list[Table]:
         value = h.get("values", {}).get(main)
         std = h.get("std", {}).get(main)
         rows.append([h["title"], f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" if value is not None else "-",
-                     number(v and v["gain_db"], "+.1f"), number(v and v["above_floor_db"], ".1f"),
-                     number(v and v["distortion_explained"], ".0%"), h["reason"] or h.get("note", "")])
-    ev = summary["evidence"]
-    level_rows = []
-    for lines, bla in zip(ev["lines"], ev["bla"]):
-        level_rows.append([_level(lines["level"]), number(lines["u_rms"]), f"{bla['outside_bounds']}/{bla['lines']}",
-                           number(bla["gain_error_max_db"], "+.1f"), number(bla["phase_error_max_deg"], "+.0f"),
-                           number(lines["excited"]["above_noise_db"], ".1f"), number(lines["odd"]["above_noise_db"], ".1f"),
-                           number(lines["even"]["above_noise_db"], ".1f")])
-    split = summary["split"]
-    tables = [
-        Table("Hypotheses, ranked by validation error", ["hypothesis", "main parameter", "gain dB", "above floor dB",
-                                                          "distortion explained", "note"], rows,
-              note=f"Estimated on {len(split['estimation'])} runs, validated on {len(split['validation'])} others. "
-                   f"A cause is named when its error power is below the original's by more than the F threshold "
-                   f"{summary['verdict']['f_threshold']:.3g} (alpha {summary['verdict']['alpha']:g})."),
-        Table("Residual per level", ["level", "u rms", "model outside BLA bounds", "gain error dB", "phase error deg",
-                                     "excited dB", "odd dB", "even dB"], level_rows,
-              note="Residual power above the noise at the in-band excited, odd and even lines (dB)."),
-    ]
-    harmonic_rows = [[number(row["frequency_hz"], "g"), _level(row["level"]), str(row["runs"]),
-                      number(row["fundamental"]["above_noise_db"], ".1f"), number(row["odd"]["above_noise_db"], ".1f"),
-                      number(row["even"]["above_noise_db"], ".1f"),
-                      " ".join(number(x, ".0f") for x in row["harmonic_above_noise_db"][1:])]
-                     for row in ev.get("harmonics", [])]
-    if harmonic_rows:
-        tables.append(Table("Residual at the sine harmonics (HOSIDF)", ["frequency Hz", "level", "runs", "fundamental dB",
-                                                                       "odd dB", "even dB", "harmonics 2, 3, ... dB"],
-                            harmonic_rows, note="Residual power above the noise at the harmonics of each sine: what "
-                                                "the model misses of each HOSIDF (odd: odd nonlinearity, even: even)."))
-    original = summary["original"]
-    gain = summary.get("gain")
-    gain_rows = [["original model", number(original["error_rms"], ".4g"), number(original["error_db"], ".1f"),
-                  number(original["above_floor_db"], ".1f")]]
+                     number(v and v["gain_db"], "+.1f"), floor_text(v),
+                     number(v and v.get("distortion_gain_db"), "+.1f"), h["reason"] or h.get("note", "")])
+    split, verdict = summary["split"], summary["verdict"]
+    return Table("Hypotheses, ranked by validation error",
+                 ["hypothesis", "main parameter", "validation gain dB", "validation error vs noise floor",
+                  "distortion gain dB", "note"], rows, text=(0, 1, 5),
+                 note=f"Estimated on {len(split['estimation'])} runs, validated on {len(split['validation'])} others. "
+                      "Validation gain: the error's drop against the original model (> 0: smaller). Distortion "
+                      "gain: the drop of the residual power at the odd and even detection lines of the validation "
+                      "multisines (> 0: the hypothesis removes distortion, < 0: it adds some). A cause is named "
+                      "when its error power is below the original's by more than the F threshold "
+                      f"{verdict['f_threshold']:.3g} (alpha {verdict['alpha']:g}).")
+
+
+def _level_table(evidence: dict, units: Units) -> Table:
+    rows = [[_level(lines["level"]), number(lines["u_rms"]), f"{bla['outside_bounds']}/{bla['lines']}",
+             number(bla["gain_error_max_db"], "+.1f"), number(bla["phase_error_max_deg"], "+.0f"),
+             number(lines["excited"]["above_noise_db"], ".1f"), number(lines["odd"]["above_noise_db"], ".1f"),
+             number(lines["even"]["above_noise_db"], ".1f")]
+            for lines, bla in zip(evidence["lines"], evidence["bla"])]
+    return Table("Residual per level", [units.label("level", "u"), units.label("u rms", "u"),
+                                        "model outside BLA bounds", "gain error dB", "phase error deg",
+                                        "excited dB", "odd dB", "even dB"], rows,
+                 note="Gain and phase error: the largest of the measured BLA against the model's, 20 log10 "
+                      "|G/G_model| (dB re 1, a ratio of like transfer functions) and its angle. Excited, odd, "
+                      "even: residual power above the noise at the in-band lines of each class (dB re the noise "
+                      "power).")
+
+
+def _harmonic_table(evidence: dict, units: Units) -> Table | None:
+    rows = [[number(row["frequency_hz"], "g"), _level(row["level"]), str(row["runs"]),
+             number(row["fundamental"]["above_noise_db"], ".1f"), number(row["odd"]["above_noise_db"], ".1f"),
+             number(row["even"]["above_noise_db"], ".1f"),
+             " ".join(number(x, ".0f") for x in row["harmonic_above_noise_db"][1:])]
+            for row in evidence.get("harmonics", [])]
+    if not rows:
+        return None
+    return Table("Residual at the sine harmonics (HOSIDF)",
+                 ["frequency Hz", units.label("amplitude", "u"), "runs", "fundamental dB", "odd dB", "even dB",
+                  "harmonics 2, 3, ... dB"], rows,
+                 note="Residual power above the noise (dB re the noise power) at the harmonics of each sine: what "
+                      "the model misses of each HOSIDF (odd: odd nonlinearity, even: even).")
+
+
+def _error_table(summary: dict, units: Units) -> Table:
+    original, gain = summary["original"], summary.get("gain")
+    rows = [["original model", number(original["error_rms"], ".4g"), number(original["error_db"], ".1f"),
+             floor_text(original)]]
     if gain:
         ext = gain["extended"]
-        gain_rows.append(["extended model", number(ext["error_rms"], ".4g"), number(ext["error_db"], ".1f"),
-                          number(ext["above_floor_db"], ".1f")])
+        rows.append(["extended model", number(ext["error_rms"], ".4g"), number(ext["error_db"], ".1f"),
+                     floor_text(ext)])
     floor = gain["extended"] if gain else original
-    gain_rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "0.0"])
-    tables.append(Table("Validation error", ["model", "rms", "dB", "above floor dB"], gain_rows,
-                        note="Mean steady-state period of the validation runs, without its mean value. Each model's "
-                             "floor is the noise in its own residual (period-to-period variance over P): the error "
-                             "the true model would show. The floor row is the best model's."))
-    return tables
+    rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "the floor"])
+    return Table("Validation error", ["model", units.label("rms", "y"), f"level ({units.level_db('y')})",
+                                      "vs noise floor"], rows,
+                 note="Mean steady-state period of the validation runs, without its mean value. Each model's "
+                      "floor is the noise in its own residual (period-to-period variance over P): the error "
+                      "the true model would show. The floor row is the best model's.")
+
+
+def _values(step: dict) -> str:
+    std = step.get("std", {})
+    return "; ".join(f"{name} = {number(value, '.4g')}" + (f" ± {number(std[name], '.2g')}" if name in std else "")
+                     for name, value in step.get("values", {}).items()) or "-"
+
+
+def _chain_table(chain: list[dict], units: Units) -> Table:
+    rows = [[str(i + 1), step.get("title") or step.get("cause", "-"), _values(step),
+             number(step.get("error_rms"), ".4g"), number(step.get("gain_db"), "+.1f"), floor_text(step)]
+            for i, step in enumerate(chain)]
+    return Table("Chain of causes", ["step", "cause", "values", units.label("validation error rms", "y"),
+                                     "validation gain dB", "validation error vs noise floor"], rows, text=(1, 2),
+                 note="Each step adds one cause to the model of the step before and diagnoses again; the gain is "
+                      "against that model, the error and its distance to the floor those of the model after the "
+                      "step.")
+
+
+def _tables(summary: dict, units: Units) -> list[Table]:
+    tables = [_chain_table(summary["chain"], units)] if summary.get("chain") else []
+    tables += [_hypothesis_table(summary, units), _level_table(summary["evidence"], units)]
+    harmonics = _harmonic_table(summary["evidence"], units)
+    return tables + ([harmonics] if harmonics else []) + [_error_table(summary, units)]
 
 
 def render_diagnosis(path: Path) -> Page:
@@ -110,7 +173,9 @@ def render_diagnosis(path: Path) -> Page:
     from nlsid.io.diagnosis_file import read_diagnosis
 
     summary, arrays = read_diagnosis(path)
+    units = units_of(summary.get("units"))
+    keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain")
     return Page(kind="Model diagnosis", title=f"Diagnosis of {Path(summary['model']).name}", source=str(path),
-                headline=summary["headline"], findings=list(summary["findings"]), figures=_figures(arrays),
-                tables=_tables(summary), provenance=summary.get("provenance", {}),
-                numbers={k: summary[k] for k in ("verdict", "original", "gain", "evidence", "split")})
+                headline=summary["headline"], findings=list(summary["findings"]), figures=_figures(arrays, units),
+                tables=_tables(summary, units), provenance=summary.get("provenance", {}),
+                numbers={k: summary[k] for k in keys if k in summary})

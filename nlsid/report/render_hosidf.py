@@ -22,7 +22,6 @@ time-domain error (Eq. 7), with the cost at the optimum relative to the first sw
 from __future__ import annotations
 
 import math
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +29,9 @@ import numpy as np
 from nlsid.analysis.hosidf import CellHOSIDF, HarmonicStats, HOSIDFGrid
 from nlsid.analysis.linearity_cost import Sweep, SweepPoint
 from nlsid.errors import InputError
+from nlsid.citations import FRICTION_COMPENSATION, MOTION_STAGES, SPECTRAL_ANALYSIS
 from nlsid.report.html import Figure, Page, Table, number
+from nlsid.report.units import Units, units_of
 
 CHANGE_SIGMAS = 3.0
 _DB = 20.0 / math.log(10.0)
@@ -102,8 +103,8 @@ def _frequencies(values: np.ndarray) -> str:
     return ", ".join(f"{f:g}" for f in values) + " Hz"
 
 
-def grid_verdict(grid: dict) -> tuple[str, list[str]]:
-    """Headline and findings of a grid (rules in the module docstring)."""
+def grid_verdict(grid: dict, units: Units, signal: str) -> tuple[str, list[str]]:
+    """Headline and findings of a grid (rules in the module docstring); amplitudes in the unit of ``signal``."""
     table = significance(grid)
     seen = [row for row in table if row["significant_cells"]]
     if seen:
@@ -121,19 +122,21 @@ def grid_verdict(grid: dict) -> tuple[str, list[str]]:
     worst = max(changes, key=lambda row: abs(row["change_db"]))
     verdict = "significant" if abs(worst["change_db"]) > CHANGE_SIGMAS * worst["std_db"] else "within the noise"
     headline = (f"{distortion}; |H_1| changes by up to {worst['change_db']:+.2f} dB from amplitude "
-                f"{worst['from_level']:g} to {worst['to_level']:g} (at {worst['frequency']:g} Hz)")
+                f"{worst['from_level']:g} to {units.value(format(worst['to_level'], 'g'), signal)} "
+                f"(at {worst['frequency']:g} Hz)")
     findings.append(f"largest |H_1| change {worst['change_db']:+.2f} dB ± {number(worst['std_db'], '.2g')} dB "
                     f"(1 sigma): {verdict} ({CHANGE_SIGMAS:g} sigma rule)")
     return headline, findings
 
 
-def sweep_verdict(sweep: dict) -> tuple[str, list[str]]:
+def sweep_verdict(sweep: dict, units: Units, signal: str) -> tuple[str, list[str]]:
     """Headline and findings of a linearity-cost sweep (seed 003 Definition 3, Eq. 7)."""
     name, cost = str(sweep["parameter"]), sweep["cost"]
     best = int(np.argmin(cost))
     headline = (f"Optimum {name} = {sweep['optimum']:g} by the linearity cost; {sweep['time_optimum']:g} by the "
                 f"time-domain error")
-    findings = [f"sine of {sweep['frequency']:g} Hz, amplitude {sweep['level']:g}; {len(cost)} values of {name} "
+    findings = [f"sine of {sweep['frequency']:g} Hz, amplitude {units.value(format(sweep['level'], 'g'), signal)}; "
+                f"{len(cost)} values of {name} "
                 f"from {sweep['value'][0]:g} to {sweep['value'][-1]:g}"]
     if cost[0] > 0 and cost[best] > 0:
         findings.append(f"cost at the optimum {cost[best]:.3g}, {20 * math.log10(cost[best] / cost[0]):+.1f} dB "
@@ -144,7 +147,7 @@ def sweep_verdict(sweep: dict) -> tuple[str, list[str]]:
     return headline, findings
 
 
-def _grid_tables(grid: dict) -> list[Table]:
+def _grid_tables(grid: dict, units: Units, signal: str) -> list[Table]:
     measured = grid["n_repeats"] > 0
     K = int(grid["harmonic"][-1])
     rows = []
@@ -158,59 +161,65 @@ def _grid_tables(grid: dict) -> list[Table]:
     change_rows = [[f"{r['frequency']:g}", f"{r['from_level']:g}", f"{r['to_level']:g}", f"{r['change_db']:+.3f}",
                     number(r["std_db"], ".2g")] for r in h1_change(grid)]
     tables = [Table("Cells: H_1 and each harmonic's level above its noise bound (dB)",
-                    ["frequency Hz", "amplitude", "R x P", "|H_1|", "∠H_1 deg",
-                     *[f"k = {k}" for k in range(2, K + 1)]],
-                    rows, note="k columns: 20 log10 |Y(k w0)| / eps_k (seed 003 Table I, Eq. 6); ✓ marks a "
-                               "harmonic above its bound. R repeats x P periods per cell.")]
+                    ["frequency Hz", units.label("amplitude", signal), "R x P", f"|H_1| ({units.ratio('y', signal)})",
+                     "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
+                    rows, note=f"k columns: 20 log10 |Y(k w0)| / eps_k, dB re the noise bound ({FRICTION_COMPENSATION}, "
+                               "Table I, Eq. 6); ✓ marks a harmonic above its bound. R repeats x P periods per cell.")]
     if change_rows:
-        tables.append(Table("H_1 versus amplitude", ["frequency Hz", "from amplitude", "to amplitude",
-                                                     "Δ|H_1| dB", "std dB"], change_rows,
+        tables.append(Table("H_1 versus amplitude", ["frequency Hz", units.label("from amplitude", signal),
+                                                     units.label("to amplitude", signal), "Δ|H_1| dB", "std dB"],
+                            change_rows,
                             note="Δ|H_1| = 20 log10 |H_1(to)/H_1(from)|; std to first order from the variance of "
                                  "the mean (over repeats, else periods)."))
     return tables
 
 
-def _sweep_table(sweep: dict) -> Table:
+def _sweep_table(sweep: dict, units: Units) -> Table:
     rows = [[f"{v:g}", number(c, ".4g"), number(a, ".4g"), number(t, ".4g"),
              ", ".join(str(k) for k in np.flatnonzero(u)) or "-"]
             for v, c, a, t, u in zip(sweep["value"], sweep["cost"], sweep["cost_all"], sweep["time_error"],
                                      sweep["used"])]
     return Table(f"Linearity cost per value of {sweep['parameter']}",
-                 [str(sweep["parameter"]), "f_c (Eq. 5)", "f (Eq. 4)", "ε (Eq. 7)", "harmonics in f_c"], rows,
-                 note="Seed 003: f_c averages the significant harmonics k >= 2 relative to the first; f uses "
-                      "k = 2..K; ε is the largest per-period rms tracking error.")
+                 [units.label(str(sweep["parameter"]), str(sweep["parameter"])), "f_c (Eq. 5)", "f (Eq. 4)",
+                  units.label("ε (Eq. 7)", "y"), "harmonics in f_c"], rows,
+                 note=f"{FRICTION_COMPENSATION}: f_c averages the significant harmonics k >= 2 relative to the "
+                      "first (a ratio of like units, y/y); f uses k = 2..K; ε is the largest per-period rms "
+                      "tracking error.")
 
 
-_SWEEP_CAPTIONS = (
-    "Harmonics and cost versus the parameter. |Y(k w0)|/|Y(w0)| of the harmonics and the linearity cost f_c "
-    "(seed 003 Fig. 3).",
-    "Harmonic spectrum, first value versus optimum. Mean and standard deviation at each harmonic (seed 003 Fig. 4).",
-    "HOSIDFs versus the parameter. Magnitude and phase of H_1..H_5 (seed 003 Fig. 5).",
-    "Frequency-domain cost and time-domain error. Both optima are marked (seed 003 Fig. 6, Eq. 7).",
+_SWEEP_FIGURES = (
+    ("sweep_harmonics", "Harmonics and cost versus the parameter. |Y(k w0)|/|Y(w0)| of the harmonics and the "
+                        f"linearity cost f_c (as in {FRICTION_COMPENSATION}, Fig. 3)."),
+    ("sweep_spectrum", "Harmonic spectrum, first value versus optimum. Mean and standard deviation at each "
+                       f"harmonic (as in {FRICTION_COMPENSATION}, Fig. 4)."),
+    ("sweep_hosidf", f"HOSIDFs versus the parameter. Magnitude and phase of H_1..H_5 (as in {FRICTION_COMPENSATION}, "
+                     "Fig. 5)."),
+    ("sweep_performance", "Frequency-domain cost and time-domain error. Both optima are marked (as in "
+                          f"{FRICTION_COMPENSATION}, Fig. 6; ε of Eq. 7)."),
 )
 
 
-def _figures(data: dict) -> list[Figure]:
-    from nlsid.report import hosidf_plots
+def _figures(data: dict, units: Units) -> list[Figure]:
+    from nlsid.report import hosidf_plots as plots
+    from nlsid.report.vector import figure
 
+    signal = str(data["input_signal"])
     figures = []
-    with tempfile.TemporaryDirectory() as folder:
-        folder = Path(folder)
-        if "grid" in data:
-            grid = _grid(data["grid"], int(data["harmonics"]))
-            analytic = data["grid"].get("analytic", {}).get("H")
-            path = hosidf_plots.plot_first_hosidf_map(grid, folder / "h1.png", analytic)
-            figures.append(Figure(path.read_bytes(), "First HOSIDF over frequency. |H_1| and its phase, one line "
-                                  "per amplitude" + (", analytic (seed 002 Lemma 2) dashed" if analytic is not None
-                                                     else "") + " (seed 000 Fig. 7).", "hosidf_h1_map"))
-            for fi, frequency in enumerate(grid.frequencies):
-                path = hosidf_plots.plot_versus_amplitude(grid, fi, folder / f"f{fi}.png")
-                figures.append(Figure(path.read_bytes(), f"HOSIDFs versus amplitude at {frequency:g} Hz. |H_k| "
-                                      "(seed 000 Eqs. 8-9) solid, standard deviation of the mean dashed (seed 000 "
-                                      "Fig. 6).", f"hosidf_vs_amplitude_f{fi:03d}"))
-        if "sweep" in data:
-            paths = hosidf_plots.sweep_figures(_sweep(data["sweep"]), folder)
-            figures += [Figure(p.read_bytes(), caption, p.stem) for p, caption in zip(paths, _SWEEP_CAPTIONS)]
+    if "grid" in data:
+        grid = _grid(data["grid"], int(data["harmonics"]))
+        analytic = data["grid"].get("analytic", {}).get("H")
+        figures.append(figure(plots.first_hosidf_figure(grid, units, analytic, signal),
+                              "First HOSIDF over frequency. |H_1| and its phase, one line per amplitude"
+                              + (f", analytic ({SPECTRAL_ANALYSIS}, Lemma 2) dashed" if analytic is not None else "")
+                              + f" (as in {MOTION_STAGES}, Fig. 7).", "hosidf_h1_map"))
+        for fi, frequency in enumerate(grid.frequencies):
+            figures.append(figure(plots.versus_amplitude_figure(grid, fi, units, signal),
+                                  f"HOSIDFs versus amplitude at {frequency:g} Hz. |H_k| ({MOTION_STAGES}, Eqs. 8-9) "
+                                  f"solid, standard deviation of the mean dashed (as in {MOTION_STAGES}, Fig. 6).",
+                                  f"hosidf_vs_amplitude_f{fi:03d}"))
+    if "sweep" in data:
+        drawn = plots.sweep_figure_list(_sweep(data["sweep"]), units, signal)
+        figures += [figure(mpl, caption, name) for mpl, (name, caption) in zip(drawn, _SWEEP_FIGURES)]
     return figures
 
 
@@ -223,20 +232,21 @@ def render_hosidf(path: Path) -> Page:
         raise InputError(f"{path}:/", "holds neither a /grid nor a /sweep group")
     headline, findings, tables, numbers = "", [], [], {"harmonics": int(data["harmonics"]),
                                                        "input_signal": str(data["input_signal"])}
+    units, signal = units_of(data.get("units")), str(data["input_signal"])
     if "grid" in data:
         grid = data["grid"]
-        headline, findings = grid_verdict(grid)
-        tables += _grid_tables(grid)
+        headline, findings = grid_verdict(grid, units, signal)
+        tables += _grid_tables(grid, units, signal)
         numbers["grid"] = {"frequencies": grid["frequency"], "levels": grid["level"],
                            "significance": significance(grid), "h1_change": h1_change(grid)}
     if "sweep" in data:
         sweep = data["sweep"]
-        sweep_headline, sweep_findings = sweep_verdict(sweep)
+        sweep_headline, sweep_findings = sweep_verdict(sweep, units, signal)
         headline = f"{headline}; {sweep_headline}" if headline else sweep_headline
         findings += sweep_findings
-        tables.append(_sweep_table(sweep))
+        tables.append(_sweep_table(sweep, units))
         numbers["sweep"] = {key: sweep[key] for key in ("parameter", "frequency", "level", "optimum", "time_optimum",
                                                        "value", "cost", "cost_all", "time_error")}
     return Page(kind="Higher order sinusoidal input describing functions", title=f"HOSIDF report: {Path(path).name}",
-                source=str(path), headline=headline, findings=findings, figures=_figures(data), tables=tables,
+                source=str(path), headline=headline, findings=findings, figures=_figures(data, units), tables=tables,
                 provenance=data["provenance"], numbers=numbers)

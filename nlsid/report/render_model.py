@@ -26,7 +26,8 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
 from nlsid.report.axes import plain_log_ticks, unwrapped_phase
-from nlsid.report.html import Figure, Page, Table, number
+from nlsid.report.html import Page, Table, number
+from nlsid.report.vector import figure, new_figure
 
 _TITLES = {
     "transfer_function": "Transfer function", "zpk": "Zero-pole-gain model", "state_space": "State-space model",
@@ -146,28 +147,26 @@ def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
     return [Element(label, plant.ss)], nonlinear
 
 
-def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarray) -> bytes:
-    from matplotlib.figure import Figure as MplFigure
+#: a model config records no units: each element's gain is in its output's unit per unit of its input
+BODE_UNIT = "dB re 1 output/input, units not recorded"
 
-    from nlsid.report.html import png
 
-    figure = MplFigure(figsize=(8, 6), layout="constrained")
-    magnitude, phase = figure.add_subplot(2, 1, 1), figure.add_subplot(2, 1, 2)
+def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarray):
+    drawn, (magnitude, phase) = new_figure(2)
     curves = [(e.name, response(e.ss, frequency)) for e in elements]
     if loop is not None:
         curves.append(("loop gain L = C P", loop))
     for name, values in curves:
         magnitude.semilogx(frequency, 20 * np.log10(np.abs(values)), label=name)
         phase.semilogx(frequency, unwrapped_phase(values)[0], label=name)
-    unit = "f / fs" if elements[0].ss.discrete else "frequency [Hz]"
-    magnitude.set_ylabel("magnitude [dB]")
-    phase.set_ylabel("phase [deg]")
-    phase.set_xlabel(unit)
+    magnitude.set_ylabel(f"magnitude ({BODE_UNIT})")
+    phase.set_ylabel("phase (deg)")
     magnitude.legend(fontsize="small", loc="best")
     for axis in (magnitude, phase):
+        axis.set_xlabel("f / fs (cycles per sample)" if elements[0].ss.discrete else "frequency (Hz)")
         axis.grid(True, which="both", alpha=0.3)
         plain_log_ticks(axis.xaxis)
-    return png(figure)
+    return drawn
 
 
 def _parameters(values: dict) -> str:
@@ -219,7 +218,7 @@ def render_model(path: Path) -> Page:
                 findings.append(f"loop gain crossover {found[0]:.3g} Hz, phase margin {found[1]:.0f} deg "
                                 "(continuous-time loop)")
                 numbers["crossover_hz"], numbers["phase_margin_deg"] = found
-        figures.append(Figure(_bode(group, loop, frequency),
+        figures.append(figure(_bode(group, loop, frequency),
                               ("Frequency response of the LTI elements" + (" (discrete, over f/fs; dead time not "
                                "drawn)" if domain else "") + ". Magnitude and phase of each element as simulated"
                                + (", and the loop gain" if loop is not None else "") + "."),

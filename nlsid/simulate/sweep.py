@@ -1,7 +1,7 @@
 """Parameter sweeps: one validated config per value of the swept key.
 
-The sweep names a key of the same config by a dotted path (``closed_loop.feedforward.coulomb``,
-``model.nonlinearities[0].fc``); each value is written at that path into the loaded YAML and the
+The sweep names a number of the same config by a dotted path (``closed_loop.feedforward.coulomb``,
+``model.nonlinearities[0].fc``, or a list element: ``model.den[1]``, ``model.A[1][0]``); each value is written at that path into the loaded YAML and the
 whole config is validated again, so a swept value obeys the same rules (and gives the same messages)
 as a value written in the file. ``linspace`` follows numpy.linspace (both ends included).
 """
@@ -70,19 +70,31 @@ def _set(data: dict, path: str, value: float, key: str = "sweep.parameter") -> N
         raise InputError(key, "a sweep cannot sweep itself") if key == "sweep.parameter" \
             else error("the sweep section holds no model parameter")
     node = data
-    for part in keys[:-1]:
-        if isinstance(part, int):
-            if not isinstance(node, list) or part >= len(node):
-                raise error(f"no item [{part}] in the config")
-            node = node[part]
-        else:
-            if not isinstance(node, dict):
-                raise error(f"{part!r} is not a mapping key in the config")
-            node = node.setdefault(part, {})
-    last = keys[-1]
-    if isinstance(last, int) or not isinstance(node, dict):
-        raise error("must end in a key of a mapping")
-    node[last] = value
+    for depth, part in enumerate(keys[:-1]):
+        check_step(node, part, keys[:depth], error)
+        node = node[part] if isinstance(part, int) else node.setdefault(part, {})
+    check_step(node, keys[-1], keys[:-1], error)
+    node[keys[-1]] = value
+
+
+def key_text(keys: tuple) -> str:
+    """``("model", "den", 2)`` -> ``model.den[2]`` (``the config`` for no keys)."""
+    text = ""
+    for key in keys:
+        text += f"[{key}]" if isinstance(key, int) else (f".{key}" if text else key)
+    return text or "the config"
+
+
+def check_step(node, key, above: tuple, error) -> None:
+    """Raise ``error(what)`` unless ``key`` can be taken from ``node`` (reached by the keys ``above``):
+    an index needs a list that long, a name a mapping (a missing name is created by :func:`_set`)."""
+    if isinstance(key, int):
+        if not isinstance(node, list):
+            raise error(f"{key_text(above)} is not a list: no item [{key}]")
+        if key >= len(node):
+            raise error(f"no item [{key}]: {key_text(above)} has {len(node)} item{'s' if len(node) != 1 else ''}")
+    elif not isinstance(node, dict):
+        raise error(f"{key_text(above)} is not a mapping: no key {key!r}")
 
 
 def sweep_values(config: SimulateConfig) -> np.ndarray:

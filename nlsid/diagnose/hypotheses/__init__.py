@@ -29,6 +29,9 @@ lugre               as stribeck, with presliding: a stiff     ``nonlinearities: 
                     force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0)
 cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
                     level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
+cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
+                    function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
+                                                              with the linear coefficients)
 input_saturation    odd distortion; BLA gain falls with       ``input_nonlinearity: saturation``
                     level; residual where abs(u) is large     (limit a: lower = -a, upper = a)
 deadzone            odd distortion; BLA gain rises with       ``input_nonlinearity: deadzone``
@@ -63,13 +66,15 @@ Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std
 
 from __future__ import annotations
 
-from nlsid.diagnose.hypotheses import delay, friction, input_blocks, mechanics, output_blocks, resonance, stiffness
+from nlsid.diagnose.hypotheses import (delay, feedback, friction, input_blocks, mechanics, output_blocks, resonance,
+                                       stiffness)
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
 __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 
 #: The hypotheses in the order they are tried (a family's simpler members first).
-LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + input_blocks.HYPOTHESES
+LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + feedback.HYPOTHESES
+                                   + input_blocks.HYPOTHESES
                                    + output_blocks.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
                                    + delay.HYPOTHESES)
 

@@ -21,5 +21,6 @@ def _extend_quadratic(data: dict, values: dict) -> dict:
 HYPOTHESES = (
     Hypothesis("quadratic_output", "Quadratic (even) output nonlinearity", "output", "a2", "1/output units",
                "even distortion at the even detection lines",
-               no_block("output_nonlinearity"), _estimate_quadratic, _extend_quadratic, ("a2",)),
+               no_block("output_nonlinearity"), _estimate_quadratic, _extend_quadratic, ("a2",),
+               lambda data: {"a2": "model.output_nonlinearity.coefficients[2]"}),
 )

@@ -1,0 +1,122 @@
+"""Nuisances: what every measurement carries and no cause explains, estimated before any hypothesis.
+
+Real converters add a DC offset at the sensor (``output_offset``), one at the actuator
+(``input_offset``, or a constant force on a mechanical template's mass, ``force_offset``) and a
+sampling skew between the DAC update and the ADC sample (``output_timing``, |t| < 1 sample). Left in
+the data they would be read as causes: a skew is a phase error growing linearly with frequency (a
+"dead time" below a sample), an offset shifts where friction sticks and biases every fit of the
+simulation error. So ``diagnose`` first fits them, together, to the estimation runs by the fit
+engine (:func:`nlsid.fit.extension.fit_free_parameters`, the simulation error), writes them into the
+model every hypothesis starts from, and reports them separately: they are never named as causes.
+
+Which nuisances are fitted (those the data can tell apart, and the model can express):
+
+- ``output_offset`` always;
+- ``output_timing`` on a continuous plant (a discrete model has no values between samples; a
+  structure has no timing key), within (-1, 1) samples, and in closed loop at most the plant's dead
+  time (a lead needs as much dead time, :func:`nlsid.simulate.engine.timing`);
+- an input-side offset (``force_offset`` on a mechanical template, else ``input_offset``) only
+  where it differs from an output offset: in closed loop, or with an input block or nonlinear
+  forces. On a linear open-loop model both give a constant output, so only the output's is fitted.
+
+A value the model already has is the start. A timing that runs into its bound (a shift of a
+sample or more) is not a skew but a dead time, a cause: it is then left out and left to the delay
+hypothesis. Fitted on a model that lacks the cause, the nuisances may absorb part of it, so each
+hypothesis re-fits them with its own parameters (:func:`nlsid.diagnose.diagnosis.refine`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nlsid.diagnose.simulation import MECHANICAL, ModelRunner
+from nlsid.io.run import Run
+
+MAX_EVALUATIONS = 40
+TIMING_LIMIT = 0.99  # |output_timing| below one sample (the key's range is open)
+AT_BOUND = 0.02     # a timing this close to its bound is a longer shift (a dead time), not a skew
+
+
+@dataclass(frozen=True)
+class Nuisances:
+    """Fitted nuisance values (model key -> value), their standard errors, the fit's notes."""
+
+    values: dict[str, float] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        return {"values": dict(self.values), "std": dict(self.std), "notes": list(self.notes)}
+
+    def findings(self) -> list[str]:
+        if not self.values:
+            return []
+        parts = ", ".join(f"{key} = {value:.4g} +- {self.std[key]:.2g}" for key, value in self.values.items())
+        return [f"nuisances estimated first (not causes): {parts}"]
+
+
+def _rms(runs: list[Run], signal: str) -> float:
+    values = [getattr(run, signal) for run in runs if getattr(run, signal) is not None]
+    return float(np.sqrt(np.mean(np.concatenate(values) ** 2))) if values else 1.0
+
+
+def _timing_bounds(runner: ModelRunner, fs: float) -> tuple[float, float] | None:
+    """(lower, upper) of ``output_timing``, or None where the model has no timing to fit."""
+    model = runner.data["model"]
+    if runner.kind not in MECHANICAL + ("transfer_function", "zpk", "state_space", "nonlinear_feedback"):
+        return None
+    if model.get("domain") == "discrete" or (runner.kind == "nonlinear_feedback"
+                                             and model["linear"].get("domain") == "discrete"):
+        return None
+    upper = TIMING_LIMIT
+    if runner.closed:
+        loop = runner.data.get("closed_loop", {})
+        dead = float(model.get("delay", 0.0)) * fs + int(loop.get("computation_delay", 0))
+        upper = min(TIMING_LIMIT, dead)
+    return -TIMING_LIMIT, upper
+
+
+def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) -> dict:
+    """The nuisance keys to fit (module docstring) with start and bounds (:class:`FreeParameter`);
+    ``timing`` False leaves the output timing out."""
+    from nlsid.fit.extension import FreeParameter
+
+    model = runner.data["model"]
+    y_scale, u_scale = _rms(runs, "y") or 1.0, _rms(runs, "u") or 1.0
+
+    def offset(key: str, scale: float) -> FreeParameter:
+        start = float(model.get(key, 0.0))
+        return FreeParameter(start, start - 10 * scale, start + 10 * scale)
+
+    free = {"model.output_offset": offset("output_offset", y_scale)}
+    if runner.closed or model.get("input_nonlinearity") is not None or model.get("nonlinearities"):
+        if runner.kind in MECHANICAL or runner.kind == "nonlinear_feedback":
+            free["model.force_offset"] = offset("force_offset", abs(float(model.get("gain", 1.0))) * u_scale)
+        else:
+            free["model.input_offset"] = offset("input_offset", u_scale)
+    bounds = _timing_bounds(runner, runs[0].fs) if timing else None
+    if bounds is not None and bounds[1] > bounds[0]:
+        start = min(max(float(model.get("output_timing", 0.0)), bounds[0]), bounds[1])
+        free["model.output_timing"] = FreeParameter(start, *bounds)
+    return free
+
+
+def estimate(data: dict, source: str, runs: list[Run]) -> tuple[dict, Nuisances]:
+    """The model config with its nuisances fitted to ``runs`` (estimation runs), and the values."""
+    from nlsid.fit.extension import fit_free_parameters
+
+    runner = ModelRunner.from_data(data, source)
+    free = free_nuisances(runner, runs)
+    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
+    timing = free.get("model.output_timing")
+    if timing is not None and not timing.lower + AT_BOUND < fit.value("model.output_timing") < timing.upper - AT_BOUND:
+        # a shift of a sample or more is a dead time, a cause: left to the delay hypothesis
+        free.pop("model.output_timing")
+        fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
+    keys = [name.split(".", 1)[1] for name in fit.names]
+    values = {key: float(v) for key, v in zip(keys, fit.values)}
+    std = {key: float(s) if math.isfinite(s) else float("nan") for key, s in zip(keys, fit.std)}
+    return fit.config, Nuisances(values, std, list(fit.warnings))

@@ -1,0 +1,19 @@
+"""The units of a recording's signals as the result files keep them (root attribute ``units``).
+
+A recording gives each signal and channel an optional ``unit`` (``docs/formats.md``); the runs of
+one recording usually agree. A result file keeps, per signal name, the unit that every run records
+alike: a signal that one run records without a unit, or with another one, gets none, and the
+report then says "unit not recorded" rather than guess.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+
+def common_units(per_run: Iterable[Mapping[str, str]]) -> dict[str, str]:
+    """The units (signal name -> unit) on which all of ``per_run`` (each run's ``units``) agree."""
+    per_run = list(per_run)
+    names = sorted(set().union(*per_run)) if per_run else []
+    return {name: per_run[0][name] for name in names if all(units.get(name) == per_run[0].get(name) for units in per_run)}
+
