@@ -102,7 +102,8 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
 
         data = result.level.data
         png = tf_fit_png(data.frequency, data.G, fit_.response, fit_.response_std, result.level.noise_std,
-                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})", Units(read_units(bla_file)))
+                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})",
+                         Units(read_units(bla_file)))
         with atomic_path(plot, force) as tmp:
             tmp.write_bytes(png)
     write_fit(output, {"model": fit_.model.config()}, header, report, provenance(input_paths=[bla_file]), force=force)

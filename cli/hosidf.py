@@ -68,7 +68,8 @@ def _analytic(branches, grid):
 @click.option("--sweep", "parameter", metavar="PARAM",
               help=f"Linearity cost ({FRICTION_COMPENSATION}) over runs that differ in run parameter PARAM, e.g. K_fc.")
 @click.option("--model", type=click.Path(dir_okay=False),
-              help=f"Model config (polynomial block structure): add its analytic HOSIDFs ({SPECTRAL_ANALYSIS}, Lemma 2).")
+              help="Model config (polynomial block structure): add its analytic HOSIDFs "
+                   f"({SPECTRAL_ANALYSIS}, Lemma 2).")
 @plots_option
 @map_option
 @force_option

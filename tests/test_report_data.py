@@ -10,17 +10,30 @@ import csv
 import html
 import io
 import re
+import sys
 import urllib.parse
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
 
-from nlsid.citations import BOOK, SOURCES
-from nlsid.report.html import render_html
-from nlsid.report.render import render
-from nlsid.report.units import Units
-from nlsid.report.vector import band, figure_csv, new_figure
+sys.path.insert(0, str(Path(__file__).parent))
+from bla_cases import odd_random_bins, runs_of_level  # noqa: E402
+
+from nlsid.citations import BOOK, SOURCES  # noqa: E402
+from nlsid.cli.main import cli  # noqa: E402
+from nlsid.diagnose.diagnosis import versus_floor  # noqa: E402
+from nlsid.diagnose.gain import Score  # noqa: E402
+from nlsid.io.bla_file import read_units  # noqa: E402
+from nlsid.io.recording import write_recording  # noqa: E402
+from nlsid.io.units import common_units  # noqa: E402
+from nlsid.report.html import Page, render_html  # noqa: E402
+from nlsid.report.diagnosis_plots import model_vs_bla  # noqa: E402
+from nlsid.report.render import render  # noqa: E402
+from nlsid.report.render_diagnosis import floor_text  # noqa: E402
+from nlsid.report.units import Units  # noqa: E402
+from nlsid.report.vector import band, figure, figure_csv, new_figure  # noqa: E402
 
 ROOT = Path(__file__).parents[1]
 INTERNAL = re.compile(r"\bseed[ -]?0\d\d\b|\bbook\b", re.I)
@@ -43,7 +56,7 @@ def csv_links(page: str) -> list[dict[str, np.ndarray]]:
 
 def test_csv_holds_what_the_figure_draws():
     """Shared x once, a band as its two edges, NaN as an empty cell, a marker line across the axes left out."""
-    figure, (top, bottom) = new_figure(2)
+    drawn, (top, bottom) = new_figure(2)
     x = np.array([1.0, 2.0, 4.0])
     top.plot(x, [1.0, np.nan, 3.0], label="a")
     top.plot(x, [4.0, 5.0, 6.0], label="b")
@@ -54,7 +67,7 @@ def test_csv_holds_what_the_figure_draws():
     bottom.plot([0.5], [0.25], "x", label="point")
     bottom.set_xlabel("time (s)")
     bottom.set_ylabel("error (V)")
-    rows = list(csv.reader(io.StringIO(figure_csv(figure))))
+    rows = list(csv.reader(io.StringIO(figure_csv(drawn))))
     assert rows[0] == ["frequency (Hz)", "a: level (dB re 1 V)", "b: level (dB re 1 V)", "point: time (s)",
                        "point: error (V)", "bounds: time (s)", "bounds, lower: error (V)", "bounds, upper: error (V)"]
     assert rows[1:] == [["1", "1", "4", "0.5", "0.25", "0", "-1", "1"],
@@ -77,8 +90,6 @@ def test_model_page_data_is_the_frequency_response_of_theory():
 
 
 def test_diagnosis_figure_data_is_the_bla_it_was_drawn_from():
-    from nlsid.report.diagnosis_plots import model_vs_bla
-
     rng = np.random.default_rng(1)
     f = np.linspace(1.0, 60.0, 40)
     G = rng.normal(size=40) + 1j * rng.normal(size=40)
@@ -97,9 +108,6 @@ def test_diagnosis_figure_data_is_the_bla_it_was_drawn_from():
 
 
 def _page_of(mpl_figure):
-    from nlsid.report.html import Page
-    from nlsid.report.vector import figure
-
     return Page(kind="Test", title="t", source="s", headline="h", findings=[],
                 figures=[figure(mpl_figure, "Caption. More.", "test")])
 
@@ -135,8 +143,6 @@ def test_no_message_help_or_caption_cites_an_internal_label():
 
 
 def test_no_command_help_cites_an_internal_label(run_cli):
-    from nlsid.cli.main import cli
-
     for name in cli.commands:
         result = run_cli(name, "--help")
         assert result.exit_code == 0 and not INTERNAL.search(result.stdout), (name, INTERNAL.findall(result.stdout))
@@ -145,8 +151,6 @@ def test_no_command_help_cites_an_internal_label(run_cli):
 def test_a_page_lists_the_full_reference_of_what_it_cites():
     page = render_html(render(ROOT / "configs" / "model_resonance.yaml"), "test")
     assert "References" not in page  # the model page cites nothing
-    from nlsid.report.html import Page
-
     text = render_html(Page(kind="k", title="t", source="s", headline=f"bounds ({BOOK}, Ex. 92)", findings=[]), "test")
     assert not INTERNAL.search(text)
     assert re.search(r'<ol class="references" id="references"><li>J. Schoukens, R. Pintelon and Y. Rolain, '
@@ -158,10 +162,28 @@ def test_a_page_lists_the_full_reference_of_what_it_cites():
 @pytest.mark.parametrize("above", [-0.22, 0.04, 56.7, -3.0])
 def test_the_table_states_the_distance_to_the_floor_as_the_verdict(above):
     """The verdict's "0.2 dB below the noise floor" and the table's cell read alike, sign and rounding."""
-    from nlsid.diagnose.diagnosis import versus_floor
-    from nlsid.diagnose.gain import Score
-    from nlsid.report.render_diagnosis import floor_text
-
     score = Score(error_rms=1.0, noise_rms=1.0, gain_db=3.0, above_floor_db=above, distortion_explained=0.5,
                   distortion_gain_db=3.0, p_above_noise=0.9)
     assert versus_floor(score) == f"{floor_text(score.summary())} the noise floor"
+
+
+def test_units_are_those_every_run_records_alike():
+    assert common_units([{"u": "N", "y": "m"}, {"u": "N"}]) == {"u": "N"}  # one run without a unit of y
+    assert common_units([{"u": "N"}, {"u": "V"}]) == {}  # runs that disagree
+    assert common_units([]) == {}
+
+
+def test_bla_keeps_the_recording_units_for_its_page(run_cli, tmp_path):
+    rng = np.random.default_rng(2)
+    B, A = signal.butter(2, 0.25)
+    runs = runs_of_level(2, 256, odd_random_bins(1, 81, 3, rng), 1.0, lambda u: signal.lfilter(B, A, u), 2, rng,
+                         fs=1000.0, noise_y=0.01, level=1.0)
+    for run in runs:
+        run.units = {"u": "V", "y": "m"}
+    write_recording(tmp_path / "rec.h5", runs, provenance={})
+    assert run_cli("bla", tmp_path / "rec.h5", "-o", tmp_path / "bla.h5").exit_code == 0
+    assert read_units(tmp_path / "bla.h5") == {"u": "V", "y": "m"}
+    result = run_cli("report", tmp_path / "bla.h5", "-o", tmp_path / "bla.html", "--json")
+    assert result.exit_code == 0 and result.json()["numbers"]["units"] == {"u": "V", "y": "m"}
+    page = (tmp_path / "bla.html").read_text(encoding="utf-8")
+    assert "dB re 1 m/V" in page and "u rms (V)" in page and "not recorded" not in page

@@ -9,11 +9,12 @@ validation data (:mod:`~nlsid.diagnose.gain`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
 
-from nlsid.diagnose import nuisances
+from nlsid.diagnose import accuracy, nuisances
 from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
@@ -62,6 +63,7 @@ class Diagnosis:
     nuisances: nuisances.Nuisances = field(default_factory=nuisances.Nuisances)
     baseline: Score | None = None  # the user's model with the nuisances, on the validation runs
     chain: list[Outcome] = field(default_factory=list)  # the causes accepted, one per round
+    accuracy: accuracy.Accuracy | None = None  # sub-steps of the user's model (None: exact, no forces)
 
     @property
     def final(self) -> Outcome | None:
@@ -174,6 +176,7 @@ class Diagnosis:
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "nuisances": self.nuisances.summary(), "baseline": self.baseline.summary() if self.baseline else None,
             "chain": self._chain_summary(), "gain": gain,
+            "simulation_accuracy": None if self.accuracy is None else dataclasses.asdict(self.accuracy),
         }
 
 
@@ -197,15 +200,25 @@ def gain_text(score: Score) -> str:
     return "zero within numerical precision"
 
 
+def floor_rms(evidence: Evidence) -> float:
+    """What a model's simulation error is compared with (:mod:`nlsid.diagnose.accuracy`): the noise
+    in the averaged periods where it is measured, else the user's model's error."""
+    if evidence.overall.noise_known and evidence.noise_rms > 0:
+        return evidence.noise_rms
+    return evidence.error_rms
+
+
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
-           nominal: dict) -> tuple[Estimate, dict]:
+           nominal: dict, floor: float) -> tuple[Estimate, dict]:
     """The signature estimate refined by the fit engine (simulation error of the estimation runs),
     together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
     ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
     a friction's phase lag), so each hypothesis re-fits them with its own parameters. A dead time
     and the output timing are one shift: the delay hypothesis takes it whole (the timing back at
-    its value in the user's ``nominal`` model, not fitted). Returns the estimate and the extended
-    config with every fitted value written in.
+    its value in the user's ``nominal`` model, not fitted). A model with forces is simulated with
+    the sub-steps that keep its numerical error below a tenth of ``floor``
+    (:mod:`nlsid.diagnose.accuracy`). Returns the estimate and the extended config with every
+    fitted value written in.
 
     Each parameter keeps its sign and stays within three decades of its signature estimate. The
     optimiser gets :data:`FIT_STEPS` cost evaluations (besides its finite-difference Jacobians):
@@ -221,6 +234,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         extended["model"].pop("output_timing", None)
         if "output_timing" in nominal["model"]:
             extended["model"]["output_timing"] = nominal["model"]["output_timing"]
+    extended, steps = accuracy.accurate(extended, source, runs, floor)
     paths = hypothesis.paths(data) if hypothesis.paths is not None else {}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
     for name, path in paths.items():  # a parameter without a signature estimate starts at the model's value
@@ -231,7 +245,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
     std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
-    note = "; ".join(filter(None, [estimate.note, what, *fit.warnings]))
+    note = "; ".join(filter(None, [estimate.note, what, steps.note() if steps else "", *fit.warnings]))
     return Estimate(values, std, estimate.explained_db, note), fit.config
 
 
@@ -309,8 +323,14 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     """
     runner = ModelRunner.from_data(data, source)
     evidence, _ = gather(runner, runs, roles, where)
-    step("evidence")
     by_id = {run.run_id: run for run in runs}
+    est_runs = [by_id[r.run_id] for r in evidence.residuals if r.role == ESTIMATION]
+    floor = floor_rms(evidence)
+    data, steps = accuracy.accurate(data, source, est_runs, floor)
+    if steps is not None and steps.substeps != runner.config.simulation.substeps:
+        runner = ModelRunner.from_data(data, source)  # the model's own forces needed finer steps
+        evidence, _ = gather(runner, runs, roles, where)
+    step("evidence")
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
     val = [res for res in evidence.residuals if res.role == VALIDATION]
     est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
@@ -345,7 +365,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.reason = estimate
             continue
         try:
-            estimate, extended = refine(hypothesis, adjusted, estimate, est_runs, source, data)
+            estimate, extended = refine(hypothesis, adjusted, estimate, est_runs, source, data, floor)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
             continue
@@ -362,4 +382,4 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     if discrepancy and found.values and baseline.within_floor:
         discrepancy = False  # the nuisances explain what the evidence saw
     verdict = rules.decide(discrepancy, baseline.error_rms ** 2, candidates, dof)
-    return Diagnosis(source, roles, evidence, original, outcomes, verdict, found, baseline)
+    return Diagnosis(source, roles, evidence, original, outcomes, verdict, found, baseline, accuracy=steps)

@@ -77,7 +77,8 @@ class Score:
         return {"error_rms": self.error_rms, "error_db": self.error_db, "noise_rms": self.noise_rms,
                 "noise_db": _db20(self.noise_rms), "gain_db": self.gain_db,
                 "above_floor_db": self.above_floor_db, "distortion_explained": self.distortion_explained,
-                "distortion_gain_db": self.distortion_gain_db, "p_above_noise": self.p_above_noise, "noise_floor_zero": self.noise_zero, "exact_match": self.exact}
+                "distortion_gain_db": self.distortion_gain_db, "p_above_noise": self.p_above_noise,
+                "noise_floor_zero": self.noise_zero, "exact_match": self.exact}
 
 
 def _db20(rms: float) -> float:

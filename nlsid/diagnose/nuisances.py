@@ -15,9 +15,10 @@ Which nuisances are fitted (those the data can tell apart, and the model can exp
 - ``output_timing`` on a continuous plant (a discrete model has no values between samples; a
   structure has no timing key), within (-1, 1) samples, and in closed loop at most the plant's dead
   time (a lead needs as much dead time, :func:`nlsid.simulate.engine.timing`);
-- an input-side offset (``force_offset`` on a mechanical template, else ``input_offset``) only
-  where it differs from an output offset: in closed loop, or with an input block or nonlinear
-  forces. On a linear open-loop model both give a constant output, so only the output's is fitted.
+- an input-side offset only where it differs from an output offset: ``input_offset`` in closed
+  loop or with an input block, else ``force_offset`` on a mechanical model with forces that can
+  see it (:func:`_force_offset_seen`). On a linear open-loop model both give a constant output, so
+  only the output's is fitted.
 
 A value the model already has is the start. A timing that runs into its bound (a shift of a
 sample or more) is not a skew but a dead time, a cause: it is then left out and left to the delay
@@ -79,6 +80,19 @@ def _timing_bounds(runner: ModelRunner, fs: float) -> tuple[float, float] | None
     return -TIMING_LIMIT, upper
 
 
+def _force_offset_seen(model: dict) -> bool:
+    """A constant force differs from a sensor offset in open loop only where the mechanics has no
+    spring to the ground to turn it into a constant displacement (a free mass: friction then sees
+    it), or a force reads the position (a cubic spring): velocity-only forces on a sprung mass see
+    the same motion about a shifted rest position."""
+    forces = model.get("nonlinearities") or []
+    if not forces:
+        return False
+    if any(f.get("type") == "cubic_stiffness" for f in forces):
+        return True
+    return model["type"] != "mass_spring_damper" or float(model.get("stiffness", 0.0)) == 0.0
+
+
 def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) -> dict:
     """The nuisance keys to fit (module docstring) with start and bounds (:class:`FreeParameter`);
     ``timing`` False leaves the output timing out."""
@@ -92,11 +106,10 @@ def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) ->
         return FreeParameter(start, start - 10 * scale, start + 10 * scale)
 
     free = {"model.output_offset": offset("output_offset", y_scale)}
-    if runner.closed or model.get("input_nonlinearity") is not None or model.get("nonlinearities"):
-        if runner.kind in MECHANICAL or runner.kind == "nonlinear_feedback":
-            free["model.force_offset"] = offset("force_offset", abs(float(model.get("gain", 1.0))) * u_scale)
-        else:
-            free["model.input_offset"] = offset("input_offset", u_scale)
+    if runner.closed or model.get("input_nonlinearity") is not None:
+        free["model.input_offset"] = offset("input_offset", u_scale)
+    elif _force_offset_seen(model):
+        free["model.force_offset"] = offset("force_offset", abs(float(model.get("gain", 1.0))) * u_scale)
     bounds = _timing_bounds(runner, runs[0].fs) if timing else None
     if bounds is not None and bounds[1] > bounds[0]:
         start = min(max(float(model.get("output_timing", 0.0)), bounds[0]), bounds[1])

@@ -14,6 +14,7 @@ from typing import Iterable, Mapping
 def common_units(per_run: Iterable[Mapping[str, str]]) -> dict[str, str]:
     """The units (signal name -> unit) on which all of ``per_run`` (each run's ``units``) agree."""
     per_run = list(per_run)
-    names = sorted(set().union(*per_run)) if per_run else []
-    return {name: per_run[0][name] for name in names if all(units.get(name) == per_run[0].get(name) for units in per_run)}
+    if not per_run:
+        return {}
+    return {name: unit for name, unit in sorted(per_run[0].items()) if all(units.get(name) == unit for units in per_run)}
 

@@ -50,7 +50,8 @@ caption { text-align: left; font-weight: 600; padding: 4px 0 6px; }
 th, td { border-bottom: 1px solid var(--line); padding: 4px 8px; text-align: right; vertical-align: top; }
 th { background: var(--panel); font-weight: 600; }
 th:first-child, td:first-child { text-align: left; }
-td.text, th.text { text-align: left; overflow-wrap: anywhere; }
+td.text, th.text { text-align: left; }
+table.provenance td.text { overflow-wrap: anywhere; }
 p.note { color: var(--muted); font-size: 13px; }
 ol.references { font-size: 13px; padding-left: 22px; }
 footer { margin-top: 36px; color: var(--muted); font-size: 12px; border-top: 1px solid var(--line);
@@ -72,7 +73,7 @@ class Figure:
 @dataclass(frozen=True)
 class Table:
     """A table of numbers: ``rows`` are already formatted strings (see :func:`number`), one per
-    column of ``header``; the columns listed in ``text`` hold words (left-aligned, wrapped anywhere)."""
+    column of ``header``; the columns listed in ``text`` hold words (left-aligned)."""
 
     caption: str
     header: list[str]
@@ -148,11 +149,15 @@ def _figure(item: Figure, index: int) -> str:
             f"<figcaption>{caption} {_csv_link(item, index)}</figcaption></figure>")
 
 
+def _cells(tag: str, cells: list[str], text: tuple[int, ...]) -> str:
+    """One table row's cells (``th`` or ``td``); those of the ``text`` columns of class ``text``."""
+    return "".join(f'<{tag} class="text">{_e(c)}</{tag}>' if i in text else f"<{tag}>{_e(c)}</{tag}>"
+                   for i, c in enumerate(cells))
+
+
 def _table(item: Table) -> str:
-    head = "".join(f'<th class="text">{_e(h)}</th>' if i in item.text else f"<th>{_e(h)}</th>"
-                   for i, h in enumerate(item.header))
-    body = "".join("<tr>" + "".join(f'<td class="text">{_e(c)}</td>' if i in item.text else f"<td>{_e(c)}</td>"
-                                    for i, c in enumerate(row)) + "</tr>" for row in item.rows)
+    head = _cells("th", item.header, item.text)
+    body = "".join(f"<tr>{_cells('td', row, item.text)}</tr>" for row in item.rows)
     note = f'<p class="note">{_e(item.note)}</p>' if item.note else ""
     return (f"<table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead>"
             f"<tbody>{body}</tbody></table>{note}")
@@ -166,14 +171,13 @@ def _provenance(provenance: dict) -> str:
             return "; ".join(f"{k} (SHA-256 {v})" for k, v in value.items()) or "-"
         return str(value)
 
-    rows = "".join(f'<tr><td>{_e(key)}</td><td class="text">{_e(text(value))}</td></tr>'
-                   for key, value in sorted(provenance.items()))
-    return (f'<h2>Provenance</h2><table class="provenance"><thead><tr><th>item</th><th>value</th></tr></thead>'
-            f"<tbody>{rows}</tbody></table>")
+    rows = "".join(f"<tr>{_cells('td', [key, text(value)], (1,))}</tr>" for key, value in sorted(provenance.items()))
+    head = _cells("th", ["item", "value"], (1,))
+    return f'<h2>Provenance</h2><table class="provenance"><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>'
 
 
 def _references(body: str) -> str:
-    """The full reference of every source ``body`` cites (:mod:`nlsid.report.citations`)."""
+    """The full reference of every source ``body`` cites (:mod:`nlsid.citations`)."""
     found = cited(body)
     if not found:
         return ""

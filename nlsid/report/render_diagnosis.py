@@ -50,8 +50,8 @@ def _figures(arrays: dict, units: Units) -> list[Figure]:
     if arrays["spectrum"]:
         top = arrays["spectrum"][-1]
         out.append(figure(plots.spectrum(top, units),
-                          f"Output spectrum at level {_level(top['level'])}. Measured power at the excited, odd and even "
-                          "lines, the model's at the same lines, and the noise variance (as in "
+                          f"Output spectrum at level {_level(top['level'])}. Measured power at the excited, odd and "
+                          "even lines, the model's at the same lines, and the noise variance (as in "
                           f"{MOTION_STAGES}, Fig. 3).", "spectrum"))
     if len(arrays["bla"]) > 1:
         out.append(figure(plots.bla_vs_level(arrays["bla"], units),
@@ -82,7 +82,8 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
         main = h["main_parameter"]
         value = h.get("values", {}).get(main)
         std = h.get("std", {}).get(main)
-        rows.append([h["title"], f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" if value is not None else "-",
+        parameter = f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" if value is not None else "-"
+        rows.append([h["title"], parameter,
                      number(v and v["gain_db"], "+.1f"), floor_text(v),
                      number(v and v.get("distortion_gain_db"), "+.1f"), h["reason"] or h.get("note", "")])
     split, verdict = summary["split"], summary["verdict"]

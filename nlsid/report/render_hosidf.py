@@ -34,6 +34,7 @@ from nlsid.report.html import Figure, Page, Table, number
 from nlsid.report.units import Units, units_of
 
 CHANGE_SIGMAS = 3.0
+NBSP = "\u00a0"  # keeps a level and its check mark on one line
 _DB = 20.0 / math.log(10.0)
 
 
@@ -153,7 +154,7 @@ def _grid_tables(grid: dict, units: Units, signal: str) -> list[Table]:
     rows = []
     for fi, ai in zip(*np.nonzero(measured)):
         H, ratio = grid["H"][fi, ai], np.abs(grid["Y"][fi, ai]) / grid["bound"][fi, ai]
-        marks = [f"{20 * math.log10(r):+.1f}{' ✓' if grid['significant'][fi, ai, k] else ''}" if r > 0 else "-"
+        marks = [f"{20 * math.log10(r):+.1f}{NBSP + '✓' if grid['significant'][fi, ai, k] else ''}" if r > 0 else "-"
                  for k, r in zip(range(2, K + 1), ratio[2:])]
         rows.append([f"{grid['frequency'][fi]:g}", f"{grid['level'][ai]:g}",
                      f"{grid['n_repeats'][fi, ai]} x {grid['n_periods'][fi, ai]}", number(abs(H[1])),
@@ -163,8 +164,9 @@ def _grid_tables(grid: dict, units: Units, signal: str) -> list[Table]:
     tables = [Table("Cells: H_1 and each harmonic's level above its noise bound (dB)",
                     ["frequency Hz", units.label("amplitude", signal), "R x P", f"|H_1| ({units.ratio('y', signal)})",
                      "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
-                    rows, note=f"k columns: 20 log10 |Y(k w0)| / eps_k, dB re the noise bound ({FRICTION_COMPENSATION}, "
-                               "Table I, Eq. 6); ✓ marks a harmonic above its bound. R repeats x P periods per cell.")]
+                    rows, note=f"k columns: 20 log10 |Y(k w0)| / eps_k, dB re the noise bound "
+                               f"({FRICTION_COMPENSATION}, Table I, Eq. 6); ✓ marks a harmonic above its bound. "
+                               "R repeats x P periods per cell.")]
     if change_rows:
         tables.append(Table("H_1 versus amplitude", ["frequency Hz", units.label("from amplitude", signal),
                                                      units.label("to amplitude", signal), "Δ|H_1| dB", "std dB"],

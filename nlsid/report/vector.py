@@ -35,6 +35,7 @@ RASTER_DPI = 100
 _SVG_RC = {"svg.fonttype": "none", "svg.hashsalt": "nlsid"}
 _LABEL_RC = {"axes.labelsize": 9, "axes.titlesize": 10}
 _CHAR_WIDTH = 0.58  # mean width of a DejaVu Sans character, in units of the font size
+_LABEL_ROOM = 0.8  # the part of an axis' length a label may take (the layout shrinks the axes a little)
 # matplotlib names its whole fallback list on every text element; the page needs three of them
 _FONT = re.compile(r"font-family: [^;\"]*")
 _SHORT_FONT = "font-family: 'DejaVu Sans', Arial, sans-serif"
@@ -60,7 +61,7 @@ def fit_labels(figure) -> None:
         box = axis.get_position()
         for label, length in ((axis.xaxis.label, box.width * width), (axis.yaxis.label, box.height * height)):
             text = label.get_text().replace("\n", " ")
-            chars = max(12, int(0.8 * length / (_CHAR_WIDTH * label.get_fontsize())))
+            chars = max(12, int(_LABEL_ROOM * length / (_CHAR_WIDTH * label.get_fontsize())))
             label.set_text(textwrap.fill(text, chars))
 
 
