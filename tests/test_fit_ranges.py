@@ -270,10 +270,13 @@ def test_validation_runs_and_ranges_together_are_refused(run_cli, tmp_path, long
     result.assert_one_line_error("--validation", "give one of them")
 
 
-def test_diagnose_refuses_a_validation_file_without_periodic_runs(run_cli, tmp_path, periodic_record, long_record):
+def test_diagnose_validates_on_an_arbitrary_record_whole(run_cli, tmp_path, periodic_record, long_record):
+    """Any excitation validates: the arbitrary record of --validate-on is compared whole, from sample 0."""
     result = run_cli("diagnose", "--model", _model(tmp_path / "m.yaml"), "--data", periodic_record,
-                     "--validate-on", long_record, "-o", tmp_path / "out")
-    result.assert_one_line_error("--validate-on", "no periodic run to validate on")
+                     "--validate-on", long_record, "-o", tmp_path / "out", "--json")
+    assert result.exit_code == 0, result.stderr
+    validation = result.json()["split"]["validation"]
+    assert validation and all(v.startswith(f"{long_record}:") and "[0:" in v for v in validation), validation
 
 
 def test_split_options_need_a_model_fit(run_cli, tmp_path):

@@ -34,13 +34,24 @@ normalised coordinates x_i = theta_i / s_i (s_i the start value's magnitude), wi
 finite-difference Jacobian whose step is ``diff_step`` relative to each parameter. Simulations of
 the runs of one evaluation run in parallel threads (:func:`nlsid.simulate.batch.simulate_all`).
 
-Uncertainty (Gauss-Newton at the optimum, the output error taken as white with variance
-sigma^2 = 2 V / (n - p), n samples, p parameters):
+Uncertainty: the sandwich estimator (Huber 1967, White 1980), which does not assume white
+residuals (coloured noise, and the correlated residual a model error leaves, make the white-noise
+form sigma^2 (J^T J)^{-1} optimistic by up to the ratio of the residual's spectrum at the
+frequencies that matter to its mean):
 
-    cov(theta_hat) = sigma^2 S (J^T J)^{-1} S,     S = diag(s),
+    cov(theta_hat) = S A^{-1} B A^{-1} S,   A = J^T J,   B = J^T Sigma J n / (n - p),   S = diag(s),
 
-with J the Jacobian of the residuals in x. This is the Cramér-Rao form for white Gaussian output
-noise and a correct model; coloured noise or model errors make it optimistic.
+with J the Jacobian of the residuals in x and Sigma the residuals' covariance. Each run's residual
+is taken as stationary, so its covariance is diagonalised by the DFT and
+
+    J^T Sigma J = sum_runs (1/N) sum_k Phi(k) G(k)^H G(k),
+
+G(k) the DFT of the run's Jacobian rows (N samples, k over all N lines; the real-signal DFT's
+lines 1 .. N/2 - 1 count twice), Phi(k) the residual's spectrum, estimated by its periodogram
+|E(k)|^2 / N averaged over SPECTRUM_LINES neighbouring lines. For white residuals Phi = sigma^2 and
+Parseval gives back sigma^2 J^T J. The factor n / (n - p) (n samples, p parameters) is the usual
+degrees-of-freedom correction. docs/fit_covariance.md derives it; tests/test_fit_covariance.py
+checks it by Monte Carlo.
 
 Identifiability: a warning names a parameter that has no effect (zero Jacobian column), a nearly
 singular J^T J (a combination of parameters the data cannot tell apart: singular value ratio
@@ -347,12 +358,35 @@ def _scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
     return out
 
 
+SPECTRUM_LINES = 17  # neighbouring DFT lines averaged into the residual spectrum of the sandwich
+
+
+def _meat(jac: np.ndarray, residual: np.ndarray, segments: Sequence[int]) -> np.ndarray:
+    """J^T Sigma J for residuals stationary within each run of ``segments`` samples (module docstring)."""
+    p = jac.shape[1]
+    out = np.zeros((p, p))
+    start = 0
+    for size in segments:
+        e, J = residual[start:start + size], jac[start:start + size]
+        start += size
+        E, G = np.fft.rfft(e), np.fft.rfft(J, axis=0)
+        periodogram = np.abs(E) ** 2 / size
+        half = min(SPECTRUM_LINES // 2, E.size - 1)  # a short run averages fewer lines
+        spectrum = np.convolve(np.pad(periodogram, half, mode="reflect"), np.ones(2 * half + 1) / (2 * half + 1),
+                               mode="valid")
+        weights = np.full(E.size, 2.0)
+        weights[0] = 1.0
+        if size % 2 == 0:
+            weights[-1] = 1.0
+        out += ((G.conj().T * (weights * spectrum)) @ G).real / size
+    return out
+
+
 def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names: list[str], values: np.ndarray,
-                 lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Covariance of theta (module docstring) and the identifiability warnings."""
+                 lower: np.ndarray, upper: np.ndarray, segments: Sequence[int]) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Covariance of theta (the sandwich of the module docstring) and the identifiability warnings."""
     n, p = jac.shape
     warnings = []
-    sigma2 = float(residual @ residual) / max(n - p, 1)
     norms = np.linalg.norm(jac, axis=0)
     for i in np.flatnonzero(norms == 0):
         warnings.append(f"{names[i]}: has no effect on the simulated output (not identifiable from these runs)")
@@ -369,11 +403,13 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
     else:
         # (J^T J)^{-1} = V diag(1/sv^2) V^T; a singular value clamped at IDENTIFIABLE_RATIO sv[0]
         # leaves a huge (not an infinite) variance along a direction the data do not determine.
-        cov_x = (vt.T / np.maximum(sv, IDENTIFIABLE_RATIO * sv[0]) ** 2) @ vt
-        cov = sigma2 * cov_x * np.outer(scale, scale)
+        inverse = (vt.T / np.maximum(sv, IDENTIFIABLE_RATIO * sv[0]) ** 2) @ vt
+        cov_x = inverse @ _meat(jac, residual, segments) @ inverse * (n / max(n - p, 1))
+        cov = cov_x * np.outer(scale, scale)
         std = np.sqrt(np.abs(np.diag(cov)))
-        spread = np.sqrt(np.diag(cov_x))  # > 0: every singular value is clamped above 0
+        spread = np.sqrt(np.maximum(np.diag(cov_x), np.finfo(float).tiny))  # zero for a zero residual
         corr = cov_x / np.outer(spread, spread)
+        np.fill_diagonal(corr, 1.0)
     for i in range(p):
         for j in range(i + 1, p):
             if abs(corr[i, j]) > CORRELATION_LIMIT:
@@ -436,7 +472,8 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     warnings = [] if result.status > 0 else [f"optimiser stopped after {evaluations} simulations without converging: {result.message}"]
     if refused:
         warnings.append(f"{len(refused)} trial value(s) refused by the model were rejected steps (first: {refused[0]})")
-    cov, corr, ident = _uncertainty(result.jac, result.fun, scale, problem.names, values, problem.lower, problem.upper)
+    cov, corr, ident = _uncertainty(result.jac, result.fun, scale, problem.names, values, problem.lower, problem.upper,
+                                    [e.size for e in est_start[fit_on]])
     warnings += ident
 
     est_errors = problem.errors(values, estimation, est_inputs)
