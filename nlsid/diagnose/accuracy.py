@@ -1,16 +1,16 @@
-"""Simulation accurate to the data: a model with nonlinear forces is simulated with enough sub-steps
-that its numerical error stays below a tenth of the floor it is compared with.
+"""How accurate the simulation of a model with nonlinear forces is, against the floor it is compared with.
 
 The force laws are stepped with a first-order error at stick-slip transitions
 (:mod:`nlsid.models.forces`), so the simulated output of a friction model depends on the number of
-sub-steps M. For an extended model the error of M sub-steps is estimated by the change from M to
-4 M (first order: the error of M is about 4/3 of that change) on the mean steady-state periods of
-the estimation runs (AC, as the residuals are compared); M is multiplied by 4 until that change is
-below ACCURACY times the floor, up to MAX_SUBSTEPS (a first-order step's error falls only as 1/M:
-at a floor that needs more, the accuracy reached is stated as not sufficient). The floor is the noise in the averaged periods
-(the evidence's ``noise_rms``) where it is measured, else the user's model's error (a model error
-well below that is below what any comparison of the diagnosis can resolve). Models without forces
-are exact at one sub-step and are left alone.
+sub-steps M. The error of M sub-steps is estimated by the change from M to 4 M (first order: the
+error of M is about 4/3 of that change) on the mean steady-state periods of the estimation runs
+(AC, as the residuals are compared). The aim is a change below ACCURACY times the floor: the noise
+in the averaged periods (the evidence's ``noise_rms``) where it is measured, else the user's
+model's error. ``diagnose`` states the accuracy of its final model and, when the aim is missed,
+the sub-steps that would reach it (the error falls as 1/M): refining the step inside every fit
+costs the first-order scheme its sub-steps linearly (minutes per diagnosis at 160), so it is
+the user's choice, ``simulation.substeps`` in the model, until a faster stick-slip integrator
+lands. Models without forces are exact at one sub-step and are not checked.
 """
 
 from __future__ import annotations
@@ -31,16 +31,25 @@ DEFAULT_SUBSTEPS = 10  # the engine's default for a plant with forces (nlsid.sim
 
 @dataclass(frozen=True)
 class Accuracy:
-    """The sub-steps chosen, the rms change of the output from them to four times as many, and the floor."""
+    """The sub-steps used, the rms change of the output from them to four times as many, the floor,
+    and the sub-steps that would bring the change below a tenth of the floor."""
 
     substeps: int
     change_rms: float
     floor_rms: float
+    needed: int
+
+    @property
+    def sufficient(self) -> bool:
+        return self.change_rms <= ACCURACY * self.floor_rms
 
     def note(self) -> str:
-        verdict = "below" if self.change_rms <= ACCURACY * self.floor_rms else "NOT below"
-        return (f"simulated with {self.substeps} sub-steps per sample (output change to {4 * self.substeps}: "
-                f"{self.change_rms:.2g} rms, {verdict} a tenth of the floor {self.floor_rms:.2g})")
+        text = (f"simulated with {self.substeps} sub-steps per sample (output change to {4 * self.substeps}: "
+                f"{self.change_rms:.2g} rms, {'below' if self.sufficient else 'NOT below'} a tenth of the floor "
+                f"{self.floor_rms:.2g})")
+        if not self.sufficient:
+            text += f"; set simulation.substeps: {self.needed} in the model for a simulation accurate to the data"
+        return text
 
 
 def _has_forces(data: dict) -> bool:
@@ -62,19 +71,11 @@ def _outputs(data: dict, source: str, runs: list[Run], substeps: int) -> np.ndar
     return _ac_mean(runs, [runner.simulate(run).y for run in runs])
 
 
-def accurate(data: dict, source: str, runs: list[Run], floor_rms: float) -> tuple[dict, Accuracy | None]:
-    """``data`` with ``simulation.substeps`` set so that the model's simulation error on ``runs``
-    is below a tenth of ``floor_rms`` (module docstring); None for a model without forces."""
+def check(data: dict, source: str, runs: list[Run], floor_rms: float) -> Accuracy | None:
+    """The accuracy of the model ``data`` on ``runs`` (module docstring); None without forces or floor."""
     if not _has_forces(data) or not math.isfinite(floor_rms) or floor_rms <= 0:
-        return data, None
+        return None
     m = int((data.get("simulation") or {}).get("substeps") or DEFAULT_SUBSTEPS)
-    current = _outputs(data, source, runs, m)
-    while True:
-        finer = _outputs(data, source, runs, 4 * m)
-        change = float(np.sqrt(np.mean((finer - current) ** 2)))
-        if change <= ACCURACY * floor_rms or 4 * m > MAX_SUBSTEPS:
-            break
-        m, current = 4 * m, finer
-    out = copy.deepcopy(data)
-    out.setdefault("simulation", {})["substeps"] = m
-    return out, Accuracy(m, change, floor_rms)
+    change = float(np.sqrt(np.mean((_outputs(data, source, runs, 4 * m) - _outputs(data, source, runs, m)) ** 2)))
+    needed = m if change <= ACCURACY * floor_rms else int(math.ceil(m * change / (ACCURACY * floor_rms) / 10) * 10)
+    return Accuracy(m, change, floor_rms, needed)

@@ -63,7 +63,7 @@ class Diagnosis:
     nuisances: nuisances.Nuisances = field(default_factory=nuisances.Nuisances)
     baseline: Score | None = None  # the user's model with the nuisances, on the validation runs
     chain: list[Outcome] = field(default_factory=list)  # the causes accepted, one per round
-    accuracy: accuracy.Accuracy | None = None  # sub-steps of the user's model (None: exact, no forces)
+    accuracy: accuracy.Accuracy | None = None  # of the final model (None: exact, no forces)
 
     @property
     def final(self) -> Outcome | None:
@@ -123,6 +123,8 @@ class Diagnosis:
 
     def findings(self) -> list[str]:
         out = self.nuisances.findings() + self.evidence.findings()
+        if self.accuracy is not None:
+            out.append(f"{'extended' if self.final else 'the'} model " + self.accuracy.note())
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
             gain = f"{o.score.gain_db:+.1f} dB" if math.isfinite(o.score.gain_db) else "error zero within numerical precision"
@@ -176,7 +178,8 @@ class Diagnosis:
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "nuisances": self.nuisances.summary(), "baseline": self.baseline.summary() if self.baseline else None,
             "chain": self._chain_summary(), "gain": gain,
-            "simulation_accuracy": None if self.accuracy is None else dataclasses.asdict(self.accuracy),
+            "simulation_accuracy": None if self.accuracy is None else {**dataclasses.asdict(self.accuracy),
+                                                                         "sufficient": self.accuracy.sufficient},
         }
 
 
@@ -209,16 +212,14 @@ def floor_rms(evidence: Evidence) -> float:
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
-           nominal: dict, floor: float) -> tuple[Estimate, dict]:
+           nominal: dict) -> tuple[Estimate, dict]:
     """The signature estimate refined by the fit engine (simulation error of the estimation runs),
     together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
     ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
     a friction's phase lag), so each hypothesis re-fits them with its own parameters. A dead time
     and the output timing are one shift: the delay hypothesis takes it whole (the timing back at
-    its value in the user's ``nominal`` model, not fitted). A model with forces is simulated with
-    the sub-steps that keep its numerical error below a tenth of ``floor``
-    (:mod:`nlsid.diagnose.accuracy`). Returns the estimate and the extended config with every
-    fitted value written in.
+    its value in the user's ``nominal`` model, not fitted). Returns the estimate and the extended
+    config with every fitted value written in.
 
     Each parameter keeps its sign and stays within three decades of its signature estimate. The
     optimiser gets :data:`FIT_STEPS` cost evaluations (besides its finite-difference Jacobians):
@@ -234,7 +235,6 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         extended["model"].pop("output_timing", None)
         if "output_timing" in nominal["model"]:
             extended["model"]["output_timing"] = nominal["model"]["output_timing"]
-    extended, steps = accuracy.accurate(extended, source, runs, floor)
     paths = hypothesis.paths(data) if hypothesis.paths is not None else {}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
     for name, path in paths.items():  # a parameter without a signature estimate starts at the model's value
@@ -245,7 +245,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
     std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
-    note = "; ".join(filter(None, [estimate.note, what, steps.note() if steps else "", *fit.warnings]))
+    note = "; ".join(filter(None, [estimate.note, what, *fit.warnings]))
     return Estimate(values, std, estimate.explained_db, note), fit.config
 
 
@@ -307,6 +307,9 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
             break
         accepted = tuple(o.hypothesis.family for o in first.chain)
         current = _round(current.winner.extended, source, runs, roles, where, step, accepted)
+    estimation = [run for run in runs if roles.get(run.run_id) == ESTIMATION]
+    final = first.final.extended if first.final is not None else data
+    first.accuracy = accuracy.check(final, source, estimation, floor_rms(first.evidence))
     return first
 
 
@@ -324,12 +327,6 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     runner = ModelRunner.from_data(data, source)
     evidence, _ = gather(runner, runs, roles, where)
     by_id = {run.run_id: run for run in runs}
-    est_runs = [by_id[r.run_id] for r in evidence.residuals if r.role == ESTIMATION]
-    floor = floor_rms(evidence)
-    data, steps = accuracy.accurate(data, source, est_runs, floor)
-    if steps is not None and steps.substeps != runner.config.simulation.substeps:
-        runner = ModelRunner.from_data(data, source)  # the model's own forces needed finer steps
-        evidence, _ = gather(runner, runs, roles, where)
     step("evidence")
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
     val = [res for res in evidence.residuals if res.role == VALIDATION]
@@ -365,7 +362,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.reason = estimate
             continue
         try:
-            estimate, extended = refine(hypothesis, adjusted, estimate, est_runs, source, data, floor)
+            estimate, extended = refine(hypothesis, adjusted, estimate, est_runs, source, data)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
             continue
@@ -382,4 +379,4 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     if discrepancy and found.values and baseline.within_floor:
         discrepancy = False  # the nuisances explain what the evidence saw
     verdict = rules.decide(discrepancy, baseline.error_rms ** 2, candidates, dof)
-    return Diagnosis(source, roles, evidence, original, outcomes, verdict, found, baseline, accuracy=steps)
+    return Diagnosis(source, roles, evidence, original, outcomes, verdict, found, baseline)
