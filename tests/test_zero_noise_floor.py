@@ -130,7 +130,9 @@ def test_a_different_model_on_noise_free_data_is_a_discrepancy_against_a_zero_fl
     assert overall["noise_floor_zero"] and not overall["exact_match"]
     assert overall["significant"] and overall["p_value"] == 0.0 and overall["above_noise_db"] is None
     assert summary["verdict"]["status"] != "no_discrepancy"
-    assert "zero noise floor" in summary["headline"]
+    # a cubic feedback around the FIR explains part of it (any gain is significant over a zero floor),
+    # and the headline says where the extension stands: still above a zero floor
+    assert "zero noise floor" in summary["headline"] or "the noise floor is zero" in summary["headline"]
     odd = summary["evidence"]["lines"][0]["odd"]
     assert odd["noise_floor_zero"] and odd["significant"]  # a cubic's odd distortion at the detection lines
 

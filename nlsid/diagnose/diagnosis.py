@@ -239,6 +239,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
     for name, path in paths.items():  # a parameter without a signature estimate starts at the model's value
         start = estimate.values[name] if name in estimate.values else float(value_at(extended, path))
+        if not (math.isfinite(start) and start != 0):
+            raise InputError(name, f"the signature estimate is {start:g}: nothing to refine (no sign to keep)")
         bounds = sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
     fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=FIT_STEPS)

@@ -354,7 +354,8 @@ def _scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
     for i in np.flatnonzero(out == 0):
         width = upper[i] - lower[i]
         bigger = max(abs(lower[i]), abs(upper[i]))
-        out[i] = width if math.isfinite(width) else (bigger if math.isfinite(bigger) and bigger > 0 else 1.0)
+        out[i] = (width if math.isfinite(width) and width > 0
+                  else (bigger if math.isfinite(bigger) and bigger > 0 else 1.0))
     return out
 
 
@@ -407,8 +408,8 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
         cov_x = inverse @ _meat(jac, residual, segments) @ inverse * (n / max(n - p, 1))
         cov = cov_x * np.outer(scale, scale)
         std = np.sqrt(np.abs(np.diag(cov)))
-        spread = np.sqrt(np.maximum(np.diag(cov_x), np.finfo(float).tiny))  # zero for a zero residual
-        corr = cov_x / np.outer(spread, spread)
+        spread = np.outer(*2 * [np.sqrt(np.maximum(np.diag(cov_x), 0.0))])  # zero for a zero residual
+        corr = np.divide(cov_x, spread, out=np.zeros_like(cov_x), where=spread > 0)
         np.fill_diagonal(corr, 1.0)
     for i in range(p):
         for j in range(i + 1, p):
