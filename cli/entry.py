@@ -2,6 +2,7 @@
 during start-up (while the commands are imported) also ends in one line and exit code 130."""
 
 import os
+import signal
 import sys
 
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report an interrupted command
@@ -19,3 +20,8 @@ def main() -> None:
     except KeyboardInterrupt:
         sys.stderr.write("nlsid: interrupted\n")
         sys.exit(EXIT_INTERRUPTED)
+    except SystemExit:
+        # The command is done, its outputs written and its exit code set: an interrupt now would
+        # only cut the interpreter's teardown short and replace that code by a signal.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        raise

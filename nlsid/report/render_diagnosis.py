@@ -91,7 +91,9 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
                  ["hypothesis", "main parameter", "validation gain dB", "validation error vs noise floor",
                   "distortion gain dB", "note"], rows, text=(0, 1, 5),
                  note=f"Estimated on {len(split['estimation'])} runs, validated on {len(split['validation'])} others. "
-                      "Validation gain: the error's drop against the original model (> 0: smaller). Distortion "
+                      "Main parameter ± one standard error, from the sandwich estimator (Huber 1967, White 1980) "
+                      "with the residual's spectrum, so correlated residuals (coloured noise, model error) "
+                      "widen it; white residuals of a right model leave it small. Validation gain: the error's drop against the original model (> 0: smaller). Distortion "
                       "gain: the drop of the residual power at the odd and even detection lines of the validation "
                       "multisines (> 0: the hypothesis removes distortion, < 0: it adds some). A cause is named "
                       "when its error power is below the original's by more than the F threshold "
