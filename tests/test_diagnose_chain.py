@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.linalg import expm
 
 sys.path.insert(0, str(Path(__file__).parent))
 from diagnose_cases import FS, NOISE, TF, excitation  # noqa: E402
+from exact_zoh import zoh  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 
 LIMIT, A2 = 1.6, 0.06
@@ -26,11 +26,7 @@ LIMIT, A2 = 1.6, 0.06
 
 def plant(u: np.ndarray) -> np.ndarray:
     a = np.array([[0.0, 1.0], [-4e4, -20.0]])
-    b = np.array([0.0, 1.0])
-    m = np.zeros((3, 3))
-    m[:2, :2], m[:2, 2] = a / FS, b / FS
-    e = expm(m)
-    phi, gamma = e[:2, :2], e[:2, 2]
+    phi, gamma = zoh(a, np.array([0.0, 1.0]), 1 / FS)
     x, y = np.zeros(2), np.empty(u.size)
     for k, uk in enumerate(u):
         y[k] = 1e4 * x[0]

@@ -16,23 +16,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.linalg import expm
 from scipy.signal import lfilter
 
 sys.path.insert(0, str(Path(__file__).parent))
 from diagnose_cases import FS, MSD, excitation  # noqa: E402
+from exact_zoh import zoh  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 from nlsid.diagnose.verdict import NO_DISCREPANCY  # noqa: E402
 
 SKEW, OFFSET = 0.37, 0.05
-
-
-def zoh(a, b, h):
-    n = a.shape[0]
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n], m[:n, n] = a * h, b * h
-    e = expm(m)
-    return e[:n, :n], e[:n, n]
 
 
 def skewed_msd(u: np.ndarray) -> np.ndarray:

@@ -17,17 +17,20 @@ Exact methods agree up to rounding, so the tolerances are 1e-9 relative.
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from scipy.linalg import expm
 
-from nlsid.errors import InputError
-from nlsid.io import model_config as mc
-from nlsid.io.run import Run
-from nlsid.models import from_config
-from nlsid.simulate.engine import simulate_run
+sys.path.insert(0, str(Path(__file__).parent))
+from exact_zoh import zoh  # noqa: E402
+from nlsid.errors import InputError  # noqa: E402
+from nlsid.io import model_config as mc  # noqa: E402
+from nlsid.io.run import Run  # noqa: E402
+from nlsid.models import from_config  # noqa: E402
+from nlsid.simulate.engine import simulate_run  # noqa: E402
 
 FS = 1000.0
 TS = 1.0 / FS
@@ -36,15 +39,6 @@ A = np.array([[0.0, 1.0], [-W * W, -2 * ZETA * W]])
 B = np.array([0.0, W * W])
 C = np.array([1.0, 0.0])
 RESONANCE = {"type": "transfer_function", "num": [W * W], "den": [1.0, 2 * ZETA * W, W * W]}
-
-
-def zoh(a, b, h):
-    """(e^{a h}, int_0^h e^{a s} ds b) by the block exponential (Van Loan 1978)."""
-    n = a.shape[0]
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n], m[:n, n] = a * h, b * h
-    e = expm(m)
-    return e[:n, :n], e[:n, n]
 
 
 def delayed_response(u, delay_samples, a=A, b=B, c=C):

@@ -187,42 +187,51 @@ class _SidedFriction(StrictModel):
         return (0.0, 0.0) if pos is None else (float(pos), float(neg))
 
 
-class CoulombConfig(_SidedFriction):
+class _Levels(StrictModel):
+    """The Coulomb level, symmetric or per direction."""
+
+    fc: Optional[Positive] = None
+    fc_pos: Optional[Positive] = None
+    fc_neg: Optional[Positive] = None
+
+
+class _BreakAway(StrictModel):
+    """Stribeck's break-away force, symmetric or per direction."""
+
+    fs: Optional[Positive] = None
+    fs_pos: Optional[Positive] = None
+    fs_neg: Optional[Positive] = None
+
+
+class _Viscous(StrictModel):
+    """The viscous coefficient, symmetric or per direction; 0 when none is given."""
+
+    fv: Optional[NonNegative] = None
+    fv_pos: Optional[NonNegative] = None
+    fv_neg: Optional[NonNegative] = None
+
+
+class CoulombConfig(_SidedFriction, _Levels, _Viscous):
     """Coulomb + viscous friction F = fc sign(v) + fv v on the velocity of mass ``at``; per direction
     F = fc_pos + fv_pos v (v > 0), -fc_neg + fv_neg v (v < 0), sticking within [-fc_neg, fc_pos]."""
 
     SIDED = (("fc", True), ("fv", False))
     type: Literal["coulomb"]
-    fc: Optional[Positive] = None
-    fc_pos: Optional[Positive] = None
-    fc_neg: Optional[Positive] = None
-    fv: Optional[NonNegative] = None  # 0 when neither fv nor fv_pos / fv_neg is given
-    fv_pos: Optional[NonNegative] = None
-    fv_neg: Optional[NonNegative] = None
     at: Optional[str] = None
 
 
-class StribeckConfig(_SidedFriction):
+class StribeckConfig(_SidedFriction, _Levels, _BreakAway, _Viscous):
     """Stribeck friction F = (fc + (fs - fc) exp(-|v/vs|^delta)) sign(v) + fv v; fc, fs and fv may be
     given per direction (``_pos`` for v > 0, ``_neg`` for v < 0), vs and delta are common."""
 
     SIDED = (("fc", True), ("fs", True), ("fv", False))
     type: Literal["stribeck"]
-    fc: Optional[Positive] = None
-    fc_pos: Optional[Positive] = None
-    fc_neg: Optional[Positive] = None
-    fs: Optional[Positive] = None
-    fs_pos: Optional[Positive] = None
-    fs_neg: Optional[Positive] = None
     vs: Positive
     delta: Positive = 2.0
-    fv: Optional[NonNegative] = None  # 0 when neither fv nor fv_pos / fv_neg is given
-    fv_pos: Optional[NonNegative] = None
-    fv_neg: Optional[NonNegative] = None
     at: Optional[str] = None
 
 
-class LuGreConfig(_SidedFriction):
+class LuGreConfig(_SidedFriction, _Levels, _BreakAway):
     """LuGre friction with bristle state z (Canudas de Wit et al. 1995); the levels fc, fs and the
     viscous sigma2 may be given per direction (``_pos`` for v > 0, ``_neg`` for v < 0)."""
 
@@ -233,12 +242,6 @@ class LuGreConfig(_SidedFriction):
     sigma2: Optional[NonNegative] = None  # 0 when neither sigma2 nor sigma2_pos / sigma2_neg is given
     sigma2_pos: Optional[NonNegative] = None
     sigma2_neg: Optional[NonNegative] = None
-    fc: Optional[Positive] = None
-    fc_pos: Optional[Positive] = None
-    fc_neg: Optional[Positive] = None
-    fs: Optional[Positive] = None
-    fs_pos: Optional[Positive] = None
-    fs_neg: Optional[Positive] = None
     vs: Positive
     at: Optional[str] = None
 
