@@ -37,8 +37,9 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
     the measured output per line (BLA with bounds, odd and even distortion against the noise),
     per level and in time. Each hypothesis of the library (Coulomb, Stribeck and LuGre friction,
-    cubic stiffness, input saturation, deadzone, backlash, quadratic output, a missing resonance,
-    wrong damping/stiffness/mass, a delay) is estimated
+    cubic stiffness, cubic or quadratic-and-cubic feedback around a transfer function, input
+    saturation, deadzone, backlash, quadratic output, a missing resonance, wrong
+    damping/stiffness/mass, a delay) is estimated
     on half of the runs and scored on the others; a cause is named only when its gain is
     significant. The outputs are written before any --fail-if check exits 1. --validate-on and
     the ranges choose what is estimated on and what is validated on, as in fit --model.

@@ -26,19 +26,20 @@ K3 = 6e3
 STEPS = 32
 
 
-def duffing(u: np.ndarray, k3: float) -> np.ndarray:
-    """Position of p'' + 20 p' + 4e4 p + k3 p^3 = 1e4 u, u held over each sample, from rest."""
-    h = 1.0 / (FS * STEPS)
+def duffing(u: np.ndarray, k3: float, k2: float = 0.0, steps: int = STEPS) -> np.ndarray:
+    """Position of p'' + 20 p' + 4e4 p + k2 p^2 + k3 p^3 = 1e4 u, u held over each sample, from
+    rest, by ``steps`` Runge-Kutta steps per sample."""
+    h = 1.0 / (FS * steps)
 
     def f(p, v, force):
-        return v, force - 20.0 * v - 4e4 * p - k3 * p**3
+        return v, force - 20.0 * v - 4e4 * p - k3 * p**3 - k2 * p**2
 
     p = v = 0.0
     y = np.empty(u.size)
     for k, uk in enumerate(u):
         y[k] = p
         force = 1e4 * uk
-        for _ in range(STEPS):
+        for _ in range(steps):
             a1, b1 = f(p, v, force)
             a2, b2 = f(p + h / 2 * a1, v + h / 2 * b1, force)
             a3, b3 = f(p + h / 2 * a2, v + h / 2 * b2, force)

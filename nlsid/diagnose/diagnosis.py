@@ -235,8 +235,10 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         extended["model"].pop("output_timing", None)
         if "output_timing" in nominal["model"]:
             extended["model"]["output_timing"] = nominal["model"]["output_timing"]
-    paths = hypothesis.paths(data) if hypothesis.paths is not None else {}
+    paths = estimate.paths if estimate.paths is not None else hypothesis.paths(data) if hypothesis.paths else {}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
+    for key in hypothesis.holds:  # held at its value in ``data``
+        free.pop(f"model.{key}", None)
     for name, path in paths.items():  # a parameter without a signature estimate starts at the model's value
         start = estimate.values[name] if name in estimate.values else float(value_at(extended, path))
         if not (math.isfinite(start) and start != 0):
@@ -247,7 +249,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
     std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
-    note = "; ".join(filter(None, [estimate.note, what, *fit.warnings]))
+    reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
+    note = "; ".join(filter(None, [estimate.note, what, *fit.warnings, reading]))
     return Estimate(values, std, estimate.explained_db, note), fit.config
 
 
@@ -369,7 +372,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.reason = f"the fit failed: {exc}"
             continue
         outcome.estimate = context.fitted[hypothesis.name] = estimate
-        outcome.extended = extended
+        outcome.extended = context.extended[hypothesis.name] = extended
         _score(outcome, runner, val_runs, val)
         step(hypothesis.name)
     outcomes.sort(key=lambda o: (o.score is None, o.score.error_rms if o.score else math.inf))

@@ -83,12 +83,12 @@ def _timing_bounds(runner: ModelRunner, fs: float) -> tuple[float, float] | None
 def _force_offset_seen(model: dict) -> bool:
     """A constant force differs from a sensor offset in open loop only where the mechanics has no
     spring to the ground to turn it into a constant displacement (a free mass: friction then sees
-    it), or a force reads the position (a cubic spring): velocity-only forces on a sprung mass see
-    the same motion about a shifted rest position."""
+    it), or a force reads the position (a cubic or polynomial spring): velocity-only forces on a
+    sprung mass see the same motion about a shifted rest position."""
     forces = model.get("nonlinearities") or []
     if not forces:
         return False
-    if any(f.get("type") == "cubic_stiffness" for f in forces):
+    if any(f.get("type") in ("cubic_stiffness", "polynomial_stiffness") for f in forces):
         return True
     return model["type"] != "mass_spring_damper" or float(model.get("stiffness", 0.0)) == 0.0
 

@@ -208,11 +208,15 @@ def _message(error: dict) -> str:
 
 def _untagged(loc: tuple, data: Any) -> tuple:
     """The error location without the discriminator values pydantic inserts for tagged unions
-    (``model.lpl.branches`` -> ``model.branches``): a part that is not a key of the mapping at hand
-    but equals its ``type`` is dropped."""
+    (``model.lpl.branches`` -> ``model.branches``, ``model.poles[0].mode.frequency`` ->
+    ``model.poles[0].frequency``): a part that is not a key of the mapping at hand but equals its
+    ``type`` or has further parts after it (a missing key ends the location) is dropped, and so is
+    a name at a list or a value (no name indexes them)."""
     out, node = [], data
-    for part in loc:
-        if isinstance(node, dict) and part not in node and node.get("type") == part:
+    for i, part in enumerate(loc):
+        if isinstance(node, dict) and part not in node and (node.get("type") == part or i < len(loc) - 1):
+            continue
+        if isinstance(part, str) and node is not None and not isinstance(node, dict):
             continue
         out.append(part)
         if isinstance(node, dict):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Annotated, ClassVar, Literal, Optional, Union
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
@@ -38,13 +38,42 @@ class TransferFunctionConfig(_LTIBase):
     den: list[float] = Field(min_length=1)
 
 
+class ModeRoots(StrictModel):
+    """A pair of roots given as a mode of natural ``frequency`` f (Hz) and ``damping`` ratio zeta:
+    the roots of s^2 + 2 zeta w s + w^2, w = 2 pi f (a conjugate pair for zeta < 1, two real
+    roots from zeta = 1 on). In a zpk it enters as the factor (s^2 + 2 zeta w s + w^2) / w^2, of
+    unit gain at s = 0, so that moving a mode leaves the low-frequency gain alone."""
+
+    frequency: Positive
+    damping: NonNegative
+
+
+def _root_shape(entry) -> str:
+    return "mode" if isinstance(entry, dict) else "pair" if isinstance(entry, list) else "number"
+
+
+# A zpk root, told apart by its shape so that a bad entry gets the one error of what it looks like
+Root = Annotated[Union[Annotated[float, Tag("number")],
+                       Annotated[list[float], Field(min_length=2, max_length=2), Tag("pair")],
+                       Annotated[ModeRoots, Tag("mode")]], Discriminator(_root_shape)]
+
+
 class ZPKConfig(_LTIBase):
-    """Zeros and poles: a number is a real root, ``[re, im]`` the conjugate pair re +- j im."""
+    """Zeros and poles: a number is a real root, ``[re, im]`` the conjugate pair re +- j im, and
+    ``{frequency, damping}`` a mode (:class:`ModeRoots`, continuous models only); each root
+    contributes the factor (s - root), each mode its unit-DC-gain factor, times ``gain``."""
 
     type: Literal["zpk"]
-    zeros: list[Union[float, Annotated[list[float], Field(min_length=2, max_length=2)]]] = []
-    poles: list[Union[float, Annotated[list[float], Field(min_length=2, max_length=2)]]] = []
+    zeros: list[Root] = []
+    poles: list[Root] = []
     gain: float
+
+    @model_validator(mode="after")
+    def _modes_continuous(self):
+        if self.domain == "discrete" and any(isinstance(r, ModeRoots) for r in [*self.zeros, *self.poles]):
+            raise ValueError("a {frequency, damping} mode needs a continuous zpk (its frequency is in Hz of "
+                             "continuous time); give a discrete zpk's roots as numbers or [re, im] pairs in z")
+        return self
 
 
 class StateSpaceConfig(_LTIBase):
@@ -261,8 +290,39 @@ class CubicStiffnessConfig(StrictModel):
         return value
 
 
+class PolynomialStiffnessConfig(StrictModel):
+    """Polynomial spring force F = k2 x^2 + k3 x^3 + ... + k10 x^10 on the position of mass ``at``:
+    the terms given (each 0 when not), at least one nonzero. An even term makes the spring
+    asymmetric (k2 > 0: stiffer for x > 0), an odd one hardening (> 0) or softening (< 0); the
+    linear term is the model's own stiffness."""
+
+    DEGREES: ClassVar[range] = range(2, 11)  # the kernel's parameter vector holds k2 .. k10 (forces.MAX_PARAMS)
+    type: Literal["polynomial_stiffness"]
+    k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+    k5: float = 0.0
+    k6: float = 0.0
+    k7: float = 0.0
+    k8: float = 0.0
+    k9: float = 0.0
+    k10: float = 0.0
+    at: Optional[str] = None
+
+    def coefficients(self) -> list[float]:
+        """[k2, k3, ..., k10]."""
+        return [float(getattr(self, f"k{p}")) for p in self.DEGREES]
+
+    @model_validator(mode="after")
+    def _some_term(self):
+        if not any(self.coefficients()):
+            raise ValueError("give at least one nonzero coefficient of k2 .. k10 (F = k2 x^2 + k3 x^3 + ...)")
+        return self
+
+
 ForceConfig = Annotated[
-    Union[CoulombConfig, StribeckConfig, LuGreConfig, CubicStiffnessConfig], Field(discriminator="type")
+    Union[CoulombConfig, StribeckConfig, LuGreConfig, CubicStiffnessConfig, PolynomialStiffnessConfig],
+    Field(discriminator="type")
 ]
 
 
@@ -306,7 +366,7 @@ class TwoMassStageConfig(_PlantBlocks):
 
 class NonlinearFeedbackConfig(_PlantBlocks):
     """Forces fed back around an LTI ``linear`` from force to position: p = G (gain u - sum F), each
-    F reading p (cubic stiffness) or the velocity v (friction): v = p' for a continuous G, the
+    F reading p (cubic or polynomial stiffness) or the velocity v (friction): v = p' for a continuous G, the
     backward difference (p[k] - p[k-1]) fs for a discrete one."""
 
     type: Literal["nonlinear_feedback"]

@@ -3,10 +3,10 @@
 The laws are implemented in :func:`nlsid.simulate.kernels.force` (kept in the kernel's module so
 that numba's on-disk cache, which watches only the compiled function's own file, stays current).
 
-Each force is a feedback from the mass's velocity v (friction) or position p (cubic stiffness) to
-a force F that opposes the actuator (``m v' = ... - F``). Over a sub-step of length h the linear
-plant is propagated exactly with F held constant (ZOH), so the mass's velocity and position at the
-end of the sub-step are
+Each force is a feedback from the mass's velocity v (friction) or position p (cubic or polynomial
+stiffness) to a force F that opposes the actuator (``m v' = ... - F``). Over a sub-step of length
+h the linear plant is propagated exactly with F held constant (ZOH), so the mass's velocity and
+position at the end of the sub-step are
 
     v+ = v_free - g_v F,      p+ = p_free - g_p F,
 
@@ -69,6 +69,8 @@ stand for the two sides of fc, and "the side" for the direction of the motion.
 * ``cubic_stiffness`` F = k3 p^3, evaluated at the sub-step midpoint estimate (p + p_free) / 2:
   second order for this smooth force (the Duffing oscillator of the book's Exercise 79, Eq. 5-12,
   is a unit mass with damping 1, stiffness -10 and k3 = 100).
+* ``polynomial_stiffness`` F = k2 p^2 + k3 p^3 + ... + k10 p^10 (Horner), at the same midpoint
+  estimate and so second order as well; with k3 alone it is ``cubic_stiffness``.
 
 Kinds and parameter vectors (the numba kernel's encoding): the sided values are those for v > 0,
 followed by the offsets d = (value for v < 0) - (value for v > 0) in the same order, so that a
@@ -78,6 +80,7 @@ a factor 2 of each other (Sterbenz's lemma), within about one rounding otherwise
 
     0 coulomb  [fc, fv, dfc, dfv]     1 stribeck [fc, fs, vs, delta, fv, dfc, dfs, dfv]
     2 lugre    [sigma0, sigma1, sigma2, fc, fs, vs, dsigma2, dfc, dfs]     3 cubic_stiffness [k3]
+    4 polynomial_stiffness [k2, k3, ..., k10]
 """
 
 from __future__ import annotations
@@ -87,13 +90,13 @@ import numpy as np
 # The kernels (nlsid/simulate/kernels.py) compile these constants in, and numba's disk cache is
 # keyed on kernels.py alone: after editing a value here, touch kernels.py (or delete its
 # __pycache__/*.nbi) or the old value stays in force. An installed package is unaffected.
-COULOMB, STRIBECK, LUGRE, CUBIC = 0, 1, 2, 3
+COULOMB, STRIBECK, LUGRE, CUBIC, POLYNOMIAL = 0, 1, 2, 3, 4
 MAX_PARAMS = 9
 MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
 TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
 LUGRE_TOLERANCE = 1e-5  # LuGre: its step is carried to first order, an error O(step^2) ~ TOLERANCE
-POSITION_KINDS = (CUBIC,)
-START_KINDS = (LUGRE, CUBIC)  # laws that read their signal at the start of the sub-step too
+POSITION_KINDS = (CUBIC, POLYNOMIAL)
+START_KINDS = (LUGRE, CUBIC, POLYNOMIAL)  # laws that read their signal at the start of the sub-step too
 
 
 def _pos(config, name: str) -> float:
@@ -117,6 +120,7 @@ def encode(config) -> tuple[int, np.ndarray]:
         "lugre": (LUGRE, lambda c: [c.sigma0, c.sigma1, _pos(c, "sigma2"), _pos(c, "fc"), _pos(c, "fs"), c.vs,
                                     *_offsets(c, "sigma2", "fc", "fs")]),
         "cubic_stiffness": (CUBIC, lambda c: [c.k3]),
+        "polynomial_stiffness": (POLYNOMIAL, lambda c: c.coefficients()),
     }[config.type]
     params = np.zeros(MAX_PARAMS)
     vals = values(config)

@@ -110,22 +110,33 @@ def _controllable_form(b: np.ndarray, a: np.ndarray, discrete: bool, delay: floa
     return StateSpace(A, B, C, float(d), discrete, delay)
 
 
-def _roots(entries: list) -> np.ndarray:
-    out = []
+def _roots(entries: list) -> tuple[np.ndarray, float]:
+    """The roots of zpk entries (a number, an [re, im] pair, a mode with ``frequency`` in Hz and
+    ``damping``) and the product of the modes' normalisations 1 / w^2 (their factors
+    (s^2 + 2 zeta w s + w^2) / w^2 have unit gain at s = 0)."""
+    out, scale = [], 1.0
     for entry in entries:
         if isinstance(entry, list):
             re, im = entry
             out.extend([complex(re, im), complex(re, -im)] if im != 0 else [complex(re, 0)])
+        elif isinstance(entry, dict) or hasattr(entry, "frequency"):  # config data or the validated mode
+            mode = entry if isinstance(entry, dict) else {"frequency": entry.frequency, "damping": entry.damping}
+            w, zeta = 2 * np.pi * float(mode["frequency"]), float(mode["damping"])
+            root = np.sqrt(complex(zeta * zeta - 1))
+            out.extend([-w * (zeta - root), -w * (zeta + root)])
+            scale /= w * w
         else:
             out.append(complex(entry, 0))
-    return np.asarray(out, dtype=complex)
+    return np.asarray(out, dtype=complex), scale
 
 
 def from_zpk(zeros: list, poles: list, gain: float, discrete: bool, delay: float, where: str) -> StateSpace:
-    """State space of gain * prod(x - z_i) / prod(x - p_i), x = s or z; [re, im] is a conjugate pair."""
-    z, p = _roots(zeros), _roots(poles)
+    """State space of gain * prod(x - z_i) / prod(x - p_i), x = s or z; [re, im] is a conjugate
+    pair, a mode (continuous) the factor (s^2 + 2 zeta w s + w^2) / w^2 (:func:`_roots`)."""
+    (z, z_scale), (p, p_scale) = _roots(zeros), _roots(poles)
     if len(z) > len(p):
         raise InputError(where, f"improper model: {len(z)} zeros > {len(p)} poles")
+    gain = gain * z_scale / p_scale
     num = np.real(gain * np.poly(z)) if len(z) else np.array([float(gain)])
     den = np.real(np.poly(p)) if len(p) else np.array([1.0])
     num = np.pad(num, (len(den) - len(num), 0))

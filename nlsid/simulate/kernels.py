@@ -272,9 +272,9 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
     is returned unchanged). ``previous`` is the element's force over the previous sub-step (LuGre's
     prediction of the velocity).
 
-    ``s_free`` is the read-out signal (velocity, or position for cubic stiffness) at the end of the
-    sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity to a unit
-    force held over the sub-step, ``h`` the sub-step length. The friction laws take their levels
+    ``s_free`` is the read-out signal (velocity, or position for cubic and polynomial stiffness) at the
+    end of the sub-step without this force, ``s_now`` its value at the start, ``g`` its sensitivity
+    to a unit force held over the sub-step, ``h`` the sub-step length. The friction laws take their levels
     for v > 0 from ``p`` and those for v < 0 as these plus the offsets of :mod:`nlsid.models.forces`.
     """
     if kind == forces.LUGRE:
@@ -292,8 +292,13 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
         return level + fv * v, z
     if kind == forces.STRIBECK:
         return _stribeck(p, s_free, g), z
-    # CUBIC
     mid = 0.5 * (s_now + s_free)
+    if kind == forces.POLYNOMIAL:  # k2 mid^2 + ... + k10 mid^10, Horner from k10 down
+        acc = p[8]
+        for i in (7, 6, 5, 4, 3, 2, 1, 0):
+            acc = acc * mid + p[i]
+        return acc * mid * mid, z
+    # CUBIC
     return p[0] * mid * mid * mid, z
 
 

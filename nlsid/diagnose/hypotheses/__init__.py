@@ -32,6 +32,10 @@ cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: 
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
                     function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
                                                               with the linear coefficients)
+polynomial_feedback as cubic_feedback, with even distortion   ``nonlinear_feedback`` with
+                    too: an asymmetric spring; fitted only    ``polynomial_stiffness`` (k2, k3,
+                    where the cubic fit leaves a score along  the linear coefficients; the
+                    -y^2 (starts from the cubic's fit)        force_offset held)
 input_saturation    odd distortion; BLA gain falls with       ``input_nonlinearity: saturation``
                     level; residual where abs(u) is large     (limit a: lower = -a, upper = a)
 deadzone            odd distortion; BLA gain rises with       ``input_nonlinearity: deadzone``
@@ -49,6 +53,17 @@ missing_resonance   BLA differs from the model around one     transfer function 
 wrong_mechanics     BLA differs around the model's own        ``mass``, ``damping``, ``stiffness``
                     resonance (height, frequency), no         of a mass_spring_damper corrected
                     distortion                                (main: damping)
+coupled_mode        BLA differs by a resonance with an        the model as a ``zpk`` with the
+                    anti-resonance below it (a second mass    modes ``{frequency: fa, damping:
+                    on the driven one), no distortion         za}`` (zero) and ``{frequency: fr,
+                                                              damping: zr}`` (pole): times (wr^2 /
+                                                              wa^2) (s^2 + 2 za wa s + wa^2) /
+                                                              (s^2 + 2 zr wr s + wr^2) (fr, fa in
+                                                              Hz, zr, za; mass ratio (fr/fa)^2 - 1)
+wiener_hammerstein  the BLA's shape the same at every level,   ``wiener_hammerstein``: the model's
+                    its gain changing; odd and even          poles and zeros split over ``first``
+                    distortion                                and ``second``, polynomial f between
+                                                              (a1 .. aP, the filters' coefficients)
 delay               BLA phase error growing linearly with     ``delay`` (seconds, whole samples)
                     frequency, gain right, no distortion
 =================== ========================================= ====================================
@@ -61,13 +76,19 @@ forces. The delay and the missing resonance are linear: they are estimated from 
 ``G_BLA / G_model`` of the measured and the model's BLA (evidence), the delay from the slope of its
 phase (weighted least squares, weights ``2 |G|^2 / var(G)``, the inverse variance of the phase),
 the resonance by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
-Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std(R)``).
+Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std(R)``), the coupled
+mode by the same on ``R(s) (s^2 + a1 s + a0) = b2 s^2 + b1 s + b0``
+(:mod:`~nlsid.diagnose.hypotheses.coupled_mode`, which derives R from the two-mass equations). The
+linear hypotheses are one family: the coupled mode (four parameters) is named over a missing
+resonance or wrong mechanics (three) only when it is significantly better, and is not fitted when
+one of them already reaches the noise floor.
 """
 
 from __future__ import annotations
 
-from nlsid.diagnose.hypotheses import (delay, feedback, friction, input_blocks, mechanics, output_blocks, resonance,
-                                       stiffness)
+from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, mechanics, output_blocks,
+                                       resonance, stiffness)
+from nlsid.diagnose.hypotheses import wiener_hammerstein
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
 __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
@@ -75,8 +96,8 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 #: The hypotheses in the order they are tried (a family's simpler members first).
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES
-                                   + output_blocks.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
-                                   + delay.HYPOTHESES)
+                                   + output_blocks.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
+                                   + coupled_mode.HYPOTHESES + delay.HYPOTHESES)
 
 
 def by_name(name: str) -> Hypothesis:

@@ -17,7 +17,8 @@ from nlsid.io.run import Run
 class Context:
     """What the estimates need: the nominal model, the estimation runs, their residual periods, the
     model's internal signals on them (full length), the BLA levels (measured, model) and the
-    final estimates of the hypotheses before this one in :data:`LIBRARY`, by name."""
+    final estimates of the hypotheses before this one in :data:`LIBRARY`, by name, with their
+    extended configs (every fitted value written in, nuisances too) in ``extended``."""
 
     runner: ModelRunner
     runs: list[Run]
@@ -25,6 +26,7 @@ class Context:
     internal: list[dict[str, np.ndarray]]
     bla_levels: tuple = ()
     fitted: dict = field(default_factory=dict)
+    extended: dict = field(default_factory=dict)
 
     def target(self) -> np.ndarray:
         return np.concatenate(self.residuals)
@@ -44,12 +46,15 @@ class Context:
 class Estimate:
     """Parameter values and standard errors; ``explained_db`` is the drop of the estimation
     residual's sum of squares the signature predicts (10 log10 of before over after; NaN when
-    either is zero: :func:`explained_db`)."""
+    either is zero: :func:`explained_db`); ``paths`` (parameter -> key path for the fit engine)
+    replaces the hypothesis' own where the parameters depend on the estimate (a structure whose
+    size the estimate chooses)."""
 
     values: dict[str, float]
     std: dict[str, float]
     explained_db: float
     note: str = ""
+    paths: dict[str, str] | None = None
 
 @dataclass(frozen=True)
 class Hypothesis:
@@ -64,6 +69,8 @@ class Hypothesis:
     extend: Callable[[dict, dict], dict]
     parameters: tuple[str, ...] = field(default=())
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
+    reading: Callable[[dict], str] | None = None  # what the final values mean physically, for the note
+    holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
 
 def explained_db(before: float, after: float) -> float:
     """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite

@@ -50,10 +50,13 @@ def _mechanical_transfer_function(model: dict) -> tuple[list[float], list[float]
 
 def _as_transfer_function(model: dict) -> dict:
     """A mechanical template as its transfer function from u to the output
-    (:func:`_mechanical_transfer_function`; the input/output blocks and the delay are kept)."""
+    (:func:`_mechanical_transfer_function`; the input/output blocks, offsets, input channels,
+    output timing and the delay are kept)."""
     if model["type"] == "transfer_function":
         return model
-    out = {k: v for k, v in model.items() if k in ("input_nonlinearity", "output_nonlinearity", "delay")}
+    kept = ("input_nonlinearity", "output_nonlinearity", "delay", "input_offset", "output_offset", "input_channels",
+            "output_timing")
+    out = {k: v for k, v in model.items() if k in kept}
     num, den = _mechanical_transfer_function(model)
     out.update(type="transfer_function", domain="continuous", num=num, den=den)
     return out
