@@ -58,3 +58,22 @@ def test_the_white_noise_formula_would_be_far_off(fits):
         J = lfilter([1.0], [1.0, -A1], run.u)
         white.append(rms / math.sqrt(float(J @ J)))
     assert float(np.mean(white)) < 0.5 * spread
+
+
+def test_correlations_stay_within_one_when_the_jacobian_is_nearly_singular():
+    """Two nearly interchangeable parameters (columns equal to 1e-9) and a coloured residual: the
+    sandwich in factored form is positive semi-definite, so |correlation| <= 1 (Cauchy-Schwarz);
+    before, roundoff in A^-1 B A^-1 gave correlations of 3 on such fits."""
+    from scipy.signal import lfilter
+
+    from nlsid.fit.extension import _uncertainty
+
+    rng = np.random.default_rng(5)
+    base = rng.standard_normal((4000, 3))
+    jac = np.column_stack([base, base[:, 0] * (1 + 1e-9) + 1e-9 * rng.standard_normal(4000)])
+    residual = lfilter([1.0], [1.0, -0.95], rng.standard_normal(4000))
+    names = ["a", "b", "c", "d"]
+    _, corr, warnings = _uncertainty(jac, residual, np.ones(4), names, np.ones(4), np.full(4, -np.inf),
+                                     np.full(4, np.inf), [4000])
+    assert np.all(np.abs(corr) <= 1 + 1e-12), corr
+    assert any("cannot tell these apart" in w for w in warnings)

@@ -362,10 +362,12 @@ def _scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
 SPECTRUM_LINES = 17  # neighbouring DFT lines averaged into the residual spectrum of the sandwich
 
 
-def _meat(jac: np.ndarray, residual: np.ndarray, segments: Sequence[int]) -> np.ndarray:
-    """J^T Sigma J for residuals stationary within each run of ``segments`` samples (module docstring)."""
-    p = jac.shape[1]
-    out = np.zeros((p, p))
+def _meat_factor(jac: np.ndarray, residual: np.ndarray, segments: Sequence[int]) -> np.ndarray:
+    """R with Re(R^H R) = J^T Sigma J for residuals stationary within each run of ``segments``
+    samples (module docstring): the rows sqrt(w_k Phi(k) / N) G(k) of every run, stacked. In this
+    factored form the sandwich is Re(K^H K), K = R A^{-1}, positive semi-definite by construction,
+    so no correlation exceeds 1 in magnitude however ill-conditioned A is."""
+    rows = []
     start = 0
     for size in segments:
         e, J = residual[start:start + size], jac[start:start + size]
@@ -379,8 +381,8 @@ def _meat(jac: np.ndarray, residual: np.ndarray, segments: Sequence[int]) -> np.
         weights[0] = 1.0
         if size % 2 == 0:
             weights[-1] = 1.0
-        out += ((G.conj().T * (weights * spectrum)) @ G).real / size
-    return out
+        rows.append(np.sqrt(weights * spectrum / size)[:, None] * G)
+    return np.vstack(rows)
 
 
 def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names: list[str], values: np.ndarray,
@@ -405,7 +407,8 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
         # (J^T J)^{-1} = V diag(1/sv^2) V^T; a singular value clamped at IDENTIFIABLE_RATIO sv[0]
         # leaves a huge (not an infinite) variance along a direction the data do not determine.
         inverse = (vt.T / np.maximum(sv, IDENTIFIABLE_RATIO * sv[0]) ** 2) @ vt
-        cov_x = inverse @ _meat(jac, residual, segments) @ inverse * (n / max(n - p, 1))
+        K = _meat_factor(jac, residual, segments) @ inverse
+        cov_x = (K.conj().T @ K).real * (n / max(n - p, 1))
         cov = cov_x * np.outer(scale, scale)
         std = np.sqrt(np.abs(np.diag(cov)))
         spread = np.outer(*2 * [np.sqrt(np.maximum(np.diag(cov_x), 0.0))])  # zero for a zero residual
