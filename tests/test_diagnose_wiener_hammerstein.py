@@ -143,3 +143,24 @@ def test_piecewise_linear_basis_is_the_block_law():
     x = np.linspace(-3, 3, 301)
     expected = static_map(PiecewiseLinearConfig(**block))(x)
     assert np.allclose(theta @ curve.basis(x), expected, atol=1e-12)
+
+
+def test_not_fitted_where_the_detection_lines_show_no_distortion():
+    """A linear truth (the model with a missing resonance) measured with random-odd multisines:
+    no odd or even distortion, so a static nonlinearity between filters is not fitted (the
+    resonance is the cause)."""
+    import copy
+
+    from diagnose_cases import TF, excitation, measure
+
+    from nlsid.diagnose.diagnosis import diagnose
+
+    rng = np.random.default_rng(11)
+    wr = 2 * np.pi * 75
+    true = copy.deepcopy(TF)
+    true["model"]["num"] = [1e4 * wr * wr]
+    true["model"]["den"] = [float(c) for c in np.convolve([1, 20, 4e4], [1, 0.1 * wr, wr * wr])]
+    result = diagnose(TF, "tf.yaml", measure(true, excitation(rng), rng), "rec")
+    assert result.verdict.winner == "missing_resonance"
+    outcome = next(o for o in result.outcomes if o.hypothesis.name == "wiener_hammerstein")
+    assert outcome.reason.startswith("not fitted: the detection lines show no nonlinear distortion")

@@ -355,6 +355,10 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
         if evidence.exact:
             outcome.reason = "not fitted: the model reproduces the noise-free data exactly (no residual to explain)"
             continue
+        if hypothesis.distorts and evidence.distortion_testable and not (evidence.odd_seen or evidence.even_seen):
+            outcome.reason = ("not fitted: the detection lines show no nonlinear distortion (odd or even), "
+                              "which a nonlinearity of this kind would leave")
+            continue
         simpler = sufficient_simpler(hypothesis, outcomes)
         if simpler is not None:
             reached = ("matches the data exactly" if simpler.score.exact

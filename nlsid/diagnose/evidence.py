@@ -338,6 +338,13 @@ class Evidence:
         return any(row["even"]["significant"] for row in self.lines + self.harmonics)
 
     @property
+    def distortion_testable(self) -> bool:
+        """Odd or even detection lines (or harmonics of sine runs) with a measured noise level
+        exist, so that :attr:`odd_seen` and :attr:`even_seen` false mean no distortion seen."""
+        return any(row[kind]["noise_known"] and row[kind].get("lines", 1) > 0
+                   for row in self.lines + self.harmonics for kind in ("odd", "even"))
+
+    @property
     def linear_seen(self) -> bool:
         return any(row["significant"] for row in self.bla)
 

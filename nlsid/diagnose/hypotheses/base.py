@@ -69,6 +69,7 @@ class Hypothesis:
     extend: Callable[[dict, dict], dict]
     parameters: tuple[str, ...] = field(default=())
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
+    distorts: bool = False  # a nonlinearity seen at the detection lines: not fitted where they show none
     reading: Callable[[dict], str] | None = None  # what the final values mean physically, for the note
     holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
 
