@@ -9,7 +9,7 @@ from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path, check_suffix, check_writable
 
-from .common import LOGGER, StageCommand, emit_json, force_option, json_option, progress, settings
+from .common import LOGGER, StageCommand, emit_json, force_option, json_option, keep_freed_memory, progress, settings
 from .options import map_option, parse_map, plot_folder, plots_option
 
 
@@ -48,7 +48,7 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     """
     from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
     from nlsid.io.bla_file import write_bla
-    from nlsid.io.provenance import provenance
+    from nlsid.io.provenance import provenance, sha256_in_background
     from nlsid.io.recording import open_recording
     from nlsid.io.units import common_units
 
@@ -60,6 +60,8 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     check_writable(output, force)
     plot_dir = plot_folder(plots)
     units_seen = []
+    keep_freed_memory()  # the runs' buffers are reused, not page-faulted in anew for each run
+    digest = sha256_in_background(recording)  # for the provenance, beside the analysis of the same file
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
             levels, lpm_levels, warnings = analyse_bla(recording_runs(rec, recording), method, confidence,
@@ -77,8 +79,8 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)
-    write_bla(output, levels, provenance(input_paths=[recording]), confidence, warnings, across, force=force,
-              lpm_levels=lpm_levels, units=units)
+    write_bla(output, levels, provenance(input_paths=[recording], digests={recording: digest}), confidence, warnings,
+              across, force=force, lpm_levels=lpm_levels, units=units)
     for name, data in figures.items():
         with atomic_path(plot_dir / name, force) as tmp:
             tmp.write_bytes(data)

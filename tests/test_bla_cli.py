@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import platform
 import sys
 from pathlib import Path
 
@@ -117,3 +118,47 @@ def test_read_bla_rejects_other_files(recording):
     path, _ = recording
     with pytest.raises(InputError, match="nlsid_format is 'recording', expected a 'bla' file"):
         read_bla(path)
+
+
+def test_the_input_hash_in_background_raises_when_asked(tmp_path):
+    """The provenance hash runs beside the analysis: its digest is the file's, and an unreadable
+    input fails only where the digest is asked for (the stage has said why already)."""
+    from nlsid.io.provenance import file_sha256, provenance, sha256_in_background
+
+    path = tmp_path / "data.bin"
+    path.write_bytes(b"nlsid" * 1000)
+    digest = sha256_in_background(path)
+    assert provenance(input_paths=[path], digests={str(path): digest})["inputs"] == {str(path): file_sha256(path)}
+    missing = sha256_in_background(tmp_path / "missing.h5")
+    with pytest.raises(FileNotFoundError):
+        missing()
+
+
+FREED_RSS_PROBE = """
+import os, sys
+import numpy as np
+from nlsid.cli.common import keep_freed_memory
+def rss():
+    return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+if sys.argv[1] == "keep":
+    keep_freed_memory()
+block = np.ones(2 << 20)  # 16 MB, touched
+held = rss()
+del block
+print(held - rss())
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+                    reason="glibc's malloc only")
+def test_freed_run_buffers_are_kept_for_the_next_run():
+    """bla keeps freed memory for reuse (glibc's mallopt): a freed 16 MB block stays mapped, where
+    by default it is handed back at once (and the next run page-faults its buffers in anew)."""
+    import subprocess
+
+    def released(mode: str) -> int:
+        out = subprocess.run([sys.executable, "-c", FREED_RSS_PROBE, mode], capture_output=True, text=True, check=True)
+        return int(out.stdout)
+
+    assert released("default") > 12 << 20
+    assert released("keep") < 4 << 20

@@ -59,6 +59,20 @@ def test_line_classes_of_an_odd_grid():
     assert not classify_lines(40, 40.0, np.array([3, 4, 5])).odd_grid
 
 
+def test_detection_lines_of_several_classes_are_their_sorted_union_and_read_only():
+    """A tuple of classes gives the union of their bins in increasing order (what np.union1d gave,
+    without loading numpy.ma); the bins are kept for the level's next run and cannot be changed."""
+    lines = classify_lines(40, 40.0, np.array([3, 4, 9, 11]))  # a full grid: every harmonic a candidate
+    for in_band in (True, False, None):
+        union = np.union1d(lines.detection(ODD, in_band), lines.detection(EVEN, in_band))
+        assert np.array_equal(lines.detection((ODD, EVEN), in_band), union)
+    assert lines.bla_detection().tolist() == [5, 6, 7, 8, 10]
+    assert lines.detection((ODD, EVEN, NONHARMONIC)).tolist() == [5, 6, 7, 8, 10]  # base 1: no nonharmonic
+    assert lines.detection(ODD) is lines.detection(ODD)
+    with pytest.raises(ValueError):
+        lines.detection(ODD)[0] = 1
+
+
 def test_f_quantile_matches_the_book_and_scipy():
     """(6-50): F_{0.95; 2, 10} = 4.10 for P = 6 (book); closed form against scipy.stats."""
     assert f_quantile_2(0.95, 10) == pytest.approx(4.10, abs=0.005)

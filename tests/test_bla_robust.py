@@ -312,3 +312,29 @@ def test_plant_distortion_fed_back_is_not_called_an_actuator_nonlinearity():
     text = " ".join(warnings)
     assert "reaches the plant input" in text and "fed back by the controller" in text, warnings
     assert "the actuator is nonlinear" not in text
+
+
+@pytest.mark.parametrize("block_bytes", [1 << 21, 3 * 16 * 257])
+def test_period_stats_batched_transforms_change_no_bit(monkeypatch, block_bytes):
+    """u and y deviations (and the means of u, y, r) are transformed in one rfft each: the result
+    is bit for bit that of one rfft per signal, with one block of periods or several (3 rows)."""
+    import nlsid.analysis.period_stats as ps
+    from nlsid.analysis.lines import spectra
+
+    monkeypatch.setattr(ps, "_BLOCK_BYTES", block_bytes)
+    rng = np.random.default_rng(3)
+    u, y, r = (rng.standard_normal((7, 512)) for _ in range(3))
+    got = ps.period_stats(u, y, r)
+    means = [x.mean(axis=0) for x in (u, y, r)]
+    var_u, var_y, cov_yu = np.zeros(257), np.zeros(257), np.zeros(257, complex)
+    rows = max(1, block_bytes // (16 * 257))
+    for start in range(0, 7, rows):
+        dU = np.fft.rfft(u[start:start + rows] - means[0], axis=-1)
+        dY = np.fft.rfft(y[start:start + rows] - means[1], axis=-1)
+        var_u += ps._real_products(dU, dU)
+        var_y += ps._real_products(dY, dY)
+        cov_yu += ps._cross_products(dY, dU)
+    scale = 1.0 / (7 * 6 * 512 * 512)
+    for field, expected in [("U", spectra(means[0])), ("Y", spectra(means[1])), ("R", spectra(means[2])),
+                            ("var_u", var_u * scale), ("var_y", var_y * scale), ("cov_yu", cov_yu * scale)]:
+        assert np.array_equal(getattr(got, field), expected), field

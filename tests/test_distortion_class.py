@@ -105,3 +105,37 @@ def test_the_p_value_is_the_f_survival_function():
     for n_a, n_b, m, x in [(10, 12, 3, 2.0), (4, 40, 10, 0.8), (25, 25, 1, 1.3)]:
         got = above(LineClass("a", n_a, x), LineClass("b", n_b, 1.0), m)
         assert got == pytest.approx(f.sf(x, 2 * n_a * m, 2 * n_b * m), rel=1e-10)
+
+
+def test_a_saturated_p_value_is_scipys_without_scipy():
+    """Where the Chernoff bound fixes I_x(a, b) at 0.0 or 1.0, scipy's betainc gives exactly that
+    value (random a, b up to 50000 and x about the mean, where both outcomes occur)."""
+    from scipy.special import betainc
+
+    from nlsid.analysis.distortion_class import saturated_beta
+
+    rng = np.random.default_rng(7)
+    found = {0.0: 0, 1.0: 0, None: 0}
+    for _ in range(5000):
+        a, b = (int(v) for v in rng.integers(1, 50000, 2))
+        x = float(np.clip(a / (a + b) * np.exp(rng.normal(0, 0.3)), 1e-300, 1 - 1e-16))
+        value = saturated_beta(a, b, x)
+        found[value] += 1
+        if value is not None:
+            assert betainc(a, b, x) == value, (a, b, x)
+    assert min(found.values()) > 250, found
+    assert saturated_beta(5, 7, 0.0) == 0.0 and saturated_beta(5, 7, 1.0) == 1.0
+
+
+def test_classes_far_apart_need_no_scipy():
+    """Odd lines 20 dB above many even lines (the bla benchmark's case): both p-values are exact
+    (0 and 1) and scipy is not imported for them (a fresh interpreter)."""
+    import subprocess
+    import sys
+
+    probe = ("import sys\n"
+             "from nlsid.analysis.distortion_class import LineClass, above\n"
+             "odd, even = LineClass('odd', 256, 1e-7), LineClass('even', 1023, 1e-9)\n"
+             "print(above(odd, even, 20), above(even, odd, 20), 'scipy' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0.0", "1.0", "False"]

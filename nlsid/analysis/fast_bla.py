@@ -37,7 +37,7 @@ import numpy as np
 
 from nlsid.analysis.bla import eiv_variance
 from nlsid.analysis.confidence import Bounds, circle_bounds, f_quantile_2
-from nlsid.analysis.lines import EVEN, ODD, Lines
+from nlsid.analysis.lines import EVEN, NONHARMONIC, ODD, Lines
 from nlsid.analysis.period_stats import PeriodStats
 from nlsid.citations import BOOK
 
@@ -76,7 +76,7 @@ def fast_run(stats: PeriodStats, lines: Lines, probability: float = 0.95) -> Fas
     G = Y[exc] / U[exc]
     var_noise = eiv_variance(G, U[exc], stats.var_y[exc], stats.var_u[exc], stats.cov_yu[exc])
 
-    in_band = np.flatnonzero(lines.in_band & (lines.kind != 0))
+    in_band = lines.detection((ODD, EVEN, NONHARMONIC))
     Yc = Y.copy()
     Yc_noise = stats.var_y.copy()
     G_l = _interp_complex(in_band, exc, G)
@@ -124,7 +124,7 @@ def _bias_checks(stats: PeriodStats, lines: Lines, Yc_power: np.ndarray, Yc_nois
 def _bias_ratios(stats: PeriodStats, lines: Lines, Yc_power: np.ndarray, Yc_noise: np.ndarray) -> dict:
     exc = lines.excited
     U_power = np.abs(stats.U) ** 2
-    detection_in = np.flatnonzero(lines.in_band & (lines.kind > 0))
+    detection_in = lines.detection((ODD, EVEN, NONHARMONIC))
     out = {
         "input_detection_db": _band_mean(U_power, detection_in) / _band_mean(U_power, exc),
         "input_sdr_db": _band_mean(U_power, exc) / _band_mean(stats.var_u * stats.n_periods, exc),

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import reduce
+from functools import cached_property, reduce
 
 import numpy as np
 
@@ -55,7 +55,7 @@ class Lines:
     kind: np.ndarray
     in_band: np.ndarray
 
-    @property
+    @cached_property
     def odd_grid(self) -> bool:
         """True when only odd harmonics are excited (odd/even classification is possible)."""
         return bool(np.all((self.excited // self.base) % 2 == 1))
@@ -69,12 +69,21 @@ class Lines:
         """Every classified bin: 1 .. (N-1)//2."""
         return np.arange(1, (self.period - 1) // 2 + 1)
 
-    def detection(self, kind: int, in_band: bool | None = True) -> np.ndarray:
-        """Bins of class ``kind`` (ODD, EVEN or NONHARMONIC), in band, out of band (False) or all (None)."""
-        mask = self.kind == kind
-        if in_band is not None:
-            mask &= self.in_band == in_band
-        return np.flatnonzero(mask)
+    def detection(self, kind: int | tuple[int, ...], in_band: bool | None = True) -> np.ndarray:
+        """Bins of class ``kind`` (ODD, EVEN or NONHARMONIC, or a tuple of classes), in band, out of
+        band (False) or all (None), in increasing order.
+
+        Computed once per ``(kind, in_band)`` and returned read-only: the lines of a level serve
+        every one of its runs."""
+        cache = self.__dict__.setdefault("_detection", {})  # a frozen dataclass: not through __setattr__
+        if (kind, in_band) not in cache:
+            mask = reduce(np.logical_or, [self.kind == k for k in (kind if isinstance(kind, tuple) else (kind,))])
+            if in_band is not None:
+                mask &= self.in_band == in_band
+            bins = np.flatnonzero(mask)
+            bins.flags.writeable = False
+            cache[kind, in_band] = bins
+        return cache[kind, in_band]
 
     def bla_detection(self) -> np.ndarray:
         """In-band detection lines that measure the distortion at the excited lines (Section 6.2, (6-54)).
@@ -82,9 +91,7 @@ class Lines:
         Odd grid: only the odd detection lines (odd excited lines carry only odd distortion).
         Full grid: every in-band harmonic detection line.
         """
-        if self.odd_grid:
-            return self.detection(ODD)
-        return np.union1d(self.detection(ODD), self.detection(EVEN))
+        return self.detection(ODD if self.odd_grid else (ODD, EVEN))
 
     @property
     def grid_factor(self) -> float:
