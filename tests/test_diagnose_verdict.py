@@ -46,3 +46,16 @@ def test_tied_families_are_ambiguous_and_noise_answers_no_discrepancy():
                                 Candidate("backlash", "input", 1, OUTSIDE)], DOF).winner == "coulomb"
     assert decide(False, 100.0, candidates, DOF).status == NO_DISCREPANCY
     assert decide(True, INSIDE, [Candidate("coulomb", "friction", 1, 1.0)], DOF).status == UNEXPLAINED
+
+
+@pytest.mark.parametrize("split, winner", [
+    (1.0 / INSIDE, "input_saturation"),   # the split is better, but not significantly: the input block it contains
+    (1.0 / OUTSIDE, "wiener_hammerstein"),  # significantly better: the split
+])
+def test_a_model_that_contains_a_tied_one_leaves_the_tie(split, winner):
+    """The Wiener-Hammerstein split contains an input block (G1 = 1): tied with input saturation it
+    is not an equally good explanation of another kind but the same one with more parameters."""
+    candidates = [Candidate("input_saturation", "input", 1, 1.0),
+                  Candidate("wiener_hammerstein", "structure", 3, split, ("input", "output"))]
+    verdict = decide(True, 100.0, candidates, DOF)
+    assert verdict.status == EXPLAINED and verdict.winner == winner

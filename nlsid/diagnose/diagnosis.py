@@ -19,6 +19,7 @@ from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
+from nlsid.diagnose.hypotheses.base import with_lti
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
 from nlsid.errors import InputError
@@ -218,8 +219,10 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
     a friction's phase lag), so each hypothesis re-fits them with its own parameters. A dead time
     and the output timing are one shift: the delay hypothesis takes it whole (the timing back at
-    its value in the user's ``nominal`` model, not fitted). Returns the estimate and the extended
-    config with every fitted value written in.
+    its value in the user's ``nominal`` model, not fitted). An estimate with an ``lti`` extends
+    the model with that LTI part in place of its own (:func:`with_lti`: a discrete model's
+    continuous equivalent). Returns the estimate and the extended config with every fitted value
+    written in.
 
     Each parameter keeps its sign and stays within three decades of its signature estimate. The
     optimiser gets :data:`FIT_STEPS` cost evaluations (besides its finite-difference Jacobians):
@@ -229,6 +232,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     """
     from nlsid.fit.extension import FreeParameter, fit_free_parameters, value_at
 
+    if estimate.lti is not None:  # the model's LTI part in the form the hypothesis extends
+        data = with_lti(data, estimate.lti)
     extended = hypothesis.extend(data, estimate.values)
     timing = hypothesis.family != "delay"
     if not timing:
@@ -382,7 +387,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     outcomes.sort(key=lambda o: (o.score is None, o.score.error_rms if o.score else math.inf))
     original = score(val)
     candidates = [rules.Candidate(o.hypothesis.name, o.hypothesis.family, len(o.hypothesis.parameters),
-                                  o.score.error_rms ** 2) for o in outcomes if o.score is not None]
+                                  o.score.error_rms ** 2, o.hypothesis.generalizes) for o in outcomes if o.score is not None]
     dof = verdict_dof(val)
     discrepancy = evidence.overall.significant if evidence.overall.noise_known else None
     if discrepancy and found.values and baseline.within_floor:

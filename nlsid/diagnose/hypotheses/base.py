@@ -48,13 +48,26 @@ class Estimate:
     residual's sum of squares the signature predicts (10 log10 of before over after; NaN when
     either is zero: :func:`explained_db`); ``paths`` (parameter -> key path for the fit engine)
     replaces the hypothesis' own where the parameters depend on the estimate (a structure whose
-    size the estimate chooses)."""
+    size the estimate chooses); ``lti`` (an LTI config: ``type``, coefficients, ``domain``)
+    replaces the LTI part of the model before it is extended (a discrete model extended as its
+    continuous equivalent, :mod:`nlsid.diagnose.hypotheses.feedback`; :data:`LTI_KEYS`)."""
 
     values: dict[str, float]
     std: dict[str, float]
     explained_db: float
     note: str = ""
     paths: dict[str, str] | None = None
+    lti: dict | None = None
+
+
+LTI_KEYS = ("type", "domain", "num", "den", "zeros", "poles", "gain", "A", "B", "C", "D")
+
+
+def with_lti(data: dict, lti: dict) -> dict:
+    """A copy of the config ``data`` whose model has the LTI part ``lti`` in place of its own (the
+    nuisances, blocks and dead time kept)."""
+    model = {k: v for k, v in data["model"].items() if k not in LTI_KEYS}
+    return {**data, "model": {**model, **lti}}
 
 @dataclass(frozen=True)
 class Hypothesis:
@@ -69,9 +82,10 @@ class Hypothesis:
     extend: Callable[[dict, dict], dict]
     parameters: tuple[str, ...] = field(default=())
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
-    distorts: bool = False  # a nonlinearity seen at the detection lines: not fitted where they show none
     reading: Callable[[dict], str] | None = None  # what the final values mean physically, for the note
     holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
+    distorts: bool = False  # a nonlinearity seen at the detection lines: not fitted where they show none
+    generalizes: tuple[str, ...] = ()  # families whose models are special cases of this one's (verdict ties)
 
 def explained_db(before: float, after: float) -> float:
     """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite
