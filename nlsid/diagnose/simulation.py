@@ -2,7 +2,9 @@
 
 ``diagnose`` simulates the model exactly as ``nlsid simulate`` would (the same validation, the same
 engine), noise-free, on the measured excitation: in open loop on the recorded plant input ``u``, in
-closed loop (a ``closed_loop:`` section) on the recorded reference ``r``. Extensions of the model
+closed loop (a ``closed_loop:`` section) on the recorded reference ``r``. A periodic run without
+transient periods is simulated in its periodic steady state, as it was measured
+(:func:`nlsid.simulate.engine.lead_periods`). Extensions of the model
 are new config data (:mod:`nlsid.diagnose.hypotheses`) and run through the same path, so an
 extended model YAML that ``diagnose`` writes is what ``simulate`` runs.
 
@@ -94,7 +96,7 @@ class ModelRunner:
         zero = np.zeros(run.n_samples)
         noise = Noise(zero, zero if output is None else output, zero if process is None else process)
         try:
-            return simulate_run(self.plant, self.loop, source, self.config.simulation.substeps, noise)
+            return simulate_run(self.plant, self.loop, source, self.config.simulation.substeps, noise, steady=True)
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 

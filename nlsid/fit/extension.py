@@ -13,7 +13,8 @@ benchmarks such as EMPS, where the position error is kept small by the loop itse
 recorded excitation (open loop: ``u``; closed loop: the reference ``r``) is simulated through the
 noise-free model with the parameters written into the config (the ``sweep`` mechanism:
 :func:`nlsid.simulate.sweep._set`, then the full config validation), and compared with the
-recorded signal over the steady-state periods (the last ``n_periods`` periods; the whole record
+recorded signal over the steady-state periods (the last ``n_periods`` periods; a run without
+transient periods with the model in periodic steady state: :func:`nlsid.simulate.engine.lead_periods`; the whole record
 of an arbitrary run; the range of a part cut by :mod:`nlsid.io.ranges`). In closed loop the
 simulated ``u`` is the plant input as the simulated controller computed it, with the loop closed
 in the simulation. The rms errors of y and (closed loop) u are both reported, whichever is fitted.
@@ -322,7 +323,7 @@ class _Problem:
         """Per reported signal s (y, and u in closed loop) and run, s_sim - s over the steady state."""
         from nlsid.simulate.batch import simulate_all
 
-        simulated = simulate_all([self.point(theta)], list(excitations), workers=self.workers)
+        simulated = simulate_all([self.point(theta)], list(excitations), workers=self.workers, steady=True)
         return {s: [_steady(run, getattr(sim, s)) - _steady(run, getattr(run, s)) for run, sim in zip(runs, simulated)]
                 for s in self.signals}
 

@@ -54,8 +54,9 @@ def _excitation(run: Run, loop: ClosedLoop | None) -> Run:
 
 
 def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = None, workers: int | None = None,
-                 step: Callable[[], None] | None = None) -> list[Run]:
-    """Simulate each excitation run for each sweep point; ``seed`` overrides the config's seed."""
+                 step: Callable[[], None] | None = None, steady: bool = False) -> list[Run]:
+    """Simulate each excitation run for each sweep point; ``seed`` overrides the config's seed;
+    ``steady``: periodic runs in their periodic steady state (:func:`nlsid.simulate.engine.simulate_run`)."""
     models = [_build(p) for p in points]
     jobs = [(run, i * len(points) + j, j) for i, run in enumerate(runs) for j in range(len(points))]
     levels = [_levels(p) for p in points]
@@ -70,7 +71,8 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
         model, loop = models[j]
         noise = draw(levels[j], streams[j][index], run.n_samples)
         try:
-            out = simulate_run(model, loop, _excitation(run, loop), points[j].config.simulation.substeps, noise)
+            out = simulate_run(model, loop, _excitation(run, loop), points[j].config.simulation.substeps, noise,
+                               steady)
         except InputError as exc:
             raise points[j].locate(exc) from None
         units = {**out.units, **{name: unit for name, unit in run.units.items() if name in run.channels}}

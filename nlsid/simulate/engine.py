@@ -291,10 +291,66 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
     return dataclasses.replace(run, u=run.u + noise.u, y=y, r=None)
 
 
+STEADY_TOLERANCE = 1e-6   # a transient below this fraction of its start counts as settled
+MAX_LEAD_PERIODS = 20     # periods simulated ahead of a run at most
+
+
+def _decay_rate(ss: StateSpace, fs: float) -> float:
+    """The slowest decay rate (1/s) of the modes of ``ss``: min -Re(s), a discrete pole z as
+    s = fs ln z; 0 with an integrator or an unstable mode, inf without modes."""
+    poles = ss.poles()
+    if poles.size == 0:
+        return math.inf
+    if ss.discrete:
+        with np.errstate(divide="ignore"):
+            rates = -np.log(np.abs(poles)) * fs
+    else:
+        rates = -poles.real
+    return max(float(np.min(rates)), 0.0)
+
+
+def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
+    """The periods to simulate ahead of a periodic run without transient periods, so that its first
+    period is in periodic steady state, as it was measured: the time t = ln(1 / STEADY_TOLERANCE) /
+    sigma in which the slowest mode of the linear dynamics (rate sigma, :func:`_decay_rate`; a
+    plant's linear part, forces aside; every stage of a structure) decays to STEADY_TOLERANCE, in
+    periods, at most MAX_LEAD_PERIODS. A run with transient periods is simulated as measured: from
+    rest through them. None (0) for an arbitrary record, in closed loop (the loop's modes are not
+    the plant's), and for a model with an integrator or an unstable mode (no periodic steady state
+    to reach)."""
+    from nlsid.io.ranges import RangeRun
+
+    if run.period is None or isinstance(run, RangeRun) or loop is not None or run.transient_periods:
+        return 0
+    stages = [s for branch in model.branches for s in branch if isinstance(s, StateSpace)] \
+        if isinstance(model, Structure) else [model.ss]
+    sigma = min((_decay_rate(ss, run.fs) for ss in stages), default=math.inf)
+    if sigma == 0 or not math.isfinite(sigma):
+        return 0
+    needed = math.ceil(math.log(1 / STEADY_TOLERANCE) / sigma * run.fs / run.period)
+    return min(needed, MAX_LEAD_PERIODS)
+
+
+def _lead(x: np.ndarray | None, period: int, count: int) -> np.ndarray | None:
+    return None if x is None else np.concatenate([np.tile(x[:period], count), x])
+
+
 def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, substeps: int | None,
-                 noise: Noise | None = None) -> Run:
-    """Simulate one run; ``noise`` defaults to none."""
+                 noise: Noise | None = None, steady: bool = False) -> Run:
+    """Simulate one run; ``noise`` defaults to none. ``steady``: a periodic run is simulated in
+    its periodic steady state, as if its excitation had run :func:`lead_periods` more periods
+    before it (each signal's first period repeated ahead of it, then cut off again)."""
     noise = noise or Noise.zero(run.n_samples)
-    if isinstance(model, Structure):
-        return simulate_structure(model, run, substeps, noise)
-    return simulate_plant(model, loop, run, substeps, noise)
+    count = lead_periods(model, loop, run) if steady else 0
+    if count:
+        original, m = run, count * run.period
+        run = dataclasses.replace(run, u=_lead(run.u, run.period, count), y=_lead(run.y, run.period, count),
+                                  r=_lead(run.r, run.period, count),
+                                  channels={k: _lead(v, run.period, count) for k, v in run.channels.items()})
+        noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
+    out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
+           else simulate_plant(model, loop, run, substeps, noise))
+    if not count:
+        return out
+    return dataclasses.replace(out, u=out.u[m:], y=None if out.y is None else out.y[m:],
+                               r=None if out.r is None else out.r[m:], channels=original.channels)
