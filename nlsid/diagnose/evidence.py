@@ -339,10 +339,11 @@ class Evidence:
 
     @property
     def distortion_testable(self) -> bool:
-        """Odd or even detection lines (or harmonics of sine runs) with a measured noise level
-        exist, so that :attr:`odd_seen` and :attr:`even_seen` false mean no distortion seen."""
-        return any(row[kind]["noise_known"] and row[kind].get("lines", 1) > 0
-                   for row in self.lines + self.harmonics for kind in ("odd", "even"))
+        """Odd and even detection lines (or harmonics of sine runs) with a measured noise level
+        both exist, so that :attr:`odd_seen` and :attr:`even_seen` false mean no distortion seen
+        (a multisine without odd detection lines cannot show an odd nonlinearity)."""
+        return all(any(row[kind]["noise_known"] and row[kind].get("lines", 1) > 0 for row in self.lines + self.harmonics)
+                   for kind in ("odd", "even"))
 
     @property
     def linear_seen(self) -> bool:

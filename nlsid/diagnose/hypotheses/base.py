@@ -69,6 +69,9 @@ def with_lti(data: dict, lti: dict) -> dict:
     model = {k: v for k, v in data["model"].items() if k not in LTI_KEYS}
     return {**data, "model": {**model, **lti}}
 
+NONLINEAR_FAMILIES = ("friction", "stiffness", "input", "output", "structure")
+
+
 @dataclass(frozen=True)
 class Hypothesis:
     name: str
@@ -84,8 +87,13 @@ class Hypothesis:
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
     reading: Callable[[dict], str] | None = None  # what the final values mean physically, for the note
     holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
-    distorts: bool = False  # a nonlinearity seen at the detection lines: not fitted where they show none
     generalizes: tuple[str, ...] = ()  # families whose models are special cases of this one's (verdict ties)
+
+    @property
+    def distorts(self) -> bool:
+        """A nonlinearity: it leaves distortion at the detection lines, so it is not fitted where
+        they show none (:func:`nlsid.diagnose.diagnosis._round`)."""
+        return self.family in NONLINEAR_FAMILIES
 
 def explained_db(before: float, after: float) -> float:
     """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite

@@ -278,6 +278,6 @@ HYPOTHESES = (
     Hypothesis("wiener_hammerstein", "A static nonlinearity between two filters (Wiener-Hammerstein)", "structure",
                "min_slope_ratio", "(slope at the flatter end of x's range / slope at its centre)",
                "the BLA's shape the same at every level, its gain changing; odd and even distortion",
-               _applies, _estimate, _extend, ("curve", "first", "second"), distorts=True,
+               _applies, _estimate, _extend, ("curve", "first", "second"),
                generalizes=("input", "output")),
 )
