@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import sys
 from dataclasses import dataclass
 from typing import Any, Iterator
@@ -75,13 +76,46 @@ def emit_json(summary: dict) -> None:
     sys.stdout.flush()
 
 
+#: The environment variables by which rich takes a file for a terminal, or a terminal for a file.
+_RICH_TERMINAL_VARIABLES = ("TTY_COMPATIBLE", "TTY_INTERACTIVE", "FORCE_COLOR")
+
+
+def _stderr_is_plain_file() -> bool:
+    """Whether rich would write to stderr as to a plain file: not a terminal, none of the
+    variables that make it one, no Jupyter or IDLE (there a progress bar shows nothing)."""
+    try:
+        terminal = sys.stderr.isatty()
+    except (AttributeError, ValueError):  # no stream, or a closed one: rich's own decision
+        return False
+    return (not terminal and not any(name in os.environ for name in _RICH_TERMINAL_VARIABLES)
+            and "IPython" not in sys.modules and "idlelib" not in sys.modules)
+
+
 @contextlib.contextmanager
 def progress(description: str, total: int) -> Iterator[Any]:
-    """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step()`` callable."""
+    """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step()`` callable.
+
+    Where stderr is no terminal (a pipe, a log) the bar would show nothing and rich would write one
+    empty line when it ends: that line is written without rich's live display (0.015 s of `nlsid
+    bla`, benchmarks/bla.py), and with ``--json`` without rich at all."""
+    quiet = settings().quiet  # here: a generator holding the bar may be closed outside the command
+    if _stderr_is_plain_file():
+        if not click.get_current_context().params.get("as_json"):
+            # The stage's report follows through rich, once its outputs are written: imported now,
+            # as the bar imported it, the moments between those outputs and the exit stay short
+            # (an interrupt there ends in exit 130 beside complete outputs).
+            import rich.console  # noqa: F401
+            import rich.table  # noqa: F401
+        try:
+            yield lambda advance=1: None
+        finally:
+            if not quiet:
+                sys.stderr.write("\n")
+                sys.stderr.flush()
+        return
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    quiet = settings().quiet
     bar = Progress(
         TextColumn("{task.description}"),
         BarColumn(),

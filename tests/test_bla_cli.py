@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import platform
 import sys
 from pathlib import Path
@@ -162,3 +163,96 @@ def test_freed_run_buffers_are_kept_for_the_next_run():
 
     assert released("default") > 12 << 20
     assert released("keep") < 4 << 20
+
+
+@pytest.mark.parametrize("flags", [[], ["-q"], ["--json"], ["-q", "--json"]], ids=" ".join)
+def test_a_stderr_that_is_no_terminal_gets_what_the_rich_bar_writes_there(tmp_path, recording, run_cli,
+                                                                            monkeypatch, flags):
+    """Where stderr is no terminal the progress bar is not drawn (nlsid.cli.common.progress): rich's
+    bar writes one empty line there when it ends, and so does its stand-in, after a run as after an
+    error inside the bar; the table or summary and the error line that follow are the same."""
+    import nlsid.cli.common as common
+
+    path, _ = recording
+    runs, bins = two_level_runs()
+    runs[1].excited_bins = bins[1:]  # the second run of a level on other lines: an error inside the bar
+    bad = tmp_path / "bad.h5"
+    write_recording(bad, runs)
+
+    def outputs() -> list[tuple]:
+        done = run_cli(*flags, "bla", path, "-o", tmp_path / "bla.h5", "--force")
+        failed = run_cli(*flags, "bla", bad, "-o", tmp_path / "bad_bla.h5")
+        return [(result.exit_code, result.stdout, result.stderr) for result in (done, failed)]
+
+    without_bar = outputs()
+    monkeypatch.setattr(common, "_stderr_is_plain_file", lambda: False)  # rich's bar, on the same stderr
+    assert outputs() == without_bar
+    (done, summary, report), (failed, _, error) = without_bar
+    quiet, as_json = "-q" in flags, "--json" in flags
+    assert done == 0 and failed == 2 and bool(summary) is as_json
+    assert report.startswith("" if quiet else "\n") and ("G_BLA" in report) is not (quiet or as_json)
+    assert error.startswith("nlsid: error: " if quiet else "\nnlsid: error: ")
+
+
+LOADED_PROBE = """
+import json, sys
+from click.testing import CliRunner
+from nlsid.cli.main import cli
+result = CliRunner().invoke(cli, sys.argv[1:])
+assert result.exit_code == 0, result.output
+print(json.dumps(sorted({name.split(".")[0] for name in sys.modules})))
+"""
+
+
+def test_the_json_summary_on_a_pipe_loads_no_rich(tmp_path, recording):
+    """rich draws the bar and the table: ``--json`` on a stderr that is no terminal needs neither."""
+    import os
+    import subprocess
+
+    path, _ = recording
+    env = {key: value for key, value in os.environ.items()
+           if key not in ("TTY_COMPATIBLE", "TTY_INTERACTIVE", "FORCE_COLOR")}
+
+    def loaded(*extra: str) -> set[str]:
+        out = subprocess.run([sys.executable, "-c", LOADED_PROBE, "bla", str(path), "-o", str(tmp_path / "bla.h5"),
+                              "--force", *extra], capture_output=True, text=True, env=env, check=True)
+        return set(json.loads(out.stdout.splitlines()[-1]))
+
+    assert "rich" not in loaded("--json")
+    assert "rich" in loaded()  # the probe sees rich where the table is printed
+
+
+def test_each_level_is_summarised_once(tmp_path, recording, run_cli, monkeypatch):
+    """The table, ``--json``, bla.h5 and the summary across levels share one summary per level."""
+    import nlsid.analysis.levels as levels_module
+
+    path, _ = recording
+    calls = []
+    classify = levels_module.classify
+    monkeypatch.setattr(levels_module, "classify", lambda *args: calls.append(args) or classify(*args))
+    out = tmp_path / "bla.h5"
+    result = run_cli("bla", path, "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    assert len(calls) == 2  # the distortion class, once for each of the two levels
+    stored = read_bla(out)
+    assert [level["attrs"]["summary"] for level in stored["levels"]] == result.json()["levels"]
+
+
+TEARDOWN_PROBE = """
+import atexit, gc, sys
+atexit.register(lambda: print(gc.get_freeze_count()))
+sys.argv = ["nlsid", *sys.argv[1:]]
+from nlsid.cli.entry import main
+main()
+"""
+
+
+@pytest.mark.parametrize("args, code", [(["--version"], 0), (["bla", "missing.h5", "-o", "x.h5"], 2)])
+def test_a_finished_command_leaves_its_objects_out_of_the_last_collections(tmp_path, args, code):
+    """The console script freezes the objects of a finished command (cli/entry.py), so that the
+    interpreter's teardown does not trace them all again; the exit code is the command's."""
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", TEARDOWN_PROBE, *args], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == code, out.stderr
+    assert int(out.stdout.splitlines()[-1]) > 1000

@@ -105,6 +105,19 @@ def test_u_all_zero_feeds_neither_bla_nor_diagnose(run_cli, tmp_path):
     assert set(stages) == {"bla", "hosidf", "diagnose", "fit --model", "simulate --excitation"}
 
 
+def test_a_later_run_whose_reference_misses_an_excited_line(run_cli, tmp_path):
+    """bla checks the input on the spectra its analysis computes, after the first run of the level
+    has been accumulated; info checks the same line with its own: the same verdict, the same line."""
+    first, second = multisine("m0", 0), multisine("m1", 1)
+    first.r = first.u.copy()
+    second.r = np.zeros_like(second.u)  # --method auto: the reference method, and no reference at all
+    rec = str(tmp_path / "no_r.h5")
+    write_recording(rec, [first, second])
+    stages = assert_same_verdicts(run_cli, tmp_path, rec, {"bla": False})
+    assert stages["bla"]["reason"].startswith(f"{rec}:/runs/m1/u: excited bin ")
+    assert stages["bla"]["reason"].endswith(" carries no input; excited_bins does not match the signal")
+
+
 def test_an_excitation_file_feeds_only_simulate(run_cli, tmp_path):
     rec = str(tmp_path / "excitation.h5")
     write_recording(rec, [multisine("m0", 0, with_y=False), multisine("m1", 1, with_y=False)])

@@ -69,3 +69,41 @@ def test_excitation_is_refused_where_output_is_needed(tmp_path):
 def test_periods_view(tmp_path):
     run = make_run(3)
     assert np.array_equal(run.periods("u")[1], run.u[100:150])
+
+
+def test_samples_read_below_h5py_are_what_h5py_reads(tmp_path):
+    """Datasets of numbers are read with h5py's low-level calls (nlsid.io.hdf5_recording._dataset):
+    the values and type of ``group[name][()]``, whatever the byte order, width or shape; anything
+    else (a scalar, an empty dataspace, strings, booleans, complex numbers) is read by h5py itself,
+    and a group where a dataset belongs is refused."""
+    from nlsid.io.hdf5_recording import _dataset
+
+    path = tmp_path / "types.h5"
+    with h5py.File(path, "w") as f:
+        group = f.create_group("run")
+        for dtype in ("<f8", ">f8", "<f4", "f2", ">i2", "<u1", "<i8", ">u4"):
+            group.create_dataset(f"x{dtype}", data=np.arange(-3, 5).astype(dtype))
+        group.create_dataset("matrix", data=np.ones((2, 3)))
+        group.create_dataset("none", data=np.zeros(0))
+        group.create_dataset("scalar", data=3.0)
+        group.create_dataset("empty", data=h5py.Empty("f8"))
+        group.create_dataset("strings", data=np.array([b"a", b"b"]))
+        group.create_dataset("flags", data=np.array([True, False]))
+        group.create_dataset("complex", data=np.array([1 + 2j]))
+        group.create_dataset("v", data=np.arange(3.0)).attrs["unit"] = "V"
+        group.create_dataset("m", data=np.arange(3.0)).attrs["unit"] = b"m"
+        group.create_group("folder")
+    with h5py.File(path, "r") as f:
+        group, units = f["run"], {}
+        for name in group:
+            if name == "folder":
+                with pytest.raises(InputError, match="run/folder: expected a dataset"):
+                    _dataset(group, name, "run/folder", units)
+                continue
+            ours, theirs = _dataset(group, name, f"run/{name}", units), group[name][()]
+            if isinstance(theirs, h5py.Empty):
+                assert isinstance(ours, h5py.Empty)
+                continue
+            assert np.asarray(ours).dtype.str == np.asarray(theirs).dtype.str, name
+            assert np.shape(ours) == np.shape(theirs) and np.array_equal(ours, theirs), name
+        assert units == {"v": "V", "m": "m"}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
@@ -70,7 +71,14 @@ class LevelResult:
         ``"estimated"`` the noise level and the levels relative to it are NaN (null in JSON).
         ``total_var_db`` is the variance of G_BLA across realizations (noise plus distortion, M >= 2)
         and ``distortion_class`` the odd/even class from the line classes alone, with an upper
-        bound of the noise (:mod:`nlsid.analysis.distortion_class`): both hold with P = 1 too."""
+        bound of the noise (:mod:`nlsid.analysis.distortion_class`): both hold with P = 1 too.
+
+        Computed once: the table, ``--json``, bla.h5 and :func:`across_levels` share the one dict
+        (read it, or copy it to change it)."""
+        return self._summary
+
+    @cached_property
+    def _summary(self) -> dict:
         G2 = float(np.mean(np.abs(self.robust.G) ** 2))
         out = {
             "level": self.level,
@@ -104,11 +112,13 @@ class _LevelAccumulator:
     """Per-level state: the first run fixes the period, lines, periods and method.
 
     The runs are checked before they get here, by :class:`nlsid.io.feeds.BlaRuns` (the checks
-    ``nlsid info`` runs too): one period, lines and P per level, input at every excited line.
+    ``nlsid info`` runs too): one period, lines and P per level; that every excited line carries
+    input is checked on the spectra :meth:`add` computes (:meth:`LevelShape.check_spectra`).
     """
 
     def __init__(self, run: Run, shape: LevelShape, method: str, probability: float):
         self.level = run.level
+        self.shape = shape
         self.lines = classify_lines(run.period, run.fs, run.excited_bins)
         self.n_periods = run.n_periods
         self.use_reference = shape.use_reference
@@ -121,9 +131,11 @@ class _LevelAccumulator:
         self.fast = FastAccumulator()
         self.spectrum = SpectrumAccumulator(self.lines.period // 2 + 1)
 
-    def add(self, run: Run) -> None:
-        """Accumulate one run that :class:`~nlsid.io.feeds.BlaRuns` has checked."""
+    def add(self, run: Run, where: str) -> None:
+        """Accumulate one run that :class:`~nlsid.io.feeds.BlaRuns` has checked structurally, after
+        the input check on its spectra (errors name ``where``)."""
         stats = run_period_stats(run, self.use_reference)
+        self.shape.check_spectra(stats.U, stats.R, where)
         self.run_ids.append(run.run_id)
         self.rms2 += stats.u_rms**2
         self.robust.add(stats)
@@ -174,14 +186,14 @@ def analyse_runs(
     """
     if method not in METHOD_CHOICES:
         raise InputError("--method", f"expected one of {', '.join(METHOD_CHOICES)}, got {method!r}")
-    checks = BlaRuns(method)
+    checks = BlaRuns(method, check_input=False)  # the input check is made on the runs' spectra
     groups: dict[float | None, _LevelAccumulator] = {}
     for run, where in runs:
         shape = checks.add(run, where)
         if shape is not None:
             if run.level not in groups:
                 groups[run.level] = _LevelAccumulator(run, shape, method, probability)
-            groups[run.level].add(run)
+            groups[run.level].add(run, where)
         if on_run is not None:
             on_run(run)
         del run  # the next run is read while this one would still be held

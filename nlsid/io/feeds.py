@@ -104,11 +104,16 @@ class LevelShape:
 
     def check_input(self, run: Run, where: str) -> None:
         """Every excited line carries input (and, for the reference method, reference) power."""
-        U = np.abs(np.fft.rfft(run.periods("u").mean(axis=0))[self.excited])
+        R = np.fft.rfft(run.periods("r").mean(axis=0)) if self.use_reference else None
+        self.check_spectra(np.fft.rfft(run.periods("u").mean(axis=0)), R, where)
+
+    def check_spectra(self, U: np.ndarray, R: np.ndarray | None, where: str) -> None:
+        """:meth:`check_input` on the spectra of the run's mean period of u (and r, for the
+        reference method), at bins 0..N//2 and at any scale: the analysis has them at hand."""
+        U = np.abs(U[self.excited])
         no_reference = False
         if self.use_reference:
-            R = np.fft.rfft(run.periods("r").mean(axis=0))[self.excited]
-            no_reference = bool(np.any(R == 0))
+            no_reference = bool(np.any(R[self.excited] == 0))
         if np.any(U <= NO_INPUT * U.max()) or no_reference:
             bad = int(self.excited[np.argmin(U)])
             raise InputError(f"{where}/u", f"excited bin {bad} carries no input; "
@@ -119,11 +124,14 @@ class BlaRuns:
     """The checks of the BLA over a stream of ``(run, where)``: :meth:`add` each run, then :meth:`finish`.
 
     Multisine runs feed the robust and fast methods, arbitrary runs the Local Polynomial Method
-    (:mod:`nlsid.analysis.arbitrary`); sines are skipped (they are for ``hosidf``).
+    (:mod:`nlsid.analysis.arbitrary`); sines are skipped (they are for ``hosidf``). With
+    ``check_input=False`` :meth:`add` makes the structural checks only and the caller runs
+    :meth:`LevelShape.check_spectra` on the spectra it computes anyway (the BLA analysis).
     """
 
-    def __init__(self, method: str = "auto"):
+    def __init__(self, method: str = "auto", check_input: bool = True):
         self.method = method
+        self.check_input = check_input
         self.levels: dict[float | None, LevelShape] = {}
         self.arbitrary: list[str] = []
         self.skipped: list[str] = []
@@ -142,7 +150,8 @@ class BlaRuns:
         if shape is None:
             shape = self.levels[run.level] = LevelShape(run, self.method)
         shape.check(run, where)
-        shape.check_input(run, where)
+        if self.check_input:
+            shape.check_input(run, where)
         return shape
 
     def finish(self, source: str) -> None:

@@ -20,6 +20,7 @@ from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
+from h5py import h5a, h5d, h5o, h5s, h5t
 
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
@@ -101,6 +102,7 @@ class HDF5Recording(RecordingReader):
         try:
             self.format, self.version, self.provenance = self._check_root()
             self.run_ids = self._list_runs()
+            self._runs = self._file["runs"]  # looked up once, not for every run
         except Exception:
             self._file.close()
             raise
@@ -149,7 +151,7 @@ class HDF5Recording(RecordingReader):
         """Read and validate one run."""
         where = self.run_where(run_id)
         with hdf5_damage(where):
-            group = self._file["runs"][run_id]
+            group = self._runs[run_id]
             attrs = dict(group.attrs)
             present = [name for name in SIGNALS if name in group]
             extra = self.version >= 2 and "channels" in group
@@ -172,13 +174,23 @@ class HDF5Recording(RecordingReader):
 
 
 def _dataset(group: h5py.Group, name: str, where: str, units: dict[str, str]):
-    """The samples of dataset ``name`` of ``group``; its unit, if any, goes to ``units[name]``."""
+    """The samples of dataset ``name`` of ``group``; its unit, if any, goes to ``units[name]``.
+
+    Numbers in a simple dataspace, which h5py reads on its fast path, are read with h5py's
+    low-level calls into an array of the dataset's type, as that path reads them: 0.13 ms less per
+    dataset than through h5py's high-level objects (0.02 s of `nlsid bla` on 80 runs,
+    benchmarks/bla.py). Anything else is read by h5py."""
     with hdf5_damage(where):
-        dataset = group[name]
-        if not isinstance(dataset, h5py.Dataset):
+        dataset = h5o.open(group.id, name.encode("utf-8"), lapl=group._lapl)  # as group[name] opens it
+        if not isinstance(dataset, h5d.DatasetID):
             raise InputError(where, "expected a dataset")
-        samples = dataset[()]
-        unit = _text(dataset.attrs.get("unit"))
+        if (dataset.get_space().get_simple_extent_type() == h5s.SIMPLE
+                and isinstance(dataset.get_type(), (h5t.TypeIntegerID, h5t.TypeFloatID))):
+            samples = np.empty(dataset.shape, dataset.dtype)
+            dataset.read(h5s.ALL, h5s.ALL, samples)
+        else:
+            samples = h5py.Dataset(dataset)[()]
+        unit = _text(h5py.Dataset(dataset).attrs["unit"]) if h5a.exists(dataset, b"unit") else None
     if unit is not None:
         units[name] = unit
     return samples
