@@ -39,14 +39,51 @@ def test_missing_resonance_multiplies_the_template_by_the_mode(template, output)
     runner = ModelRunner.from_data({"model": model}, "model.yaml")
     hypothesis = _hypothesis("missing_resonance")
     assert hypothesis.applies(runner) is None
-    values = {"fr": 75.0, "zeta": 0.05, "b0": 2.0e5}
+    values = {"fr": 75.0, "zeta": 0.05, "gain": 2.0e5}
     extended = hypothesis.extend({"model": model}, values)["model"]
-    assert extended["type"] == "transfer_function"
+    assert extended["type"] == "zpk" and extended["gain"] == values["gain"]
     wr = 2 * np.pi * values["fr"]
-    mode = values["b0"] / (-W**2 + 2j * values["zeta"] * wr * W + wr**2)
-    np.testing.assert_allclose(_tf_response(extended), _state_space_response(model) * mode, rtol=1e-10)
+    # The model's response times the mode, scaled from the model's own leading coefficient ratio
+    # (the zpk gain) to the one given: g wr^2 / (s^2 + 2 zeta wr s + wr^2), g = gain / own gain.
+    num, den = _mechanical_or_tf(model)
+    mode = values["gain"] / (num[0] / den[0]) * wr**2 / (-W**2 + 2j * values["zeta"] * wr * W + wr**2)
+    np.testing.assert_allclose(_zpk_response(extended), _state_space_response(model) * mode, rtol=1e-8)
     # a free stage's velocity has no pole at 0 (the s of the velocity cancels it); its position has
-    assert (extended["den"][-1] == 0) == (model["type"] == "two_mass_stage" and output == "position")
+    has_zero_pole = any(p == 0 for p in extended["poles"] if not isinstance(p, (list, dict)))
+    assert has_zero_pole == (model["type"] == "two_mass_stage" and output == "position")
+    # the fit engine's key paths address the added mode and the gain
+    paths = hypothesis.paths({"model": model})
+    assert paths["fr"] == f"model.poles[{len(extended['poles']) - 1}].frequency" and paths["gain"] == "model.gain"
+
+
+def _mechanical_or_tf(model: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) in s of the model's response (leading coefficients nonzero), from its state space."""
+    from scipy.signal import ss2tf
+    ss = ModelRunner.from_data({"model": model}, "model.yaml").plant.ss
+    num, den = ss2tf(ss.A, ss.B[:, None], ss.C[None, :], np.array([[ss.D]]))
+    num = np.trim_zeros(np.where(np.abs(num[0]) < 1e-9 * np.abs(num[0]).max(), 0.0, num[0]), "f")
+    return num, den
+
+
+def _zpk_response(model: dict) -> np.ndarray:
+    """k prod(s - z) / prod(s - p) at s = jW, entries as docs/configs.md defines them: a number a real
+    root, [re, im] a conjugate pair, {frequency, damping} a unit-DC-gain mode."""
+    s = 1j * W
+
+    def factor(entry):
+        if isinstance(entry, dict):
+            w = 2 * np.pi * entry["frequency"]
+            return (s**2 + 2 * entry["damping"] * w * s + w**2) / w**2
+        if isinstance(entry, list):
+            return (s - complex(entry[0], entry[1])) * (s - complex(entry[0], -entry[1]))
+        return s - entry
+
+    out = model["gain"] * np.ones_like(s)
+    for z in model["zeros"]:
+        out = out * factor(z)
+    for p in model["poles"]:
+        out = out / factor(p)
+    return out
 
 
 def test_missing_resonance_does_not_apply_to_a_stage_with_forces():

@@ -44,9 +44,11 @@ backlash            odd distortion and a phase lag that       ``input_nonlineari
                     shrinks with level                        (width)
 quadratic_output    even distortion                           ``output_nonlinearity: polynomial``
                                                               [0, 1, a2] (a2)
-missing_resonance   BLA differs from the model around one     transfer function times
-                    frequency, no distortion                  b0 / (s^2 + 2 zeta wr s + wr^2)
-                                                              (fr = wr / 2 pi in Hz, zeta, b0); a
+missing_resonance   BLA differs from the model around one     the model as a ``zpk`` with the
+                    frequency, no distortion                  pole mode ``{frequency: fr, damping:
+                                                              zeta}`` and its ``gain`` refined:
+                                                              times g wr^2 / (s^2 + 2 zeta wr s +
+                                                              wr^2) (fr in Hz, zeta, gain); a
                                                               mass_spring_damper or two_mass_stage
                                                               becomes its transfer function (mode
                                                               in series)
@@ -64,8 +66,8 @@ wiener_hammerstein  the BLA's shape the same at every level,   ``wiener_hammerst
                     its gain changing; odd and even          poles and zeros split over ``first``
                     distortion                                and ``second``, polynomial f between
                                                               (a1 .. aP, the filters' coefficients)
-delay               BLA phase error growing linearly with     ``delay`` (seconds, whole samples)
-                    frequency, gain right, no distortion
+delay               BLA phase error growing linearly with     ``delay`` (seconds, a real number
+                    frequency, gain right, no distortion      of samples)
 =================== ========================================= ====================================
 
 Friction is one family of nested laws: Coulomb (fc) in Stribeck (fs = fc) in LuGre (sigma0 to
@@ -75,7 +77,7 @@ mechanics correction starts at the model's own values and is refined by the fit 
 forces. The delay and the missing resonance are linear: they are estimated from the ratio
 ``G_BLA / G_model`` of the measured and the model's BLA (evidence), the delay from the slope of its
 phase (weighted least squares, weights ``2 |G|^2 / var(G)``, the inverse variance of the phase),
-the resonance by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
+the resonance's start by Levy's linearised least squares on ``R(s) (s^2 + a1 s + a0) = b0`` (book
 Section 7.2's linear-in-the-parameters weighting idea, here with weights ``1/std(R)``), the coupled
 mode by the same on ``R(s) (s^2 + a1 s + a0) = b2 s^2 + b1 s + b0``
 (:mod:`~nlsid.diagnose.hypotheses.coupled_mode`, which derives R from the two-mass equations). The

@@ -54,25 +54,10 @@ import numpy as np
 
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, regress
 from nlsid.diagnose.hypotheses.bla_ratio import bla_ratios
-from nlsid.diagnose.hypotheses.resonance import _as_transfer_function, _resonance_applies
+from nlsid.diagnose.hypotheses.resonance import _as_zpk, _resonance_applies
 
 MIN_DAMPING = 1e-3  # a start damping ratio at least this (the fit engine keeps the sign of its start)
 PARAMETERS = ("fr", "fa", "zr", "za")
-
-
-def _entries(roots: np.ndarray) -> list:
-    """Roots as zpk entries: a real root a number, a conjugate pair one ``[re, im]`` (im > 0)."""
-    return [float(r.real) if r.imag == 0 else [float(r.real), float(r.imag)] for r in roots if r.imag >= 0]
-
-
-def _as_zpk(model: dict) -> dict:
-    """A continuous transfer function or a mechanical template as a zpk of the same response."""
-    tf = _as_transfer_function(model)
-    num, den = (np.trim_zeros(np.asarray(tf[key], dtype=float), "f") for key in ("num", "den"))
-    out = {k: v for k, v in tf.items() if k not in ("type", "num", "den")}
-    out.update(type="zpk", zeros=_entries(np.roots(num)) if num.size else [], poles=_entries(np.roots(den)),
-               gain=float(num[0] / den[0]) if num.size else 0.0)
-    return out
 
 
 def _estimate_coupled(ctx: Context) -> Estimate | str:

@@ -1,5 +1,19 @@
-"""A missing resonance: the model times b0 / (s^2 + 2 zeta wr s + wr^2), estimated by Levy's
-linearised least squares on the BLA ratio."""
+"""A missing resonance: the model times g wr^2 / (s^2 + 2 zeta wr s + wr^2), a mode of DC gain g.
+
+Estimate. Levy's linearised least squares (Levy 1959) on the BLA ratio R = G_BLA / G_model of the
+evidence (:func:`bla_ratios`), weighted by 1 / std(R): R (s^2 + a1 s + a0) = b0, so wr^2 = a0,
+zeta = a1 / (2 wr) and the mode's DC gain g = b0 / a0 (1 where the model is right at low
+frequency). Those are the start; the fit engine refines fr, zeta and the extended model's gain by
+the simulation error (``paths``): Levy's equation error weights the lines by |s^2 + a1 s + a0|,
+which biases the damping where the resonance is sharp.
+
+Extension. The model as a continuous ``zpk`` (a transfer function's roots; a mechanical template
+through its transfer function, :func:`_as_transfer_function`) with the pole mode ``{frequency: fr,
+damping: zeta}`` added (a zpk mode is the unit-DC-gain factor wr^2 / (s^2 + 2 zeta wr s + wr^2),
+``docs/configs.md``) and its gain times g: exactly the model times the mode. ``gain`` is the
+extended zpk's gain (the model's own times g): the one key that the fit engine can refine for the
+mode's gain.
+"""
 
 from __future__ import annotations
 
@@ -61,6 +75,21 @@ def _as_transfer_function(model: dict) -> dict:
     out.update(type="transfer_function", domain="continuous", num=num, den=den)
     return out
 
+def _entries(roots: np.ndarray) -> list:
+    """Roots as zpk entries: a real root a number, a conjugate pair one ``[re, im]`` (im > 0)."""
+    return [float(r.real) if r.imag == 0 else [float(r.real), float(r.imag)] for r in roots if r.imag >= 0]
+
+
+def _as_zpk(model: dict) -> dict:
+    """A continuous transfer function or a mechanical template as a zpk of the same response."""
+    tf = _as_transfer_function(model)
+    num, den = (np.trim_zeros(np.asarray(tf[key], dtype=float), "f") for key in ("num", "den"))
+    out = {k: v for k, v in tf.items() if k not in ("type", "num", "den")}
+    out.update(type="zpk", zeros=_entries(np.roots(num)) if num.size else [], poles=_entries(np.roots(den)),
+               gain=float(num[0] / den[0]) if num.size else 0.0)
+    return out
+
+
 def _estimate_resonance(ctx: Context) -> Estimate | str:
     ratios = bla_ratios(ctx)
     if not ratios:
@@ -79,21 +108,27 @@ def _estimate_resonance(ctx: Context) -> Estimate | str:
         return "the BLA ratio shows no stable resonance"
     wr = math.sqrt(a0)
     fr_std = est.std["a0"] / (2 * wr) / (2 * math.pi)
-    return Estimate({"fr": wr / (2 * math.pi), "zeta": a1 / (2 * wr), "b0": b0},
-                    {"fr": fr_std, "zeta": float("nan"), "b0": est.std["b0"]}, est.explained_db,
-                    "Levy's linearised least squares on the BLA ratio")
+    gain = _as_zpk(ctx.runner.data["model"])["gain"] * b0 / a0
+    return Estimate({"fr": wr / (2 * math.pi), "zeta": a1 / (2 * wr), "gain": gain},
+                    {"fr": fr_std, "zeta": float("nan"), "gain": float("nan")}, est.explained_db,
+                    "Levy's linearised least squares on the BLA ratio (start values)")
 
 def _extend_resonance(data: dict, values: dict) -> dict:
     out = copy.deepcopy(data)
-    wr = 2 * math.pi * values["fr"]
-    model = out["model"] = _as_transfer_function(out["model"])
-    model["num"] = [float(c) for c in np.asarray(model["num"], dtype=float) * values["b0"]]
-    model["den"] = [float(c) for c in np.convolve(model["den"], [1.0, 2 * values["zeta"] * wr, wr * wr])]
+    model = out["model"] = _as_zpk(out["model"])
+    model["poles"] = model["poles"] + [{"frequency": float(values["fr"]), "damping": float(values["zeta"])}]
+    model["gain"] = float(values["gain"])
     return out
+
+
+def _paths(data: dict) -> dict[str, str]:
+    """The added mode's key paths (the last pole of the extended zpk) and the zpk's gain."""
+    pole = f"model.poles[{len(_as_zpk(data['model'])['poles'])}]"
+    return {"fr": f"{pole}.frequency", "zeta": f"{pole}.damping", "gain": "model.gain"}
 
 
 HYPOTHESES = (
     Hypothesis("missing_resonance", "A missing resonance", "linear", "fr", "Hz",
                "BLA differs from the model around one frequency; no distortion",
-               _resonance_applies, _estimate_resonance, _extend_resonance, ("fr", "zeta", "b0")),
+               _resonance_applies, _estimate_resonance, _extend_resonance, ("fr", "zeta", "gain"), _paths),
 )
