@@ -68,10 +68,44 @@ def test_fit_on_one_period_runs_recovers_a_light_damping():
 
 def test_no_lead_for_a_free_mass_or_an_arbitrary_record():
     free = ModelRunner.from_data({"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0,
-                                            "stiffness": 0.0, "gain": 1.0},
-                                  "closed_loop": {"controller": {"type": "pid", "kp": 1.0, "ki": 0.0, "kd": 0.1,
-                                                                 "tau": 0.01}}}, "free.yaml")
+                                            "stiffness": 0.0, "gain": 1.0}}, "free.yaml")
     run = one_period_runs(np.random.default_rng(3), 1)[0]
-    assert lead_periods(free.plant, free.loop, run) == 0
+    assert lead_periods(free.plant, None, run) == 0  # open loop: the free mass never settles
     arbitrary = dataclasses.replace(run, period=None, kind="arbitrary", excited_bins=None, realization=None, level=None)
     assert lead_periods(ModelRunner.from_data(MODEL, "msd.yaml").plant, None, arbitrary) == 0
+
+
+# A PD loop around a free mass (m = 1, no spring: the plant alone has no steady state) with a
+# one-sample computation delay, at FS = N = 1024: the loop's slowest mode (about 1.6 Hz, damping
+# ratio 0.1 in the loop algebra below) decays by e in 1 s, one period.
+LOOP = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 0.0, "stiffness": 0.0, "gain": 1.0},
+        "closed_loop": {"controller": {"type": "pid", "kp": 100.0, "kd": 2.0, "tau": 0.002},
+                        "computation_delay": 1}}
+
+
+def loop_steady_state(r: np.ndarray) -> np.ndarray:
+    """The exact periodic response y of the sampled loop to the periodic reference r, per DFT line:
+    Y = C G z^-1 / (1 + C G z^-1) R, G = 1 / s^2 through the ZOH (scipy's cont2discrete),
+    C(z) = kp + kd s / (tau s + 1) at Tustin's s = 2 fs (z - 1) / (z + 1) (docs/configs.md), z^-1 the
+    computation delay."""
+    b, a, _ = cont2discrete(([1.0], [1.0, 0.0, 0.0]), 1 / FS, method="zoh")
+    R = np.fft.rfft(r)
+    assert abs(R[0]) < 1e-9 * np.max(np.abs(R))  # no DC in the reference (odd lines), so none in y
+    z = np.exp(2j * np.pi * np.arange(1, R.size) / r.size)
+    G = np.polyval(np.ravel(b), z) / np.polyval(np.ravel(a), z)
+    s = 2 * FS * (z - 1) / (z + 1)
+    L = (100.0 + 2.0 * s / (0.002 * s + 1)) * G / z
+    return np.fft.irfft(np.concatenate([[0.0], L / (1 + L) * R[1:]]), n=r.size)
+
+
+def test_a_one_period_run_in_closed_loop_is_simulated_in_the_loops_periodic_steady_state():
+    run = one_period_runs(np.random.default_rng(4), 1)[0]
+    run = dataclasses.replace(run, r=run.u)  # the excitation is the loop's reference
+    runner = ModelRunner.from_data(LOOP, "loop.yaml")
+    truth = loop_steady_state(run.u)
+    count = lead_periods(runner.plant, runner.loop, run)
+    assert 0 < count <= 20
+    error = np.max(np.abs(runner.simulate(run).y - truth))
+    transient = np.max(np.abs(simulate_run(runner.plant, runner.loop, run, None).y - truth))
+    assert transient > 0.05 * np.max(np.abs(truth))
+    assert error <= 1e-5 * transient, (error, transient, count)

@@ -309,22 +309,40 @@ def _decay_rate(ss: StateSpace, fs: float) -> float:
     return max(float(np.min(rates)), 0.0)
 
 
+def _loop_decay_rate(plant: Plant, loop: ClosedLoop, fs: float, n: int) -> float:
+    """The slowest decay rate (1/s) of the sampled closed loop (:func:`closed_loop_poles`: plant,
+    dead time, output timing, the drive's law) and of the reference's prefilter, a pole z as
+    s = fs ln z; 0 with a pole on or outside the unit circle."""
+    ss = dataclasses.replace(plant.ss, C=plant.ss.C * fs) if plant.difference_output else plant.ss
+    shift = timing(plant, fs, n, True, loop.computation_delay)
+    poles = closed_loop_poles(ss, _controller(loop, fs), fs, shift)
+    if loop.prefilter is not None:
+        poles = np.concatenate([poles, tustin(loop.prefilter, 1.0 / fs).poles()])
+    if poles.size == 0:
+        return math.inf
+    with np.errstate(divide="ignore"):
+        return max(float(np.min(-np.log(np.abs(poles)) * fs)), 0.0)
+
+
 def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
     """The periods to simulate ahead of a periodic run without transient periods, so that its first
     period is in periodic steady state, as it was measured: the time t = ln(1 / STEADY_TOLERANCE) /
-    sigma in which the slowest mode of the linear dynamics (rate sigma, :func:`_decay_rate`; a
-    plant's linear part, forces aside; every stage of a structure) decays to STEADY_TOLERANCE, in
-    periods, at most MAX_LEAD_PERIODS. A run with transient periods is simulated as measured: from
-    rest through them. None (0) for an arbitrary record, in closed loop (the loop's modes are not
-    the plant's), and for a model with an integrator or an unstable mode (no periodic steady state
-    to reach)."""
+    sigma in which the slowest mode of the linear dynamics (rate sigma: :func:`_decay_rate` of a
+    plant's linear part, forces aside, or of every stage of a structure; in closed loop
+    :func:`_loop_decay_rate`, the loop's modes) decays to STEADY_TOLERANCE, in periods, at most
+    MAX_LEAD_PERIODS. A run with transient periods is simulated as measured: from rest through
+    them. None (0) for an arbitrary record, and for a model (or loop) with an integrator or an
+    unstable mode (no periodic steady state to reach)."""
     from nlsid.io.ranges import RangeRun
 
-    if run.period is None or isinstance(run, RangeRun) or loop is not None or run.transient_periods:
+    if run.period is None or isinstance(run, RangeRun) or run.transient_periods:
         return 0
-    stages = [s for branch in model.branches for s in branch if isinstance(s, StateSpace)] \
-        if isinstance(model, Structure) else [model.ss]
-    sigma = min((_decay_rate(ss, run.fs) for ss in stages), default=math.inf)
+    if loop is not None:
+        sigma = _loop_decay_rate(model, loop, run.fs, run.n_samples)
+    else:
+        stages = [s for branch in model.branches for s in branch if isinstance(s, StateSpace)] \
+            if isinstance(model, Structure) else [model.ss]
+        sigma = min((_decay_rate(ss, run.fs) for ss in stages), default=math.inf)
     if sigma == 0 or not math.isfinite(sigma):
         return 0
     needed = math.ceil(math.log(1 / STEADY_TOLERANCE) / sigma * run.fs / run.period)
