@@ -77,8 +77,9 @@ class FRFData:
     def frequency(self) -> np.ndarray:
         return self.bins * self.fs / self.period
 
-    @property
+    @functools.cached_property
     def z(self) -> np.ndarray:
+        """exp(j 2 pi k / N) at the bins (computed once: every model evaluation of a fit needs it)."""
         return np.exp(2j * np.pi * self.bins / self.period)
 
     def subset(self, index: np.ndarray) -> "FRFData":
@@ -201,6 +202,7 @@ class _Basis:
         self.free_a = [i for i in range(na + 1) if i != self.fixed]
         self.powers = self.omega[:, None] ** np.arange(max(na + integrators, nb) + 1)[None, :]
         self.factor_values = self.powers[:, : integrators + 1] @ self.factor_asc
+        self.shift = z ** (-delay)
 
     def split(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ascending coefficients of A and B in Omega."""
@@ -215,13 +217,12 @@ class _Basis:
 
     def model(self, theta: np.ndarray) -> np.ndarray:
         a, b = self.split(theta)
-        z = self.data.z
         if self.domain == "z":
             full = self.full_denominator(a)
             g = (self.powers[:, : self.nb + 1] @ b) / (self.powers[:, : full.size] @ full)
         else:
-            g = _zoh_response(b, self.full_denominator(a), self.h * self.scale, z)
-        return g * z ** (-self.delay)
+            g = _zoh_response(b, self.full_denominator(a), self.h * self.scale, self.data.z)
+        return g * self.shift
 
     def poles_of(self, a: np.ndarray) -> np.ndarray:
         """Poles (z, or s in units of omega_s) of the free factor A with ascending coefficients ``a``."""
