@@ -1,5 +1,11 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
+The measured data of every open-loop case without forces (the linear ones, the input and output
+blocks, the fractional delay, the linear controls) come from tests/independent_plant.py, written
+without nlsid's simulator (exact ZOH stepping, the modified z-transform for the delay); the cases
+with friction or a cubic spring, and the closed-loop ones, still from nlsid's simulator
+(diagnose_cases.measure) until the independent plant has forces and loops.
+
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is
 detectable (15 to 50 dB above the noise floor of the averaged period), and the test checks:
@@ -21,6 +27,7 @@ rule of nlsid.diagnose.verdict, so a failure here is a defect, not bad luck).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -29,7 +36,8 @@ import pytest
 from scipy.signal import ss2tf
 
 sys.path.insert(0, str(Path(__file__).parent))
-from diagnose_cases import FS, MSD, STAGE, TF, excitation, measure, with_closed_loop  # noqa: E402
+import independent_plant  # noqa: E402
+from diagnose_cases import FS, MSD, NOISE, STAGE, TF, U_NOISE, excitation, measure, with_closed_loop  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 from nlsid.diagnose.evidence import error_test  # noqa: E402
 from nlsid.diagnose.gain import model_residuals, score  # noqa: E402
@@ -57,6 +65,19 @@ def _resonance(rng):
     wr = 2 * np.pi * fr
     true = _key(_key(TF, "num", [1e4 * wr * wr]), "den", [float(c) for c in np.convolve([1, 20, 4e4], [1, 0.1 * wr, wr * wr])])
     return TF, true, fr
+
+
+def _measure(true: dict, runs, rng: np.random.Generator):
+    """The runs as measured on the true system: independent_plant where it models the config (the
+    same noise as diagnose_cases.measure, drawn in the same order), else nlsid's simulator."""
+    if not independent_plant.applies(true):
+        return measure(true, runs, rng)
+    out = []
+    for run in runs:
+        n = rng.standard_normal(run.n_samples) * NOISE
+        measured_u = run.u + rng.standard_normal(run.n_samples) * U_NOISE
+        out.append(dataclasses.replace(run, u=measured_u, y=independent_plant.output(true, run.u, run.fs) + n))
+    return out
 
 
 def _case(effect: str, rng: np.random.Generator):
@@ -167,7 +188,7 @@ def _assert_truth_at_floor(diagnosis, true: dict, runs) -> None:
 def test_hidden_effect_is_named_recovered_and_gains_like_the_truth(seed, effect):
     rng = np.random.default_rng(seed)
     nominal, true, value = _case(effect, rng)
-    runs = measure(true, excitation(rng), rng)
+    runs = _measure(true, excitation(rng), rng)
     result = diagnose(nominal, "nominal.yaml", runs, "recording.h5")
     assert result.verdict.winner == EXPECTED.get(effect, effect), result.headline()
     winner = result.winner
@@ -182,7 +203,7 @@ def test_hidden_effect_is_named_recovered_and_gains_like_the_truth(seed, effect)
 def test_linear_control_has_no_significant_discrepancy(seed, closed):
     rng = np.random.default_rng(seed)
     nominal = with_closed_loop(MSD) if closed else MSD
-    runs = measure(nominal, excitation(rng), rng)
+    runs = _measure(nominal, excitation(rng), rng)
     result = diagnose(nominal, "nominal.yaml", runs, "recording.h5")
     assert result.verdict.status == NO_DISCREPANCY, result.headline()
     assert result.verdict.winner is None

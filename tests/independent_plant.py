@@ -1,0 +1,120 @@
+"""A measured plant for the tests, written independently of nlsid's simulator: linear dynamics
+stepped exactly for a zero-order-hold input, a fractional dead time, and static blocks on the
+input and the output, as docs/configs.md defines them.
+
+Linear part. A continuous transfer function num/den (descending powers of s; a
+``mass_spring_damper`` m p'' + c p' + k p = gain u is gain / (m s^2 + c s + k)), strictly proper,
+in a state-space form (A, B, C) (scipy's ``tf2ss``). The plant input v(t) is the held sample
+sequence v[k] on [k T, (k + 1) T). A dead time d = (m + f) T (m whole samples, 0 <= f < 1) shifts
+the switching instants: on [k T, (k + 1) T) the plant sees v[k - m - 1] during the first f T and
+v[k - m] after it, so, with Phi(tau) = e^{A tau} and Gamma(tau) = int_0^tau e^{A s} ds B (the block
+exponential of Van Loan 1978, tests/exact_zoh.py),
+
+    x[k + 1] = Phi(T) x[k] + Phi((1 - f) T) Gamma(f T) v[k - m - 1] + Gamma((1 - f) T) v[k - m],
+    y[k] = C x[k]   (the output sampled at t_k = k T, from rest),
+
+the modified z-transform of the held input (e.g. Franklin, Powell and Workman 1998, Digital Control
+of Dynamic Systems, Sec. 4.3.4): exact. The recursion runs as two discrete transfer functions
+(``ss2tf``, ``lfilter``).
+
+Blocks (docs/configs.md, "blocks"): ``input_nonlinearity`` acts on the input samples before the hold
+(saturation, deadzone, backlash: a play operator starting at 0), ``output_nonlinearity`` (a
+polynomial) on the output samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import lfilter, ss2tf, tf2ss
+
+from exact_zoh import zoh
+
+LINEAR_TYPES = ("mass_spring_damper", "transfer_function")
+
+
+def transfer_function(model: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(num, den) in s of a continuous transfer_function or a mass_spring_damper (position output)."""
+    if model["type"] == "mass_spring_damper":
+        return (np.array([float(model.get("gain", 1.0))]),
+                np.array([float(model["mass"]), float(model.get("damping", 0.0)), float(model.get("stiffness", 0.0))]))
+    return np.asarray(model["num"], dtype=float), np.asarray(model["den"], dtype=float)
+
+
+def _block_exponential(A: np.ndarray, B: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    if tau == 0.0:
+        return np.eye(A.shape[0]), np.zeros(A.shape[0])
+    return zoh(A, B, tau)
+
+
+def linear_response(num: np.ndarray, den: np.ndarray, v: np.ndarray, fs: float, delay: float = 0.0) -> np.ndarray:
+    """The sampled output of num/den (strictly proper) to the held input v with a dead time
+    ``delay`` (seconds), from rest (module docstring)."""
+    A, B, C, D = tf2ss(num, den)
+    assert np.allclose(D, 0.0), "a strictly proper plant"
+    B, C = B[:, 0], C[0]
+    T = 1.0 / fs
+    whole = math.floor(delay * fs + 1e-12)
+    f = delay * fs - whole
+    Phi, _ = _block_exponential(A, B, T)
+    Phi_rest, Gamma_rest = _block_exponential(A, B, (1 - f) * T)
+    _, Gamma_first = _block_exponential(A, B, f * T)
+    early = Phi_rest @ Gamma_first      # multiplies v[k - m - 1]
+    late = Gamma_rest                    # multiplies v[k - m]
+    y = np.zeros(v.size)
+    for gain, shift in ((early, whole + 1), (late, whole)):
+        b, a = ss2tf(Phi, gain[:, None], C[None, :], np.zeros((1, 1)))
+        # x[k+1] = Phi x[k] + gain w[k], y[k] = C x[k]: y = C (zI - Phi)^-1 gain w, b[0] = 0
+        w = np.concatenate([np.zeros(shift), v[: v.size - shift]]) if shift else v
+        y += lfilter(np.ravel(b), np.ravel(a), w)
+    return y
+
+
+def input_block(block: dict | None, u: np.ndarray) -> np.ndarray:
+    """docs/configs.md's input blocks on the samples (held afterwards)."""
+    if block is None:
+        return u
+    kind = block["type"]
+    if kind == "saturation":
+        return np.clip(u, block["lower"], block["upper"])
+    if kind == "deadzone":
+        lower, upper = block["lower"], block["upper"]
+        return np.where(u > upper, u - upper, np.where(u < lower, u - lower, 0.0))
+    if kind == "backlash":
+        half, out, y = block["width"] / 2, np.empty_like(u), 0.0
+        for k, x in enumerate(u):
+            if x - y > half:
+                y = x - half
+            elif y - x > half:
+                y = x + half
+            out[k] = y
+        return out
+    raise ValueError(f"no independent model of the input block {kind!r}")
+
+
+def output_block(block: dict | None, y: np.ndarray) -> np.ndarray:
+    """docs/configs.md's output polynomial: sum_i c_i y^i."""
+    if block is None:
+        return y
+    assert block["type"] == "polynomial", block
+    return sum(c * y**i for i, c in enumerate(block["coefficients"]))
+
+
+def applies(data: dict) -> bool:
+    """Whether this module models the config: open loop, a linear template or continuous transfer
+    function, no forces, at most input/output blocks and a dead time."""
+    model = data["model"]
+    known = {"type", "mass", "damping", "stiffness", "gain", "num", "den", "domain", "delay", "input_nonlinearity",
+             "output_nonlinearity"}
+    return ("closed_loop" not in data and model["type"] in LINEAR_TYPES and not set(model) - known
+            and model.get("domain", "continuous") == "continuous" and model.get("output", "position") == "position")
+
+
+def output(data: dict, u: np.ndarray, fs: float) -> np.ndarray:
+    """The noise-free sampled output of the plant ``data`` to the command u."""
+    assert applies(data), data
+    model = data["model"]
+    num, den = transfer_function(model)
+    y = linear_response(num, den, input_block(model.get("input_nonlinearity"), u), fs, float(model.get("delay", 0.0)))
+    return output_block(model.get("output_nonlinearity"), y)
