@@ -1,10 +1,11 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
-The measured data of every open-loop case without forces (the linear ones, the input and output
-blocks, the fractional delay, the linear controls) come from tests/independent_plant.py, written
-without nlsid's simulator (exact ZOH stepping, the modified z-transform for the delay); the cases
-with friction or a cubic spring, and the closed-loop ones, still from nlsid's simulator
-(diagnose_cases.measure) until the independent plant has forces and loops.
+The measured data of every open-loop case without friction (the linear ones, the input and
+output blocks, the fractional delay, the cubic spring, the linear controls) come from
+tests/independent_plant.py, written without nlsid's simulator (exact ZOH stepping, the modified
+z-transform for the delay, Runge-Kutta for the cubic spring); the friction and closed-loop cases
+still from nlsid's simulator (diagnose_cases.measure) until the independent plant has stick-slip
+and loops.
 
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is
@@ -72,11 +73,12 @@ def _measure(true: dict, runs, rng: np.random.Generator):
     same noise as diagnose_cases.measure, drawn in the same order), else nlsid's simulator."""
     if not independent_plant.applies(true):
         return measure(true, runs, rng)
+    Y = independent_plant.outputs(true, np.stack([run.u for run in runs]), runs[0].fs)
     out = []
-    for run in runs:
+    for run, y in zip(runs, Y):
         n = rng.standard_normal(run.n_samples) * NOISE
         measured_u = run.u + rng.standard_normal(run.n_samples) * U_NOISE
-        out.append(dataclasses.replace(run, u=measured_u, y=independent_plant.output(true, run.u, run.fs) + n))
+        out.append(dataclasses.replace(run, u=measured_u, y=y + n))
     return out
 
 

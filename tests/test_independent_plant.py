@@ -41,3 +41,15 @@ def test_blocks_as_documented():
                                [0.0, 0.0, 0.15, 0.05, -0.05, 0.0, 0.25])
     np.testing.assert_allclose(ip.output_block({"type": "polynomial", "coefficients": [0.0, 1.0, 0.5]}, u),
                                u + 0.5 * u**2)
+
+
+def test_cubic_spring_without_k3_is_the_exact_linear_response():
+    """RK4 of the spring with k3 = 0 against the exact ZOH stepping: the Runge-Kutta error alone,
+    order (omega h)^4 globally: 4e-8 of the response here (measured), asserted below 1e-6."""
+    rng = np.random.default_rng(1)
+    U = rng.standard_normal((2, 500))
+    model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4e4, "gain": 1e4,
+             "nonlinearities": [{"type": "cubic_stiffness", "k3": 0.0}]}
+    Y = ip.cubic_response(model, U, FS)
+    exact = np.stack([ip.linear_response(NUM, DEN, u, FS) for u in U])
+    np.testing.assert_allclose(Y, exact, rtol=0, atol=1e-6 * np.max(np.abs(exact)))
