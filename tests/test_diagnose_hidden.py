@@ -1,11 +1,11 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
-The measured data of every open-loop case without friction (the linear ones, the input and
-output blocks, the fractional delay, the cubic spring, the linear controls) come from
-tests/independent_plant.py, written without nlsid's simulator (exact ZOH stepping, the modified
-z-transform for the delay, Runge-Kutta for the cubic spring); the friction and closed-loop cases
-still from nlsid's simulator (diagnose_cases.measure) until the independent plant has stick-slip
-and loops.
+The measured data of every open-loop case but the Stribeck and LuGre ones (the linear ones, the
+input and output blocks, the fractional delay, the cubic spring, Coulomb friction, the linear
+controls) come from tests/independent_plant.py, written without nlsid's simulator (exact ZOH
+stepping, the modified z-transform for the delay, Runge-Kutta for the cubic spring, the
+closed-form stick-slip for Coulomb); Stribeck, LuGre and the closed-loop cases still from nlsid's
+simulator (diagnose_cases.measure).
 
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is

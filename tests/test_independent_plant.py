@@ -53,3 +53,22 @@ def test_cubic_spring_without_k3_is_the_exact_linear_response():
     Y = ip.cubic_response(model, U, FS)
     exact = np.stack([ip.linear_response(NUM, DEN, u, FS) for u in U])
     np.testing.assert_allclose(Y, exact, rtol=0, atol=1e-6 * np.max(np.abs(exact)))
+
+
+def test_coulomb_stick_slip_from_rest_under_a_constant_force():
+    """A constant drive 500 N against fc = 100 N on m = 1, c = 20, k = 4e4 (sigma = -10/s, wd =
+    sqrt(4e4 - 100)), by hand: the mass slides about p1 = 400 / k = 0.01 for half a damped period,
+    stops at p1 (1 + r), r = e^{sigma pi / wd}; the spring then pulls back harder than fc, it slides
+    about p2 = 600 / k = 0.015 and stops at p2 - (p1 (1 + r) - p2) r, where |500 - k p| < fc: stuck
+    for good. A drive within +-fc never moves it."""
+    model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4e4, "gain": 1e4,
+             "nonlinearities": [{"type": "coulomb", "fc": 100.0}]}
+    r = np.exp(-10.0 * np.pi / np.sqrt(4e4 - 100.0))
+    first = 0.01 * (1 + r)
+    final = 0.015 - (first - 0.015) * r
+    assert abs(500.0 - 4e4 * final) < 100.0  # the hand computation's premise: it sticks there
+    fs = 20 * np.sqrt(4e4 - 100.0) / np.pi  # the first stop, at pi / wd, is sample 20
+    y = ip.coulomb_response(model, np.full(200, 0.05), fs)
+    assert y[20] == pytest.approx(first, rel=1e-9)
+    np.testing.assert_allclose(y[-50:], final, rtol=1e-9)
+    np.testing.assert_array_equal(ip.coulomb_response(model, np.full(50, 0.009), FS), 0.0)
