@@ -39,6 +39,10 @@ sample), and there the mass sticks if |gain u - k p| <= fc, else slides on the o
 mass feels a constant force until the held input changes, so it leaves only at a sample instant.
 No time step: the trajectory is exact to the root finder's tolerance.
 
+A PID loop (:func:`closed_loop_response`): the drive's law of docs/configs.md, u[k] = C(e)[k],
+e[k] = r[k] - y[k], y[k] the measured output (with its noise), C the PID through Tustin's
+substitution as a difference equation, u held over the sample; the plant stepped exactly as above.
+
 Blocks (docs/configs.md, "blocks"): ``input_nonlinearity`` acts on the input samples before the hold
 (saturation, deadzone, backlash: a play operator starting at 0), ``output_nonlinearity`` (a
 polynomial) on the output samples.
@@ -50,7 +54,7 @@ import math
 
 import numpy as np
 from scipy.optimize import brentq
-from scipy.signal import lfilter, ss2tf, tf2ss
+from scipy.signal import bilinear, lfilter, ss2tf, tf2ss
 
 from exact_zoh import zoh
 
@@ -130,40 +134,84 @@ def _slide(p0: float, v0: float, p_eq: float, sigma: float, wd: float, t: float)
     return p_eq + decay * (q0 * cos + b * sin), decay * (v0 * cos + (sigma * b - wd * q0) * sin)
 
 
+def _msd_step(p: float, v: float, drive: float, T: float, m: float, c: float, k: float, fc: float,
+              fv: float) -> tuple[float, float]:
+    """(p, v) one held sample T later, under the drive force and Coulomb friction fc + fv v (fc = 0:
+    a linear mass_spring_damper, c + fv its damping), exactly (module docstring)."""
+    sigma = -(c + fv) / (2 * m)
+    wd = math.sqrt(k / m - sigma**2)
+    if fc == 0.0:
+        return _slide(p, v, drive / k, sigma, wd, T)
+    left = T
+    while left > 0.0:
+        if v == 0.0:
+            applied = drive - k * p
+            if abs(applied) <= fc:
+                return p, v  # stuck until the input changes
+            direction = math.copysign(1.0, applied)
+        else:
+            direction = math.copysign(1.0, v)
+        p_eq = (drive - direction * fc) / k
+        p_end, v_end = _slide(p, v, p_eq, sigma, wd, left)
+        if v_end * direction > 0.0:
+            return p_end, v_end
+        start = left * 1e-12 if v == 0.0 else 0.0
+        stop = brentq(lambda t: _slide(p, v, p_eq, sigma, wd, t)[1] * direction, start, left, xtol=1e-15,
+                      rtol=4 * np.finfo(float).eps)
+        p, v = _slide(p, v, p_eq, sigma, wd, stop)[0], 0.0
+        left -= stop
+    return p, v
+
+
+def _mechanics(model: dict) -> tuple[float, float, float, float, float, float]:
+    """(m, c, k, gain, fc, fv) of a mass_spring_damper with at most one Coulomb force."""
+    m, c, k = (float(model.get(key, 0.0)) for key in ("mass", "damping", "stiffness"))
+    forces = model.get("nonlinearities") or []
+    fc = float(forces[0]["fc"]) if forces else 0.0
+    fv = float(forces[0].get("fv", 0.0)) if forces else 0.0
+    return m, c, k, float(model.get("gain", 1.0)), fc, fv
+
+
 def coulomb_response(model: dict, u: np.ndarray, fs: float) -> np.ndarray:
     """The sampled position of m p'' + c p' + k p = gain u - F, F Coulomb friction with stick-slip,
     for the held input u, from rest (module docstring)."""
-    m, c, k = (float(model.get(key, 0.0)) for key in ("mass", "damping", "stiffness"))
-    gain = float(model.get("gain", 1.0))
-    (force,) = model["nonlinearities"]
-    fc, fv = float(force["fc"]), float(force.get("fv", 0.0))
-    sigma = -(c + fv) / (2 * m)
-    wd = math.sqrt(k / m - sigma**2)
-    T = 1.0 / fs
+    m, c, k, gain, fc, fv = _mechanics(model)
     p = v = 0.0
     y = np.empty(u.size)
     for n, drive in enumerate(gain * np.asarray(u, dtype=float)):
         y[n] = p
-        left = T
-        while left > 0.0:
-            if v == 0.0:
-                applied = drive - k * p
-                if abs(applied) <= fc:
-                    break  # stuck until the input changes
-                direction = math.copysign(1.0, applied)
-            else:
-                direction = math.copysign(1.0, v)
-            p_eq = (drive - direction * fc) / k
-            p_end, v_end = _slide(p, v, p_eq, sigma, wd, left)
-            if v_end * direction > 0.0:
-                p, v = p_end, v_end
-                break
-            start = left * 1e-12 if v == 0.0 else 0.0
-            stop = brentq(lambda t: _slide(p, v, p_eq, sigma, wd, t)[1] * direction, start, left, xtol=1e-15,
-                          rtol=4 * np.finfo(float).eps)
-            p, v = _slide(p, v, p_eq, sigma, wd, stop)[0], 0.0
-            left -= stop
+        p, v = _msd_step(p, v, drive, 1.0 / fs, m, c, k, fc, fv)
     return y
+
+
+def pid_tustin(controller: dict, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(b, a), a[0] = 1, of C(s) = kp + ki / s + kd s / (tau s + 1) = (kp s (tau s + 1) + ki (tau s + 1)
+    + kd s^2) / (s (tau s + 1)) through Tustin's s = 2 fs (z - 1) / (z + 1) (scipy's ``bilinear``),
+    in powers of z^-1."""
+    kp, ki, kd, tau = (float(controller.get(key, 0.0)) for key in ("kp", "ki", "kd", "tau"))
+    b, a = bilinear([kp * tau + kd, kp + ki * tau, ki], [tau, 1.0, 0.0], fs)
+    return b / a[0], a / a[0]
+
+
+def closed_loop_response(data: dict, r: np.ndarray, noise: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """(u, y): the plant input the drive computes and the measured output, in the loop of
+    docs/configs.md: y[k] = p(t_k) + noise[k], e[k] = r[k] - y[k], u = C(e) by the difference
+    equation of :func:`pid_tustin`, held over the sample (no computation delay), the plant stepped
+    exactly (:func:`_msd_step`), from rest."""
+    m, c, k, gain, fc, fv = _mechanics(data["model"])
+    b, a = pid_tustin(data["closed_loop"]["controller"], fs)
+    e_past, u_past = np.zeros(b.size), np.zeros(a.size)
+    p = v = 0.0
+    u, y = np.empty(r.size), np.empty(r.size)
+    for n in range(r.size):
+        y[n] = p + noise[n]
+        e_past = np.roll(e_past, 1)
+        e_past[0] = r[n] - y[n]
+        u[n] = float(b @ e_past - a[1:] @ u_past[:-1])
+        u_past = np.roll(u_past, 1)
+        u_past[0] = u[n]
+        p, v = _msd_step(p, v, gain * u[n], 1.0 / fs, m, c, k, fc, fv)
+    return u, y
 
 
 def input_block(block: dict | None, u: np.ndarray) -> np.ndarray:
@@ -207,9 +255,9 @@ def _cubic(model: dict) -> bool:
 
 
 def applies(data: dict) -> bool:
-    """Whether this module models the config: open loop, a linear template or continuous transfer
+    """Whether this module models the config in open loop: a linear template or continuous transfer
     function with at most input/output blocks and a dead time, or a mass_spring_damper with one
-    cubic spring and nothing else."""
+    cubic spring or one Coulomb force and nothing else."""
     model = data["model"]
     known = {"type", "mass", "damping", "stiffness", "gain", "num", "den", "domain", "delay", "input_nonlinearity",
              "output_nonlinearity"}
@@ -219,6 +267,16 @@ def applies(data: dict) -> bool:
         return not set(model) - {"type", "mass", "damping", "stiffness", "gain", "nonlinearities"}
     return (model["type"] in LINEAR_TYPES and not set(model) - known
             and model.get("domain", "continuous") == "continuous")
+
+
+def applies_in_closed_loop(data: dict) -> bool:
+    """Whether :func:`closed_loop_response` models the config: a PID loop (nothing else in
+    ``closed_loop``) around a mass_spring_damper with at most one Coulomb force."""
+    model, loop = data["model"], data.get("closed_loop")
+    return (loop is not None and set(loop) == {"controller"} and loop["controller"].get("type") == "pid"
+            and model["type"] == "mass_spring_damper" and model.get("output", "position") == "position"
+            and not set(model) - {"type", "mass", "damping", "stiffness", "gain", "nonlinearities"}
+            and (not model.get("nonlinearities") or _coulomb(model)))
 
 
 def outputs(data: dict, U: np.ndarray, fs: float) -> np.ndarray:

@@ -1,11 +1,12 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
-The measured data of every open-loop case but the Stribeck and LuGre ones (the linear ones, the
-input and output blocks, the fractional delay, the cubic spring, Coulomb friction, the linear
-controls) come from tests/independent_plant.py, written without nlsid's simulator (exact ZOH
-stepping, the modified z-transform for the delay, Runge-Kutta for the cubic spring, the
-closed-form stick-slip for Coulomb); Stribeck, LuGre and the closed-loop cases still from nlsid's
-simulator (diagnose_cases.measure).
+The measured data of every case but Stribeck, LuGre and the two-mass stage's loop (the linear
+ones, the input and output blocks, the fractional delay, the cubic spring, Coulomb friction, the
+PID loops around the mass-spring-damper with and without Coulomb friction, the linear controls in
+open and closed loop) come from tests/independent_plant.py, written without nlsid's simulator
+(exact ZOH stepping, the modified z-transform for the delay, Runge-Kutta for the cubic spring,
+the closed-form stick-slip for Coulomb, the PID's Tustin difference equation); those three still
+from nlsid's simulator (diagnose_cases.measure).
 
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is
@@ -71,6 +72,13 @@ def _resonance(rng):
 def _measure(true: dict, runs, rng: np.random.Generator):
     """The runs as measured on the true system: independent_plant where it models the config (the
     same noise as diagnose_cases.measure, drawn in the same order), else nlsid's simulator."""
+    if independent_plant.applies_in_closed_loop(true):
+        out = []
+        for run in runs:
+            n = rng.standard_normal(run.n_samples) * NOISE
+            u, y = independent_plant.closed_loop_response(true, run.u, n, run.fs)
+            out.append(dataclasses.replace(run, u=u, y=y, r=run.u.copy()))
+        return out
     if not independent_plant.applies(true):
         return measure(true, runs, rng)
     Y = independent_plant.outputs(true, np.stack([run.u for run in runs]), runs[0].fs)

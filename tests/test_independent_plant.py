@@ -72,3 +72,27 @@ def test_coulomb_stick_slip_from_rest_under_a_constant_force():
     assert y[20] == pytest.approx(first, rel=1e-9)
     np.testing.assert_allclose(y[-50:], final, rtol=1e-9)
     np.testing.assert_array_equal(ip.coulomb_response(model, np.full(50, 0.009), FS), 0.0)
+
+
+def test_linear_pid_loop_is_the_loop_algebra():
+    """The PID loop around the mass-spring-damper, in steady state after five periods of a sine
+    reference, against Y = C G / (1 + C G) R at its line: G the exact ZOH equivalent
+    (cont2discrete), C(z) = kp + ki / s + kd s / (tau s + 1) at s = 2 fs (z - 1) / (z + 1)."""
+    from scipy.signal import cont2discrete, freqz
+
+    pid = {"type": "pid", "kp": 2.0, "ki": 40.0, "kd": 0.02, "tau": 0.001}
+    data = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4e4, "gain": 1e4},
+            "closed_loop": {"controller": pid}}
+    n, line = 1000, 7
+    r = np.cos(2 * np.pi * line * np.arange(6 * n) / n + 0.4)
+    u, y = ip.closed_loop_response(data, r, np.zeros(r.size), FS)
+    b, a, _ = cont2discrete((NUM, DEN), 1 / FS, method="zoh")
+    w = 2 * np.pi * line / n
+    _, G = freqz(np.ravel(b), np.ravel(a), worN=[w])
+    z = np.exp(1j * w)
+    s = 2 * FS * (z - 1) / (z + 1)
+    C = pid["kp"] + pid["ki"] / s + pid["kd"] * s / (pid["tau"] * s + 1)
+    R = np.fft.fft(r[-n:])[line]
+    Y = np.fft.fft(y[-n:])[line]
+    assert Y == pytest.approx((C * G / (1 + C * G) * R)[0], rel=1e-6)
+    assert np.fft.fft(u[-n:])[line] == pytest.approx((C / (1 + C * G) * R)[0], rel=1e-6)
