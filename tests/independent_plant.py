@@ -41,7 +41,8 @@ No time step: the trajectory is exact to the root finder's tolerance.
 
 A PID loop (:func:`closed_loop_response`): the drive's law of docs/configs.md, u[k] = C(e)[k],
 e[k] = r[k] - y[k], y[k] the measured output (with its noise), C the PID through Tustin's
-substitution as a difference equation, u held over the sample; the plant stepped exactly as above.
+substitution as a difference equation, u held over the sample; the plant (a mass-spring-damper, or
+a continuous transfer function) stepped exactly as above.
 
 Blocks (docs/configs.md, "blocks"): ``input_nonlinearity`` acts on the input samples before the hold
 (saturation, deadzone, backlash: a play operator starting at 0), ``output_nonlinearity`` (a
@@ -198,20 +199,42 @@ def closed_loop_response(data: dict, r: np.ndarray, noise: np.ndarray, fs: float
     docs/configs.md: y[k] = p(t_k) + noise[k], e[k] = r[k] - y[k], u = C(e) by the difference
     equation of :func:`pid_tustin`, held over the sample (no computation delay), the plant stepped
     exactly (:func:`_msd_step`), from rest."""
-    m, c, k, gain, fc, fv = _mechanics(data["model"])
     b, a = pid_tustin(data["closed_loop"]["controller"], fs)
+    read, step = _plant_stepper(data["model"], fs)
     e_past, u_past = np.zeros(b.size), np.zeros(a.size)
-    p = v = 0.0
     u, y = np.empty(r.size), np.empty(r.size)
     for n in range(r.size):
-        y[n] = p + noise[n]
+        y[n] = read() + noise[n]
         e_past = np.roll(e_past, 1)
         e_past[0] = r[n] - y[n]
         u[n] = float(b @ e_past - a[1:] @ u_past[:-1])
         u_past = np.roll(u_past, 1)
         u_past[0] = u[n]
-        p, v = _msd_step(p, v, gain * u[n], 1.0 / fs, m, c, k, fc, fv)
+        step(u[n])
     return u, y
+
+
+def _plant_stepper(model: dict, fs: float):
+    """(read, step) of a plant from rest: read() the output at this sample instant, step(u) one held
+    sample on: a mass_spring_damper by :func:`_msd_step`, a continuous transfer function (strictly
+    proper) by its exact ZOH state step."""
+    if model["type"] == "mass_spring_damper":
+        m, c, k, gain, fc, fv = _mechanics(model)
+        state = [0.0, 0.0]
+
+        def step(u):
+            state[:] = _msd_step(state[0], state[1], gain * u, 1.0 / fs, m, c, k, fc, fv)
+
+        return (lambda: state[0]), step
+    A, B, C, D = tf2ss(*transfer_function(model))
+    assert np.allclose(D, 0.0), "a strictly proper plant"
+    Phi, Gamma = zoh(A, B[:, 0], 1.0 / fs)
+    x = np.zeros(A.shape[0])
+
+    def step_linear(u):
+        x[:] = Phi @ x + Gamma * u
+
+    return (lambda: float(C[0] @ x)), step_linear
 
 
 def input_block(block: dict | None, u: np.ndarray) -> np.ndarray:
@@ -271,10 +294,14 @@ def applies(data: dict) -> bool:
 
 def applies_in_closed_loop(data: dict) -> bool:
     """Whether :func:`closed_loop_response` models the config: a PID loop (nothing else in
-    ``closed_loop``) around a mass_spring_damper with at most one Coulomb force."""
+    ``closed_loop``) around a mass_spring_damper with at most one Coulomb force, or around a
+    continuous transfer function."""
     model, loop = data["model"], data.get("closed_loop")
-    return (loop is not None and set(loop) == {"controller"} and loop["controller"].get("type") == "pid"
-            and model["type"] == "mass_spring_damper" and model.get("output", "position") == "position"
+    if loop is None or set(loop) != {"controller"} or loop["controller"].get("type") != "pid":
+        return False
+    if model["type"] == "transfer_function":
+        return not set(model) - {"type", "num", "den", "domain"} and model.get("domain", "continuous") == "continuous"
+    return (model["type"] == "mass_spring_damper" and model.get("output", "position") == "position"
             and not set(model) - {"type", "mass", "damping", "stiffness", "gain", "nonlinearities"}
             and (not model.get("nonlinearities") or _coulomb(model)))
 

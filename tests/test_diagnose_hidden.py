@@ -1,12 +1,12 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
-The measured data of every case but Stribeck, LuGre and the two-mass stage's loop (the linear
-ones, the input and output blocks, the fractional delay, the cubic spring, Coulomb friction, the
-PID loops around the mass-spring-damper with and without Coulomb friction, the linear controls in
-open and closed loop) come from tests/independent_plant.py, written without nlsid's simulator
-(exact ZOH stepping, the modified z-transform for the delay, Runge-Kutta for the cubic spring,
-the closed-form stick-slip for Coulomb, the PID's Tustin difference equation); those three still
-from nlsid's simulator (diagnose_cases.measure).
+The measured data of every case but Stribeck and LuGre friction (the linear ones, the input and
+output blocks, the fractional delay, the cubic spring, Coulomb friction, the PID loops around the
+mass-spring-damper with and without Coulomb friction and around the two-mass stage, the linear
+controls in open and closed loop) come from tests/independent_plant.py, written without nlsid's
+simulator (exact ZOH stepping, the modified z-transform for the delay, Runge-Kutta for the cubic
+spring, the closed-form stick-slip for Coulomb, the PID's Tustin difference equation); those two
+still from nlsid's simulator (diagnose_cases.measure).
 
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is
