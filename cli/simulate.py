@@ -19,10 +19,15 @@ from .common import StageCommand, emit_json, force_option, json_option, progress
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="Seed of the noise (overrides disturbances.seed of the config).")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (default: all cores).")
+@click.option("--steady-state", "steady", is_flag=True,
+              help="Simulate each periodic run without transient periods in its periodic steady state (its first "
+                   "period repeated ahead until the model has settled), as diagnose and fit --model compare with "
+                   "it: the test error on held-out periodic measurements (e.g. one period per realization). "
+                   "Default: from rest.")
 @force_option
 @json_option
-def simulate(config: str, excitation: str, output: str, seed: int | None, workers: int | None, force: bool,
-             as_json: bool) -> None:
+def simulate(config: str, excitation: str, output: str, seed: int | None, workers: int | None, steady: bool,
+             force: bool, as_json: bool) -> None:
     """Run a model on an excitation and write a recording in the measured-data format.
 
     Each excitation run gives one recording run with the same id and attributes (one per sweep
@@ -30,10 +35,11 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     r (the reference: the input run's r where it has one, else its u), u (controller output +
     feed-forward) and y. Further measured channels of an input run are copied unchanged.
 
-    Example:
+    Examples:
 
     \b
       nlsid simulate configs/model_stage_lugre.yaml --excitation excitation.h5 -o recording.h5
+      nlsid simulate diagnosis/extended_model.yaml --excitation test.h5 --steady-state -o predicted.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.io.provenance import provenance
@@ -47,7 +53,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     runs = read_runs(excitation, require_y=False)
     start = time.perf_counter()
     with progress("simulate", len(runs) * len(points)) as step:
-        out = simulate_all(points, runs, seed=seed, workers=workers, step=step)
+        out = simulate_all(points, runs, seed=seed, workers=workers, step=step, steady=steady)
     seconds = time.perf_counter() - start
     write_recording(output, out, provenance(config_paths=[config], input_paths=[excitation]), force=force)
     samples = sum(run.n_samples for run in out)

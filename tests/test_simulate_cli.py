@@ -259,3 +259,29 @@ def test_bad_model_configs_exit_2_with_one_line(run_cli, tmp_path, multisine_fil
     assert f"{name}.yaml" in lines[0], lines[0]
     assert fragment in lines[0], lines[0]
     assert not out.exists()
+
+
+def test_steady_state_flag_simulates_one_period_in_periodic_steady_state(run_cli, tmp_path):
+    """``--steady-state``: a periodic run without transient periods (P = 1, as a realization with
+    its lead-in cut off) comes out in periodic steady state. The reference is the frequency
+    domain: for a periodic input the steady-state output of a stable discrete LTI model is
+    exactly Y(k) = G(e^{j 2 pi k / N}) U(k) on every DFT line, independent of the simulator.
+    Without the flag the run is simulated from rest: its start differs by the transient."""
+    num, den = [0.0, 0.05, 0.03], [1.0, -1.6, 0.9]  # a resonance with |pole| = 0.95: 20+ samples to settle
+    model = tmp_path / "model.yaml"
+    model.write_text(f"model:\n  type: transfer_function\n  domain: discrete\n  num: {num}\n  den: {den}\n")
+    N = 256
+    run = multisine("ms", 1000.0, N, np.arange(1, 100, 2), 1, 0, seed=3)
+    excitation = write_excitation(tmp_path / "one_period.h5", [run])
+    z = np.exp(2j * np.pi * np.arange(N // 2 + 1) / N)
+    response = np.polyval(num[::-1], 1 / z) / np.polyval(den[::-1], 1 / z)  # coefficients of z^-i
+    expected = np.fft.irfft(response * np.fft.rfft(run.u), N)
+    for flag, out in (("--steady-state", "steady.h5"), (None, "rest.h5")):
+        args = ["simulate", model, "--excitation", excitation, "-o", tmp_path / out] + ([flag] if flag else [])
+        result = run_cli(*args)
+        assert result.exit_code == 0, result.stderr
+    (steady,), (rest,) = read_runs(tmp_path / "steady.h5"), read_runs(tmp_path / "rest.h5")
+    scale = float(np.sqrt(np.mean(expected**2)))
+    assert np.max(np.abs(steady.y - expected)) < 1e-6 * scale  # lead periods settle to 1e-6 (engine.STEADY_TOLERANCE)
+    assert np.max(np.abs(rest.y[:20] - expected[:20])) > 0.1 * scale
+    assert steady.transient_periods == 0 and steady.period == N

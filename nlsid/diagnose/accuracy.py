@@ -1,16 +1,19 @@
 """How accurate the simulation of a model with nonlinear forces is, against the floor it is compared with.
 
-The force laws are stepped with a first-order error at stick-slip transitions
-(:mod:`nlsid.models.forces`), so the simulated output of a friction model depends on the number of
-sub-steps M. The error of M sub-steps is estimated by the change from M to 4 M (first order: the
-error of M is about 4/3 of that change) on the mean steady-state periods of the estimation runs
-(AC, as the residuals are compared). The aim is a change below ACCURACY times the floor: the noise
-in the averaged periods (the evidence's ``noise_rms``) where it is measured, else the user's
-model's error. ``diagnose`` states the accuracy of its final model and, when the aim is missed,
-the sub-steps that would reach it (the error falls as 1/M): refining the step inside every fit
-costs the first-order scheme its sub-steps linearly (minutes per diagnosis at 160), so it is
-the user's choice, ``simulation.substeps`` in the model, until a faster stick-slip integrator
-lands. Models without forces are exact at one sub-step and are not checked.
+The force laws are held over each of the M sub-steps of a sample (:mod:`nlsid.models.forces`),
+so the simulated output of a model with forces depends on M: the error falls as 1/M at stick-slip
+transitions (first order) and as 1/M^2 for a smooth force (a cubic spring: measured 0.80, 0.23,
+0.059, 0.015 mV at M = 10, 20, 40, 80 on a Duffing oscillator). The outputs at M, 2M and 4M on
+the mean steady-state periods of the estimation runs (AC, as the residuals are compared) give
+the observed order p = log2(|y_2M - y_M| / |y_4M - y_2M|), clipped to [1, 2] (Richardson's
+estimate; e.g. Hairer, Norsett and Wanner 1993, Solving ODEs I, Sec. II.4), and the change from M
+to 4M, which is within a factor 4/3 of the error of M at first order. The aim is a change below
+ACCURACY times the floor: the noise in the averaged periods (the evidence's ``noise_rms``) where
+it is measured, else the best model's validation error (``diagnose``: the final extended model's).
+Where the aim is missed, the sub-steps that reach it are N = M (change / aim)^(1/p), rounded up
+to tens; ``diagnose`` re-fits its final model at N when N <= MAX_SUBSTEPS (the cost of a
+simulation grows faster than M beyond about 40) and otherwise says which N the data need. Models
+without forces are exact at one sub-step and are not checked.
 """
 
 from __future__ import annotations
@@ -25,19 +28,24 @@ from nlsid.diagnose.simulation import ModelRunner, steady_mean
 from nlsid.io.run import Run
 
 ACCURACY = 0.1
-MAX_SUBSTEPS = 160  # the first-order step costs its sub-steps linearly: beyond this, say so
+MAX_SUBSTEPS = 80  # re-fitted at most at this (a simulation costs ~15x that at 10); beyond, the user's choice
 DEFAULT_SUBSTEPS = 10  # the engine's default for a plant with forces (nlsid.simulate.engine)
 
 
 @dataclass(frozen=True)
 class Accuracy:
-    """The sub-steps used, the rms change of the output from them to four times as many, the floor,
-    and the sub-steps that would bring the change below a tenth of the floor."""
+    """The sub-steps used, the rms change of the output from them to four times as many, the floor
+    (and what it is), the observed order of the error, and the sub-steps that would bring the
+    change below a tenth of the floor; ``refit``: the final model was re-fitted at ``substeps``
+    because the default missed the aim."""
 
     substeps: int
     change_rms: float
     floor_rms: float
     needed: int
+    order: float = 1.0
+    floor_from: str = "noise"
+    refit: bool = False
 
     @property
     def sufficient(self) -> bool:
@@ -46,10 +54,17 @@ class Accuracy:
     def note(self) -> str:
         text = (f"simulated with {self.substeps} sub-steps per sample (output change to {4 * self.substeps}: "
                 f"{self.change_rms:.2g} rms, {'below' if self.sufficient else 'NOT below'} a tenth of the floor "
-                f"{self.floor_rms:.2g})")
+                f"{self.floor_rms:.2g}, {FLOOR_TEXT[self.floor_from]}; error of order {self.order:.1f} in the step)")
+        if self.refit:
+            text += "; re-fitted at these sub-steps, as the default missed a tenth of the floor"
         if not self.sufficient:
             text += f"; set simulation.substeps: {self.needed} in the model for a simulation accurate to the data"
         return text
+
+
+FLOOR_TEXT = {"noise": "the noise in the averaged periods",
+              "validation": "the final model's validation error (noise level unknown)",
+              "model": "the model's validation error (noise level unknown)"}
 
 
 def _has_forces(data: dict) -> bool:
@@ -71,11 +86,18 @@ def _outputs(data: dict, source: str, runs: list[Run], substeps: int) -> np.ndar
     return _ac_mean(runs, [runner.simulate(run).y for run in runs])
 
 
-def check(data: dict, source: str, runs: list[Run], floor_rms: float) -> Accuracy | None:
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x ** 2)))
+
+
+def check(data: dict, source: str, runs: list[Run], floor_rms: float, floor_from: str = "noise") -> Accuracy | None:
     """The accuracy of the model ``data`` on ``runs`` (module docstring); None without forces or floor."""
     if not _has_forces(data) or not math.isfinite(floor_rms) or floor_rms <= 0:
         return None
     m = int((data.get("simulation") or {}).get("substeps") or DEFAULT_SUBSTEPS)
-    change = float(np.sqrt(np.mean((_outputs(data, source, runs, 4 * m) - _outputs(data, source, runs, m)) ** 2)))
-    needed = m if change <= ACCURACY * floor_rms else int(math.ceil(m * change / (ACCURACY * floor_rms) / 10) * 10)
-    return Accuracy(m, change, floor_rms, needed)
+    y1, y2, y4 = (_outputs(data, source, runs, k * m) for k in (1, 2, 4))
+    first, second = _rms(y2 - y1), _rms(y4 - y2)
+    order = min(max(math.log2(first / second), 1.0), 2.0) if first > 0 and second > 0 else 1.0
+    change, aim = _rms(y4 - y1), ACCURACY * floor_rms
+    needed = m if change <= aim else int(math.ceil(m * (change / aim) ** (1 / order) / 10) * 10)
+    return Accuracy(m, change, floor_rms, needed, order, floor_from)

@@ -86,6 +86,7 @@ class Hypothesis:
     parameters: tuple[str, ...] = field(default=())
     paths: Callable[[dict], dict[str, str]] | None = None  # parameter -> key path, for the fit engine
     reading: Callable[[dict], str] | None = None  # what the final values mean physically, for the note
+    qualifier: Callable[[dict], str] | None = None  # the same in a word or two, for the headline ("hardening")
     holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
     generalizes: tuple[str, ...] = ()  # families whose models are special cases of this one's (verdict ties)
 
@@ -94,6 +95,11 @@ class Hypothesis:
         """A nonlinearity: it leaves distortion at the detection lines, so it is not fitted where
         they show none (:func:`nlsid.diagnose.diagnosis._round`)."""
         return self.family in NONLINEAR_FAMILIES
+
+def spring(k3: float) -> str:
+    """The kind of a cubic spring F = k3 p^3 against the motion: hardening for k3 > 0."""
+    return "hardening" if k3 > 0 else "softening"
+
 
 def explained_db(before: float, after: float) -> float:
     """10 log10(before / after), the drop of a residual sum of squares; NaN when it has no finite

@@ -63,7 +63,7 @@ from typing import Callable
 
 import numpy as np
 
-from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, regress
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, regress, spring
 from nlsid.diagnose.simulation import ModelRunner, steady_mean
 from nlsid.models.continuous_equivalent import continuous_transfer_function
 
@@ -87,10 +87,6 @@ def _responses(ctx: Context, powers: tuple[int, ...]) -> list[np.ndarray]:
     """The model's responses to the input errors -y_model^p, one column per power p."""
     outputs = [ctx.runner.simulate(run).y for run in ctx.runs]
     return [ctx.response([-x**p for x in outputs], "process") for p in powers]
-
-
-def _spring(k3: float) -> str:
-    return "hardening" if k3 > 0 else "softening"
 
 
 def _linear(ctx: Context) -> tuple[dict | None, list[str]]:
@@ -137,7 +133,7 @@ def _estimate(ctx: Context) -> Estimate | str:
         stiffened = den
     names = [n for n in _paths(("k3",))({"model": linear}) if n != "k3"]
     values = {"k3": k3, **_coefficients({"num": np.asarray(linear["num"], float), "den": stiffened}, names)}
-    notes = [f"odd feedback of y^3 with the sign of a {_spring(k3)} spring", *notes]
+    notes = [f"odd feedback of y^3 with the sign of a {spring(k3)} spring", *notes]
     return Estimate(values, {"k3": est.std["k3"], **{n: math.nan for n in names}}, est.explained_db,
                     "; ".join(notes), lti=lti)
 
@@ -263,8 +259,8 @@ def _estimate_polynomial(ctx: Context) -> Estimate | str:
 def _reading(values: dict) -> str:
     """The fitted polynomial spring in words, with the centre of the cubic it equals (module docstring)."""
     k2, k3 = values["k2"], values["k3"]
-    return (f"an asymmetric spring, stiffer for y {'>' if k2 > 0 else '<'} 0 (k2), {_spring(k3)} (k3); "
-            f"equivalently a {_spring(k3)} cubic spring centred at y = {-k2 / (3 * k3):.4g} "
+    return (f"an asymmetric spring, stiffer for y {'>' if k2 > 0 else '<'} 0 (k2), {spring(k3)} (k3); "
+            f"equivalently a {spring(k3)} cubic spring centred at y = {-k2 / (3 * k3):.4g} "
             "(-k2 / 3 k3, with a constant force and a linear stiffness)")
 
 
@@ -305,10 +301,12 @@ HYPOTHESES = (
     Hypothesis("cubic_feedback", "Cubic feedback of the output (cubic stiffness)", "stiffness", "k3",
                "input units / output units^3",
                "odd distortion; the resonance moves with level; residual like the response to -y^3 at the input",
-               _applies, _estimate, _extender("cubic_stiffness", ("k3",)), ("k3",), _paths(("k3",))),
+               _applies, _estimate, _extender("cubic_stiffness", ("k3",)), ("k3",), _paths(("k3",)),
+               qualifier=lambda values: spring(values["k3"])),
     Hypothesis("polynomial_feedback", "Quadratic and cubic feedback of the output (asymmetric stiffness)", "stiffness",
                "k2", "input units / output units^2",
                "odd and even distortion; residual like the responses to -y^2 and -y^3 at the input",
                _applies, _estimate_polynomial, _extender("polynomial_stiffness", POLYNOMIAL), POLYNOMIAL,
-               _paths(POLYNOMIAL), reading=_reading, holds=("force_offset",)),
+               _paths(POLYNOMIAL), reading=_reading, holds=("force_offset",),
+               qualifier=lambda values: f"stiffer for y {'>' if values['k2'] > 0 else '<'} 0, {spring(values['k3'])}"),
 )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, regress
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, regress, spring
 from nlsid.diagnose.hypotheses.mass_forces import add_force, force_columns, force_paths, mechanical, needs
 
 
@@ -15,5 +15,6 @@ def _estimate_cubic(ctx: Context) -> Estimate | str:
 HYPOTHESES = (
     Hypothesis("cubic_stiffness", "Cubic stiffness", "stiffness", "k3", "N/m^3",
                "odd distortion; the resonance moves with level; residual force cubic in position",
-               mechanical, _estimate_cubic, add_force({"type": "cubic_stiffness"}), ("k3",), force_paths(("k3",))),
+               mechanical, _estimate_cubic, add_force({"type": "cubic_stiffness"}), ("k3",), force_paths(("k3",)),
+               qualifier=lambda values: spring(values["k3"])),
 )
