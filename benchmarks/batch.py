@@ -3,9 +3,8 @@
 * ``speedup``: 8 recordings of a stage (mass-spring-damper with Coulomb friction, fc 0.50 ... 0.57 N,
   6 realizations x (1 transient + 4) periods x 4096 samples at 2048 Hz, each with its own noise),
   pipeline: ``bla``, ``fit --model`` of fc, of fc, damping and stiffness, and of these and the mass
-  from a start further away (the fits with ``--workers 1``: one thread per task), and the nightly
-  ``diagnose`` of the stage's model without its friction (which names it; its simulations use the
-  cores as ``fit``'s default does, so the 1-worker run has some parallelism of its own).
+  from a start further away (the fits with ``--workers 1``: one thread per task, so the worker
+  processes are the only parallelism).
   Wall time of ``nlsid batch ... --workers 1`` and ``--workers 2``, each into a fresh folder, as
   processes (start-up, the pipeline check, spawning and warming the workers, the results and the
   page all included), each timed twice, interleaved, the faster kept (other jobs on the machine
@@ -69,9 +68,7 @@ FIT_FOUR = {"model": {**FIT_THREE["model"], "mass": 3.0, "damping": 10.0, "stiff
 STEPS = ["bla {recording} -o {out}/bla.h5",
          "fit --model fit_fc.yaml --data {recording} -o {out}/fc.yaml --workers 1",
          "fit --model fit_three.yaml --data {recording} -o {out}/three.yaml --workers 1",
-         "fit --model fit_four.yaml --data {recording} -o {out}/four.yaml --workers 1",
-         "diagnose --model nominal.yaml --data {recording} -o {out}/diagnosis"]
-NOMINAL = {"model": PLANT}  # the stage's model without its friction: the nightly diagnosis names it
+         "fit --model fit_four.yaml --data {recording} -o {out}/four.yaml --workers 1"]
 BUSY = "import time\nt = time.perf_counter()\nx = 0\nfor i in range(4_000_000):\n    x += i\nprint(time.perf_counter() - t)"
 CHEAP = ["bla {recording} -o {out}/bla.h5"]
 
@@ -167,7 +164,6 @@ def main() -> None:
         (stage / "fit_fc.yaml").write_text(yaml.safe_dump(FIT_FC))
         (stage / "fit_three.yaml").write_text(yaml.safe_dump(FIT_THREE))
         (stage / "fit_four.yaml").write_text(yaml.safe_dump(FIT_FOUR))
-        (stage / "nominal.yaml").write_text(yaml.safe_dump(NOMINAL))
         (stage / "pipeline.yaml").write_text(yaml.safe_dump({"steps": STEPS}))
         # warm numba's on-disk cache for these model shapes, so that no run below compiles
         timed_batch(stage / "pipeline.yaml", recordings[:1], root / "warm", 1)

@@ -22,8 +22,9 @@ from .common import StageCommand, emit_json, force_option, json_option, progress
 @click.option("--steady-state", "steady", is_flag=True,
               help="Simulate each periodic run without transient periods in its periodic steady state (its first "
                    "period repeated ahead until the model has settled), as diagnose and fit --model compare with "
-                   "it: the test error on held-out periodic measurements (e.g. one period per realization). "
-                   "Default: from rest.")
+                   "it: the test error on held-out periodic measurements (e.g. one period per realization); "
+                   "an arbitrary record with a measured y starts from the initial state fitted to its first "
+                   "samples. Default: from rest.")
 @force_option
 @json_option
 def simulate(config: str, excitation: str, output: str, seed: int | None, workers: int | None, steady: bool,

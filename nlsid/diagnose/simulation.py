@@ -4,7 +4,8 @@
 engine), noise-free, on the measured excitation: in open loop on the recorded plant input ``u``, in
 closed loop (a ``closed_loop:`` section) on the recorded reference ``r``. A periodic run without
 transient periods is simulated in its periodic steady state, as it was measured
-(:func:`nlsid.simulate.engine.lead_periods`). Extensions of the model
+(:func:`nlsid.simulate.engine.lead_periods`), and an arbitrary record from the initial state fitted
+to its measured output (:mod:`nlsid.simulate.initial_state`; the probes below from rest). Extensions of the model
 are new config data (:mod:`nlsid.diagnose.hypotheses`) and run through the same path, so an
 extended model YAML that ``diagnose`` writes is what ``simulate`` runs.
 
@@ -91,8 +92,8 @@ class ModelRunner:
         from nlsid.simulate.noise import Noise
 
         source = self.excitation(run)
-        if not excite:
-            source = dataclasses.replace(source, u=np.zeros_like(source.u))
+        if not excite:  # a probe from rest: no initial state fitted to the measured output
+            source = dataclasses.replace(source, u=np.zeros_like(source.u), y=None)
         zero = np.zeros(run.n_samples)
         noise = Noise(zero, zero if output is None else output, zero if process is None else process)
         try:
@@ -128,8 +129,8 @@ class ModelRunner:
         if not self.mechanical:
             return out
         if not self.closed:
-            for signal in ("position", "velocity"):
-                out[signal] = self.with_changes(_probe(self.data, signal)).simulate(run).y
+            for signal in ("position", "velocity"):  # from rest: the measured y is not this signal
+                out[signal] = self.with_changes(_probe(self.data, signal)).simulate(dataclasses.replace(run, y=None)).y
             return out
         model = self.config.model
         if model.type == "two_mass_stage" and model.output_at != "motor" or model.output_nonlinearity is not None:

@@ -316,7 +316,8 @@ class _Problem:
                 raise InputError(run.run_id, "run has no measured y to fit to")
             if self.closed and run.r is None:
                 raise InputError(run.run_id, "the model has a closed_loop but the run has no reference r")
-            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, y=None, r=None))
+            # y stays: an arbitrary record starts from the initial state fitted to it (nlsid.simulate.initial_state)
+            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, r=None))
         return out
 
     def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:

@@ -355,9 +355,11 @@ def _lead(x: np.ndarray | None, period: int, count: int) -> np.ndarray | None:
 
 def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, substeps: int | None,
                  noise: Noise | None = None, steady: bool = False) -> Run:
-    """Simulate one run; ``noise`` defaults to none. ``steady``: a periodic run is simulated in
-    its periodic steady state, as if its excitation had run :func:`lead_periods` more periods
-    before it (each signal's first period repeated ahead of it, then cut off again)."""
+    """Simulate one run; ``noise`` defaults to none. ``steady`` (the run as it was measured): a
+    periodic run is simulated in its periodic steady state, as if its excitation had run
+    :func:`lead_periods` more periods before it (each signal's first period repeated ahead of it,
+    then cut off again); an arbitrary record of a plant with a measured ``y`` from the initial
+    state that fits its first samples (:mod:`nlsid.simulate.initial_state`)."""
     noise = noise or Noise.zero(run.n_samples)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
@@ -368,6 +370,10 @@ def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, su
         noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
     out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
            else simulate_plant(model, loop, run, substeps, noise))
+    if steady and run.period is None and isinstance(model, Plant):
+        from nlsid.simulate.initial_state import with_initial_state
+
+        return with_initial_state(model, loop, run, out)
     if not count:
         return out
     return dataclasses.replace(out, u=out.u[m:], y=None if out.y is None else out.y[m:],
