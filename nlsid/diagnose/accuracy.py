@@ -1,8 +1,8 @@
 """How accurate the simulation of a model is in its sub-steps, against the floor it is compared with.
 
-A model with continuous-time forces depends on its sub-steps (:func:`_stepped`). The force laws are held over each of the M sub-steps of a sample (:mod:`nlsid.models.forces`),
-so the simulated output of a model with forces depends on M: the error falls as 1/M at stick-slip
-transitions (first order) and as 1/M^2 for a smooth force (a cubic spring: measured 0.80, 0.23,
+A model with continuous-time forces depends on its sub-steps (:func:`_stepped`): the force laws are
+held over each of the M sub-steps of a sample (:mod:`nlsid.models.forces`), and the error falls as
+1/M at stick-slip transitions (first order) and as 1/M^2 for a smooth force (a cubic spring: measured 0.80, 0.23,
 0.059, 0.015 mV at M = 10, 20, 40, 80 on a Duffing oscillator). The outputs at M, 2M and 4M on
 the mean steady-state periods of the estimation runs (AC, as the residuals are compared) give
 the observed order p = log2(|y_2M - y_M| / |y_4M - y_2M|), clipped to [1, 2] (Richardson's

@@ -256,10 +256,15 @@ def _estimate_polynomial(ctx: Context) -> Estimate | str:
                     "; ".join([start, *notes]), lti=lti)
 
 
+def _stiffer(k2: float) -> str:
+    """Where a spring with the quadratic term k2 p^2 against the motion is stiffer."""
+    return f"stiffer for y {'>' if k2 > 0 else '<'} 0"
+
+
 def _reading(values: dict) -> str:
     """The fitted polynomial spring in words, with the centre of the cubic it equals (module docstring)."""
     k2, k3 = values["k2"], values["k3"]
-    return (f"an asymmetric spring, stiffer for y {'>' if k2 > 0 else '<'} 0 (k2), {spring(k3)} (k3); "
+    return (f"an asymmetric spring, {_stiffer(k2)} (k2), {spring(k3)} (k3); "
             f"equivalently a {spring(k3)} cubic spring centred at y = {-k2 / (3 * k3):.4g} "
             "(-k2 / 3 k3, with a constant force and a linear stiffness)")
 
@@ -308,5 +313,5 @@ HYPOTHESES = (
                "odd and even distortion; residual like the responses to -y^2 and -y^3 at the input",
                _applies, _estimate_polynomial, _extender("polynomial_stiffness", POLYNOMIAL), POLYNOMIAL,
                _paths(POLYNOMIAL), reading=_reading, holds=("force_offset",),
-               qualifier=lambda values: f"stiffer for y {'>' if values['k2'] > 0 else '<'} 0, {spring(values['k3'])}"),
+               qualifier=lambda values: f"{_stiffer(values['k2'])}, {spring(values['k3'])}"),
 )
