@@ -287,14 +287,27 @@ def test_discrete_nonlinear_feedback_follows_its_documented_equations():
              "linear": {"type": "state_space", "domain": "discrete", "A": phi.tolist(), "B": gamma.tolist(),
                         "C": c.tolist()}}
     out = simulate({"model": model}, u)
-    # x[k+1] = A x + B (u - F), v = (p[k+1] - p[k]) fs, F implicit for v[k+1] (Moreau), g = fs C B
+    # x[k+1] = A x + B (u - F), v[k+1] = (p[k+1] - p[k]) fs, g = fs C B; F the mean of the law over
+    # the sample's velocity path v[k] -> v[k+1] taken as linear (nlsid.models.forces): Moreau's
+    # implicit step from rest; a reversal inside the sample located, the rest a step from rest
     g = FS * c @ gamma
-    x, y = np.zeros(2), np.empty(u.size)
+
+    def from_rest(v_free, g):
+        return v_free / g if abs(v_free) <= g * fc else fc * np.sign(v_free)
+
+    x, y, p_prev = np.zeros(2), np.empty(u.size), 0.0
     for k in range(u.size):
         y[k] = c @ x
         free = phi @ x + gamma * u[k]
-        v_free = (c @ free - c @ x) * FS
-        force = v_free / g if abs(v_free) <= g * fc else fc * np.sign(v_free)
+        v_now, v_free = (c @ x - p_prev) * FS, (c @ free - c @ x) * FS
+        if v_now == 0.0:
+            force = from_rest(v_free, g)
+        elif np.sign(v_now) * v_free > g * fc:  # still sliding on its side at the end
+            force = fc * np.sign(v_now)
+        else:  # stops at tau; the rest of the sample from rest
+            tau = v_now / (v_now - (v_free - g * fc * np.sign(v_now)))
+            force = tau * fc * np.sign(v_now) + (1 - tau) * from_rest((1 - tau) * (v_free - v_now), (1 - tau) * g)
+        p_prev = c @ x
         x = free - gamma * force
     assert close(out.y, y)
     assert np.ptp(out.y) > 1e-3  # it moves: the test is not about a mass at rest

@@ -134,8 +134,8 @@ def _discrete_feedback(G: StateSpace, gain: float, output: str, delay: float, wh
 
         [x; q][k+1] = [[A, 0], [C, 0]] [x; q][k] + [B; 0] (gain u - F),   v = fs [C, -1] [x; q].
 
-    A friction force is chosen implicitly for the velocity at the end of its sample (the Moreau
-    step of :mod:`nlsid.models.forces`, sensitivity g = fs C B): it needs C B != 0, a force that
+    A friction force is chosen by the step of :mod:`nlsid.models.forces` over the sample (its
+    velocity path from v[k] to v[k+1] taken as linear; sensitivity g = fs C B): it needs C B != 0, a force that
     moves the position within the sample it acts (the ZOH equivalent of a mass has C B = Ts^2 / 2m).
     """
     n = G.order

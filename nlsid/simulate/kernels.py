@@ -221,47 +221,151 @@ def _lugre(p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: 
     return force, decay * z + h * m0 * vv
 
 
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _side(kind: int, p: tuple, forward: bool) -> tuple[float, float, float]:
+    """(fc, fs, fv) of a friction law on one side of zero (Coulomb: fs = fc, no break-away peak)."""
+    if kind == forces.COULOMB:
+        fc, fv = (p[0], p[1]) if forward else (p[0] + p[2], p[1] + p[3])
+        return fc, fc, fv
+    if forward:
+        return p[0], p[1], p[4]
+    return p[0] + p[5], p[1] + p[6], p[4] + p[7]
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _level(kind: int, fc: float, fs: float, vs: float, delta: float, w: float) -> float:
+    """The friction level at speed w >= 0 without the viscous term: fc, or fc + (fs - fc) e^{-(w/vs)^delta}."""
+    if kind == forces.COULOMB:
+        return fc
+    return fc + (fs - fc) * math.exp(-((w / vs) ** delta))
+
+
+# 8-point Gauss-Legendre nodes on [0, 1] and their weights (summing to 1)
+_GL_X = (0.019855071751231912, 0.10166676129318664, 0.2372337950418355, 0.4082826787521751,
+         0.5917173212478248, 0.7627662049581645, 0.8983332387068134, 0.9801449282487681)
+_GL_W = (0.05061426814518853, 0.11119051722668721, 0.15685332293894344, 0.18134189168918083,
+         0.18134189168918083, 0.15685332293894344, 0.11119051722668721, 0.05061426814518853)
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True)
+def _stribeck_area(vs: float, delta: float, w: float) -> float:
+    """The integral of e^{-(x/vs)^delta} over x in [0, w]: vs sqrt(pi)/2 erf(w/vs) for delta = 2,
+    else Gauss-Legendre (8 points on each half of [0, min(w, SLIDING vs)], the integrand below
+    rounding beyond; about 1e-10 relative)."""
+    if delta == 2.0:
+        return 0.5 * math.sqrt(math.pi) * vs * math.erf(w / vs)
+    span = min(w, SLIDING * vs)
+    half = 0.5 * span
+    area = 0.0
+    for i in range(8):
+        area += _GL_W[i] * (math.exp(-((_GL_X[i] * half / vs) ** delta))
+                            + math.exp(-(((1.0 + _GL_X[i]) * half / vs) ** delta)))
+    return area * half
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _ramp_mean(kind: int, fc: float, fs: float, vs: float, delta: float, a: float, b: float) -> float:
+    """The mean friction level while the speed moves linearly between a and b (both >= 0): fc, or
+    fc + (fs - fc) (I(a) - I(b)) / (a - b) with I of :func:`_stribeck_area`; the level at the
+    midpoint when a and b are within 1e-4 (a + b + vs) (error (a - b)^2 |level''| / 24)."""
+    if kind == forces.COULOMB:
+        return fc
+    if abs(a - b) <= 1e-4 * (a + b + vs):
+        return _level(kind, fc, fs, vs, delta, 0.5 * (a + b))
+    return fc + (fs - fc) * (_stribeck_area(vs, delta, a) - _stribeck_area(vs, delta, b)) / (a - b)
+
+
 # Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
 @njit(cache=True, fastmath={"contract"}, nogil=True)
-def _stribeck(p: tuple, s_free: float, g: float) -> float:
-    """Stribeck force over a sub-step, implicit in the end velocity v+ = s w (s = sign(v_free)).
-
-    Sticks while -g fs- <= v_free <= g fs+. Otherwise it slides on the side s, with that side's
-    fc, fs and fv (vs and delta are common), and the speed w solves
-    psi(w) = w (1 + g fv) + g level(w) - |v_free| = 0 with psi(0) = g fs - |v_free| < 0 and
-    psi(|v_free|) > 0, so a root is bracketed in (0, |v_free|): Newton's method, with bisection
-    whenever a step leaves the bracket (the Stribeck curve's negative slope can make psi
-    non-monotone when g |level'| > 1, where a plain fixed-point iteration would diverge).
-    """
-    fc, fs, vs, delta, fv = p[0], p[1], p[2], p[3], p[4]
-    fs_neg = fs + p[6]
-    if _stick_or_slip(s_free, g, fs, fs_neg):
-        return s_free / g
-    s = 1.0 if s_free > 0 else -1.0
-    if s_free < 0:
-        fc, fs, fv = fc + p[5], fs_neg, fv + p[7]
-    target = abs(s_free)
+def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a: float, target: float,
+                    g: float) -> float:
+    """The root w in (0, target) of psi(w) = w (1 + g fv / 2) + g (M(w) + fv a / 2) - target, M(w)
+    the mean level over the speed ramp from a to w (:func:`_ramp_mean`), given psi(0) < 0
+    (psi(target) > 0): Newton's method, with bisection whenever a step leaves the bracket (the
+    Stribeck curve's negative slope can make psi non-monotone, where a plain fixed-point
+    iteration would diverge). dM/dw = (M(w) - level(w)) / (a - w), level'(w) / 2 at w = a."""
     lo, hi = 0.0, target
     w = target
-    level = fs
     for _ in range(forces.MAX_ITERATIONS):
-        ratio = (w / vs) ** delta
-        ex = math.exp(-ratio)
-        level = fc + (fs - fc) * ex
-        psi = w * (1.0 + g * fv) + g * level - target
+        mean = _ramp_mean(forces.STRIBECK, fc, fs, vs, delta, a, w)
+        psi = w * (1.0 + 0.5 * g * fv) + g * (mean + 0.5 * fv * a) - target
         if psi > 0.0:
             hi = w
         else:
             lo = w
-        slope = 1.0 + g * fv - g * (fs - fc) * ex * delta * ratio / w if w > 0.0 else 1.0 + g * fv
-        w_new = w - psi / slope
+        level = _level(forces.STRIBECK, fc, fs, vs, delta, w)
+        if abs(a - w) > 1e-4 * (a + w + vs):
+            d_mean = (mean - level) / (a - w)
+        else:
+            ratio = (w / vs) ** delta
+            d_mean = -0.5 * (fs - fc) * math.exp(-ratio) * delta * ratio / w if w > 0.0 else 0.0
+        w_new = w - psi / (1.0 + 0.5 * g * fv + g * d_mean)
         if not lo < w_new < hi:
             w_new = 0.5 * (lo + hi)
         done = abs(w_new - w) <= forces.TOLERANCE * (w_new + vs)
         w = w_new
         if done:
             break
-    return s * (fc + (fs - fc) * math.exp(-((w / vs) ** delta)) + fv * w)
+    return w
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _ramp_force(kind: int, p: tuple, forward: bool, a: float, target: float, g: float) -> float:
+    """The magnitude of the force held over a sub-step in which the mass moves on one side from
+    speed a to the end speed w: the mean of the law over that (linear) speed ramp,
+    M(a, w) + fv (a + w) / 2, with w solving w = target - g (M(a, w) + fv (a + w) / 2), which has a
+    root w > 0 when target > g (M(a, 0) + fv a / 2) (the caller's); Coulomb in closed form,
+    Stribeck by :func:`_stribeck_speed`."""
+    fc, fs, fv = _side(kind, p, forward)
+    if kind == forces.COULOMB:
+        w = (target - g * (fc + 0.5 * fv * a)) / (1.0 + 0.5 * g * fv)
+        return fc + 0.5 * fv * (a + w)
+    w = _stribeck_speed(fc, fs, p[2], p[3], fv, a, target, g)
+    return _ramp_mean(kind, fc, fs, p[2], p[3], a, w) + 0.5 * fv * (a + w)
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _from_rest(kind: int, p: tuple, s_free: float, g: float) -> float:
+    """Coulomb or Stribeck force over a sub-step that starts at rest (Moreau): sticks while
+    -g fs- <= v_free <= g fs+ (the break-away forces; fc for Coulomb), the force then v_free / g;
+    else slides on the side of v_free, the force the law's mean over the speed ramp from 0
+    (:func:`_ramp_force`)."""
+    if _stick_or_slip(s_free, g, _side(kind, p, True)[1], _side(kind, p, False)[1]):
+        return s_free / g
+    forward = s_free > 0.0
+    f = _ramp_force(kind, p, forward, 0.0, abs(s_free), g)
+    return f if forward else -f
+
+
+# Not inlined: compiled once on its own, it keeps the kernel's compilation short (inlined, 3x longer).
+@njit(cache=True, fastmath={"contract"}, nogil=True)
+def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> float:
+    """Coulomb or Stribeck force held over a sub-step from the start velocity v = ``s_now``: the
+    law's mean over the sub-step's velocity path taken as linear, which makes the step second
+    order in h in slip, at break-away and at reversals (scheme in :mod:`nlsid.models.forces`).
+
+    From rest: :func:`_from_rest`. In slip on the side s of v: if the mass is still sliding on
+    that side at the end (s v_free > g F_d, F_d = M(|v|, 0) + fv |v| / 2 the mean force of a ramp
+    down to zero), the mean over the ramp from |v| to the end speed (:func:`_ramp_force`).
+    Otherwise the mass reaches v = 0 in the sub-step: with the other forces on the mass held
+    (A = (v_free - v) / g), it decelerates under s F_d and stops at tau = v / (v - v_a),
+    v_a = v_free - g s F_d; from rest there, the step over the remaining (1 - tau) h (free end
+    velocity (1 - tau) g A, sensitivity (1 - tau) g) decides stick or slip on either side and gives
+    F_b. The force held is the sub-step's mean tau s F_d + (1 - tau) F_b, which gives the end
+    velocity of that motion. The branches meet at the end speed 0, tau = 1.
+    """
+    if s_now == 0.0:
+        return _from_rest(kind, p, s_free, g)
+    forward = s_now > 0.0
+    s = 1.0 if forward else -1.0
+    fc, fs, fv = _side(kind, p, forward)
+    speed = abs(s_now)
+    stopping = _ramp_mean(kind, fc, fs, p[2], p[3], speed, 0.0) + 0.5 * fv * speed
+    if s * s_free > g * stopping:
+        return s * _ramp_force(kind, p, forward, speed, s * s_free, g)
+    tau = s_now / (s_now - (s_free - g * s * stopping))
+    rest = 1.0 - tau
+    return tau * s * stopping + rest * _from_rest(kind, p, rest * (s_free - s_now), g * rest)
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
@@ -279,19 +383,8 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
     """
     if kind == forces.LUGRE:
         return _lugre(p, d, z, previous, s_free, s_now, g, h)
-    if kind == forces.COULOMB:
-        fc, fv = p[0], p[1]
-        fc_neg = fc + p[2]
-        if _stick_or_slip(s_free, g, fc, fc_neg):
-            return s_free / g, z
-        if s_free > 0:  # slides forward: F = fc+ + fv+ v
-            level = fc
-        else:  # backward: F = -fc- + fv- v
-            level, fv = -fc_neg, fv + p[3]
-        v = (s_free - g * level) / (1.0 + g * fv)
-        return level + fv * v, z
-    if kind == forces.STRIBECK:
-        return _stribeck(p, s_free, g), z
+    if kind == forces.COULOMB or kind == forces.STRIBECK:
+        return _friction(kind, p, s_now, s_free, g), z
     mid = 0.5 * (s_now + s_free)
     if kind == forces.POLYNOMIAL:  # k2 mid^2 + ... + k10 mid^10, Horner from k10 down
         acc = p[8]
@@ -348,6 +441,7 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
         xc = np.zeros(nc)
         xcn = np.empty(nc)
         state = np.zeros(n_el)
+        ends = np.zeros(n_el)  # each element's free value at the end of the last sub-step
         f = np.zeros((substeps, n_el))  # the forces of the sub-steps of this sample (of the last one before)
         gains = np.empty(n_el)
         for e in range(n_el):
@@ -399,12 +493,14 @@ def _make_loop(n_el: int, fixed_n: int, fixed_nc: int):
                             s_free -= coupling[j - i, e, e2] * f[i, e2]
                     s_now = 0.0
                     if kinds[e] in forces.START_KINDS:  # the only laws that read the start value
-                        s_now = row_gamma[j, e] * pp if j else 0.0  # Gamma_0 = 0: no wait for p at j = 0
-                        for i in range(n):
-                            s_now += row_pow[j, e, i] * x[i]
-                        for i in range(j):
-                            for e2 in range(n_el):
-                                s_now -= coupling[j - 1 - i, e, e2] * f[i, e2]
+                        if j:  # the end of the previous sub-step: its free value less its forces from e on
+                            s_now = ends[e]
+                            for e2 in range(e, n_el):
+                                s_now -= coupling[0, e, e2] * f[j - 1, e2]
+                        else:  # the start of the sample (Gamma_0 = 0: no wait for p)
+                            for i in range(n):
+                                s_now += row_pow[0, e, i] * x[i]
+                    ends[e] = s_free
                     previous = f[j - 1 if j else substeps - 1, e]
                     # scalars, not array rows: an array passed to the inlined law costs two atomic
                     # reference-count updates each way per call (11 % of the kernel's time)
