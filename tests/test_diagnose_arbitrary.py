@@ -55,6 +55,10 @@ def record(run_id: str, rng, k3: float) -> Run:
     return Run(run_id, FS, "arbitrary", u, y=y)
 
 
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("diagnose_arbitrary")
+
+
 @pytest.fixture(scope="module")
 def records():
     rng = np.random.default_rng(3)

@@ -27,6 +27,10 @@ CHAIN = [{"cause": "coulomb", "title": "Coulomb friction", "values": {"fc": 99.2
           "error_rms": 1.6e-6, "gain_db": 4.0, "above_floor_db": -0.31}]
 
 
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("diagnose_browser")
+
+
 @pytest.fixture(scope="module")
 def diagnosis(tmp_path_factory):
     """The diagnosis folder, its summary, and the probe's view of its page and of the chained page."""

@@ -34,6 +34,10 @@ def plant(u: np.ndarray) -> np.ndarray:
     return y
 
 
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("chain")
+
+
 @pytest.fixture(scope="module")
 def diagnosis():
     rng = np.random.default_rng(9)

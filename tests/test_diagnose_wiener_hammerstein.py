@@ -35,6 +35,10 @@ TEST = slice(20000, N)
 NOISE, OFFSET, KNEE = 1e-3, 0.02, 0.1
 
 
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("wiener_hammerstein")
+
+
 @pytest.fixture(scope="module")
 def chain(tmp_path_factory):
     from click.testing import CliRunner

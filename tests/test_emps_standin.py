@@ -7,6 +7,13 @@ fitted model's simulated force on the validation record errs by at most 1 % (rel
 The tolerances are the issue's. What limits the recovery is the model error nlsid cannot see:
 the truth's drive reads the quantized encoder (5e-8 m steps), the model's reads the exact
 position, and the model steps friction by a first-order scheme at the stick-slip transitions.
+
+Issue 17's closed-loop axis: ``nlsid diagnose`` of the axis as its drive computes it, but without
+friction and with mass and viscous damping wrong by -16 % and -12 % (two differences from reality
+at once), on the estimation record with ``--validate-on`` the validation record. Coulomb friction
+must be named with fc, mass and viscous damping within the issue's 3 % of the truth, the headline
+must say that the mass and the damping were corrected, and nothing else may be named: the other
+hypotheses leave only the encoder's quantization, which no hypothesis of the library models.
 """
 
 from __future__ import annotations
@@ -34,6 +41,10 @@ AXIS = {
     "free": {"model.mass": {"lower": 1.0}, "model.damping": {"lower": 0.0},
              "model.nonlinearities[0].fc": {"lower": 1.0e-3}, "model.force_offset": {}},
 }
+
+
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("emps")
 
 
 @pytest.fixture(scope="module")
@@ -65,3 +76,25 @@ def test_fit_recovers_the_axis_and_predicts_the_force(run_cli, tmp_path, records
     simulated = simulate_run(from_config.model(model), from_config.closed_loop(model), excitation, None)
     error = np.sqrt(np.mean((simulated.u - validation.u) ** 2)) / np.sqrt(np.mean(validation.u ** 2))
     assert error <= 0.01
+
+
+def test_diagnose_names_coulomb_friction_and_corrects_the_mechanics(run_cli, tmp_path, records):
+    estimation = write_recording(tmp_path / "estimation.h5", records[:1], {"tool": "test"})
+    validation = write_recording(tmp_path / "validation.h5", records[1:], {"tool": "test"})
+    axis = {"model": {"type": "mass_spring_damper", "mass": 80.0, "damping": 180.0, "gain": E.GAIN},
+            "closed_loop": AXIS["closed_loop"]}
+    config = tmp_path / "axis.yaml"
+    config.write_text(yaml.safe_dump(axis, sort_keys=False))
+    result = run_cli("--json", "diagnose", "--model", config, "--data", estimation, "--validate-on", validation,
+                     "-o", tmp_path / "d")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()
+    assert [step["cause"] for step in summary["chain"]] == ["coulomb"], summary["headline"]
+    values = summary["chain"][0]["values"]
+    assert values["fc"] == pytest.approx(E.COULOMB, rel=0.03)
+    assert values["mass"] == pytest.approx(E.MASS, rel=0.03)
+    assert values["damping"] == pytest.approx(E.VISCOUS, rel=0.03)
+    assert "the mass" in summary["headline"] and "the damping" in summary["headline"], summary["headline"]
+    # the constant force is the actuator-side offset, in volts at the drive: OFFSET / gain
+    extended = yaml.safe_load((tmp_path / "d" / "extended_model.yaml").read_text())
+    assert extended["model"]["input_offset"] * E.GAIN == pytest.approx(-E.OFFSET, abs=0.05)

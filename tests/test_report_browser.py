@@ -139,6 +139,10 @@ def _report(args: list, folder: Path) -> dict:
     return json.loads(result.stdout) if "--json" in args else {}
 
 
+# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("report_browser")
+
+
 @pytest.fixture(scope="module")
 def bla_page(tmp_path_factory):
     """A bla.h5 report of a Wiener system with a cubic (two levels, 4 realizations, 3 periods), u and y in V."""

@@ -22,6 +22,7 @@ from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.hypotheses.base import with_lti
+from nlsid.diagnose.hypotheses.mechanics import linear_paths
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
 from nlsid.errors import InputError
@@ -30,6 +31,7 @@ from nlsid.io.run import Run
 
 
 FIT_STEPS = 25
+MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 NUMERATOR = re.compile(r"\.num\[\d+\]$")  # a numerator coefficient's key path (:func:`refine`)
 
 
@@ -46,6 +48,15 @@ class Outcome:
     free: dict = field(default_factory=dict)   # key path -> FreeParameter of its refinement
     paths: dict = field(default_factory=dict)  # its parameter -> key path
 
+    @property
+    def generalizes(self) -> tuple[str, ...]:
+        """Families or hypotheses whose models are special cases of this one's (the verdict's ties):
+        the hypothesis' own, and the wrong mechanics where its refinement freed them
+        (:func:`linear_paths`)."""
+        freed = self.hypothesis.distorts and self.extended is not None and any(
+            self.paths.get(name) == path for name, path in linear_paths(self.extended).items())
+        return self.hypothesis.generalizes + (("wrong_mechanics",) if freed else ())
+
     def qualifier(self) -> str:
         """The fitted values' physical reading in a word or two ("hardening"), or ""."""
         q = self.hypothesis.qualifier
@@ -54,6 +65,21 @@ class Outcome:
     def named(self) -> str:
         """The title with its qualifier, as the headline names the cause."""
         return f"{self.hypothesis.title}, {self.qualifier()}" if self.qualifier() else self.hypothesis.title
+
+    def mechanics_changed(self) -> str:
+        """The linear mechanics its refinement moved significantly from the model's values (by more
+        than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or ""."""
+        if self.extended is None or self.estimate is None:
+            return ""
+        parts = []
+        for name, path in linear_paths(self.extended).items():
+            if self.paths.get(name) != path or path not in self.free:
+                continue
+            start, value, std = self.free[path].start, self.estimate.values[name], self.estimate.std[name]
+            if math.isfinite(std) and abs(value - start) > MOVED * std:
+                change = 100 * (value - start) / abs(start)
+                parts.append(f"the {name.replace('_', ' ')} {abs(change):.3g} % {'above' if change > 0 else 'below'}")
+        return f"{', '.join(parts)} the model's" if parts else ""
 
     def summary(self) -> dict:
         h = self.hypothesis
@@ -115,8 +141,9 @@ class Diagnosis:
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
                     "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
-            causes = ", then ".join(f"{o.named()} ({o.hypothesis.main} = "
-                                    f"{o.estimate.values[o.hypothesis.main]:.4g} {o.hypothesis.unit})" for o in self.chain)
+            causes = ", then ".join(f"{o.named()} ({o.hypothesis.main} = {o.estimate.values[o.hypothesis.main]:.4g} "
+                                    f"{o.hypothesis.unit}{'; ' if o.mechanics_changed() else ''}{o.mechanics_changed()})"
+                                    for o in self.chain)
             final = self.final_score()
             return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
                     f"{gain_text(final)}, {versus_floor(final)}")
@@ -133,7 +160,7 @@ class Diagnosis:
     def _chain_summary(self) -> list[dict]:
         """Each accepted cause: its values, the gain over the model before it, the distance to the floor."""
         return [{"cause": o.hypothesis.name, "title": o.hypothesis.title, "qualifier": o.qualifier(),
-                 "values": o.estimate.values,
+                 "values": o.estimate.values, "mechanics_changed": o.mechanics_changed(),
                  "std": o.estimate.std, "error_rms": o.score.error_rms, "gain_db": o.score.gain_db,
                  "above_floor_db": o.score.above_floor_db} for o in self.chain]
 
@@ -255,6 +282,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         if "output_timing" in nominal["model"]:
             extended["model"]["output_timing"] = nominal["model"]["output_timing"]
     paths = estimate.paths if estimate.paths is not None else hypothesis.paths(data) if hypothesis.paths else {}
+    if hypothesis.distorts:
+        paths = {**linear_paths(extended), **paths}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
     for key in hypothesis.holds:  # held at its value in ``data``
         free.pop(f"model.{key}", None)
@@ -359,7 +388,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     while current.verdict.status == rules.EXPLAINED:
         first.chain.append(current.winner)
         last = current
-        done = current.winner.score.within_floor or not current.evidence.overall.noise_known
+        done = current.winner.score.within_floor
         if done or len(first.chain) == MAX_CAUSES:
             break
         accepted = tuple(o.hypothesis.family for o in first.chain)
@@ -423,7 +452,7 @@ def _decide(evidence: Evidence, found: nuisances.Nuisances, baseline: Score, out
     """The verdict (:mod:`nlsid.diagnose.verdict`) over the scored ``outcomes``, against the
     baseline (the model with its nuisances) on the validation residuals ``val``."""
     candidates = [rules.Candidate(o.hypothesis.name, o.hypothesis.family, len(o.hypothesis.parameters),
-                                  o.score.error_rms ** 2, o.hypothesis.generalizes) for o in outcomes if o.score is not None]
+                                  o.score.error_rms ** 2, o.generalizes) for o in outcomes if o.score is not None]
     discrepancy = evidence.overall.significant if evidence.overall.noise_known else None
     if discrepancy and found.values and baseline.within_floor:
         discrepancy = False  # the nuisances explain what the evidence saw
@@ -487,6 +516,11 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
                                                                      source, data)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
+            continue
+        if hypothesis.parameters and all(math.isinf(estimate.std.get(n, 0.0)) for n in hypothesis.parameters):
+            outcome.reason = ("not a cause: at its fitted values none of its parameters has an effect on the "
+                              "estimation runs (a limit beyond the signal's range), so any gain is the re-fit of "
+                              "the rest of the model")
             continue
         outcome.estimate = context.fitted[hypothesis.name] = estimate
         outcome.extended = context.extended[hypothesis.name] = extended

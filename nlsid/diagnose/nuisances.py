@@ -11,7 +11,8 @@ model every hypothesis starts from, and reports them separately: they are never 
 
 Which nuisances are fitted (those the data can tell apart, and the model can express):
 
-- ``output_offset`` always;
+- ``output_offset`` but in closed loop around a plant whose motion does not depend on where it is
+  (:func:`_translation_invariant`: the loop cancels it);
 - ``output_timing`` on a continuous plant (a discrete model has no values between samples; a
   structure has no timing key), within (-1, 1) samples, and in closed loop at most the plant's dead
   time (a lead needs as much dead time, :func:`nlsid.simulate.engine.timing`);
@@ -80,6 +81,31 @@ def _timing_bounds(runner: ModelRunner, fs: float) -> tuple[float, float] | None
     return -TIMING_LIMIT, upper
 
 
+POSITION_FORCES = ("cubic_stiffness", "polynomial_stiffness")  # forces that read the position
+
+
+def _translation_invariant(model: dict) -> bool:
+    """The plant's motion does not depend on where it is: a position output of a mechanical
+    template without a spring to the ground, or of a transfer function with an integrator (a pole
+    at s = 0, z = 1), and no force that reads the position. In closed loop the controller then
+    moves the plant to wherever the offset sensor reads the reference, and nothing else changes:
+    an output offset is not identifiable (but through the start of the record, which the initial
+    state absorbs; fitted anyway it wandered to 0.4 m on an axis stand-in and stopped the fit of
+    its friction at 2.5e-6 m instead of 1.9e-8 m)."""
+    if model.get("output", "position") != "position":
+        return False
+    if any(f.get("type") in POSITION_FORCES for f in model.get("nonlinearities") or []):
+        return False
+    kind = model["type"]
+    if kind == "mass_spring_damper":
+        return float(model.get("stiffness", 0.0)) == 0.0
+    lti = model.get("linear", model) if kind == "nonlinear_feedback" else model
+    if lti.get("type") != "transfer_function":
+        return False
+    den = np.asarray(lti["den"], float)
+    return bool(den.sum() == 0.0) if lti.get("domain") == "discrete" else bool(den[-1] == 0.0)
+
+
 def _force_offset_seen(model: dict) -> bool:
     """A constant force differs from a sensor offset in open loop only where the mechanics has no
     spring to the ground to turn it into a constant displacement (a free mass: friction then sees
@@ -88,7 +114,7 @@ def _force_offset_seen(model: dict) -> bool:
     forces = model.get("nonlinearities") or []
     if not forces:
         return False
-    if any(f.get("type") in ("cubic_stiffness", "polynomial_stiffness") for f in forces):
+    if any(f.get("type") in POSITION_FORCES for f in forces):
         return True
     return model["type"] != "mass_spring_damper" or float(model.get("stiffness", 0.0)) == 0.0
 
@@ -105,7 +131,9 @@ def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) ->
         start = float(model.get(key, 0.0))
         return FreeParameter(start, start - 10 * scale, start + 10 * scale)
 
-    free = {"model.output_offset": offset("output_offset", y_scale)}
+    free = {}
+    if not (runner.closed and _translation_invariant(model)):
+        free["model.output_offset"] = offset("output_offset", y_scale)
     if runner.closed or model.get("input_nonlinearity") is not None:
         free["model.input_offset"] = offset("input_offset", u_scale)
     elif _force_offset_seen(model):
@@ -123,6 +151,8 @@ def estimate(data: dict, source: str, runs: list[Run]) -> tuple[dict, Nuisances]
 
     runner = ModelRunner.from_data(data, source)
     free = free_nuisances(runner, runs)
+    if not free:
+        return data, Nuisances()
     fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
     timing = free.get("model.output_timing")
     if timing is not None and not timing.lower + AT_BOUND < fit.value("model.output_timing") < timing.upper - AT_BOUND:

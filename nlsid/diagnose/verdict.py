@@ -14,7 +14,8 @@ Let ``E_0`` be the validation error power of the original model, ``E_h`` that of
 3. Among the hypotheses that explain, the best is the one with the smallest ``E_h``; a hypothesis
    is *tied* with it when ``E_h / E_best < F*``. A tied hypothesis whose model contains a tied one
    of another family as a special case (the Wiener-Hammerstein split contains an input block before
-   the model and an output block after it) leaves the tie: the simpler explanation is as good. If
+   the model and an output block after it; a force refined with the mechanics contains the wrong
+   mechanics) leaves the tie: the simpler explanation is as good. If
    tied hypotheses of different families remain,
    no single cause is named: the verdict lists them. If every tied hypothesis belongs to one
    family (members nested from simple to rich, e.g. Coulomb in Stribeck in LuGre friction), the
@@ -64,7 +65,7 @@ class Candidate:
     family: str
     n_parameters: int
     error_power: float
-    generalizes: tuple[str, ...] = ()  # families whose models are special cases of this one's
+    generalizes: tuple[str, ...] = ()  # families or hypotheses whose models are special cases of this one's
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,8 @@ def decide(discrepancy: bool | None, original_power: float, candidates: list[Can
         return Verdict(UNEXPLAINED, None, (), names, threshold)
     best = explaining[0]
     tied = [c for c in explaining if ratio(c.error_power, best.error_power) < threshold]
-    tied = [c for c in tied if not any(d.family in c.generalizes for d in tied)]
+    tied = [c for c in tied if not any(d is not c and (d.family in c.generalizes or d.name in c.generalizes)
+                                       for d in tied)]
     if len({c.family for c in tied}) > 1:
         return Verdict(AMBIGUOUS, None, tuple(c.name for c in tied), names, threshold)
     return Verdict(EXPLAINED, simplest_sufficient(explaining, tied[0].family, threshold).name,

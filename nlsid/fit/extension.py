@@ -54,7 +54,8 @@ Parseval gives back sigma^2 J^T J. The factor n / (n - p) (n samples, p paramete
 degrees-of-freedom correction. docs/fit_covariance.md derives it; tests/test_fit_covariance.py
 checks it by Monte Carlo.
 
-Identifiability: a warning names a parameter that has no effect (zero Jacobian column), a nearly
+Identifiability: a warning names a parameter that has no effect (zero Jacobian column: its
+standard error is infinite, its covariances NaN), a nearly
 singular J^T J (a combination of parameters the data cannot tell apart: singular value ratio
 below 1e-6), a pair with correlation above 0.99 in magnitude, a relative standard deviation above
 50 %, or an estimate at a bound.
@@ -412,6 +413,9 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
         K = _meat_factor(jac, residual, segments) @ inverse
         cov_x = (K.conj().T @ K).real * (n / max(n - p, 1))
         cov = cov_x * np.outer(scale, scale)
+        inert = norms == 0  # no effect: undetermined, whatever the clamp left in the sandwich
+        cov[inert, :] = cov[:, inert] = math.nan
+        cov[inert, inert] = math.inf
         std = np.sqrt(np.abs(np.diag(cov)))
         spread = np.outer(*2 * [np.sqrt(np.maximum(np.diag(cov_x), 0.0))])  # zero for a zero residual
         corr = np.divide(cov_x, spread, out=np.zeros_like(cov_x), where=spread > 0)

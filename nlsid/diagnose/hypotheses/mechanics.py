@@ -12,6 +12,23 @@ from nlsid.diagnose.simulation import ModelRunner
 
 MECHANICS = ("mass", "damping", "stiffness")
 
+LINEAR_MECHANICS = {"mass_spring_damper": MECHANICS,
+                    "two_mass_stage": ("motor_mass", "load_mass", "stiffness", "damping", "motor_damping",
+                                       "load_damping")}
+
+
+def linear_paths(data: dict) -> dict[str, str]:
+    """The linear mechanics a force or block hypothesis refines together with its own parameters
+    (issue 17 item 4: a linear part held at the user's values cannot reach the floor once reality
+    differs from it in two ways, e.g. a 5 % mass error and Coulomb friction): the masses, dampings
+    and stiffnesses of a mechanical template that are not zero (a zero has no sign to keep and is
+    a structural choice: a free mass has no spring). The actuator gain is held: with the masses,
+    dampings and stiffnesses free it only rescales them. Name -> key path; empty for other models.
+    """
+    model = data["model"]
+    keys = LINEAR_MECHANICS.get(model.get("type"), ())
+    return {k: f"model.{k}" for k in keys if float(model.get(k, 0.0)) != 0.0}
+
 def _mass_spring_damper(runner: ModelRunner) -> str | None:
     return None if runner.kind == "mass_spring_damper" else "needs a mass_spring_damper model"
 
