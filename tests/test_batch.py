@@ -194,7 +194,10 @@ def test_a_diagnosis_whose_check_fails_still_gets_its_report(run_cli, project):
     assert row["headline"].startswith("Cause: Coulomb friction")
     flat = rows_of(fleet)["night2"]
     fc = row["parameters"]["coulomb.fc"]
-    assert flat["causes"] == "coulomb" and flat["cause_parameters"] == f"coulomb: fc = {fc['value']:.4g} ± {fc['std']:.2g} N"
+    # the main parameter first, with its unit, then the mechanics refined with it (mass, ...)
+    assert flat["causes"] == "coulomb"
+    assert flat["cause_parameters"].startswith(f"coulomb: fc = {fc['value']:.4g} ± {fc['std']:.2g} N, ")
+    assert "mass = " in flat["cause_parameters"]
     assert float(flat["coulomb.fc"]) == fc["value"] and float(flat["std(coulomb.fc)"]) == fc["std"]
     page = (fleet / "fleet.html").read_text()
     assert "Coulomb friction" in page and 'href="night2/report.html"' in page

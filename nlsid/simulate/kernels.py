@@ -289,6 +289,8 @@ def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a:
     for _ in range(forces.MAX_ITERATIONS):
         mean = _ramp_mean(forces.STRIBECK, fc, fs, vs, delta, a, w)
         psi = w * (1.0 + 0.5 * g * fv) + g * (mean + 0.5 * fv * a) - target
+        if psi == 0.0:  # the root (Newton lands on it where the curve is flat; bisecting on would leave it)
+            return w
         if psi > 0.0:
             hi = w
         else:
@@ -300,7 +302,7 @@ def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a:
             ratio = (w / vs) ** delta
             d_mean = -0.5 * (fs - fc) * math.exp(-ratio) * delta * ratio / w if w > 0.0 else 0.0
         w_new = w - psi / (1.0 + 0.5 * g * fv + g * d_mean)
-        if not lo < w_new < hi:
+        if not lo <= w_new <= hi:
             w_new = 0.5 * (lo + hi)
         done = abs(w_new - w) <= forces.TOLERANCE * (w_new + vs)
         w = w_new
