@@ -35,11 +35,12 @@ TEST = slice(20000, N)
 NOISE, OFFSET, KNEE = 1e-3, 0.02, 0.1
 
 
-# one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
+# one worker runs the module (xdist --dist loadgroup), and its fixture lives for the session: a
+# module fixture was built twice (about 110 s each) when the worker ran other tests between these
 pytestmark = pytest.mark.xdist_group("wiener_hammerstein")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def chain(tmp_path_factory):
     from click.testing import CliRunner
 
