@@ -98,7 +98,7 @@ def _write(path: Path, runs: list[tuple[str, dict, np.ndarray, np.ndarray]]) -> 
             group["u"], group["y"] = u, y
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # session: built once even when its worker interleaves other tests
 def standin(tmp_path_factory):
     """The recordings (estimation, validation, test, arrow) and the noise in each test record."""
     rng = np.random.default_rng(2026)
@@ -122,7 +122,7 @@ def standin(tmp_path_factory):
     return folder, noises
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def pipeline(standin):
     """bla -> fit 2/2 (the BLA's discrete model) -> diagnose --validate-on, as a user types them."""
     from click.testing import CliRunner
