@@ -48,14 +48,25 @@ class Outcome:
     free: dict = field(default_factory=dict)   # key path -> FreeParameter of its refinement
     paths: dict = field(default_factory=dict)  # its parameter -> key path
 
+    def fitted_mechanics(self) -> dict[str, str]:
+        """The linear mechanics (name -> key path, :func:`linear_paths`) its refinement fitted."""
+        if self.extended is None:
+            return {}
+        return {name: path for name, path in linear_paths(self.extended).items()
+                if self.paths.get(name) == path and path in self.free}
+
     @property
     def generalizes(self) -> tuple[str, ...]:
         """Families or hypotheses whose models are special cases of this one's (the verdict's ties):
-        the hypothesis' own, and the wrong mechanics where its refinement freed them
-        (:func:`linear_paths`)."""
-        freed = self.hypothesis.distorts and self.extended is not None and any(
-            self.paths.get(name) == path for name, path in linear_paths(self.extended).items())
+        the hypothesis' own, and the wrong mechanics where a force or block was refined with them."""
+        freed = self.hypothesis.distorts and self.fitted_mechanics()
         return self.hypothesis.generalizes + (("wrong_mechanics",) if freed else ())
+
+    def headline_values(self) -> str:
+        """The main parameter with its unit and the mechanics it moved, as the headline gives them."""
+        h = self.hypothesis
+        main = f"{h.main} = {self.estimate.values[h.main]:.4g} {h.unit}"
+        return "; ".join(filter(None, [main, self.mechanics_changed()]))
 
     def qualifier(self) -> str:
         """The fitted values' physical reading in a word or two ("hardening"), or ""."""
@@ -69,12 +80,10 @@ class Outcome:
     def mechanics_changed(self) -> str:
         """The linear mechanics its refinement moved significantly from the model's values (by more
         than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or ""."""
-        if self.extended is None or self.estimate is None:
+        if self.estimate is None:
             return ""
         parts = []
-        for name, path in linear_paths(self.extended).items():
-            if self.paths.get(name) != path or path not in self.free:
-                continue
+        for name, path in self.fitted_mechanics().items():
             start, value, std = self.free[path].start, self.estimate.values[name], self.estimate.std[name]
             if math.isfinite(std) and abs(value - start) > MOVED * std:
                 change = 100 * (value - start) / abs(start)
@@ -141,9 +150,7 @@ class Diagnosis:
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
                     "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
-            causes = ", then ".join(f"{o.named()} ({o.hypothesis.main} = {o.estimate.values[o.hypothesis.main]:.4g} "
-                                    f"{o.hypothesis.unit}{'; ' if o.mechanics_changed() else ''}{o.mechanics_changed()})"
-                                    for o in self.chain)
+            causes = ", then ".join(f"{o.named()} ({o.headline_values()})" for o in self.chain)
             final = self.final_score()
             return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
                     f"{gain_text(final)}, {versus_floor(final)}")
