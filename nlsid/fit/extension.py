@@ -32,8 +32,9 @@ The start itself must be valid (it is evaluated first; its error stops the fit).
 
 The minimisation is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) in
 normalised coordinates x_i = theta_i / s_i (s_i the start value's magnitude), with a forward
-finite-difference Jacobian whose step is ``diff_step`` relative to each parameter. Simulations of
-the runs of one evaluation run in parallel threads (:func:`nlsid.simulate.batch.simulate_all`).
+finite-difference Jacobian whose step is ``diff_step`` relative to each parameter (scipy's own
+rule, :func:`forward_steps`). Simulations of the runs of one evaluation run in parallel threads
+(:func:`nlsid.simulate.batch.simulate_all`), those of all the Jacobian's columns in one pool.
 
 Uncertainty: the sandwich estimator (Huber 1967, White 1980), which does not assume white
 residuals (coloured noise, and the correlated residual a model error leaves, make the white-noise
@@ -323,11 +324,21 @@ class _Problem:
 
     def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:
         """Per reported signal s (y, and u in closed loop) and run, s_sim - s over the steady state."""
+        return self.errors_many([theta], runs, excitations)[0]
+
+    def errors_many(self, thetas: Sequence[np.ndarray], runs: Sequence[Run],
+                    excitations: Sequence[Run]) -> list[dict[str, list[np.ndarray]]]:
+        """:meth:`errors` for several parameter vectors, simulated in one pool of threads (every
+        run of every vector a job, :func:`nlsid.simulate.batch.simulate_all`): the columns of a
+        finite-difference Jacobian keep both cores busy to the end, where one vector's runs leave
+        a core idle while the last run finishes."""
         from nlsid.simulate.batch import simulate_all
 
-        simulated = simulate_all([self.point(theta)], list(excitations), workers=self.workers, steady=True)
-        return {s: [_steady(run, getattr(sim, s)) - _steady(run, getattr(run, s)) for run, sim in zip(runs, simulated)]
-                for s in self.signals}
+        points = [self.point(theta) for theta in thetas]
+        simulated = simulate_all(points, list(excitations), workers=self.workers, steady=True)
+        count = len(points)
+        return [{s: [_steady(run, getattr(simulated[i * count + j], s)) - _steady(run, getattr(run, s))
+                     for i, run in enumerate(runs)] for s in self.signals} for j in range(count)]
 
 
 def _where(source: str, lines: dict, key_path: tuple) -> str:
@@ -360,6 +371,25 @@ def _scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarr
         out[i] = (width if math.isfinite(width) and width > 0
                   else (bigger if math.isfinite(bigger) and bigger > 0 else 1.0))
     return out
+
+
+def forward_steps(x: np.ndarray, rel_step: float, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """The forward-difference steps of :func:`scipy.optimize.least_squares` ("2-point" with
+    ``diff_step``, scipy's ``_numdiff`` rule, so the Jacobian is the one scipy would form):
+    h_i = rel_step sign(x_i) |x_i| (sqrt(eps) sign(x_i) max(1, |x_i|) where that step vanishes);
+    a step that leaves the bounds is reversed where the other side has room, else it goes to the
+    farther bound."""
+    sign = np.where(x >= 0, 1.0, -1.0)
+    h = rel_step * sign * np.abs(x)
+    h = np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)), h)
+    if np.all(np.isneginf(lower) & np.isposinf(upper)):
+        return h
+    below, above = x - lower, upper - x
+    violated = (x + h < lower) | (x + h > upper)
+    fitting = np.abs(h) <= np.maximum(below, above)
+    h = np.where(violated & fitting, -h, h)
+    h = np.where(~fitting & (above >= below), above, h)
+    return np.where(~fitting & (above < below), -below, h)
 
 
 SPECTRUM_LINES = 17  # neighbouring DFT lines averaged into the residual spectrum of the sandwich
@@ -464,20 +494,46 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     x0 = problem.start / scale
     evaluations, refused = 0, []
 
+    last = [x0, start_residual]  # the last point evaluated and its residual: the Jacobian's base
+
     def residual(x: np.ndarray) -> np.ndarray:
         nonlocal evaluations
         evaluations += 1
         if np.array_equal(x, x0):  # the start, simulated already
-            return start_residual.copy()
-        try:
-            return np.concatenate(problem.errors(x * scale, estimation, est_inputs)[fit_on])
-        except InputError as exc:  # a value the model refuses: a rejected step (module docstring)
-            refused.append(exc)
-            return penalty
+            out = start_residual.copy()
+        else:
+            try:
+                out = np.concatenate(problem.errors(x * scale, estimation, est_inputs)[fit_on])
+            except InputError as exc:  # a value the model refuses: a rejected step (module docstring)
+                refused.append(exc)
+                out = penalty
+        last[:] = [x.copy(), out]
+        return out
 
-    result = least_squares(residual, x0, bounds=(problem.lower / scale, problem.upper / scale), method="trf",
-                           diff_step=diff_step, x_scale=1.0, max_nfev=max_evaluations, xtol=tolerance,
-                           ftol=tolerance, gtol=tolerance)
+    def columns(xs: list[np.ndarray]) -> list[np.ndarray]:
+        """The residuals at the Jacobian's perturbed points, simulated together."""
+        nonlocal evaluations
+        evaluations += len(xs)
+        try:
+            return [np.concatenate(e[fit_on]) for e in problem.errors_many([x * scale for x in xs], estimation, est_inputs)]
+        except InputError:  # one of them refused: each on its own, the refused ones rejected steps
+            evaluations -= len(xs)
+            return [residual(x) for x in xs]
+
+    lower_x, upper_x = problem.lower / scale, problem.upper / scale
+
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        """Forward differences at x (:func:`forward_steps`), from the residual already evaluated there."""
+        f0 = last[1] if np.array_equal(x, last[0]) else residual(x)
+        h = forward_steps(x, diff_step, lower_x, upper_x)
+        shifted = [x + np.where(np.arange(x.size) == i, h, 0.0) for i in range(x.size)]
+        jac = np.empty((f0.size, x.size))
+        for i, f in enumerate(columns(shifted)):
+            jac[:, i] = (f - f0) / (shifted[i][i] - x[i])
+        return jac
+
+    result = least_squares(residual, x0, jac=jacobian, bounds=(lower_x, upper_x), method="trf", x_scale=1.0,
+                           max_nfev=max_evaluations, xtol=tolerance, ftol=tolerance, gtol=tolerance)
     values = result.x * scale
     warnings = [] if result.status > 0 else [f"optimiser stopped after {evaluations} simulations without converging: {result.message}"]
     if refused:
