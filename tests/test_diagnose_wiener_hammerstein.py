@@ -35,8 +35,9 @@ TEST = slice(20000, N)
 NOISE, OFFSET, KNEE = 1e-3, 0.02, 0.1
 
 
-# one worker runs the module (xdist --dist loadgroup), and its fixture lives for the session: a
-# module fixture was built twice (about 110 s each) when the worker ran other tests between these
+# one worker runs the module (xdist --dist loadgroup; pytest below 9.2, see pyproject), and its
+# fixture lives for the session: the worker may run other modules' tests between these, which
+# tears a module fixture down
 pytestmark = pytest.mark.xdist_group("wiener_hammerstein")
 
 

@@ -526,7 +526,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         """Forward differences at x (:func:`forward_steps`), from the residual already evaluated there."""
         f0 = last[1] if np.array_equal(x, last[0]) else residual(x)
         h = forward_steps(x, diff_step, lower_x, upper_x)
-        shifted = [x + np.where(np.arange(x.size) == i, h, 0.0) for i in range(x.size)]
+        shifted = list(x + np.diag(h))  # row i: x + h_i e_i
         jac = np.empty((f0.size, x.size))
         for i, f in enumerate(columns(shifted)):
             jac[:, i] = (f - f0) / (shifted[i][i] - x[i])
