@@ -1,17 +1,18 @@
 """Speed of ``nlsid batch`` on the local process pool; prints JSON.
 
 * ``speedup``: 8 recordings of a stage (mass-spring-damper with Coulomb friction, fc 0.50 ... 0.57 N,
-  6 realizations x (1 transient + 4) periods x 4096 samples at 2048 Hz, each with its own noise),
-  pipeline: ``bla``, ``fit --model`` of fc, of fc, damping and stiffness, and of these and the mass
-  from a start further away (the fits with ``--workers 1``: one thread per task, so the worker
-  processes are the only parallelism).
+  2 levels x 3 realizations x (1 transient + 2) periods x 2048 samples at 1024 Hz, each with its
+  own noise), the pipeline of configs/batch_stage.yaml: ``bla``, ``fit --model`` of fc,
+  ``diagnose`` of the model without friction (which names the friction: a few seconds to tens of
+  seconds each) and ``report``. Every step runs one simulation thread (``NLSID_THREADS=1`` in the
+  environment of both batches), so the worker processes are the only parallelism.
   Wall time of ``nlsid batch ... --workers 1`` and ``--workers 2``, each into a fresh folder, as
   processes (start-up, the pipeline check, spawning and warming the workers, the results and the
   page all included), each timed twice, interleaved, the faster kept (other jobs on the machine
   only ever add time); ``speedup_2_workers = seconds_1_worker / seconds_2_workers``. The obvious
   alternative, timed in the same run: the shell loop users write today, ``nlsid run`` of the
-  recording's pipeline once per recording, one after the other (``speedup_vs_shell_loop =
-  seconds_shell_loop / seconds_2_workers``).
+  recording's pipeline once per recording, one after the other, with the stages' default threads
+  (every core) (``speedup_vs_shell_loop = seconds_shell_loop / seconds_2_workers``).
 * ``overhead``: what a task costs beyond its steps. ``nlsid -v batch --workers 1`` of a cheap
   pipeline (``bla`` of a small recording) on 64 recordings; with ``-v`` (not on a terminal) the
   batch prints a line as each recording's record comes back, and the benchmark notes when each
@@ -51,30 +52,24 @@ import yaml
 NLSID = (sys.executable, "-c", "from nlsid.cli.entry import main; main()")
 PLANT = {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0, "gain": 1.0,
          "output": "position"}
-STAGE = {"fs": 2048.0, "seed": 3, "unit": "N",
-         "multisine": {"period": 4096, "band": [1.0, 80.0], "lines": "random-odd", "realizations": 6, "periods": 4,
-                       "transient_periods": 1, "rms_levels": [1.0]}}
+STAGE = {"fs": 1024.0, "seed": 3, "unit": "N",
+         "multisine": {"period": 2048, "band": [0.5, 60.0], "lines": "random-odd", "realizations": 3, "periods": 2,
+                       "transient_periods": 1, "rms_levels": [1.0, 2.0]}}
 SMALL = {"fs": 256.0, "seed": 3, "unit": "N",
          "multisine": {"period": 256, "band": [1.0, 40.0], "lines": "random-odd", "realizations": 2, "periods": 2,
                        "transient_periods": 1, "rms_levels": [1.0]}}
-FIT_FC = {"model": {**PLANT, "nonlinearities": [{"type": "coulomb", "fc": 0.3}]}, "simulation": {"substeps": 2},
+FIT_FC = {"model": {**PLANT, "nonlinearities": [{"type": "coulomb", "fc": 0.3}]},
           "free": {"model.nonlinearities[0].fc": {"lower": 1.0e-6, "upper": 5.0}}}
-FIT_THREE = {"model": {**PLANT, "damping": 15.0, "stiffness": 1900.0, "nonlinearities": [{"type": "coulomb", "fc": 0.3}]},
-             "simulation": {"substeps": 2},
-             "free": {"model.nonlinearities[0].fc": {"lower": 1.0e-6, "upper": 5.0}, "model.damping": {"lower": 0.0},
-                      "model.stiffness": {"lower": 1.0}}}
-FIT_FOUR = {"model": {**FIT_THREE["model"], "mass": 3.0, "damping": 10.0, "stiffness": 1500.0}, "simulation": {"substeps": 2},
-            "free": {**FIT_THREE["free"], "model.mass": {"lower": 0.1}}}
 STEPS = ["bla {recording} -o {out}/bla.h5",
-         "fit --model fit_fc.yaml --data {recording} -o {out}/fc.yaml --workers 1",
-         "fit --model fit_three.yaml --data {recording} -o {out}/three.yaml --workers 1",
-         "fit --model fit_four.yaml --data {recording} -o {out}/four.yaml --workers 1"]
+         "fit --model fit_fc.yaml --data {recording} -o {out}/fc.yaml",
+         "diagnose --model model.yaml --data {recording} -o {out}/diagnosis",
+         "report {out}/diagnosis -o {out}/report.html"]
 BUSY = "import time\nt = time.perf_counter()\nx = 0\nfor i in range(4_000_000):\n    x += i\nprint(time.perf_counter() - t)"
 CHEAP = ["bla {recording} -o {out}/bla.h5"]
 
 
-def nlsid(*args, check: bool = True) -> subprocess.CompletedProcess:
-    result = subprocess.run([*NLSID, *map(str, args)], capture_output=True, text=True)
+def nlsid(*args, check: bool = True, env: dict | None = None) -> subprocess.CompletedProcess:
+    result = subprocess.run([*NLSID, *map(str, args)], capture_output=True, text=True, env=env)
     if check and result.returncode != 0:
         raise RuntimeError(f"nlsid {' '.join(map(str, args))}: {result.stderr}")
     return result
@@ -97,7 +92,7 @@ def make_recordings(folder: Path, design: dict, count: int) -> list[Path]:
     paths = []
     for i in range(count):
         config = {"model": {**PLANT, "nonlinearities": [{"type": "coulomb", "fc": 0.5 + 0.01 * (i % 8)}]},
-                  "disturbances": {"y_noise": 2.0e-7, "seed": 100 + i}, "simulation": {"substeps": 2}}
+                  "disturbances": {"y_noise": 2.0e-7, "seed": 100 + i}}
         (folder / f"machine{i}.yaml").write_text(yaml.safe_dump(config))
         out = folder / "rec" / f"night{i:02d}.h5"
         out.parent.mkdir(exist_ok=True)
@@ -113,7 +108,8 @@ def timed_batch(pipeline: Path, inputs: list[Path], fleet: Path, workers: int) -
     listing = inputs[0].parent / f"list_{len(inputs)}.txt"
     listing.write_text("".join(f"{p.name}\n" for p in inputs))
     started = time.perf_counter()
-    result = nlsid("batch", pipeline, "--inputs-from", listing, "-o", fleet, "--workers", workers, "--json")
+    result = nlsid("batch", pipeline, "--inputs-from", listing, "-o", fleet, "--workers", workers, "--json",
+                   env={**os.environ, "NLSID_THREADS": "1"})
     seconds = time.perf_counter() - started
     summary = json.loads(result.stdout)
     assert summary["ok"] == len(inputs), summary
@@ -162,8 +158,7 @@ def main() -> None:
         stage.mkdir()
         recordings = make_recordings(stage, STAGE, 8)
         (stage / "fit_fc.yaml").write_text(yaml.safe_dump(FIT_FC))
-        (stage / "fit_three.yaml").write_text(yaml.safe_dump(FIT_THREE))
-        (stage / "fit_four.yaml").write_text(yaml.safe_dump(FIT_FOUR))
+        (stage / "model.yaml").write_text(yaml.safe_dump({"model": PLANT}))
         (stage / "pipeline.yaml").write_text(yaml.safe_dump({"steps": STEPS}))
         # warm numba's on-disk cache for these model shapes, so that no run below compiles
         timed_batch(stage / "pipeline.yaml", recordings[:1], root / "warm", 1)

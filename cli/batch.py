@@ -31,7 +31,7 @@ LOCK_FILE = ".batch.lock"
                    "results.jsonl, fleet.html. A rerun skips the recordings that are up to date.")
 @click.option("--workers", type=click.IntRange(min=1), metavar="N",
               help="Local worker processes, each running one recording at a time (default: the number of cores). "
-                   "Not the threads of simulate/fit --workers.")
+                   "Not the threads of simulate/fit/diagnose --workers (their default in each worker: cores / N).")
 @click.option("--scheduler", envvar="DASK_SCHEDULER_ADDRESS", show_envvar=True, metavar="ADDRESS",
               help="Run on the Dask distributed cluster of this scheduler (e.g. tcp://10.0.0.1:8786) instead of "
                    "local processes; needs nlsid[cluster].")

@@ -26,12 +26,15 @@ from .options import map_option, parse_map, read_split, split_options
 @click.option("--fail-if-distortion-above", type=float, metavar="DB",
               help="Exit 1 when odd or even distortion the model does not produce exceeds the noise by DB dB.")
 @split_options
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
 @map_option
 @force_option
 @json_option
 def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
              fail_if_distortion_above: float | None, validate_on: tuple[str, ...], estimation_range: str | None,
-             validation_range: str | None, mapping: tuple[str, ...], force: bool, as_json: bool) -> None:
+             validation_range: str | None, workers: int | None, mapping: tuple[str, ...], force: bool,
+             as_json: bool) -> None:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -57,6 +60,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import read_runs
     from nlsid.io.units import common_units
+    from nlsid.simulate.batch import default_threads
 
     data, _ = load_yaml(model_path)
     if not isinstance(data, dict):
@@ -65,7 +69,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
         raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
     estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping))
     runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
-    with progress("diagnose", len(LIBRARY) + 2) as step:  # evidence, nuisances, each hypothesis
+    with progress("diagnose", len(LIBRARY) + 2) as step, default_threads(workers):  # evidence, nuisances, each hypothesis
         result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step(), validate_on=extra,
                                estimation_range=estimation, validation_range=validation)
     final = result.final

@@ -34,7 +34,7 @@ from .options import map_option, parse_map, read_split, split_options
 @click.option("--start-estimate", is_flag=True,
               help="Start free force parameters (fc, fv, k3 of a mass_spring_damper) without a start: value at a "
                    "regression of the residual force instead of the config's value.")
-@click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (default: all cores).")
+@click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
 @map_option
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")

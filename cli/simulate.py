@@ -18,7 +18,7 @@ from .common import StageCommand, emit_json, force_option, json_option, progress
               help="Recording to write (.h5 or .mcap).")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="Seed of the noise (overrides disturbances.seed of the config).")
-@click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (default: all cores).")
+@click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
 @click.option("--steady-state", "steady", is_flag=True,
               help="Simulate each periodic run without transient periods in its periodic steady state (its first "
                    "period repeated ahead until the model has settled), as diagnose and fit --model compare with "

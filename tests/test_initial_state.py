@@ -38,6 +38,12 @@ def _cut(run_id: str, rng) -> tuple[Run, np.ndarray]:
     return Run(run_id, FS, "arbitrary", u[START:], y=y), clean
 
 
+def _transient(run: Run, clean: np.ndarray) -> np.ndarray:
+    """The free response of the state at the cut: the output less the response from rest to the
+    record's own input (superposition, exact for the LTI plant)."""
+    return clean - linear_response(*transfer_function(MSD["model"]), run.u, FS)
+
+
 @pytest.fixture(scope="module")
 def records():
     rng = np.random.default_rng(11)
@@ -66,10 +72,25 @@ def test_a_correct_model_names_no_cause_on_records_cut_mid_run(records):
     """Diagnosed on records that start moving, the correct model is not 'explained' by anything:
     with the initial state estimated, its validation error is the noise (no cause can beat it
     significantly), and the offset is the nuisance it is."""
-    (estimation, _), (validation, _) = records
+    (estimation, clean_est), (validation, clean_val) = records
     result = diagnose(MSD, "nominal.yaml", [estimation], "est.h5", validate_on=[validation])
     assert result.verdict.status != EXPLAINED, result.headline()
     assert result.nuisances.values["output_offset"] == pytest.approx(OFFSET, abs=1e-4)
+    # the initial state is reported (summary.json nuisances.initial_state) for both records: its
+    # free response is the true transient but for the noise's share (0.15 NOISE, as above)
+    reported = {entry["run_id"]: entry for entry in result.summary()["nuisances"]["initial_state"]}
+    names = [f"{name}[0:{SAMPLES}]" for name in ("estimation", "validation")]  # the split's names of the records
+    assert sorted(reported) == names
+    for name, (run, clean) in zip(names, ((estimation, clean_est), (validation, clean_val))):
+        state, entry = result.nuisances.initial[name], reported[name]
+        truth = _transient(run, clean)[:state.samples]
+        assert np.sqrt(np.mean((state.transient - truth) ** 2)) < 0.15 * NOISE
+        assert entry["transient_rms"] == pytest.approx(np.sqrt(np.mean(truth ** 2)), abs=0.15 * NOISE)
+        # x0[0] is the position at the cut, the output's first sample: its error is one sample of
+        # the transient's, at most the root of their sum of squares
+        assert entry["x0"][0] == pytest.approx(clean[0], abs=0.15 * NOISE * np.sqrt(state.samples))
+        assert entry["samples"] == state.samples and len(entry["x0"]) == 2
+    assert any("initial state fitted to the start of 2 arbitrary record(s)" in f for f in result.findings())
     # the baseline's validation error without its mean, against the noise: within 3 % (the
     # validation record's 8192 samples give its rms a relative spread of 0.8 %)
     assert result.baseline.error_rms == pytest.approx(NOISE, rel=0.03)

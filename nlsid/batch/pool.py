@@ -11,9 +11,10 @@ a new worker (at most :data:`ATTEMPTS` times), while the other workers go on.
 in it).
 
 Workers ignore Ctrl-C (the batch process handles it and terminates them). The fork server, and so
-every worker, starts with the BLAS/OpenMP thread variables set to cores / N (at least 1) unless they
-are set already, so N processes do not oversubscribe the machine; the stages' own threads
-(``simulate``, ``fit``: ``--workers``) are left as they are.
+every worker, starts with the BLAS/OpenMP thread variables and ``NLSID_THREADS`` (the default of
+the stages' simulation threads, :func:`nlsid.simulate.batch.thread_count`) set to cores / N (at
+least 1) unless they are set already, so N processes do not oversubscribe the machine; a step's own
+``--workers`` (``simulate``, ``fit``, ``diagnose``) still sets its threads.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from multiprocessing.connection import wait
 from typing import Callable
 
 ATTEMPTS = 3  # a task whose worker dies this often is recorded as an error
-_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NLSID_THREADS")
 # imported by the fork server before it forks the workers (a name that fails to import is skipped
 # by multiprocessing; tests/test_batch.py imports every one)
 PRELOAD = ("numpy", "scipy.optimize", "h5py", "yaml", "pydantic", "numba", "nlsid.cli.main", "nlsid.batch.task",

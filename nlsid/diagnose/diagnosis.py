@@ -485,7 +485,9 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     val = [res for res in evidence.residuals if res.role == VALIDATION]
     est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
     adjusted, found = (data, nuisances.Nuisances()) if evidence.exact else nuisances.estimate(data, source, est_runs)
-    baseline = score(val, model_residuals(ModelRunner.from_data(adjusted, source), val_runs, val))
+    with_nuisances = ModelRunner.from_data(adjusted, source)
+    found = dataclasses.replace(found, initial=nuisances.initial_states(with_nuisances, est_runs + val_runs))
+    baseline = score(val, model_residuals(with_nuisances, val_runs, val))
     step("nuisances")
     context = Context(runner, est_runs, [r.residual for r in est], [runner.internal(run) for run in est_runs],
                       evidence.bla_levels)

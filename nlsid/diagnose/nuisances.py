@@ -49,15 +49,31 @@ class Nuisances:
     values: dict[str, float] = field(default_factory=dict)
     std: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    initial: dict = field(default_factory=dict)  # run id -> InitialState of an arbitrary record
 
     def summary(self) -> dict:
-        return {"values": dict(self.values), "std": dict(self.std), "notes": list(self.notes)}
+        initial = [{"run_id": run_id, "samples": state.samples, "x0": [float(x) for x in state.x0],
+                    "transient_rms": state.transient_rms} for run_id, state in self.initial.items()]
+        return {"values": dict(self.values), "std": dict(self.std), "notes": list(self.notes),
+                "initial_state": initial}
 
     def findings(self) -> list[str]:
-        if not self.values:
-            return []
-        parts = ", ".join(f"{key} = {value:.4g} +- {self.std[key]:.2g}" for key, value in self.values.items())
-        return [f"nuisances estimated first (not causes): {parts}"]
+        out = []
+        if self.values:
+            parts = ", ".join(f"{key} = {value:.4g} +- {self.std[key]:.2g}" for key, value in self.values.items())
+            out.append(f"nuisances estimated first (not causes): {parts}")
+        if self.initial:
+            largest = max(self.initial.values(), key=lambda state: state.transient_rms)
+            out.append(f"initial state fitted to the start of {len(self.initial)} arbitrary record(s) (not a cause): "
+                       f"its free response up to {largest.transient_rms:.3g} rms over the first {largest.samples} samples")
+        return out
+
+
+def initial_states(runner: ModelRunner, runs: list[Run]) -> dict:
+    """Run id -> the initial state the model ``runner`` (with its nuisances) fits to each arbitrary
+    record of ``runs`` (:meth:`ModelRunner.initial_state`), where one is fitted."""
+    states = {run.run_id: runner.initial_state(run) for run in runs}
+    return {run_id: state for run_id, state in states.items() if state is not None}
 
 
 def _rms(runs: list[Run], signal: str) -> float:

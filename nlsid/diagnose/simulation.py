@@ -101,6 +101,25 @@ class ModelRunner:
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 
+    def initial_state(self, run: Run):
+        """The initial state fitted to the start of an arbitrary record as the model simulates it
+        (:class:`nlsid.simulate.initial_state.InitialState`), None where none is fitted (a
+        periodic run, a block structure, a mode too slow for the record)."""
+        from nlsid.models.from_config import Plant
+        from nlsid.simulate.engine import simulate_run
+        from nlsid.simulate.initial_state import estimate
+        from nlsid.simulate.noise import Noise
+
+        source = self.excitation(run)
+        if source.period is not None or source.y is None or not isinstance(self.plant, Plant):
+            return None
+        try:
+            rest = simulate_run(self.plant, self.loop, source, self.config.simulation.substeps,
+                                Noise.zero(source.n_samples))
+        except InputError as exc:
+            raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
+        return estimate(self.plant, self.loop, source, rest)
+
     def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
         """Recorded-output response to a plant-input and/or output disturbance, excitation zero
         (less the response to the model's own offsets and input channels, when it has any)."""

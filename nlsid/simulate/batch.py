@@ -14,7 +14,9 @@ from __future__ import annotations
 import dataclasses
 import os
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable
+from contextlib import contextmanager
+from contextvars import ContextVar
+from typing import Callable, Iterator
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
@@ -23,6 +25,38 @@ from nlsid.models.from_config import ClosedLoop
 from nlsid.simulate.engine import simulate_run
 from nlsid.simulate.noise import NoiseLevels, draw, run_streams
 from nlsid.simulate.sweep import SweepPoint
+
+
+THREADS_VARIABLE = "NLSID_THREADS"  # the default number of simulation threads of a process
+_threads: ContextVar[int | None] = ContextVar("nlsid_threads", default=None)
+
+
+def thread_count(workers: int | None = None) -> int:
+    """The simulation threads to use: ``workers`` when given, else the default of the command
+    running (:func:`default_threads`, e.g. ``diagnose --workers``), else the environment's
+    ``NLSID_THREADS`` (``nlsid batch`` sets it to cores / worker processes in its workers), else
+    every core."""
+    if workers:
+        return workers
+    if _threads.get():
+        return _threads.get()
+    text = os.environ.get(THREADS_VARIABLE, "").strip()
+    if text:
+        if not text.isdigit() or int(text) < 1:
+            raise InputError(THREADS_VARIABLE, f"expected a whole number of threads, 1 or more; got {text!r}")
+        return int(text)
+    return os.cpu_count() or 1
+
+
+@contextmanager
+def default_threads(workers: int | None) -> Iterator[None]:
+    """Within the block, :func:`thread_count` without an explicit number gives ``workers`` (None:
+    unchanged)."""
+    token = _threads.set(workers)
+    try:
+        yield
+    finally:
+        _threads.reset(token)
 
 
 def run_id(base: str, index: int, count: int) -> str:
@@ -55,7 +89,8 @@ def _excitation(run: Run, loop: ClosedLoop | None) -> Run:
 
 def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = None, workers: int | None = None,
                  step: Callable[[], None] | None = None, steady: bool = False) -> list[Run]:
-    """Simulate each excitation run for each sweep point; ``seed`` overrides the config's seed;
+    """Simulate each excitation run for each sweep point, in :func:`thread_count` threads;
+    ``seed`` overrides the config's seed;
     ``steady``: periodic runs in their periodic steady state (:func:`nlsid.simulate.engine.simulate_run`)."""
     models = [_build(p) for p in points]
     jobs = [(run, i * len(points) + j, j) for i, run in enumerate(runs) for j in range(len(points))]
@@ -82,5 +117,5 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
             step()
         return out
 
-    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+    with ThreadPoolExecutor(max_workers=thread_count(workers)) as pool:
         return list(pool.map(one, jobs))

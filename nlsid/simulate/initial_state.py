@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -64,14 +65,38 @@ def free_responses(plant: Plant, loop: ClosedLoop | None, run: Run, length: int)
     return np.column_stack(columns) if columns else np.zeros((length, 0))
 
 
+@dataclass(frozen=True)
+class InitialState:
+    """The fitted initial plant state ``x0`` of a record (in the coordinates of the model's
+    state-space form: a mass_spring_damper's position and velocity), the ``samples`` L it was
+    fitted on and its free response ``transient`` = O x0 over them."""
+
+    x0: np.ndarray
+    samples: int
+    transient: np.ndarray
+
+    @property
+    def transient_rms(self) -> float:
+        return float(np.sqrt(np.mean(self.transient ** 2)))
+
+
+def estimate(plant: Plant, loop: ClosedLoop | None, run: Run, simulated: Run) -> InitialState | None:
+    """The initial state fitted to ``run``'s measured output, ``simulated`` being the model from
+    rest on ``run`` (module docstring); None where none is estimated."""
+    length = transient_length(plant, loop, run)
+    if length is None or run.y is None or plant.ss.order == 0:
+        return None
+    basis = free_responses(plant, loop, run, length)
+    x0, *_ = np.linalg.lstsq(basis, run.y[:length] - simulated.y[:length], rcond=None)
+    return InitialState(x0, length, basis @ x0)
+
+
 def with_initial_state(plant: Plant, loop: ClosedLoop | None, run: Run, simulated: Run) -> Run:
     """``simulated`` (the model from rest on ``run``) plus the free response of the initial state
     fitted to ``run``'s measured output (module docstring); unchanged where none is estimated."""
-    length = transient_length(plant, loop, run)
-    if length is None or run.y is None or plant.ss.order == 0:
+    state = estimate(plant, loop, run, simulated)
+    if state is None:
         return simulated
-    basis = free_responses(plant, loop, run, length)
-    x0, *_ = np.linalg.lstsq(basis, run.y[:length] - simulated.y[:length], rcond=None)
     y = simulated.y.copy()
-    y[:length] += basis @ x0
+    y[:state.samples] += state.transient
     return dataclasses.replace(simulated, y=y)
