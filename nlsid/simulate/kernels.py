@@ -233,11 +233,19 @@ def _side(kind: int, p: tuple, forward: bool) -> tuple[float, float, float]:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _ratio_power(w: float, vs: float, delta: float) -> float:
+    """(w / vs)^delta, as a product for the usual delta = 2 (a general power costs a fifth of a
+    Stribeck sub-step; the product is the same number)."""
+    x = w / vs
+    return x * x if delta == 2.0 else x ** delta
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def _level(kind: int, fc: float, fs: float, vs: float, delta: float, w: float) -> float:
     """The friction level at speed w >= 0 without the viscous term: fc, or fc + (fs - fc) e^{-(w/vs)^delta}."""
     if kind == forces.COULOMB:
         return fc
-    return fc + (fs - fc) * math.exp(-((w / vs) ** delta))
+    return fc + (fs - fc) * math.exp(-_ratio_power(w, vs, delta))
 
 
 # 8-point Gauss-Legendre nodes on [0, 1] and their weights (summing to 1)
@@ -299,7 +307,7 @@ def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a:
         if abs(a - w) > 1e-4 * (a + w + vs):
             d_mean = (mean - level) / (a - w)
         else:
-            ratio = (w / vs) ** delta
+            ratio = _ratio_power(w, vs, delta)
             d_mean = -0.5 * (fs - fc) * math.exp(-ratio) * delta * ratio / w if w > 0.0 else 0.0
         w_new = w - psi / (1.0 + 0.5 * g * fv + g * d_mean)
         if not lo <= w_new <= hi:
