@@ -342,21 +342,32 @@ def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str) -
 
 
 def sufficient_simpler(hypothesis: Hypothesis, outcomes: list[Outcome]) -> Outcome | None:
-    """An already scored member of ``hypothesis``'s family with fewer parameters whose validation
-    error is not significantly above the noise (p >= ALPHA), or None.
+    """An already scored hypothesis with fewer parameters whose validation error is not
+    significantly above the noise (p >= ALPHA), or None.
 
-    Such a member makes fitting the richer one pointless: the verdict moves to a richer member only
+    Such a hypothesis makes fitting the richer one pointless: a hypothesis is named over it only
     when ``E_simpler / E_richer > F*`` (:mod:`nlsid.diagnose.verdict`), and with ``E_simpler``
     within ``F*`` of the noise floor that needs ``E_richer`` below the floor, which on validation
-    runs (noise the fit never saw) happens with probability about ALPHA. Skipping them saves the
-    slowest fits (Stribeck and LuGre: about three quarters of a diagnosis of Coulomb friction).
+    runs (noise the fit never saw) happens with probability about ALPHA; at equal errors the
+    explanation with fewer parameters is the one named (within a family the verdict's own rule;
+    across families a tie the data cannot resolve, which the simpler explanation settles). The
+    hypotheses are tried in the order of their parameter counts (:func:`_by_parameters`), so a
+    present cubic spring (one parameter) at the floor spares the Stribeck and LuGre fits (three
+    and four) that a family that is not the cause would cost, and a Coulomb friction at the floor
+    spares them likewise.
     """
     for outcome in outcomes:
         h = outcome.hypothesis
-        if (h.family == hypothesis.family and len(h.parameters) < len(hypothesis.parameters)
-                and outcome.score is not None and outcome.score.within_floor):
+        if (len(h.parameters) < len(hypothesis.parameters) and outcome.score is not None
+                and outcome.score.within_floor):
             return outcome
     return None
+
+
+def _by_parameters(library: tuple[Hypothesis, ...]) -> list[Hypothesis]:
+    """The library in the order its hypotheses are tried: by parameter count, the library's order
+    among equals (a family's simpler members first, so a richer member can start from their fits)."""
+    return sorted(library, key=lambda h: len(h.parameters))
 
 
 def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list) -> None:
@@ -492,7 +503,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     context = Context(runner, est_runs, [r.residual for r in est], [runner.internal(run) for run in est_runs],
                       evidence.bla_levels)
     outcomes = []
-    for hypothesis in LIBRARY:
+    for hypothesis in _by_parameters(LIBRARY):
         outcome = Outcome(hypothesis)
         outcomes.append(outcome)
         if hypothesis.family in accepted:
@@ -513,8 +524,8 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
         if simpler is not None:
             reached = ("matches the data exactly" if simpler.score.exact
                        else f"already reaches the noise floor (p = {simpler.score.p_above_noise:.2g})")
-            outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached}, so this richer law cannot be "
-                              "significantly better")
+            outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached} with fewer parameters, so this "
+                              "hypothesis cannot be significantly better")
             continue
         estimate = hypothesis.estimate(context)
         if isinstance(estimate, str):
