@@ -219,3 +219,29 @@ def test_linear_control_has_no_significant_discrepancy(seed, closed):
     assert result.verdict.winner is None
     assert result.headline().startswith("No significant discrepancy")
     _assert_truth_at_floor(result, nominal, runs)
+
+
+def test_skipping_hypotheses_richer_than_one_at_the_floor_leaves_the_verdict(monkeypatch):
+    """The rule of nlsid.diagnose.diagnosis.sufficient_simpler, checked on the cubic-spring case of
+    seed 22, where the cubic spring (one parameter) reaches the noise floor and the Stribeck and
+    LuGre fits (three and four) are skipped: fitted anyway, neither is significantly better than
+    the spring (its error power over theirs below the verdict's F threshold), and the verdict and
+    the spring's values are the same."""
+    import nlsid.diagnose.diagnosis as diagnosis
+    from nlsid.diagnose.verdict import ratio
+
+    rng = np.random.default_rng(22)
+    nominal, true, _ = _case("cubic_stiffness", rng)
+    runs = _measure(true, excitation(rng), rng)
+    skipping = diagnose(nominal, "nominal.yaml", runs, "recording.h5")
+    skipped = {o.hypothesis.name for o in skipping.outcomes if o.reason.startswith("not fitted: Cubic stiffness")}
+    assert {"stribeck", "lugre"} <= skipped, [(o.hypothesis.name, o.reason) for o in skipping.outcomes]
+
+    monkeypatch.setattr(diagnosis, "sufficient_simpler", lambda hypothesis, outcomes: None)
+    fitting = diagnose(nominal, "nominal.yaml", runs, "recording.h5")
+    assert fitting.verdict.winner == skipping.verdict.winner == "cubic_stiffness"
+    assert fitting.winner.estimate.values == skipping.winner.estimate.values
+    scored = {o.hypothesis.name: o for o in fitting.outcomes if o.score is not None}
+    for name in ("stribeck", "lugre"):
+        power = scored[name].score.error_rms ** 2
+        assert ratio(fitting.winner.score.error_rms ** 2, power) < fitting.verdict.threshold, name
