@@ -64,3 +64,29 @@ def test_bad_model_is_one_line_exit_2(run_cli, tmp_path):
     result = run_cli("diagnose", "--model", str(bad), "--data", str(rec), "-o", str(tmp_path / "d"))
     assert result.exit_code == 2 and "mass" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "d").exists()
+
+
+def test_workers_sets_the_diagnosis_simulation_threads(run_cli, tmp_path, monkeypatch):
+    """``diagnose --workers 1``: every pool of simulations the diagnosis starts has one thread (the
+    default would be NLSID_THREADS, here 2 to tell them apart), and the result is the same."""
+    import nlsid.simulate.batch as batch
+
+    pools = []
+    real = batch.ThreadPoolExecutor
+
+    def recording(max_workers):
+        pools.append(max_workers)
+        return real(max_workers=max_workers)
+
+    monkeypatch.setattr(batch, "ThreadPoolExecutor", recording)
+    monkeypatch.setenv("NLSID_THREADS", "2")
+    model, rec = _setup(tmp_path)
+    one = run_cli("diagnose", "--model", str(model), "--data", str(rec), "-o", str(tmp_path / "one"), "--workers", "1")
+    assert one.exit_code == 0, one.stderr
+    assert pools and set(pools) == {1}, sorted(set(pools))
+    pools.clear()
+    default = run_cli("diagnose", "--model", str(model), "--data", str(rec), "-o", str(tmp_path / "two"))
+    assert default.exit_code == 0, default.stderr
+    assert pools and set(pools) == {2}, sorted(set(pools))
+    first, second = (json.loads((tmp_path / name / "summary.json").read_text()) for name in ("one", "two"))
+    assert first["verdict"] == second["verdict"] and first["hypotheses"] == second["hypotheses"]
