@@ -51,7 +51,7 @@ def thread_count(workers: int | None = None) -> int:
 @contextmanager
 def default_threads(workers: int | None) -> Iterator[None]:
     """Within the block, :func:`thread_count` without an explicit number gives ``workers`` (None:
-    unchanged)."""
+    no command default, so ``NLSID_THREADS`` or every core)."""
     token = _threads.set(workers)
     try:
         yield
