@@ -13,8 +13,8 @@ sqrt(2 / 18432) = 0.010. The bounds 0.95 and 1.05 are five of those.
 
 The sample written by the simulator of the first release (commit b1c9fc4) fails this: its stepping of
 the friction put its output 2.4e-7 to 6e-7 m rms off the exact trajectory (growing with the level),
-against 1.4e-7 m of averaged noise: the ratio above was 6.6 (today's sample: 1.01); a diagnosis of the correct model on
-it reported a discrepancy 8.6 dB above the noise.
+against 1.4e-7 m of averaged noise: the ratio above was 6.6 (today's sample: 1.01); a diagnosis
+of the correct model on it reported a discrepancy 8.6 dB above the noise.
 """
 
 from __future__ import annotations
@@ -40,7 +40,6 @@ def designed(tmp_path_factory):
     from nlsid.io.recording import read_runs
 
     out = tmp_path_factory.mktemp("design") / "excitation.h5"
-
     result = CliRunner().invoke(cli, ["-q", "design", str(ROOT / "configs" / "stage_design.yaml"), "-o", str(out)])
     assert result.exit_code == 0, result.output
     return {run.run_id: run for run in read_runs(out, require_y=False)}

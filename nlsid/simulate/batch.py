@@ -36,10 +36,9 @@ def thread_count(workers: int | None = None) -> int:
     running (:func:`default_threads`, e.g. ``diagnose --workers``), else the environment's
     ``NLSID_THREADS`` (``nlsid batch`` sets it to cores / worker processes in its workers), else
     every core."""
-    if workers:
-        return workers
-    if _threads.get():
-        return _threads.get()
+    default = workers or _threads.get()
+    if default:
+        return default
     text = os.environ.get(THREADS_VARIABLE, "").strip()
     if text:
         if not text.isdigit() or int(text) < 1:
