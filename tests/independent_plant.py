@@ -44,6 +44,9 @@ e[k] = r[k] - y[k], y[k] the measured output (with its noise), C the PID through
 substitution as a difference equation, u held over the sample; the plant (a mass-spring-damper, or
 a continuous transfer function) stepped exactly as above.
 
+Stribeck and LuGre friction (symmetric laws): tests/independent_friction.py, Runge-Kutta on a fine
+grid with the stick events located.
+
 Blocks (docs/configs.md, "blocks"): ``input_nonlinearity`` acts on the input samples before the hold
 (saturation, deadzone, backlash: a play operator starting at 0), ``output_nonlinearity`` (a
 polynomial) on the output samples.
@@ -57,6 +60,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import bilinear, lfilter, ss2tf, tf2ss
 
+import independent_friction
 from exact_zoh import zoh
 
 LINEAR_TYPES = ("mass_spring_damper", "transfer_function")
@@ -277,16 +281,21 @@ def _cubic(model: dict) -> bool:
     return len(forces) == 1 and forces[0]["type"] == "cubic_stiffness" and model["type"] == "mass_spring_damper"
 
 
+def _dynamic_friction(model: dict) -> bool:
+    forces = model.get("nonlinearities") or []
+    return len(forces) == 1 and independent_friction.models(forces[0]) and model["type"] == "mass_spring_damper"
+
+
 def applies(data: dict) -> bool:
     """Whether this module models the config in open loop: a linear template or continuous transfer
     function with at most input/output blocks and a dead time, or a mass_spring_damper with one
-    cubic spring or one Coulomb force and nothing else."""
+    cubic spring, one Coulomb force or one symmetric Stribeck or LuGre force, and nothing else."""
     model = data["model"]
     known = {"type", "mass", "damping", "stiffness", "gain", "num", "den", "domain", "delay", "input_nonlinearity",
              "output_nonlinearity"}
     if "closed_loop" in data or model.get("output", "position") != "position":
         return False
-    if _cubic(model) or _coulomb(model):
+    if _cubic(model) or _coulomb(model) or _dynamic_friction(model):
         return not set(model) - {"type", "mass", "damping", "stiffness", "gain", "nonlinearities"}
     return (model["type"] in LINEAR_TYPES and not set(model) - known
             and model.get("domain", "continuous") == "continuous")
@@ -314,6 +323,8 @@ def outputs(data: dict, U: np.ndarray, fs: float) -> np.ndarray:
         return cubic_response(model, U, fs)
     if _coulomb(model):
         return np.stack([coulomb_response(model, u, fs) for u in U])
+    if _dynamic_friction(model):
+        return independent_friction.response(model, U, fs)
     num, den = transfer_function(model)
     delay = float(model.get("delay", 0.0))
     return np.stack([output_block(model.get("output_nonlinearity"),

@@ -1,12 +1,12 @@
 """Hidden-effect suite: data from the nominal model plus one effect of the library, with noise.
 
-The measured data of every case but Stribeck and LuGre friction (the linear ones, the input and
-output blocks, the fractional delay, the cubic spring, Coulomb friction, the PID loops around the
+The measured data of every case (the linear ones, the input and output blocks, the fractional
+delay, the cubic spring, Coulomb, Stribeck and LuGre friction, the PID loops around the
 mass-spring-damper with and without Coulomb friction and around the two-mass stage, the linear
 controls in open and closed loop) come from tests/independent_plant.py, written without nlsid's
 simulator (exact ZOH stepping, the modified z-transform for the delay, Runge-Kutta for the cubic
-spring, the closed-form stick-slip for Coulomb, the PID's Tustin difference equation); those two
-still from nlsid's simulator (diagnose_cases.measure).
+spring, the closed-form stick-slip for Coulomb, Runge-Kutta on a fine grid with bisected stop
+instants for Stribeck and LuGre, the PID's Tustin difference equation).
 
 The tool gets only the nominal model and the data. For every effect type, over a fixed list of
 seeds (not tuned), the parameters of the effect are drawn at random in a range where the effect is
@@ -39,7 +39,7 @@ from scipy.signal import ss2tf
 
 sys.path.insert(0, str(Path(__file__).parent))
 import independent_plant  # noqa: E402
-from diagnose_cases import FS, MSD, NOISE, STAGE, TF, U_NOISE, excitation, measure, with_closed_loop  # noqa: E402
+from diagnose_cases import FS, MSD, NOISE, STAGE, TF, U_NOISE, excitation, with_closed_loop  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 from nlsid.diagnose.evidence import error_test  # noqa: E402
 from nlsid.diagnose.gain import model_residuals, score  # noqa: E402
@@ -70,8 +70,8 @@ def _resonance(rng):
 
 
 def _measure(true: dict, runs, rng: np.random.Generator):
-    """The runs as measured on the true system: independent_plant where it models the config (the
-    same noise as diagnose_cases.measure, drawn in the same order), else nlsid's simulator."""
+    """The runs as measured on the true system by independent_plant (the same noise as
+    diagnose_cases.measure, drawn in the same order)."""
     if independent_plant.applies_in_closed_loop(true):
         out = []
         for run in runs:
@@ -79,8 +79,7 @@ def _measure(true: dict, runs, rng: np.random.Generator):
             u, y = independent_plant.closed_loop_response(true, run.u, n, run.fs)
             out.append(dataclasses.replace(run, u=u, y=y, r=run.u.copy()))
         return out
-    if not independent_plant.applies(true):
-        return measure(true, runs, rng)
+    assert independent_plant.applies(true), true
     Y = independent_plant.outputs(true, np.stack([run.u for run in runs]), runs[0].fs)
     out = []
     for run, y in zip(runs, Y):
