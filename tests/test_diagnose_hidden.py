@@ -244,3 +244,26 @@ def test_skipping_hypotheses_richer_than_one_at_the_floor_leaves_the_verdict(mon
     for name in ("stribeck", "lugre"):
         power = scored[name].score.error_rms ** 2
         assert ratio(fitting.winner.score.error_rms ** 2, power) < fitting.verdict.threshold, name
+
+
+def test_stribeck_starts_next_to_the_fitted_coulomb_law(monkeypatch):
+    """A Stribeck law with fs = fc is Coulomb's (docs/configs.md), so on Coulomb data (case 22,
+    the skip rule disabled so that Stribeck is fitted) the Stribeck refinement starts next to the
+    fitted Coulomb law (its fc, fs = 1.001 fc, the mechanics and nuisances the Coulomb fit
+    refined: nlsid.diagnose.hypotheses.friction) and ends where a nested model must: its
+    validation error within 0.2 % of Coulomb's (its two extra parameters fit noise, about 2 / 16384
+    of the error power, and cannot do much worse than the simpler law they contain), its break-away
+    level fs within 1 % of the true fc (the fit's standard error is about 0.1 % here)."""
+    import nlsid.diagnose.diagnosis as diagnosis
+
+    rng = np.random.default_rng(22)
+    nominal, true, fc = _case("coulomb", rng)
+    runs = _measure(true, excitation(rng), rng)
+    monkeypatch.setattr(diagnosis, "sufficient_simpler", lambda hypothesis, outcomes: None)
+    result = diagnose(nominal, "nominal.yaml", runs, "recording.h5")
+    by_name = {o.hypothesis.name: o for o in result.outcomes}
+    coulomb, stribeck = by_name["coulomb"], by_name["stribeck"]
+    assert result.verdict.winner == "coulomb", result.headline()
+    assert "next to the fitted Coulomb law" in stribeck.estimate.note, stribeck.estimate.note
+    assert stribeck.score.error_rms <= 1.002 * coulomb.score.error_rms
+    assert abs(stribeck.estimate.values["fs"] - fc) <= 0.01 * fc

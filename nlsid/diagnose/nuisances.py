@@ -37,6 +37,7 @@ import numpy as np
 from nlsid.diagnose.simulation import MECHANICAL, ModelRunner
 from nlsid.io.run import Run
 
+KEYS = ("output_offset", "input_offset", "force_offset", "output_timing")  # the model keys of the nuisances
 MAX_EVALUATIONS = 40
 TIMING_LIMIT = 0.99  # |output_timing| below one sample (the key's range is open)
 AT_BOUND = 0.02     # a timing this close to its bound is a longer shift (a dead time), not a skew

@@ -50,7 +50,10 @@ class Estimate:
     replaces the hypothesis' own where the parameters depend on the estimate (a structure whose
     size the estimate chooses); ``lti`` (an LTI config: ``type``, coefficients, ``domain``)
     replaces the LTI part of the model before it is extended (a discrete model extended as its
-    continuous equivalent, :mod:`nlsid.diagnose.hypotheses.feedback`; :data:`LTI_KEYS`)."""
+    continuous equivalent, :mod:`nlsid.diagnose.hypotheses.feedback`; :data:`LTI_KEYS`);
+    ``starts`` (model key -> value) starts the linear mechanics refined with a force or block
+    (:func:`nlsid.diagnose.hypotheses.mechanics.linear_paths`) and the nuisances re-fitted with it
+    elsewhere than at the model's values (a richer friction law at the simpler one's fit)."""
 
     values: dict[str, float]
     std: dict[str, float]
@@ -58,6 +61,7 @@ class Estimate:
     note: str = ""
     paths: dict[str, str] | None = None
     lti: dict | None = None
+    starts: dict[str, float] | None = None
 
 
 LTI_KEYS = ("type", "domain", "num", "den", "zeros", "poles", "gain", "A", "B", "C", "D")
