@@ -111,9 +111,11 @@ def test_fit_reads_an_lpm_level_and_recovers_the_poles(run_cli, tmp_path):
     poles = np.sort_complex(np.roots(den))
     truth = np.sort_complex(np.linalg.eigvals(PHI))
     assert np.max(np.abs(poles - truth)) < 2e-3, (poles, truth)
-    # q = 9: costs weighted by variances of 9 degrees of freedom, as for M = 10 realizations
+    # q = 9, below the 20 the weights aim at: the variance averaged over the odd B <= 20*7/9 lines,
+    # B = 15, with q B / 7 = 19.3 degrees of freedom (docs/lpm.md): costs as for M = 20 realizations
     summary = result.json()
-    assert summary["expected_cost"] == pytest.approx(9 / 8 * (summary["lines"] - 5 / 2))
+    assert summary["expected_cost"] == pytest.approx(19 / 18 * (summary["lines"] - 5 / 2))
+    assert "averaged over 15 lines" in summary["weights"]
     assert "Local Polynomial Method" in summary["weights"] and "upper bound of the noise" in summary["weights"]
 
 

@@ -33,6 +33,16 @@ random excitation, its stochastic nonlinear distortion, which the local model ca
 
 For circular complex normal E and a model that holds exactly, ``|G_hat - G|^2 / var_hat G`` is
 F(2, 2q) distributed (the ratio form only to first order), which gives the confidence circles.
+
+*Smoothed variance (weights of a parametric fit).* With the book's window q = 1: a weight
+1/var_hat has an infinite mean (E{1/chi^2_2} diverges) and a fit weighted by it is led by the lines
+whose variance happens to come out small (docs/lpm.md, "Smoothed variance"). The disturbance
+spectrum C is smooth in frequency (noise and stochastic distortion, unlike the input's
+line-to-line |U|^2, which stays exact in [A^-1]_00), so ``var_G_smoothed`` averages C over
+:func:`smoothing_lines` B lines around k (shifted at the band edges like the window) and applies
+the same formula. The average holds at least B / (2n+1) disjoint windows, hence at least
+``smoothed_dof = q B / (2n+1)`` degrees of freedom (more: overlapping windows' residuals are only
+partly dependent; Monte Carlo in tests/test_lpm.py).
 """
 
 from __future__ import annotations
@@ -46,6 +56,8 @@ from nlsid.analysis.confidence import Bounds, circle_bounds
 DEFAULT_HALF_WIDTH = 3  # n: a window of 2n+1 = 7 lines (the book's setting, Section 3.7)
 DEFAULT_DEGREE = 2      # R: quadratic local polynomials (the book's setting)
 CHUNK_LINES = 65536     # lines solved at once: bounds the working memory to some tens of MB
+SMOOTHED_DOF = 20       # degrees of freedom the smoothed variance aims at: E{1/var_hat} 5 % above 1/var
+SMOOTHING_SHARE = 10    # the smoothing band is at most 1/SMOOTHING_SHARE of the lines
 
 
 @dataclass
@@ -71,6 +83,9 @@ class LPMResult:
     G_yr: np.ndarray | None = None
     G_ur: np.ndarray | None = None
     var_u: np.ndarray | None = None
+    var_G_smoothed: np.ndarray | None = None   # var_G from C averaged over smoothing_lines lines
+    smoothing_lines: int = 1
+    smoothed_dof: float = 0.0                  # its degrees of freedom, at least q B / (2n+1)
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -84,6 +99,44 @@ class LPMResult:
 def degrees_of_freedom(n_records: int, half_width: int, degree: int) -> int:
     """q = M (2n+1) - (M+1)(R+1): window lines of all records less the G and transient parameters."""
     return n_records * (2 * half_width + 1) - (n_records + 1) * (degree + 1)
+
+
+def smoothing_lines(dof: int, width: int, lines: int) -> int:
+    """B: the odd number of lines over which C is averaged so that q B / width reaches
+    SMOOTHED_DOF, at most lines / SMOOTHING_SHARE; 1 (no smoothing) when q already reaches it or
+    the band is too short for B to span more than one window."""
+    if dof >= SMOOTHED_DOF:
+        return 1
+    wanted = -(-SMOOTHED_DOF * width // dof)
+    count = min(wanted, lines // SMOOTHING_SHARE)
+    count -= 1 - count % 2
+    return count if count > width else 1
+
+
+def band_mean(values: np.ndarray, count: int) -> np.ndarray:
+    """The mean of the finite values of ``values`` (lines along axis 0) over ``count`` lines around
+    each line, the band shifted at the ends to stay inside; NaN where a band has none."""
+    if count <= 1:
+        return values
+    finite = np.isfinite(values)
+    sums = np.concatenate([np.zeros((1,) + values.shape[1:], values.dtype),
+                           np.cumsum(np.where(finite, values, 0), axis=0)])
+    counts = np.concatenate([np.zeros((1,) + values.shape[1:]), np.cumsum(finite, axis=0)])
+    first = np.clip(np.arange(values.shape[0]) - count // 2, 0, max(values.shape[0] - count, 0))
+    last = np.minimum(first + count, values.shape[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (sums[last] - sums[first]) / (counts[last] - counts[first])
+
+
+def _var_G(var0: np.ndarray, cov: np.ndarray, G: np.ndarray | None, G_ur: np.ndarray | None) -> np.ndarray:
+    """var G from [A^-1]_00 and C (module docstring): direct, or the indirect ratio's first order."""
+    if G is None:
+        return var0 * cov[:, 0, 0].real
+    with np.errstate(divide="ignore", invalid="ignore"):
+        var_G = var0 * (cov[:, 0, 0].real + np.abs(G) ** 2 * cov[:, 1, 1].real
+                        - 2 * (np.conj(G) * cov[:, 0, 1]).real) / np.abs(G_ur) ** 2
+    var_G[var_G < 0] = np.nan   # C lost its positive definiteness to rounding: unresolved
+    return var_G
 
 
 def lpm(x: np.ndarray, z: np.ndarray, fs: float, half_width: int = DEFAULT_HALF_WIDTH,
@@ -110,17 +163,19 @@ def lpm(x: np.ndarray, z: np.ndarray, fs: float, half_width: int = DEFAULT_HALF_
              for start in range(0, top, CHUNK_LINES)]
     theta0, var0, cov = (np.concatenate(p, axis=0) for p in zip(*parts))
     lines = np.arange(1, top + 1)
+    count = smoothing_lines(dof, width, top)
+    smooth = band_mean(cov, count)
+    smoothed = {"smoothing_lines": count, "smoothed_dof": float(dof * count / width) if count > 1 else float(dof)}
     if Z.shape[1] == 1:
         return LPMResult(fs, n_samples, n_records, half_width, degree, lines, theta0[:, 0],
-                         var0 * cov[:, 0, 0].real, cov[:, 0, 0].real, dof)
+                         _var_G(var0, cov, None, None), cov[:, 0, 0].real, dof,
+                         var_G_smoothed=_var_G(var0, smooth, None, None), **smoothed)
     G_yr, G_ur = theta0[:, 0], theta0[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
         G = G_yr / G_ur
-        var_G = var0 * (cov[:, 0, 0].real + np.abs(G) ** 2 * cov[:, 1, 1].real
-                        - 2 * (np.conj(G) * cov[:, 0, 1]).real) / np.abs(G_ur) ** 2
-    var_G[var_G < 0] = np.nan   # C lost its positive definiteness to rounding: unresolved
-    return LPMResult(fs, n_samples, n_records, half_width, degree, lines, G, var_G, cov[:, 0, 0].real, dof,
-                     G_yr=G_yr, G_ur=G_ur, var_u=cov[:, 1, 1].real)
+    return LPMResult(fs, n_samples, n_records, half_width, degree, lines, G, _var_G(var0, cov, G, G_ur),
+                     cov[:, 0, 0].real, dof, G_yr=G_yr, G_ur=G_ur, var_u=cov[:, 1, 1].real,
+                     var_G_smoothed=_var_G(var0, smooth, G, G_ur), **smoothed)
 
 
 def _solve_chunk(X, Z, centres, half_width, degree, dof):

@@ -7,15 +7,18 @@ realizations, else the fast method's ``var_total`` ((6-55)), else the noise vari
 flags them, book Section 7.5 (i)).
 
 Levels of arbitrary runs (``lpm_levels``, the Local Polynomial Method, docs/lpm.md) are numbered
-after the multisine levels. Their weight is the LPM's ``var_G`` (noise plus distortion), estimated
-with q degrees of freedom: each cost term is then F(2, 2q) distributed, as for sample variances
-from M = q + 1 realizations, so the expected cost is that of M = q + 1 (finite only for q >= 2,
-with a finite spread only for q >= 3). The lines are the record's DFT bins (period = record
-length).
+after the multisine levels. Their weight is the LPM's ``var_G_smoothed`` (noise plus distortion,
+its disturbance variance averaged over neighbouring lines: at least ``smoothed_dof`` degrees of
+freedom q; docs/lpm.md, "Smoothed variance"), or ``var_G`` (q = ``dof``) in files written before
+it or when the band was too short to smooth: each cost term is then about F(2, 2q) distributed,
+as for sample variances from M = q + 1 realizations, so the expected cost is that of M = q + 1
+(finite only for q >= 2, with a finite spread only for q >= 3). The lines are the record's DFT
+bins (period = record length).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -110,11 +113,13 @@ def _lpm_level(path, chosen: dict) -> BLALevel:
     """An ``lpm_levels`` group as the FRF to fit (module docstring)."""
     attrs = chosen["attrs"]
     where = f"{path}:/lpm_levels/{chosen['name']}"
-    variance = np.asarray(chosen["var_G"], dtype=float)
+    smoothed = chosen.get("var_G_smoothed") is not None and int(attrs.get("smoothing_lines", 1)) > 1
+    name = "var_G_smoothed" if smoothed else "var_G"
+    variance = np.asarray(chosen[name], dtype=float)
     usable = np.isfinite(variance) & (variance > 0) & np.isfinite(chosen["G"])
     if not usable.any():
-        raise InputError(f"{where}/var_G", "no finite positive variance to weight the fit")
-    dof = int(attrs["dof"])
+        raise InputError(f"{where}/{name}", "no finite positive variance to weight the fit")
+    dof = int(math.floor(float(attrs["smoothed_dof"]))) if smoothed else int(attrs["dof"])
     warnings = [] if usable.all() else [f"{int((~usable).sum())} lines without a finite variance left out"]
     if dof < 3:
         warnings.append(f"weights from the LPM with q = {dof} degrees of freedom: the expected cost is "
@@ -125,4 +130,8 @@ def _lpm_level(path, chosen: dict) -> BLALevel:
     data = FRFData(np.asarray(chosen["bins"], dtype=np.int64)[usable], np.asarray(chosen["G"], dtype=complex)[usable],
                    variance[usable], float(attrs["fs"]), int(attrs["n_samples"]), dof + 1)
     size = data.bins.size
-    return BLALevel(data, np.full(size, np.nan), np.full(size, np.nan), warnings, WEIGHTS["lpm"])
+    weights = WEIGHTS["lpm"]
+    if smoothed:
+        weights += (f", its disturbance variance averaged over {int(attrs['smoothing_lines'])} lines (at least "
+                    f"{float(attrs['smoothed_dof']):.3g} degrees of freedom instead of {int(attrs['dof'])})")
+    return BLALevel(data, np.full(size, np.nan), np.full(size, np.nan), warnings, weights)

@@ -37,8 +37,10 @@ starts a Levenberg-Marquardt minimisation of V itself (:func:`scipy.optimize.lea
 G_k e^{+j omega_k h / 2} (the hold's half-sample delay removed), the band-limited approximation of
 the ZOH response. When the result is unstable or its cost lies above its bound, further starts
 follow and the lowest cost is kept: for ``s`` the z fit mapped to s (matched poles s = fs ln z),
-else, and for ``z``, poles spread over the band, each with its least-squares numerator
-(:func:`fit_order`). Integrators (poles fixed at z = 1 / s = 0) and fits kept inside the stable
+else poles spread over the band; for ``z`` the poles of the frequency-domain subspace model
+(McKelvey, Akçay and Ljung 1996, :mod:`nlsid.fit.subspace`: non-iterative, so free of the local
+minima the linear start can lead into when the order is high and the weights are rough) and poles
+spread over the band; each with its least-squares numerator (:func:`fit_order`). Integrators (poles fixed at z = 1 / s = 0) and fits kept inside the stable
 region serve the order selection (:func:`fit_stable`, :mod:`nlsid.fit.order`).
 
 Uncertainty: with the residuals r(theta) = [Re e_k, Im e_k], e_k = (G_k - G(Omega_k, theta))/sigma_k,
@@ -483,6 +485,22 @@ def _theta_from_poles(basis: _Basis, poles: np.ndarray, weight: np.ndarray) -> n
     return np.concatenate([a[basis.free_a], b])
 
 
+def _subspace_start(basis: _Basis, weight: np.ndarray) -> list[np.ndarray]:
+    """A z fit's start whose free poles are those of the frequency-domain subspace model
+    (:mod:`nlsid.fit.subspace`) of the data without delay and integrators, with the best numerator
+    for them; none for s (its fit starts from the z fit mapped to s) or when the data cannot give
+    it."""
+    if basis.domain != "z" or basis.na == 0:
+        return []
+    from nlsid.fit.subspace import subspace_poles
+
+    poles = subspace_poles(basis.linear_target(), basis.data.z, weight, basis.na)
+    if poles is None:
+        return []
+    b = _numerator_for(basis, np.real(np.poly(poles)), weight)  # np.poly: descending in z = ascending in z^-1
+    return [] if b is None else [np.concatenate([np.real(np.poly(poles))[basis.free_a], b])]
+
+
 START_DAMPING = (0.1, 0.5)  # damping ratios of the spread-pole starts
 
 
@@ -551,18 +569,21 @@ def fit_order(data: FRFData, nb: int, na: int, domain: str = "z", delay: int = 0
     # the linear start led to an unstable model or a cost above its bound (a local minimum, or a
     # too-low order): other starts, the best cost kept
     if domain == "s" and z_start:
-        starts, how = _s_starts(data, nb, na, delay, integrators, basis, weight)
+        s_starts, how = _s_starts(data, nb, na, delay, integrators, basis, weight)
+        starts = [(theta, how) for theta in s_starts]
     else:
-        starts, how = _spread_starts(basis, weight), "poles spread over the band"
-    best = result
-    for theta0 in starts:
+        starts = [(theta, "the subspace model's poles (McKelvey, Akçay and Ljung 1996)")
+                  for theta in _subspace_start(basis, weight)]
+        starts += [(theta, "poles spread over the band") for theta in _spread_starts(basis, weight)]
+    best, best_how = result, ""
+    for theta0, how in starts:
         other = _refine(basis, theta0, weight, evaluations=EXTRA_EVALUATIONS)
         if math.isfinite(other.cost) and other.cost < best.cost * (1 - 1e-9):
-            best = other
+            best, best_how = other, how
     if best is result:
         return fit
     return _result(basis, best, data, nb, na, integrators, weight,
-                   f"start: {how} (the linear start gave cost {fit.cost:.4g}, {fit.model.stability()})")
+                   f"start: {best_how} (the linear start gave cost {fit.cost:.4g}, {fit.model.stability()})")
 
 
 def refit(fit: TFFit, data: FRFData) -> TFFit:

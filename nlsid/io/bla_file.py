@@ -23,11 +23,12 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
     /lpm_levels/level_NN/   (version 2) one group per level of arbitrary runs, by the Local
                             Polynomial Method (nlsid.analysis.arbitrary, docs/lpm.md)
         attrs   level (NaN when none), u_rms, fs, n_samples, n_records, method ("lpm" or
-                "lpm_reference"), half_width, degree, dof, run_ids (JSON), warnings (JSON),
+                "lpm_reference"), half_width, degree, dof, smoothing_lines, smoothed_dof, run_ids
+                (JSON), warnings (JSON),
                 summary (JSON, see LPMLevel.summary)
         bins (F,) int64      DFT bins k of the records' length (frequency k fs / n_samples)
         frequency (F,)       Hz
-        G (F, 2), var_G, var_y, [G_yr (F, 2), G_ur (F, 2), var_u], radius, mag_lo, mag_hi,
+        G (F, 2), var_G, var_y, var_G_smoothed, [G_yr (F, 2), G_ur (F, 2), var_u], radius, mag_lo, mag_hi,
         phase_lo, phase_hi
 
 Version 1 files (no ``lpm_levels``) are still read.
@@ -88,7 +89,8 @@ def _write_lpm_level(group: h5py.Group, level) -> None:
         "level": float("nan") if level.level is None else float(level.level),
         "u_rms": float(level.u_rms), "fs": float(result.fs), "n_samples": int(result.n_samples),
         "n_records": int(result.n_records), "method": level.method, "half_width": int(result.half_width),
-        "degree": int(result.degree), "dof": int(result.dof), "run_ids": json.dumps(level.run_ids),
+        "degree": int(result.degree), "dof": int(result.dof), "smoothing_lines": int(result.smoothing_lines),
+        "smoothed_dof": float(result.smoothed_dof), "run_ids": json.dumps(level.run_ids),
         "warnings": json.dumps(level.warnings), "summary": json.dumps(json_safe(level.summary()), sort_keys=True),
     })
     put(group, "bins", level.bins.astype(np.int64))
@@ -96,6 +98,7 @@ def _write_lpm_level(group: h5py.Group, level) -> None:
     put(group, "G", level.G)
     put(group, "var_G", level.var_G)
     put(group, "var_y", result.var_y[level.band])
+    put(group, "var_G_smoothed", result.var_G_smoothed[level.band])
     if result.G_yr is not None:
         for name in ("G_yr", "G_ur", "var_u"):
             put(group, name, getattr(result, name)[level.band])
