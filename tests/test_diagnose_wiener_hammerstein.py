@@ -9,7 +9,11 @@ reproduces exactly; white sensor noise of 1 mV and a sensor offset of 20 mV. Its
 samples of delay) takes two real poles of different filters for one damped pair, so the split must
 be found with the roots moving. Measured when this test was written: the linear model's error is
 63 mV; with the true filters, the best 16-knot curve leaves 1.4 mV against the measured output
-(noise 1 mV, so the curve's own error is about 1 mV); the diagnosis ends at 1.8 mV.
+(noise 1 mV, so the curve's own error is about 1 mV); the diagnosis ended at 1.8 mV from the fit
+with per-line LPM weights (its poles up to 0.12 off in |z|), and ends at 2.2 mV from the fit with
+smoothed weights (poles within 0.01 in |z| of the truth's, two real poles taken as one pair): the
+split search's optimum depends on where it starts (the same 2.2 mV with 4x the refinement budget,
+4 finalists or 80 root-search steps).
 """
 
 from __future__ import annotations
@@ -95,15 +99,16 @@ def test_first_filter_poles_are_the_circuits(chain):
 @pytest.mark.slow
 def test_held_out_error_near_the_noise(chain):
     """On the last 4000 samples (neither fitted nor validated on) the extended model's error
-    against the noise-free output is below 2 mV (the curve's own error, about 1 mV, with the
-    fit's; the noise is 1 mV), 30 times below the linear model's."""
+    against the noise-free output is below 2.5 mV (the curve's own error, about 1 mV, with the
+    fit's and the split search's; the noise is 1 mV; module docstring), 25 times below the linear
+    model's (63 mV)."""
     _, extended, linear, run, clean = chain
     model = ModelRunner.from_data(extended, "extended_model.yaml").simulate(run).y
     start = ModelRunner.from_data(linear, "linear.yaml").simulate(run).y
     error = np.sqrt(np.mean((model[TEST] - clean[TEST] - OFFSET) ** 2))
     linear_error = np.sqrt(np.mean((start[TEST] - clean[TEST] - OFFSET) ** 2))
-    assert error < 2e-3, error
-    assert linear_error > 30 * error, (linear_error, error)
+    assert error < 2.5e-3, error
+    assert linear_error > 25 * error, (linear_error, error)
 
 
 def test_every_split_multiplies_back_to_the_model():
