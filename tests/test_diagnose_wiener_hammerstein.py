@@ -12,8 +12,8 @@ be found with the roots moving. Measured when this test was written: the linear 
 (noise 1 mV, so the curve's own error is about 1 mV); the diagnosis ended at 1.8 mV from the fit
 with per-line LPM weights (its poles up to 0.12 off in |z|), and ends at 2.2 mV from the fit with
 smoothed weights (poles within 0.01 in |z| of the truth's, two real poles taken as one pair): the
-split search's optimum depends on where it starts (the same 2.2 mV with 4x the refinement budget,
-4 finalists or 80 root-search steps).
+split search's optimum depends on where it starts (the same validation error, 2.35 mV, with 4x the
+refinement budget, 4 finalists or 80 root-search steps).
 """
 
 from __future__ import annotations
