@@ -6,7 +6,6 @@ equivalent, scipy's cont2discrete), and the analog Wiener-Hammerstein circuit of
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -48,7 +47,7 @@ def test_too_few_lines_or_non_finite_data_give_none():
     assert subspace_poles(np.full(50, np.nan, complex), np.exp(1j * np.linspace(0.1, 1, 50)), np.ones(50), 2) is None
 
 
-def test_wiener_hammerstein_bla_fitted_within_its_cost_bound(tmp_path):
+def test_wiener_hammerstein_bla_fitted_within_its_cost_bound(run_cli, tmp_path):
     """``bla`` -> ``fit --order 6/6`` on one 80 000-sample record of the analog circuit (filtered
     Gaussian input, 0.3 mV noise, an output offset): the BLA's variance is mostly stochastic
     nonlinear distortion. With the smoothed weights the cost check has a finite bound, and the
@@ -56,9 +55,6 @@ def test_wiener_hammerstein_bla_fitted_within_its_cost_bound(tmp_path):
     probability 0.99865 (nlsid.fit.tf_fit.cost_bound). Measured when written: the linear
     (Levy, Sanathanan-Koerner) start alone ends in a local minimum at 20 916, above the bound
     19 562; from the subspace start 18 564."""
-    from click.testing import CliRunner
-
-    from nlsid.cli.main import cli
     from nlsid.io.recording import write_recording
     from nlsid.io.run import Run
 
@@ -68,13 +64,10 @@ def test_wiener_hammerstein_bla_fitted_within_its_cost_bound(tmp_path):
     recording = tmp_path / "circuit.h5"
     write_recording(recording, [Run("circuit", wh_cases.FS, "arbitrary", u, y=y)])
 
-    def nlsid(*args):
-        result = CliRunner().invoke(cli, [str(x) for x in args], catch_exceptions=False)
-        assert result.exit_code == 0, result.output
-        return result.stdout
-
-    nlsid("bla", recording, "-o", tmp_path / "bla.h5")
-    report = json.loads(nlsid("fit", tmp_path / "bla.h5", "--order", "6/6", "-o", tmp_path / "model.yaml", "--json"))
+    assert run_cli("-q", "bla", recording, "-o", tmp_path / "bla.h5").exit_code == 0
+    result = run_cli("fit", tmp_path / "bla.h5", "--order", "6/6", "-o", tmp_path / "model.yaml", "--json")
+    assert result.exit_code == 0, result.stderr
+    report = result.json()
     assert "averaged over 139 lines" in report["weights"]
     assert np.isfinite(report["cost_bound"])
     assert report["cost"] <= report["cost_bound"], (report["cost"], report["cost_bound"], report["fit_note"])

@@ -119,7 +119,7 @@ def _lpm_level(path, chosen: dict) -> BLALevel:
     usable = np.isfinite(variance) & (variance > 0) & np.isfinite(chosen["G"])
     if not usable.any():
         raise InputError(f"{where}/{name}", "no finite positive variance to weight the fit")
-    dof = int(math.floor(float(attrs["smoothed_dof"]))) if smoothed else int(attrs["dof"])
+    dof = math.floor(float(attrs["smoothed_dof"])) if smoothed else int(attrs["dof"])
     warnings = [] if usable.all() else [f"{int((~usable).sum())} lines without a finite variance left out"]
     if dof < 3:
         warnings.append(f"weights from the LPM with q = {dof} degrees of freedom: the expected cost is "

@@ -479,6 +479,11 @@ def _theta_from_poles(basis: _Basis, poles: np.ndarray, weight: np.ndarray) -> n
         a = np.real(np.poly(np.exp(poles / basis.data.fs))) if poles.size else np.ones(1)  # ascending in z^-1
     else:
         a = np.real(np.poly(poles / basis.scale))[::-1] if poles.size else np.ones(1)  # ascending in Omega, monic
+    return _theta_from_denominator(basis, a, weight)
+
+
+def _theta_from_denominator(basis: _Basis, a: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
+    """theta of the free factor with ascending coefficients ``a`` and the best numerator for it."""
     b = _numerator_for(basis, a, weight)
     if b is None:
         return None
@@ -497,8 +502,8 @@ def _subspace_start(basis: _Basis, weight: np.ndarray) -> list[np.ndarray]:
     poles = subspace_poles(basis.linear_target(), basis.data.z, weight, basis.na)
     if poles is None:
         return []
-    b = _numerator_for(basis, np.real(np.poly(poles)), weight)  # np.poly: descending in z = ascending in z^-1
-    return [] if b is None else [np.concatenate([np.real(np.poly(poles))[basis.free_a], b])]
+    theta = _theta_from_denominator(basis, np.real(np.poly(poles)), weight)  # descending in z = ascending in z^-1
+    return [] if theta is None else [theta]
 
 
 START_DAMPING = (0.1, 0.5)  # damping ratios of the spread-pole starts
