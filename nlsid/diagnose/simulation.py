@@ -103,16 +103,21 @@ class ModelRunner:
 
     def initial_state(self, run: Run):
         """The initial state fitted to the start of an arbitrary record as the model simulates it
-        (:class:`nlsid.simulate.initial_state.InitialState`), None where none is fitted (a
-        periodic run, a block structure, a mode too slow for the record)."""
+        (:class:`nlsid.simulate.initial_state.InitialState`; of a block structure its filters'
+        states, :mod:`nlsid.simulate.structure_state`), None where none is fitted (a periodic
+        run, a mode too slow for the record)."""
         from nlsid.models.from_config import Plant
         from nlsid.simulate.engine import simulate_run
         from nlsid.simulate.initial_state import estimate
         from nlsid.simulate.noise import Noise
 
         source = self.excitation(run)
-        if source.period is not None or source.y is None or not isinstance(self.plant, Plant):
+        if source.period is not None or source.y is None:
             return None
+        if not isinstance(self.plant, Plant):
+            from nlsid.simulate.structure_state import estimate as structure_estimate
+
+            return structure_estimate(self.plant, source, self.config.simulation.substeps)
         try:
             rest = simulate_run(self.plant, self.loop, source, self.config.simulation.substeps,
                                 Noise.zero(source.n_samples))

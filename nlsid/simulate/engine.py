@@ -255,22 +255,32 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
     return dataclasses.replace(run, u=u_out, y=y_out, r=run.u.copy(), units=units)
 
 
-def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int) -> np.ndarray:
-    """An LTI block alone on the held signal x at the rate fs_step, with ``delay`` samples of dead time."""
+def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int, x0: np.ndarray | None = None) -> np.ndarray:
+    """An LTI block alone on the held signal x at the rate fs_step, with ``delay`` samples of dead
+    time, from the state ``x0`` (default rest)."""
     Phi, Gu = stepped(ss, 1.0 / fs_step)
     zero = np.zeros_like(x)
     none = np.zeros((0, ss.order))
-    return _run_kernel(Phi, Gu, ss, np.zeros(ss.order), _EMPTY_I, np.zeros((0, forces.MAX_PARAMS)), none, none, 1,
+    start = np.zeros(ss.order) if x0 is None else _f64(x0)
+    return _run_kernel(Phi, Gu, ss, start, _EMPTY_I, np.zeros((0, forces.MAX_PARAMS)), none, none, 1,
                        1.0 / fs_step, Timing(delay), fs_step, None, _EMPTY_1, _EMPTY_1, x, zero, zero)[1]
 
 
-def simulate_structure(structure: Structure, run: Run, substeps: int | None, noise: Noise) -> Run:
-    """Run a block structure on ``run``: each branch's stages in series, branches summed.
+def structure_stages(structure: Structure) -> list[StateSpace]:
+    """The LTI stages of a structure, branch by branch, each branch's in series order."""
+    return [s for branch in structure.branches for s in branch if isinstance(s, StateSpace)]
+
+
+def simulate_structure(structure: Structure, run: Run, substeps: int | None, noise: Noise,
+                       states: list[np.ndarray] | None = None) -> Run:
+    """Run a block structure on ``run``: each branch's stages in series, branches summed; each LTI
+    stage from its state in ``states`` (in :func:`structure_stages` order; default all at rest).
 
     With ``substeps`` M > 1 the held input is evaluated M times per sample, so the signals between
     blocks are sampled M times finer (continuous LTI blocks only); y is then read every M-th value.
     """
-    stages = [s for branch in structure.branches for s in branch if isinstance(s, StateSpace)]
+    stages = structure_stages(structure)
+    starts = iter(states if states is not None else [None] * len(stages))
     m = substeps or 1
     if m > 1 and any(s.discrete for s in stages):
         raise InputError("simulation.substeps", "a structure with discrete-time blocks runs one step per sample")
@@ -282,7 +292,7 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
         for stage in branch:
             if isinstance(stage, StateSpace):
                 delay = _delay(stage, run.fs, n, "model") * m
-                signal = _filter(stage, signal, run.fs * m, delay)
+                signal = _filter(stage, signal, run.fs * m, delay, next(starts))
             else:
                 signal = stage(signal)
         y += signal
@@ -340,8 +350,7 @@ def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) ->
     if loop is not None:
         sigma = _loop_decay_rate(model, loop, run.fs, run.n_samples)
     else:
-        stages = [s for branch in model.branches for s in branch if isinstance(s, StateSpace)] \
-            if isinstance(model, Structure) else [model.ss]
+        stages = structure_stages(model) if isinstance(model, Structure) else [model.ss]
         sigma = min((_decay_rate(ss, run.fs) for ss in stages), default=math.inf)
     if sigma == 0 or not math.isfinite(sigma):
         return 0
@@ -358,8 +367,9 @@ def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, su
     """Simulate one run; ``noise`` defaults to none. ``steady`` (the run as it was measured): a
     periodic run is simulated in its periodic steady state, as if its excitation had run
     :func:`lead_periods` more periods before it (each signal's first period repeated ahead of it,
-    then cut off again); an arbitrary record of a plant with a measured ``y`` from the initial
-    state that fits its first samples (:mod:`nlsid.simulate.initial_state`)."""
+    then cut off again); an arbitrary record with a measured ``y`` from the initial state that
+    fits its first samples (a plant's: :mod:`nlsid.simulate.initial_state`; a block structure's
+    filters': :mod:`nlsid.simulate.structure_state`)."""
     noise = noise or Noise.zero(run.n_samples)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
@@ -374,6 +384,10 @@ def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, su
         from nlsid.simulate.initial_state import with_initial_state
 
         return with_initial_state(model, loop, run, out)
+    if steady and run.period is None:
+        from nlsid.simulate.structure_state import with_initial_states
+
+        return with_initial_states(model, run, substeps, noise, out)
     if not count:
         return out
     return dataclasses.replace(out, u=out.u[m:], y=None if out.y is None else out.y[m:],

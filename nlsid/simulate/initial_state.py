@@ -17,8 +17,9 @@ a first-order one for a nonlinear model, whose transient is that of its linearis
 Inside a fit it is variable projection: x0 is eliminated at every evaluation (Golub and Pereyra
 1973). It costs the fit n degrees of freedom out of L samples.
 
-Not estimated (the record is simulated from rest, as before): a block structure (its transient
-passes its static curves), a model whose slowest mode does not decay within a quarter of the record
+A block structure's transient passes its static curves: its filters' states are fitted by
+:mod:`nlsid.simulate.structure_state`. Not estimated (the record is simulated from rest, as
+before): a model whose slowest mode does not decay within a quarter of the record
 (an integrator, a mode the record cannot tell from an offset), and a run without a measured output.
 """
 
