@@ -18,7 +18,9 @@ from .options import map_option, parse_map, read_split, split_options
 @click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,
               help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
 @click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
-@click.option("--max-order", type=click.IntRange(min=1), default=4, show_default=True, help="Largest na scanned by --order auto.")
+@click.option("--max-order", type=click.IntRange(min=1), default=None,
+              help="Largest na scanned by --order auto. Default: 4, and up to 10 (nb = na-2..na) while no order "
+                   "reaches its cost bound.")
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Level index in bla.h5 (required when it holds several).")
 @click.option("--plot", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG): data, model, residual, noise and nonlinear std.")
 @click.option("--model", "model_config", type=click.Path(dir_okay=False), default=None,

@@ -277,3 +277,26 @@ def test_existing_output_is_not_overwritten(run_cli, bla_file, tmp_path):
     result = run_cli("fit", bla_file / "bla.h5", "--order", "0/2", "-o", tmp_path / "m.yaml")
     assert result.exit_code == 2 and "--force" in result.stderr
     assert (tmp_path / "m.yaml").read_text() == "keep"
+
+
+def test_order_scan_goes_beyond_the_default_only_while_no_order_passes():
+    """A sixth-order system (the zero-order-hold equivalent of a third-order Chebyshev I low-pass in
+    series with a third-order inverse Chebyshev, as in the SYSID 2009 circuit), exact variances:
+    scanned up to na = 4 no order reaches its bound (the data hold six poles); extended, the scan
+    stops at the first na where one does, and that is the system's own na = 6 (a fit of the true
+    order passes with probability 0.99865). With an explicit limit the scan does not go on."""
+    fs, N = 51200.0, 4096
+    bins = np.arange(1, 700)
+    first = signal.cont2discrete(signal.cheby1(3, 0.5, 2 * np.pi * 4400, analog=True), 1 / fs, method="zoh")
+    second = signal.cont2discrete(signal.cheby2(3, 40, 2 * np.pi * 5000, analog=True), 1 / fs, method="zoh")
+    b, a = np.convolve(np.ravel(first[0]), np.ravel(second[0])), np.convolve(first[1], second[1])
+    _, G0 = signal.freqz(b, a, worN=2 * np.pi * bins / N)
+    sigma = 0.002 * np.abs(G0) + 1e-5
+    data = FRFData(bins, _synthetic(G0, sigma, np.random.default_rng(12)), sigma ** 2, fs, N)
+    limited = select_order(data, 4, "z")
+    assert not any(r.accepted for r in limited.scan) and max(r.na for r in limited.scan) == 4
+    extended = select_order(data, 4, "z", extend_to=10)
+    assert extended.fit.na == 6, extended.reason
+    assert max(r.na for r in extended.scan) == 6
+    assert {(r.nb, r.na) for r in extended.scan if r.na > 4} == {(3, 5), (4, 5), (5, 5), (4, 6), (5, 6), (6, 6)}
+    assert "went on to na = 6" in extended.reason

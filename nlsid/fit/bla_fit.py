@@ -70,14 +70,22 @@ class BLAFit:
         }
 
 
+DEFAULT_MAX_ORDER = 4     # the orders --order auto scans when --max-order is not given ...
+EXTENDED_MAX_ORDER = 10   # ... and how far it goes on when none of them reaches its cost bound
+
+
 def fit_bla(path: str | os.PathLike, order: tuple[int, int] | None, domain: str, delay: int | None,
-            max_order: int, level: int | None) -> BLAFit:
-    """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``."""
+            max_order: int | None, level: int | None) -> BLAFit:
+    """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``; ``max_order``
+    None: up to DEFAULT_MAX_ORDER, beyond it up to EXTENDED_MAX_ORDER where no order reaches its
+    cost bound (:func:`nlsid.fit.order.select_order`)."""
     source = frf_from_bla(path, level)
     if order is not None:
         return BLAFit(source, fit_transfer_function(source.data, order[0], order[1], domain, delay), None)
+    scanned = DEFAULT_MAX_ORDER if max_order is None else max_order
     if delay is None:
-        delay = fit_transfer_function(source.data, max_order, max_order, domain, None).model.delay
-    selection = select_order(source.data, max_order, domain, delay)
+        delay = fit_transfer_function(source.data, scanned, scanned, domain, None).model.delay
+    selection = select_order(source.data, scanned, domain, delay,
+                             extend_to=EXTENDED_MAX_ORDER if max_order is None else None)
     return BLAFit(source, selection.fit, selection)
 

@@ -24,6 +24,12 @@ the lowest cost); ties go to the lower held-out error. When no stable order pass
 order with the lowest held-out error is chosen and the reason says so; an unstable model is never
 chosen. A higher nested order with a clearly higher cost than a lower one is flagged as a local
 minimum (book Ex 76).
+
+Without an explicit ``--max-order`` the scan goes on where no eligible order up to the default
+reaches its bound (and the bound is finite): na = 5, 6, ... up to ``extend_to``, each with nb =
+na - 2 .. na only (a proper model of a sampled analog system has nb near na; the full triangle
+would double the fits), stopping after the first na at which an order passes. The rule of choice
+is unchanged: the reason names the orders the scan reached.
 """
 
 from __future__ import annotations
@@ -36,6 +42,9 @@ import numpy as np
 from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.fit.tf_fit import FRFData, TFFit, expected_cost, fit_stable, on_boundary, refit
+
+
+EXTENSION_NB_SPAN = 2  # beyond --max-order: nb = na - 2 .. na only
 
 
 @dataclass(frozen=True)
@@ -100,13 +109,24 @@ def _refusal(r: OrderResult) -> str:
     return f"{r.how} fit {r.stability}"
 
 
-def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 0) -> OrderSelection:
-    """Scan the candidate orders and choose one (module docstring); the reason is plain text."""
+def extension_orders(na: int) -> list[tuple[int, int]]:
+    """The orders of denominator order ``na`` scanned beyond ``--max-order`` (module docstring):
+    nb = na - EXTENSION_NB_SPAN .. na, by increasing parameter count."""
+    return [(nb, na) for nb in range(max(0, na - EXTENSION_NB_SPAN), na + 1)]
+
+
+def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 0,
+                 extend_to: int | None = None) -> OrderSelection:
+    """Scan the candidate orders and choose one (module docstring); the reason is plain text.
+    ``extend_to``: when no eligible order up to ``max_order`` is within its cost bound, go on
+    with :func:`extension_orders` of na = max_order + 1, ... up to ``extend_to``, until one is."""
     scan, fits = [], {}
     enough = None  # parameter count of the first stable order within its bound: larger ones cannot be chosen
-    for nb, na in candidate_orders(max_order):
+
+    def scan_order(nb: int, na: int) -> None:
+        nonlocal enough
         if 2 * (data.bins.size // 2) <= na + nb + 1 or (domain == "s" and nb > na):
-            continue
+            return
         fit = fit_stable(data, nb, na, domain, delay, thorough=enough is None or nb + na <= enough)
         fits[(nb, na)] = fit
         scan.append(OrderResult(nb, na, fit.cost, fit.expected_cost, fit.cost_std,
@@ -115,8 +135,18 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
                                 fit.how == "stabilised" and on_boundary(fit)))
         if enough is None and scan[-1].eligible and scan[-1].accepted:
             enough = nb + na
+
+    for nb, na in candidate_orders(max_order):
+        scan_order(nb, na)
+    first_max = scanned_to = max_order
+    bounded = any(math.isfinite(r.cost_bound) for r in scan)
+    while enough is None and bounded and extend_to is not None and scanned_to < extend_to:
+        scanned_to += 1
+        for nb, na in extension_orders(scanned_to):
+            scan_order(nb, na)
     if not scan:
         raise InputError("--order auto", f"{data.bins.size} lines are too few for any model order")
+    max_order = scanned_to
     eligible = [r for r in scan if r.eligible]
     passing = [r for r in eligible if r.accepted]
     per_line = expected_cost(1, 0, data.realizations)[0]  # (M-1)/(M-2), or 1 for exact variances
@@ -146,6 +176,9 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         best = min(scan, key=lambda r: r.cost)
         reason = (f"no stable fit of any order up to {max_order}: {best.nb}/{best.na} (lowest cost) is "
                   f"{best.stability}; check the data (a closed loop measured as open loop, a wrong sign)")
+    if scanned_to > first_max:
+        reason += (f"; no order up to na = {first_max} reached its bound, so the scan went on to na = {scanned_to} "
+                   f"(nb = na-{EXTENSION_NB_SPAN}..na)")
     fit = fits[(best.nb, best.na)]
     if fit.how == "integrator":
         reason += f"; {fit.note}"
