@@ -22,6 +22,7 @@ from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.hypotheses.base import with_lti
+from nlsid.diagnose.hypotheses.linear_dynamics import is_coefficient
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
@@ -33,6 +34,7 @@ from nlsid.io.run import Run
 FIT_STEPS = 25
 MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 NUMERATOR = re.compile(r"\.num\[\d+\]$")  # a numerator coefficient's key path (:func:`refine`)
+LINEAR_REFITS = ("wrong_mechanics", "wrong_dynamics")  # the linear part's refit alone (Outcome.generalizes)
 
 
 @dataclass
@@ -58,9 +60,10 @@ class Outcome:
     @property
     def generalizes(self) -> tuple[str, ...]:
         """Families or hypotheses whose models are special cases of this one's (the verdict's ties):
-        the hypothesis' own, and the wrong mechanics where a force or block was refined with them."""
+        the hypothesis' own, and the linear refit alone (wrong mechanics, wrong linear dynamics)
+        where a force or block was refined with the linear part."""
         freed = self.hypothesis.distorts and self.fitted_mechanics()
-        return self.hypothesis.generalizes + (("wrong_mechanics",) if freed else ())
+        return self.hypothesis.generalizes + (LINEAR_REFITS if freed else ())
 
     def headline_values(self) -> str:
         """The main parameter with its unit and the mechanics it moved, as the headline gives them."""
@@ -82,13 +85,20 @@ class Outcome:
         than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or ""."""
         if self.estimate is None:
             return ""
-        parts = []
+        parts, coefficients, moved = [], 0, 0
         for name, path in self.fitted_mechanics().items():
             start, value, std = self.free[path].start, self.estimate.values[name], self.estimate.std[name]
-            if math.isfinite(std) and abs(value - start) > MOVED * std:
+            significant = math.isfinite(std) and abs(value - start) > MOVED * std
+            if is_coefficient(name):
+                coefficients, moved = coefficients + 1, moved + significant
+            elif significant:
                 change = 100 * (value - start) / abs(start)
                 parts.append(f"the {name.replace('_', ' ')} {abs(change):.3g} % {'above' if change > 0 else 'below'}")
-        return f"{', '.join(parts)} the model's" if parts else ""
+        text = f"{', '.join(parts)} the model's" if parts else ""
+        if moved:
+            text = "; ".join(filter(None, [text, f"{moved} of the transfer function's {coefficients} coefficients "
+                                                 f"corrected with it (by more than {MOVED:g} standard errors)"]))
+        return text
 
     def summary(self) -> dict:
         h = self.hypothesis
@@ -307,7 +317,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         bounds = (-abs(start) * 1e3, abs(start) * 1e3) if NUMERATOR.search(path) else sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
     fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free))
-    values, std = _fitted(estimate, fit, paths)
+    values, std = _derived(hypothesis, *_fitted(estimate, fit, paths), free, paths, fit.config["model"])
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
     note = "; ".join(filter(None, [estimate.note, what, *fit.warnings, reading]))
@@ -320,6 +330,17 @@ def _fitted(estimate: Estimate, fit, paths: dict[str, str]) -> tuple[dict, dict]
     values = {**estimate.values, **{name: fit.value(path) for name, path in paths.items()}}
     std = {**estimate.std, **{name: float(fit.std[fit.names.index(path)]) for name, path in paths.items()}}
     return values, std
+
+
+def _derived(hypothesis: Hypothesis, values: dict, std: dict, free: dict, paths: dict[str, str],
+             model: dict) -> tuple[dict, dict]:
+    """``values`` and ``std`` with the hypothesis' derived values (``Hypothesis.derive``: of the
+    fitted values against their starts, the model's own; standard errors not computed, NaN)."""
+    if hypothesis.derive is None:
+        return values, std
+    starts = {name: free[path].start for name, path in paths.items() if path in free}
+    extra = hypothesis.derive(values, starts, model)
+    return values | extra, std | {name: float("nan") for name in extra}
 
 
 def budget(free: dict) -> int:
@@ -340,7 +361,8 @@ def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str) -
     free = {path: dataclasses.replace(p, start=None) for path, p in outcome.free.items()}
     fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=budget(free))
     est = outcome.estimate
-    values, std = _fitted(est, fit, outcome.paths)
+    values, std = _derived(outcome.hypothesis, *_fitted(est, fit, outcome.paths), outcome.free, outcome.paths,
+                           fit.config["model"])
     note = "; ".join([est.note, f"re-fitted with {substeps} sub-steps per sample (the simulation's error "
                                 "below a tenth of the floor)", *fit.warnings])
     outcome.estimate = Estimate(values, std, est.explained_db, note)

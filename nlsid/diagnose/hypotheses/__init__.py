@@ -55,6 +55,11 @@ missing_resonance   BLA differs from the model around one     the model as a ``z
 wrong_mechanics     BLA differs around the model's own        ``mass``, ``damping``, ``stiffness``
                     resonance (height, frequency), no         of a mass_spring_damper corrected
                     distortion                                (main: damping)
+wrong_dynamics      BLA differs from the model in shape or    a ``transfer_function``'s ``num``
+                    gain, no distortion                       and ``den`` corrected (main: the
+                                                              largest change of a pole's natural
+                                                              frequency, %); the same coefficients
+                                                              are refined with every block
 coupled_mode        BLA differs by a resonance with an        the model as a ``zpk`` with the
                     anti-resonance below it (a second mass    modes ``{frequency: fa, damping:
                     on the driven one), no distortion         za}`` (zero) and ``{frequency: fr,
@@ -88,8 +93,8 @@ one of them already reaches the noise floor.
 
 from __future__ import annotations
 
-from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, mechanics, output_blocks,
-                                       resonance, stiffness)
+from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
+                                       output_blocks, resonance, stiffness)
 from nlsid.diagnose.hypotheses import wiener_hammerstein
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
@@ -99,6 +104,7 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES
                                    + output_blocks.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
+                                   + linear_dynamics.HYPOTHESES
                                    + coupled_mode.HYPOTHESES + delay.HYPOTHESES)
 
 

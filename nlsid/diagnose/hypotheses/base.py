@@ -93,6 +93,7 @@ class Hypothesis:
     qualifier: Callable[[dict], str] | None = None  # the same in a word or two, for the headline ("hardening")
     holds: tuple[str, ...] = ()  # nuisance keys its fit does not re-fit (a parameter of it moves the model the same way)
     generalizes: tuple[str, ...] = ()  # families whose models are special cases of this one's (verdict ties)
+    derive: Callable[[dict, dict, dict], dict] | None = None  # (fitted, start values, model) -> values computed from them
 
     @property
     def distorts(self) -> bool:

@@ -7,6 +7,7 @@ import copy
 import math
 
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
+from nlsid.diagnose.hypotheses.linear_dynamics import coefficient_paths
 from nlsid.diagnose.simulation import ModelRunner
 
 
@@ -26,6 +27,8 @@ def linear_paths(data: dict) -> dict[str, str]:
     dampings and stiffnesses free it only rescales them. Name -> key path; empty for other models.
     """
     model = data["model"]
+    if model.get("type") == "transfer_function":
+        return coefficient_paths(data)
     keys = LINEAR_MECHANICS.get(model.get("type"), ())
     return {k: f"model.{k}" for k in keys if float(model.get(k, 0.0)) != 0.0}
 
