@@ -104,9 +104,12 @@ def eiv_variance(G: np.ndarray, U: np.ndarray, var_y: np.ndarray, var_u: np.ndar
     """First-order variance of ``G = Y/U`` from the (co)variances of Y and U ((6-34), (6-49), (6-53)).
 
     ``|G|^2 (s_Y/|Y|^2 + s_U/|U|^2 - 2 Re(s_YU/(Y conj U)))``, written without dividing by Y so that
-    it holds where G vanishes: ``(s_Y + |G|^2 s_U - 2 Re(s_YU conj(G))) / |U|^2``.
+    it holds where G vanishes: ``(s_Y + |G|^2 s_U - 2 Re(s_YU conj(G))) / |U|^2``. With sample
+    (co)variances of one set of realizations this is the variance of Y - G U, never negative; the
+    difference of nearly equal terms can fall below zero by rounding where the realizations agree
+    to rounding (a noise-free simulation of a linear model, in closed loop), and is then 0.
     """
-    return (var_y + np.abs(G) ** 2 * var_u - 2 * (cov_yu * np.conj(G)).real) / np.abs(U) ** 2
+    return np.maximum((var_y + np.abs(G) ** 2 * var_u - 2 * (cov_yu * np.conj(G)).real) / np.abs(U) ** 2, 0.0)
 
 
 class RobustAccumulator:

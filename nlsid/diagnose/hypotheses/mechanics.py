@@ -37,17 +37,17 @@ def _mass_spring_damper(runner: ModelRunner) -> str | None:
 
 def _estimate_mechanics(ctx: Context) -> Estimate | str:
     """Start values: the model's own mass, damping and stiffness (the fit engine corrects them). A
-    zero damping starts at 5 % of critical, 0.1 sqrt(k m), so that it has an effect to fit."""
+    zero stiffness stays zero, not fitted (a free mass has no spring: a structural choice, and a
+    start of zero has no sign to keep); a zero damping of a mass on a spring starts at 5 % of
+    critical, 0.1 sqrt(k m), so that it has an effect to fit, and of a free mass stays zero."""
     model = ctx.runner.data["model"]
     values = {"mass": float(model["mass"]), "damping": float(model.get("damping", 0.0)),
               "stiffness": float(model.get("stiffness", 0.0))}
-    if values["damping"] == 0:
-        if values["stiffness"] <= 0:
-            return "no damping and no positive stiffness to start a damping correction from"
+    if values["damping"] == 0 and values["stiffness"] > 0:
         values["damping"] = 0.1 * math.sqrt(values["stiffness"] * values["mass"])
-    if values["stiffness"] == 0:
-        return "no stiffness to start a stiffness correction from (the fit keeps the sign of each start)"
-    return Estimate(values, {k: float("nan") for k in values}, float("nan"), "start at the model's own values")
+    note = "start at the model's own values" + ("; a free mass: no stiffness" if values["stiffness"] == 0 else "")
+    return Estimate(values, {k: float("nan") for k in values}, float("nan"), note,
+                    paths={k: f"model.{k}" for k, v in values.items() if v != 0})
 
 def _set_keys(data: dict, values: dict) -> dict:
     out = copy.deepcopy(data)
