@@ -44,26 +44,26 @@ BISECTIONS = 60
 
 
 @numba.njit(cache=False)
-def _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv):
+def _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv, k3):
     level = fc + (fs - fc) * math.exp(-abs(v / vs) ** delta)
-    return (drive - c * v - k * p - s * level - fv * v) / m
+    return (drive - c * v - k * p - k3 * p**3 - s * level - fv * v) / m
 
 
 @numba.njit(cache=False)
-def _stribeck_rk4(p, v, tau, drive, s, m, c, k, fc, fs, vs, delta, fv):
+def _stribeck_rk4(p, v, tau, drive, s, m, c, k, fc, fs, vs, delta, fv, k3):
     """One RK4 step of length tau while sliding in direction s."""
-    a1 = _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv)
+    a1 = _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
     p2, v2 = p + 0.5 * tau * v, v + 0.5 * tau * a1
-    a2 = _stribeck_acceleration(p2, v2, drive, s, m, c, k, fc, fs, vs, delta, fv)
+    a2 = _stribeck_acceleration(p2, v2, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
     p3, v3 = p + 0.5 * tau * v2, v + 0.5 * tau * a2
-    a3 = _stribeck_acceleration(p3, v3, drive, s, m, c, k, fc, fs, vs, delta, fv)
+    a3 = _stribeck_acceleration(p3, v3, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
     p4, v4 = p + tau * v3, v + tau * a3
-    a4 = _stribeck_acceleration(p4, v4, drive, s, m, c, k, fc, fs, vs, delta, fv)
+    a4 = _stribeck_acceleration(p4, v4, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
     return p + tau / 6 * (v + 2 * v2 + 2 * v3 + v4), v + tau / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
 
 
 @numba.njit(cache=False)
-def _stribeck_runs(U, fs_hz, substeps, m, c, k, gain, fc, fs, vs, delta, fv):
+def _stribeck_runs(U, fs_hz, substeps, m, c, k, gain, fc, fs, vs, delta, fv, k3):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
     for r in range(U.shape[0]):
@@ -75,25 +75,25 @@ def _stribeck_runs(U, fs_hz, substeps, m, c, k, gain, fc, fs, vs, delta, fv):
                 left = h
                 while left > 0.0:
                     if v == 0.0:
-                        applied = drive - k * p
+                        applied = drive - k * p - k3 * p**3
                         if abs(applied) <= fs:
                             left = -1.0  # stuck until the next sample
                             break
                         s = 1.0 if applied > 0 else -1.0
                     else:
                         s = 1.0 if v > 0 else -1.0
-                    p1, v1 = _stribeck_rk4(p, v, left, drive, s, m, c, k, fc, fs, vs, delta, fv)
+                    p1, v1 = _stribeck_rk4(p, v, left, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
                     if v1 * s > 0.0:
                         p, v, left = p1, v1, 0.0
                         break
                     lo, hi = 0.0, left
                     for _ in range(BISECTIONS):
                         mid = 0.5 * (lo + hi)
-                        if _stribeck_rk4(p, v, mid, drive, s, m, c, k, fc, fs, vs, delta, fv)[1] * s > 0.0:
+                        if _stribeck_rk4(p, v, mid, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)[1] * s > 0.0:
                             lo = mid
                         else:
                             hi = mid
-                    p = _stribeck_rk4(p, v, hi, drive, s, m, c, k, fc, fs, vs, delta, fv)[0]
+                    p = _stribeck_rk4(p, v, hi, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)[0]
                     v = 0.0
                     left -= hi
                 if left < 0.0:
@@ -139,12 +139,17 @@ def _mechanics(model: dict) -> tuple[float, float, float, float]:
 
 def stribeck_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 16) -> np.ndarray:
     """The sampled positions (runs x samples) of a mass_spring_damper with one symmetric
-    ``stribeck`` force for the held inputs U (runs x samples), from rest (module docstring)."""
-    (force,) = model["nonlinearities"]
-    law = [float(force[key]) if key in force else default for key, default in
-           (("fc", None), ("fs", None), ("vs", None), ("delta", 2.0), ("fv", 0.0))]
+    ``stribeck`` force (or ``coulomb``: a Stribeck law with fs = fc) and at most one
+    ``cubic_stiffness`` (k3 p^3 against the motion, with the spring in the stick test) for the
+    held inputs U (runs x samples), from rest (module docstring)."""
+    forces = model["nonlinearities"]
+    (force,) = [f for f in forces if f["type"] in ("stribeck", "coulomb")]
+    k3 = sum(float(f["k3"]) for f in forces if f["type"] == "cubic_stiffness")
+    fc = float(force["fc"])
+    law = [fc, float(force.get("fs", fc)), float(force.get("vs", 1.0)), float(force.get("delta", 2.0)),
+           float(force.get("fv", 0.0))]
     return _stribeck_runs(np.atleast_2d(np.asarray(U, dtype=float)), float(fs_hz), int(substeps),
-                          *_mechanics(model), *law)
+                          *_mechanics(model), *law, k3)
 
 
 def lugre_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 128) -> np.ndarray:

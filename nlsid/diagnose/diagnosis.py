@@ -264,7 +264,7 @@ def gain_text(score: Score) -> str:
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
-           nominal: dict) -> tuple[Estimate, dict, dict, dict]:
+           nominal: dict, carried: dict[str, str] | None = None) -> tuple[Estimate, dict, dict, dict]:
     """The signature estimate refined by the fit engine (simulation error of the estimation runs),
     together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
     ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
@@ -301,6 +301,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     paths = estimate.paths if estimate.paths is not None else hypothesis.paths(data) if hypothesis.paths else {}
     if hypothesis.distorts:
         paths = {**linear_paths(extended), **paths}
+    paths = {**_carried(carried or {}, extended), **paths}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
     for key in hypothesis.holds:  # held at its value in ``data``
         free.pop(f"model.{key}", None)
@@ -322,6 +323,36 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
     note = "; ".join(filter(None, [estimate.note, what, *fit.warnings, reading]))
     return Estimate(values, std, estimate.explained_db, note), fit.config, free, paths
+
+
+def _update_earlier(chain: list[Outcome]) -> None:
+    """The earlier causes' values and standard errors as the last one's refinement left them (it
+    refined them again: :func:`_carried`), so that the chain reports the final model's values."""
+    last = chain[-1].estimate
+    for earlier in chain[:-1]:
+        names = [name for name in earlier.paths if name in last.values]
+        earlier.estimate = dataclasses.replace(
+            earlier.estimate, values={**earlier.estimate.values, **{n: last.values[n] for n in names}},
+            std={**earlier.estimate.std, **{n: last.std[n] for n in names}})
+
+
+def _carried(carried: dict[str, str], extended: dict) -> dict[str, str]:
+    """The parameters of the causes accepted in earlier rounds (name -> key path) that the
+    extended config still holds, with a value that has a sign to keep: refined again with each
+    hypothesis of a later round (issue 17 items 4 and 6: fitted without the later cause, they carry
+    part of it; Coulomb friction fitted before a cubic spring came out 1.6 % high, and the final
+    model stayed 5 dB above the floor with it held)."""
+    from nlsid.fit.extension import value_at
+
+    out = {}
+    for name, path in carried.items():
+        try:
+            value = value_at(extended, path)
+        except InputError:  # the later hypothesis rebuilt the model: the path is gone
+            continue
+        if isinstance(value, (int, float)) and math.isfinite(value) and value != 0:
+            out[name] = path
+    return out
 
 
 def _fitted(estimate: Estimate, fit, paths: dict[str, str]) -> tuple[dict, dict]:
@@ -423,7 +454,9 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
 
     Several effects: once a cause is named, the extended model is diagnosed again (the families
     already accepted left out), until its validation error is at the noise floor, no hypothesis
-    improves it significantly, or :data:`MAX_CAUSES` are named. The result is the first round's
+    improves it significantly, or :data:`MAX_CAUSES` are named; in a later round every hypothesis
+    is refined together with the parameters of the causes accepted before it (:func:`_carried`).
+    The result is the first round's
     diagnosis (the evidence against the user's model) with the ``chain`` of accepted causes; the
     extended model is the last one's.
     """
@@ -433,12 +466,14 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     first = current = last = _round(data, source, runs, roles, where, step, ())
     while current.verdict.status == rules.EXPLAINED:
         first.chain.append(current.winner)
+        _update_earlier(first.chain)
         last = current
         done = current.winner.score.within_floor
         if done or len(first.chain) == MAX_CAUSES:
             break
         accepted = tuple(o.hypothesis.family for o in first.chain)
-        current = _round(current.winner.extended, source, runs, roles, where, step, accepted)
+        carried = {name: path for o in first.chain for name, path in o.paths.items()}
+        current = _round(current.winner.extended, source, runs, roles, where, step, accepted, carried)
     first.accuracy = _accurate(first, last, data, source, runs, roles)
     return first
 
@@ -511,7 +546,7 @@ def _decide(evidence: Evidence, found: nuisances.Nuisances, baseline: Score, out
 
 
 def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], where: str,
-           step: Callable[[str], None], accepted: tuple[str, ...]) -> Diagnosis:
+           step: Callable[[str], None], accepted: tuple[str, ...], carried: dict[str, str] | None = None) -> Diagnosis:
     """One diagnosis of the model ``data``: evidence, nuisances, every hypothesis of a family not in
     ``accepted``, the verdict.
 
@@ -566,7 +601,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             continue
         try:
             estimate, extended, outcome.free, outcome.paths = refine(hypothesis, adjusted, estimate, est_runs,
-                                                                     source, data)
+                                                                     source, data, carried)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
             continue

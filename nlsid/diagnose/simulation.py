@@ -18,7 +18,12 @@ Two probes serve the evidence and the signature estimates:
   For a linear model this is the exact small-signal sensitivity of the output to a force (or input
   error) at the actuator and to an output error, in open loop (G d) and in closed loop (the loop's
   input and output sensitivities), because the engine adds ``process`` to the held plant input
-  after the dead time and the controller reads the output with ``y_noise`` added.
+  after the dead time and the controller reads the output with ``y_noise`` added. A nonlinear model
+  (forces, blocks: an extended model in a later round of the diagnosis) responds differently where
+  it is: at rest a friction force holds the mass against a small disturbance, so the response from
+  rest would be zero. Its response is taken along its own trajectory, a finite difference with a
+  disturbance of RESPONSE_STEP times the signal's rms (the first-order sensitivity where the model
+  is smooth, a secant across the friction's events).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from nlsid.errors import InputError
 from nlsid.io.run import Run
 
 MECHANICAL = ("mass_spring_damper", "two_mass_stage")
+RESPONSE_STEP = 1e-3  # a disturbance's size, relative to the signal it acts on, for a nonlinear model's response
 LTI = ("transfer_function", "zpk", "state_space")
 
 
@@ -126,12 +132,45 @@ class ModelRunner:
         return estimate(self.plant, self.loop, source, rest)
 
     def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
-        """Recorded-output response to a plant-input and/or output disturbance, excitation zero
-        (less the response to the model's own offsets and input channels, when it has any)."""
+        """Recorded-output response to a plant-input and/or output disturbance: of a linear model
+        with the excitation zero (less the response to the model's own offsets and input
+        channels, when it has any); of a nonlinear one along its own trajectory
+        (:meth:`_along`)."""
+        if self.nonlinear:
+            return self._along(run, process, output)
         y = self.simulate(run, process, output, excite=False).y
         if self.has_offsets:
             y = y - self.simulate(run, excite=False).y
         return y
+
+    @property
+    def nonlinear(self) -> bool:
+        """The model has forces, blocks or a block structure: its response to a disturbance
+        depends on where it is (a friction force at rest holds the mass against a small one)."""
+        from nlsid.models import blocks
+        from nlsid.models.from_config import Plant
+
+        if not isinstance(self.plant, Plant):
+            return True
+        identity = blocks.encode(None)[0]
+        return bool(self.plant.forces) or self.plant.input_block[0] != identity or self.plant.output_block[0] != identity
+
+    def _along(self, run: Run, process: np.ndarray | None, output: np.ndarray | None) -> np.ndarray:
+        """The first-order response of a nonlinear model to the disturbances along its own
+        trajectory on ``run``: for each disturbance d (scaled to RESPONSE_STEP times the rms of
+        the excitation, respectively of the model's output, that scale s divided out again),
+        (y(u; s d) - y(u)) / s, summed. Simulated as the model runs on ``run`` (its periodic
+        steady state), from rest where the record is arbitrary."""
+        quiet = dataclasses.replace(run, y=None)
+        nominal = self.simulate(quiet).y
+        total = np.zeros(run.n_samples)
+        for name, signal, reference in (("process", process, self.excitation(run).u), ("output", output, nominal)):
+            size = _rms(signal) if signal is not None else 0.0
+            if size == 0:
+                continue
+            scale = RESPONSE_STEP * (_rms(reference) or 1.0) / size
+            total += (self.simulate(quiet, **{name: scale * signal}).y - nominal) / scale
+        return total
 
     @property
     def has_offsets(self) -> bool:
@@ -173,6 +212,10 @@ class ModelRunner:
     def actuator_gain(self) -> float:
         """Force per unit of plant input on the driven mass (mechanical templates)."""
         return float(self.config.model.gain)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
 
 
 def _probe(data: dict, signal: str) -> dict:

@@ -61,6 +61,20 @@ singular J^T J (a combination of parameters the data cannot tell apart: singular
 below 1e-6), a pair with correlation above 0.99 in magnitude, a relative standard deviation above
 50 %, or an estimate at a bound.
 
+Periodic runs are fitted on their mean period. With P steady-state periods of a periodic model
+response s_sim, sum_p ||s_sim - s_p||^2 = P ||s_sim - mean_p s_p||^2 + sum_p ||s_p - mean_p s_p||^2,
+and the last term does not depend on theta; so the optimiser's residual of such a run is
+sqrt(P) (s_sim - mean_p s_p) over one period, and the run is simulated through its transient
+periods and one period instead of all P (:func:`_compact`), driven in that period by the mean
+period of the recorded excitation (its measurement noise averaged like the output's, where the
+whole run would carry each period's own). The model's response is periodic there
+when its linear dynamics (forces aside) decay to the engine's STEADY_TOLERANCE within the
+transient periods (or, without them, within the lead periods of the periodic steady state:
+:func:`nlsid.simulate.engine.lead_periods`); a run where they do not (an integrator, a slow mode),
+a range part and a run with measured input channels (not periodic) are fitted whole. The
+sandwich below is the same in this form: its noise is divided by P and multiplied by P again. The
+errors reported are those of the whole runs.
+
 The validation runs are never used by the optimiser: their rms errors, and each run's noise level
 (the period-to-period standard deviation of the fitted signal, a lower limit no model can beat),
 tell how well the fitted model predicts data it has not seen.
@@ -249,6 +263,37 @@ def _steady(run: Run, x: np.ndarray) -> np.ndarray:
     return x[run.n_samples - run.n_periods * run.period:]
 
 
+def _compact(run: Run, excitation: Run, point, signals: Sequence[str]) -> tuple[Run, Run, float] | None:
+    """(measured, excitation, weight) of ``run`` fitted on its mean period (module docstring):
+    the transient periods and one period, the last period of the measured signals and of the
+    excitation their mean over the steady-state periods (a recorded input's noise averaged as the
+    output's), the weight sqrt(P); None where the run is fitted whole."""
+    from nlsid.io.ranges import RangeRun
+    from nlsid.simulate.batch import _build
+    from nlsid.simulate.engine import lead_periods
+
+    if run.period is None or isinstance(run, RangeRun) or run.n_periods < 2 or run.channels:
+        return None
+    model, loop = _build(point)
+    needed = lead_periods(model, loop, dataclasses.replace(excitation, transient_periods=0))
+    if needed == 0 or (run.transient_periods and needed > run.transient_periods):
+        return None
+    length = (run.transient_periods + 1) * run.period
+    head = run.transient_periods * run.period
+
+    def mean_period(x: np.ndarray | None) -> np.ndarray | None:
+        if x is None:
+            return None
+        return np.concatenate([x[:head], _steady(run, x).reshape(run.n_periods, run.period).mean(axis=0)])
+
+    measured = dataclasses.replace(run, **{name: mean_period(getattr(run, name)) for name in signals})
+    measured = dataclasses.replace(measured, **{name: getattr(measured, name)[:length]
+                                                for name in ("u", "y", "r") if getattr(measured, name) is not None})
+    short = dataclasses.replace(excitation, u=mean_period(excitation.u)[:length],
+                                y=None if excitation.y is None else excitation.y[:length])
+    return measured, short, math.sqrt(run.n_periods)
+
+
 def noise_rms(run: Run, signal: str = "y") -> float:
     """Period-to-period standard deviation of a signal (pooled over the samples of a period), NaN if P < 2."""
     if run.period is None or run.n_periods < 2:
@@ -339,6 +384,36 @@ class _Problem:
         count = len(points)
         return [{s: [_steady(run, getattr(simulated[i * count + j], s)) - _steady(run, getattr(run, s))
                      for i, run in enumerate(runs)] for s in self.signals} for j in range(count)]
+
+
+@dataclass
+class _Cost:
+    """The runs as the optimiser sees them (:func:`_compact`): measured runs, excitations, weights."""
+
+    runs: list[Run]
+    inputs: list[Run]
+    weights: np.ndarray
+
+    @classmethod
+    def of(cls, problem: "_Problem", runs: Sequence[Run], inputs: Sequence[Run]) -> "_Cost":
+        point = problem.point(problem.start)
+        out = cls([], [], np.ones(len(runs)))
+        for i, (run, excitation) in enumerate(zip(runs, inputs)):
+            compact = _compact(run, excitation, point, problem.signals)
+            measured, short, weight = compact if compact is not None else (run, excitation, 1.0)
+            out.runs.append(measured)
+            out.inputs.append(short)
+            out.weights[i] = weight
+        return out
+
+    def residuals(self, problem: "_Problem", thetas: Sequence[np.ndarray], signal: str) -> list[np.ndarray]:
+        """The weighted residual vector of each parameter vector (module docstring)."""
+        return [np.concatenate([w * e for w, e in zip(self.weights, errors[signal])])
+                for errors in problem.errors_many(thetas, self.runs, self.inputs)]
+
+    def segments(self) -> list[int]:
+        """Samples of each run's residual (:func:`_steady`'s)."""
+        return [run.n_samples if run.period is None else run.n_periods * run.period for run in self.runs]
 
 
 def _where(source: str, lines: dict, key_path: tuple) -> str:
@@ -488,9 +563,10 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     est_inputs, val_inputs = problem.inputs(estimation), problem.inputs(validation)
     scale = _scales(problem.start, problem.lower, problem.upper)
     est_start = problem.errors(problem.start, estimation, est_inputs)  # the start must run: its error stops the fit
-    start_residual = np.concatenate(est_start[fit_on])
-    start_rms = _rms([start_residual])
-    penalty = np.full(start_residual.size, 10.0 * start_rms if start_rms > 0 else 1.0)
+    cost = _Cost.of(problem, estimation, est_inputs)
+    start_residual = cost.residuals(problem, [problem.start], fit_on)[0]
+    cost_rms = _rms([start_residual])
+    penalty = np.full(start_residual.size, 10.0 * cost_rms if cost_rms > 0 else 1.0)
     x0 = problem.start / scale
     evaluations, refused = 0, []
 
@@ -503,7 +579,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
             out = start_residual.copy()
         else:
             try:
-                out = np.concatenate(problem.errors(x * scale, estimation, est_inputs)[fit_on])
+                out = cost.residuals(problem, [x * scale], fit_on)[0]
             except InputError as exc:  # a value the model refuses: a rejected step (module docstring)
                 refused.append(exc)
                 out = penalty
@@ -515,7 +591,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         nonlocal evaluations
         evaluations += len(xs)
         try:
-            return [np.concatenate(e[fit_on]) for e in problem.errors_many([x * scale for x in xs], estimation, est_inputs)]
+            return cost.residuals(problem, [x * scale for x in xs], fit_on)
         except InputError:  # one of them refused: each on its own, the refused ones rejected steps
             evaluations -= len(xs)
             return [residual(x) for x in xs]
@@ -539,7 +615,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     if refused:
         warnings.append(f"{len(refused)} trial value(s) refused by the model were rejected steps (first: {refused[0]})")
     cov, corr, ident = _uncertainty(result.jac, result.fun, scale, problem.names, values, problem.lower, problem.upper,
-                                    [e.size for e in est_start[fit_on]])
+                                    cost.segments())
     warnings += ident
 
     est_errors = problem.errors(values, estimation, est_inputs)
@@ -563,10 +639,10 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         names=problem.names, start=problem.start, values=values, std=np.sqrt(np.abs(np.diag(cov))),
         covariance=cov, correlation=corr,
         estimation_rms=_rms(est_errors[fit_on]), validation_rms=_rms(val_errors[fit_on]),
-        start_estimation_rms=start_rms, start_validation_rms=_rms(val_start[fit_on]),
+        start_estimation_rms=_rms(est_start[fit_on]), start_validation_rms=_rms(val_start[fit_on]),
         noise_rms_estimation=noise["estimation"], noise_rms_validation=noise["validation"],
         runs=runs, warnings=warnings, config=completed, evaluations=evaluations, message=str(result.message),
-        samples=int(result.fun.size), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
+        samples=sum(int(e.size) for e in est_errors[fit_on]), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
         fit_on=fit_on, signal_rms={s: {"estimation": _rms(est_errors[s]), "validation": _rms(val_errors[s])}
                                    for s in problem.signals},
     )

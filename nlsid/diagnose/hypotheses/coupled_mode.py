@@ -54,9 +54,10 @@ import numpy as np
 
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, regress
 from nlsid.diagnose.hypotheses.bla_ratio import bla_ratios
-from nlsid.diagnose.hypotheses.resonance import _as_zpk, _resonance_applies
+from nlsid.diagnose.hypotheses.resonance import _as_transfer_function, _as_zpk, _resonance_applies
 
 MIN_DAMPING = 1e-3  # a start damping ratio at least this (the fit engine keeps the sign of its start)
+SK_ITERATIONS = 6  # Levy's fit and five Sanathanan-Koerner passes
 PARAMETERS = ("fr", "fa", "zr", "za")
 
 
@@ -90,6 +91,83 @@ def _estimate_coupled(ctx: Context) -> Estimate | str:
                     "Levy's linearised least squares on the BLA ratio (start values)" + clipped)
 
 
+def _single_mode(model: dict) -> bool:
+    """The model is one mode and a gain (a mass_spring_damper, G = b0 / (s^2 + a1 s + a0))."""
+    tf = _as_transfer_function(model)
+    if tf.get("domain", "continuous") != "continuous":
+        return False
+    num, den = (np.trim_zeros(np.asarray(tf[key], dtype=float), "f") for key in ("num", "den"))
+    return num.size == 1 and den.size == 3 and np.all(den / den[0] > 0)
+
+
+def _mode(root: complex) -> tuple[float, float]:
+    """(frequency in Hz, damping ratio) of a stable root pair."""
+    w = abs(root)
+    return w / (2 * math.pi), -root.real / w
+
+
+def _estimate_moved(ctx: Context) -> Estimate | str:
+    """A start where the coupled mass also moved the model's own mode (the user's model of the
+    driven mass alone, or of the wrong total): Levy's linearised least squares on the measured BLA
+    itself, G (s^4 + a3 s^3 + a2 s^2 + a1 s + a0) = b2 s^2 + b1 s + b0, iterated by Sanathanan and
+    Koerner (1963: each pass weighted by 1 / (std(G) |D(s)|) of the pass before, which removes
+    Levy's bias toward high frequencies; s in units of the highest excited line), the quartic's
+    roots the low mode (f0, z0) and the resonance (fr, zr), the quadratic's the anti-resonance
+    (fa, za), an unstable root reflected into the left half-plane; the gain G(0) = b0 / a0."""
+    measured, _ = ctx.bla_levels
+    if not measured:
+        return "needs multisine runs (the BLA)"
+    levels = [(2 * np.pi * a.lines.frequency(a.lines.excited), a.robust.G,
+               a.robust.var_total if np.all(np.isfinite(a.robust.var_total)) else a.robust.var_noise)
+              for a in measured]
+    scale = max(float(np.max(w)) for w, _, _ in levels)
+    den = np.array([1.0, 0.0, 0.0, 0.0, 0.0])
+    for _ in range(SK_ITERATIONS):
+        rows, rhs = [], []
+        for w, G, var in levels:
+            x = 1j * w / scale
+            weight = 1 / (np.sqrt(np.maximum(var, 1e-30)) * np.maximum(np.abs(np.polyval(den, x)), 1e-12))
+            block = np.column_stack([-G * x**3, -G * x**2, -G * x, -G, x**2, x, np.ones_like(G)]) * weight[:, None]
+            rows += [block.real, block.imag]
+            target = G * x**4 * weight
+            rhs += [target.real, target.imag]
+        a3, a2, a1, a0, b2, b1, b0 = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        den = np.array([1.0, a3, a2, a1, a0])
+    poles, zeros = np.roots(den) * scale, np.roots([b2, b1, b0]) * scale
+    pairs = sorted((complex(-abs(p.real), p.imag) for p in poles if p.imag > 0), key=abs)  # reflected if unstable
+    if len(pairs) != 2 or not (zeros.imag != 0).all():
+        return "the BLA shows no low mode, resonance and anti-resonance (a fourth-order fit)"
+    zeros = -np.abs(zeros.real) + 1j * zeros.imag
+    (f0, z0), (fr, zr), (fa, za) = _mode(pairs[0]), _mode(pairs[1]), _mode(zeros[0])
+    if not f0 < fa < fr:
+        return (f"the BLA's anti-resonance ({fa:.4g} Hz) does not lie between its low mode ({f0:.4g} Hz) and its "
+                f"resonance ({fr:.4g} Hz), as a mass coupled to the driven one puts it")
+    values = {"fr": fr, "fa": fa, "zr": zr, "za": max(za, MIN_DAMPING), "f0": f0, "z0": max(z0, MIN_DAMPING),
+              "gain": float((b0 / a0).real)}
+    paths = {"f0": "model.poles[0].frequency", "z0": "model.poles[0].damping", "gain": "model.gain",
+             "fr": "model.poles[1].frequency", "zr": "model.poles[1].damping",
+             "fa": "model.zeros[0].frequency", "za": "model.zeros[0].damping"}
+    return Estimate(values, {k: float("nan") for k in values}, float("nan"),
+                    "the model's own mode moved too: Levy's linearised least squares on the BLA (start values)",
+                    paths=paths)
+
+
+def _estimate(ctx: Context) -> Estimate | str:
+    """The start on the BLA ratio (the model right at its low mode); for a model of one mode, where
+    that finds no pair or the fourth-order start on the BLA simulates closer, that one."""
+    ratio = _estimate_coupled(ctx)
+    if not _single_mode(ctx.runner.data["model"]):
+        return ratio
+    moved = _estimate_moved(ctx)
+    if isinstance(moved, str):
+        return ratio
+    if isinstance(ratio, str):
+        return moved
+    data = ctx.runner.data
+    rss = [ctx.simulation_rss(_extend_coupled(data, e.values)) for e in (ratio, moved)]
+    return moved if rss[1] < rss[0] else ratio
+
+
 def _mass_ratio(values: dict) -> str:
     ratio = (values["fr"] / values["fa"]) ** 2 - 1
     return (f"mass ratio (fr/fa)^2 - 1 = {ratio:.4g}: the coupled mass over the driven mass, for a free pair "
@@ -99,6 +177,9 @@ def _mass_ratio(values: dict) -> str:
 def _extend_coupled(data: dict, values: dict) -> dict:
     out = copy.deepcopy(data)
     model = out["model"] = _as_zpk(out["model"])
+    if "f0" in values:  # the model's own mode moved too (:func:`_estimate_moved`)
+        model.update(zeros=[], poles=[{"frequency": float(values["f0"]), "damping": float(values["z0"])}],
+                     gain=float(values["gain"]))
     model["zeros"] = model["zeros"] + [{"frequency": float(values["fa"]), "damping": float(values["za"])}]
     model["poles"] = model["poles"] + [{"frequency": float(values["fr"]), "damping": float(values["zr"])}]
     return out
@@ -114,5 +195,5 @@ def _paths(data: dict) -> dict[str, str]:
 HYPOTHESES = (
     Hypothesis("coupled_mode", "A coupled mode (second mass)", "linear", "fr", "Hz",
                "BLA differs from the model by a resonance with an anti-resonance below it; no distortion",
-               _resonance_applies, _estimate_coupled, _extend_coupled, PARAMETERS, _paths, _mass_ratio),
+               _resonance_applies, _estimate, _extend_coupled, PARAMETERS, _paths, _mass_ratio),
 )

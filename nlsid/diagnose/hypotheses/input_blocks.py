@@ -1,5 +1,10 @@
 """Actuator nonlinearities at the plant input: saturation, deadzone and backlash, each one parameter
-found by a bounded search of the residual it predicts, e ~ S[f_a(u) - u]."""
+found by a bounded search of the residual it predicts, e ~ S[f_a(u) - u].
+
+The deadzone's refinement holds the input offset at the value the nuisances got: an offset c before
+a deadzone [l, u] is the deadzone [l - c, u - c] exactly (its output is x + c - u above it, x + c - l
+below), so the two would trade along a direction the data cannot fix, and the limits' values would
+be wherever the search stopped on it."""
 
 from __future__ import annotations
 
@@ -51,7 +56,7 @@ HYPOTHESES = (
                no_block("input_nonlinearity"),
                _input_block(_deadzone, "half width", lambda x: 0.0, quantile(0.9)),
                set_block("input_nonlinearity", "deadzone"), ("upper", "lower"),
-               block_paths("input_nonlinearity", ("upper", "lower"))),
+               block_paths("input_nonlinearity", ("upper", "lower")), holds=("input_offset",)),
     Hypothesis("backlash", "Backlash at the input", "input", "width", "input units",
                "odd distortion and a phase lag that shrinks with level",
                no_block("input_nonlinearity"),

@@ -1,0 +1,132 @@
+"""Issue 17's battery on its open-loop plant, two effects at once: a mass-spring-damper near 32 Hz
+with damping ratio 0.03, fs 1 kHz, N = 4096, random-odd multisines over 1-150 Hz at three levels
+x six realizations, four periods after a transient one, coloured sensor noise 50 dB below the
+output, and sensor and actuator offsets.
+
+The data come from tests/independent_friction.py (Runge-Kutta on a fine grid, the stop instants of
+the friction bisected; the cubic spring in the motion and in the stick test), not nlsid's
+simulator. Earlier versions named such data wrongly: Coulomb friction 0.5 N with a cubic spring
+as LuGre with Fc = 87 N, and a 5 % mass error with Coulomb friction as LuGre with Fc = 20 N (the
+issue's text). The criteria are the issue's: every cause named, the main parameters within 10 %,
+the final model within 3 dB of the noise floor.
+
+Measured when this was written (2-core machine, one test at a time): Coulomb with the cubic spring
+29 s (two rounds: the first fits every friction law and spring against a residual that is both),
+the mass error with Coulomb 9 s. Before the response along the model's trajectory (a model with
+friction responds to nothing from rest), the second round could not fit the spring at all.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+sys.path.insert(0, str(Path(__file__).parent))
+import independent_friction  # noqa: E402
+import independent_plant  # noqa: E402
+from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
+from nlsid.io.run import Run  # noqa: E402
+from nlsid.signals.lines import random_grid  # noqa: E402
+from nlsid.signals.multisine import flat_amplitudes, random_phases, synthesize  # noqa: E402
+
+FS, N = 1000.0, 4096
+MASS = 0.5
+STIFFNESS = MASS * (2 * np.pi * 32.0) ** 2
+DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
+LEVELS = (1.0, 2.0, 4.0)               # force rms (N): position 0.12 to 0.48 mm rms
+SNR_DB = 50.0
+SENSOR_OFFSET, ACTUATOR_OFFSET = 2e-5, 0.01   # m (a sixth of the lowest level's rms), N
+NOMINAL = {"model": {"type": "mass_spring_damper", "mass": MASS, "damping": float(DAMPING),
+                     "stiffness": float(STIFFNESS), "gain": 1.0}}
+
+
+def two_mass(m2: float, f2: float, zeta2: float) -> dict:
+    """A load m2 coupled to the driven mass by a spring and a damper (m2 alone on them: f2 Hz,
+    damping ratio zeta2): the driven mass's position as a transfer function, from the two
+    equations of motion (module docstring of nlsid/diagnose/hypotheses/coupled_mode.py):
+    X1 / F = (m2 s^2 + c2 s + k2) / ((m1 s^2 + (c + c2) s + k + k2)(m2 s^2 + c2 s + k2) - (c2 s + k2)^2)."""
+    k2 = m2 * (2 * np.pi * f2) ** 2
+    c2 = 2 * zeta2 * np.sqrt(k2 * m2)
+    load = np.array([m2, c2, k2])
+    den = np.polysub(np.polymul([MASS, DAMPING + c2, STIFFNESS + k2], load), np.polymul([c2, k2], [c2, k2]))
+    return {"type": "transfer_function", "num": [float(c) for c in load], "den": [float(c) for c in den]}
+
+
+def recording(seed: int, forces: list[dict], mass: float = MASS, linear: dict | None = None) -> list[Run]:
+    """The runs measured on the truth: the nominal plant with ``forces`` and ``mass``, or the
+    transfer function ``linear``."""
+    rng = np.random.default_rng(seed)
+    bins, _ = random_grid(np.arange(5, int(150 * N / FS) + 1, 2), 3, rng)
+    commands = [np.tile(synthesize(N, bins, flat_amplitudes(bins.size, level), random_phases(bins.size, rng)), 5)
+                for level in LEVELS for _ in range(6)]
+    truth = copy.deepcopy(NOMINAL)["model"] | {"mass": mass}
+    U = np.stack(commands) + ACTUATOR_OFFSET
+    Y = (independent_friction.stribeck_response(truth | {"nonlinearities": forces}, U, FS) if forces
+         else independent_plant.outputs({"model": linear or truth}, U, FS))
+    noise = 10 ** (-SNR_DB / 20) * float(np.sqrt(np.mean(Y**2)))
+    runs = []
+    for i, (u, y) in enumerate(zip(commands, Y)):
+        coloured = lfilter([0.6], [1.0, -0.8], rng.standard_normal(y.size)) * noise  # unit variance x noise
+        runs.append(Run(f"r{i}", FS, "multisine", u, y=y + coloured + SENSOR_OFFSET, period=N, transient_periods=1,
+                        realization=i % 6, level=LEVELS[i // 6], excited_bins=bins))
+    return runs
+
+
+def _final_values(result) -> dict:
+    model = result.final.extended["model"]
+    return {"mass": model["mass"], **{f["type"]: f for f in model.get("nonlinearities", [])}}
+
+
+@pytest.mark.slow
+def test_coulomb_friction_and_a_cubic_spring_are_both_named():
+    coulomb, cubic = {"type": "coulomb", "fc": 0.2}, {"type": "cubic_stiffness", "k3": 1e9}
+    result = diagnose(NOMINAL, "model.yaml", recording(4, [coulomb, cubic]), "recording.h5")
+    assert sorted(o.hypothesis.name for o in result.chain) == ["coulomb", "cubic_stiffness"], result.headline()
+    values = _final_values(result)
+    assert values["coulomb"]["fc"] == pytest.approx(0.2, rel=0.10)
+    assert values["cubic_stiffness"]["k3"] == pytest.approx(1e9, rel=0.10)
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+@pytest.mark.slow
+def test_a_mass_error_and_coulomb_friction_are_both_corrected():
+    result = diagnose(NOMINAL, "model.yaml", recording(5, [{"type": "coulomb", "fc": 0.2}], mass=1.05 * MASS),
+                      "recording.h5")
+    named = {o.hypothesis.name for o in result.chain}
+    assert "coulomb" in named and named <= {"coulomb", "wrong_mechanics"}, result.headline()
+    values = _final_values(result)
+    assert values["coulomb"]["fc"] == pytest.approx(0.2, rel=0.10)
+    assert values["mass"] == pytest.approx(1.05 * MASS, rel=0.01)
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+@pytest.mark.slow
+def test_a_correct_model_with_offsets_and_coloured_noise_is_nothing_beyond_noise():
+    """The offsets are nuisances: their static effect on y (a sensor offset, and the actuator's
+    through the static gain 1 / k) is fitted, not named as a cause."""
+    result = diagnose(NOMINAL, "model.yaml", recording(6, []), "recording.h5")
+    assert result.verdict.status == "no_discrepancy", result.headline()
+    found = result.nuisances.values
+    static = found.get("output_offset", 0.0) + (found.get("force_offset", 0.0) + found.get("input_offset", 0.0)) / STIFFNESS
+    assert static == pytest.approx(SENSOR_OFFSET + ACTUATOR_OFFSET / STIFFNESS, rel=0.05), found
+
+
+@pytest.mark.slow
+def test_a_coupled_load_mass_is_a_coupled_mode_though_it_moves_the_model_own_mode():
+    """A 0.15 kg load on the 0.5 kg driven mass, 60 Hz on its coupling: the low mode moves from
+    32 Hz to 27.3 Hz (the user's model knows the driven mass alone), the resonance is at 70.4 Hz
+    (the roots of the fourth-order denominator, by numpy). The ratio of the BLA to the model then
+    holds both, and its second-order fit put the anti-resonance above the resonance: the issue's
+    "named wrong mechanics". The coupled mode must be named with its resonance within 10 %."""
+    truth = two_mass(0.15, 60.0, 0.02)
+    resonance = max(abs(np.roots(truth["den"]))) / (2 * np.pi)
+    result = diagnose(NOMINAL, "model.yaml", recording(7, [], linear=truth), "recording.h5")
+    assert result.verdict.winner == "coupled_mode", result.headline()
+    assert result.winner.estimate.values["fr"] == pytest.approx(resonance, rel=0.10)
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
