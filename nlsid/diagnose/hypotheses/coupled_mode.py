@@ -35,7 +35,12 @@ least squares on R (s^2 + a1 s + a0) = b2 s^2 + b1 s + b0, with weights ``1/std(
 missing resonance (:mod:`nlsid.diagnose.hypotheses.resonance`), in s / w_max (w_max the highest
 excited line) so that the five columns are of one size; then wr^2 = a0, zr = a1 / (2 wr),
 wa^2 = b0 / b2, za = b1 / (2 b2 wa). The gain b2 is not used: the extension has R(0) = 1. Those are
-the start; the fit engine refines fr, fa, zr and za by the simulation error (``paths``).
+the start; the fit engine refines fr, fa, zr and za by the simulation error (``paths``). That
+start assumes the model right at its low mode. A model of one mode that knows the driven mass alone
+is not: the load moves the low mode too, R holds two pairs, and its second-order fit fails. For
+such a model (:func:`_single_mode`) a second start is the fourth-order fit of the BLA itself
+(:func:`_estimate_moved`), the model's own mode (f0, z0) and gain refined with the pair; of the two
+starts the one whose extension simulates closer on the estimation runs is kept.
 
 Extension. The model as a continuous ``zpk`` (a transfer function's roots; a mechanical template
 through its transfer function, :func:`~nlsid.diagnose.hypotheses.resonance._as_transfer_function`)
