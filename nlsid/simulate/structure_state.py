@@ -20,8 +20,8 @@ the exact (nonlinear) least-squares estimate over the window, not a linearisatio
 whose every filter ends its branch (Hammerstein, parallel Hammerstein) it is one linear solve.
 
 L is the sum over a branch's filters of the samples in which each one's slowest mode decays to
-:data:`~nlsid.simulate.engine.STEADY_TOLERANCE` (a transient of G1 passes G2 before it is gone),
-the longest branch's. Not fitted (the record is simulated from rest, as before): a structure with a
+:data:`~nlsid.simulate.engine.STEADY_TOLERANCE` and of their dead times (a transient of G1 passes
+G2 before it is gone), the longest branch's. Not fitted (the record is simulated from rest, as before): a structure with a
 filter whose slowest mode does not decay within :data:`~nlsid.simulate.initial_state.RECORD_SHARE`
 of the record, and a run without a measured output. The input a dead time holds at the start (the
 excitation before the record) is not known and stays zero; only the filters' states are fitted.
@@ -47,13 +47,17 @@ def transient_length(structure: Structure, run: Run) -> int | None:
     """L of the module docstring, or None where it exceeds RECORD_SHARE of the record (or never ends)."""
     from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate
 
+    from nlsid.models.lti import delay_samples
+
     longest = 0
     for branch in structure.branches:
-        rates = [_decay_rate(stage, run.fs) for stage in branch if isinstance(stage, StateSpace)]
+        stages = [stage for stage in branch if isinstance(stage, StateSpace)]
+        rates = [_decay_rate(stage, run.fs) for stage in stages]
         if any(not rate > 0 for rate in rates):
             return None
         longest = max(longest, sum(math.log(1 / STEADY_TOLERANCE) / rate * run.fs
-                                   for rate in rates if math.isfinite(rate)))
+                                   for rate in rates if math.isfinite(rate))
+                      + sum(delay_samples(stage.delay, run.fs, "model.delay") for stage in stages))
     length = math.ceil(longest)
     return length if 0 < length <= RECORD_SHARE * run.n_samples else None
 

@@ -136,7 +136,10 @@ def _estimate_moved(ctx: Context) -> Estimate | str:
             rows += [block.real, block.imag]
             target = G * x**4 * weight
             rhs += [target.real, target.imag]
-        a3, a2, a1, a0, b2, b1, b0 = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+        X, y = np.vstack(rows), np.concatenate(rhs)
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
+            return "the BLA has lines without a variance to weight a fourth-order fit by"
+        a3, a2, a1, a0, b2, b1, b0 = np.linalg.lstsq(X, y, rcond=None)[0]
         den = np.array([1.0, a3, a2, a1, a0])
     poles, zeros = np.roots(den) * scale, np.roots([b2, b1, b0]) * scale
     pairs = sorted((complex(-abs(p.real), p.imag) for p in poles if p.imag > 0), key=abs)  # reflected if unstable
