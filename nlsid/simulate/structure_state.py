@@ -21,8 +21,8 @@ whose every filter ends its branch (Hammerstein, parallel Hammerstein) it is one
 
 L is the sum over a branch's filters of the samples in which each one's slowest mode decays to
 :data:`~nlsid.simulate.engine.STEADY_TOLERANCE` and of their dead times (a transient of G1 passes
-G2 before it is gone), the longest branch's. Not fitted (the record is simulated from rest, as before): a structure with a
-filter whose slowest mode does not decay within :data:`~nlsid.simulate.initial_state.RECORD_SHARE`
+G2 before it is gone), the longest branch's. Not fitted (the record is simulated from rest, as
+before): a structure with a filter whose slowest mode does not decay within :data:`~nlsid.simulate.initial_state.RECORD_SHARE`
 of the record, and a run without a measured output. The input a dead time holds at the start (the
 excitation before the record) is not known and stays zero; only the filters' states are fitted.
 """
@@ -36,7 +36,7 @@ import numpy as np
 
 from nlsid.io.run import Run
 from nlsid.models.from_config import Structure
-from nlsid.models.lti import StateSpace
+from nlsid.models.lti import StateSpace, delay_samples
 from nlsid.simulate.initial_state import RECORD_SHARE, InitialState
 from nlsid.simulate.noise import Noise
 
@@ -46,8 +46,6 @@ MAX_EVALUATIONS = 60  # residual evaluations of the inner states' search at most
 def transient_length(structure: Structure, run: Run) -> int | None:
     """L of the module docstring, or None where it exceeds RECORD_SHARE of the record (or never ends)."""
     from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate
-
-    from nlsid.models.lti import delay_samples
 
     longest = 0
     for branch in structure.branches:
@@ -64,7 +62,7 @@ def transient_length(structure: Structure, run: Run) -> int | None:
 
 def _output_stages(structure: Structure) -> list[bool]:
     """For each LTI stage (engine order): does it end its branch (its state enters y linearly)?"""
-    return [isinstance(stage, StateSpace) and k == len(branch) - 1
+    return [k == len(branch) - 1
             for branch in structure.branches for k, stage in enumerate(branch) if isinstance(stage, StateSpace)]
 
 
@@ -81,7 +79,7 @@ def _free_response(stage: StateSpace, fs: float, substeps: int, length: int) -> 
     from nlsid.simulate.engine import _delay, _filter
 
     m = substeps
-    delay = _delay(stage, fs, length, "model") * m if length > 0 else 0
+    delay = _delay(stage, fs, length, "model") * m
     zero = np.zeros(length * m)
     return np.column_stack([_filter(stage, zero, fs * m, delay, unit)[::m] for unit in np.eye(stage.order)]) \
         if stage.order else np.zeros((length, 0))
