@@ -98,8 +98,8 @@ def test_coulomb_mass_under_a_sine_matches_event_based_reference():
 SLIP_THROUGH = 8.0 * np.sin(2 * np.pi * 3.0 * np.arange(2000) / 1000)  # near resonance (3.18 Hz)
 
 
-@pytest.mark.parametrize("law", ["coulomb", "stribeck"])
-def test_a_mass_driven_through_zero_velocity_is_second_order(law):
+@pytest.mark.parametrize("law, delta", [("coulomb", None), ("stribeck", 2.0), ("stribeck", 1.0)])
+def test_a_mass_driven_through_zero_velocity_is_second_order(law, delta):
     """Driven near its resonance, the mass of the sine test reverses 12 times, mostly without
     sticking: it slides through v = 0 within a sub-step. The force then changes side inside the
     sub-step; held at the new side's level over the whole of it (Moreau's implicit step), the
@@ -109,7 +109,9 @@ def test_a_mass_driven_through_zero_velocity_is_second_order(law):
     (fc/m) h^2 of position error (the bound below, all added up: 3.75e-7 at 4 sub-steps), and 4x
     finer sub-steps divide the error by about 16 (>= 10; 4 for first order). Stribeck
     (fs = 0.8 N, vs = 0.01 m/s against peak speeds of 2 m/s: the mean over a ramp through the
-    Stribeck dip matters) must do the same; the reference is event-located DOP853 with the law."""
+    Stribeck dip matters) must do the same, with the Gaussian curve (delta = 2) and the
+    exponential one (delta = 1, whose ramp mean needs the incomplete gamma function; a quadrature
+    cut at 6.5 vs missed e^-6.5 of it); the reference is event-located DOP853 with the law."""
     m, c, k, fc, fs = 1.0, 2.0, 400.0, 0.5, 1000.0
     pos = mass_spring_damper(m, c, k, 1.0, "position")
     if law == "coulomb":
@@ -118,8 +120,8 @@ def test_a_mass_driven_through_zero_velocity_is_second_order(law):
     else:
         static, vs = 0.8, 0.01
         x_ref, v_ref = coulomb_reference(m, c, k, fc, SLIP_THROUGH, fs, breakaway=static,
-                                         level=lambda w: fc + (static - fc) * math.exp(-((w / vs) ** 2)))
-        element = force_element(forces.STRIBECK, [fc, static, vs, 2.0, 0.0], pos)
+                                         level=lambda w: fc + (static - fc) * math.exp(-((w / vs) ** delta)))
+        element = force_element(forces.STRIBECK, [fc, static, vs, delta, 0.0], pos)
     moving = v_ref[v_ref != 0.0]
     assert np.sum(np.diff(np.sign(moving)) != 0) == 12 and np.sum(v_ref == 0.0) < 10
     errors = {}
@@ -320,6 +322,20 @@ def test_stribeck_steady_sliding_solves_the_force_balance(vs, substeps):
     stribeck = [force_element(forces.STRIBECK, [fc, fs, vs, 2.0, 0.0], vel)]
     v = simulate(vel, stribeck, np.full(2000, F), 1000.0, substeps)
     assert v[-1] == pytest.approx(v_star, rel=1e-9)
+
+
+@pytest.mark.parametrize("delta", [0.5, 1.0, 1.5, 2.0, 3.0, 7.0])
+def test_stribeck_ramp_integral_is_the_incomplete_gamma_function(delta):
+    # I(w) = int_0^w e^{-(x/vs)^delta} dx = vs Gamma(1 + 1/delta) P(1/delta, (w/vs)^delta), P from
+    # scipy (Cephes), an implementation independent of the kernel's series and continued fraction.
+    from scipy.special import gamma, gammainc
+
+    from nlsid.simulate.kernels import _stribeck_area
+
+    vs = 0.003
+    for w in (1e-9, 1e-4, 0.001, 0.003, 0.006, 0.02, 0.1, 10.0):
+        exact = vs * gamma(1 + 1 / delta) * gammainc(1 / delta, (w / vs) ** delta)
+        assert _stribeck_area(vs, delta, w) == pytest.approx(exact, rel=1e-13)
 
 
 def test_lugre_relaxation_functions_to_the_last_digits():

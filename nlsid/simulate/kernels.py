@@ -248,54 +248,95 @@ def _level(kind: int, fc: float, fs: float, vs: float, delta: float, w: float) -
     return fc + (fs - fc) * math.exp(-_ratio_power(w, vs, delta))
 
 
-# 8-point Gauss-Legendre nodes on [0, 1] and their weights (summing to 1)
-_GL_X = (0.019855071751231912, 0.10166676129318664, 0.2372337950418355, 0.4082826787521751,
-         0.5917173212478248, 0.7627662049581645, 0.8983332387068134, 0.9801449282487681)
-_GL_W = (0.05061426814518853, 0.11119051722668721, 0.15685332293894344, 0.18134189168918083,
-         0.18134189168918083, 0.15685332293894344, 0.11119051722668721, 0.05061426814518853)
+@njit(cache=True, fastmath={"contract"}, nogil=True)
+def _gamma_p(a: float, x: float) -> float:
+    """The regularised lower incomplete gamma function P(a, x) = gamma(a, x) / Gamma(a), x >= 0: its
+    series sum_n x^n / (a (a+1) .. (a+n)) times x^a e^{-x} / Gamma(a) for x < a + 1, else 1 - Q
+    with Q's continued fraction by the modified Lentz method (Press et al. 2007, Numerical Recipes,
+    3rd ed., Section 6.2, eqs. 6.2.5 and 6.2.7), both summed to rounding."""
+    if x <= 0.0:
+        return 0.0
+    front = math.exp(a * math.log(x) - x - math.lgamma(a))
+    if x < a + 1.0:
+        term = total = 1.0 / a
+        n = a
+        for _ in range(1000):
+            n += 1.0
+            term *= x / n
+            total += term
+            if abs(term) < 1e-17 * abs(total):
+                break
+        return total * front
+    tiny = 1e-300
+    b = x + 1.0 - a
+    c = 1.0 / tiny
+    d = 1.0 / b
+    h = d
+    for i in range(1, 1000):
+        an = -i * (i - a)
+        b += 2.0
+        d = an * d + b
+        d = tiny if abs(d) < tiny else d
+        c = b + an / c
+        c = tiny if abs(c) < tiny else c
+        d = 1.0 / d
+        step = d * c
+        h *= step
+        if abs(step - 1.0) < 1e-16:
+            break
+    return 1.0 - front * h
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True)
 def _stribeck_area(vs: float, delta: float, w: float) -> float:
-    """The integral of e^{-(x/vs)^delta} over x in [0, w]: vs sqrt(pi)/2 erf(w/vs) for delta = 2,
-    else Gauss-Legendre (8 points on each half of [0, min(w, SLIDING vs)], the integrand below
-    rounding beyond; about 1e-10 relative)."""
+    """The integral I(w) of e^{-(x/vs)^delta} over x in [0, w]: with t = (x/vs)^delta it is
+    vs Gamma(1 + 1/delta) P(1/delta, (w/vs)^delta) (:func:`_gamma_p`); vs sqrt(pi)/2 erf(w/vs) for
+    delta = 2."""
     if delta == 2.0:
         return 0.5 * math.sqrt(math.pi) * vs * math.erf(w / vs)
-    span = min(w, SLIDING * vs)
-    half = 0.5 * span
-    area = 0.0
-    for i in range(8):
-        area += _GL_W[i] * (math.exp(-((_GL_X[i] * half / vs) ** delta))
-                            + math.exp(-(((1.0 + _GL_X[i]) * half / vs) ** delta)))
-    return area * half
+    a = 1.0 / delta
+    return vs * math.exp(math.lgamma(1.0 + a)) * _gamma_p(a, (w / vs) ** delta)
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def _ramp_mean(kind: int, fc: float, fs: float, vs: float, delta: float, a: float, b: float) -> float:
+def _area(kind: int, p: tuple, speed: float) -> float:
+    """I(speed) of :func:`_stribeck_area` for a Stribeck law (0 for Coulomb, which does not use it;
+    beyond :func:`_sliding_speed` it is I(infinity) = vs Gamma(1 + 1/delta) to rounding)."""
+    if kind == forces.COULOMB:
+        return 0.0
+    if speed >= _sliding_speed(p[2], p[3]):
+        return p[2] * math.exp(math.lgamma(1.0 + 1.0 / p[3]))
+    return _stribeck_area(p[2], p[3], speed)
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _ramp_mean(kind: int, fc: float, fs: float, vs: float, delta: float, a: float, b: float, area_a: float) -> float:
     """The mean friction level while the speed moves linearly between a and b (both >= 0): fc, or
-    fc + (fs - fc) (I(a) - I(b)) / (a - b) with I of :func:`_stribeck_area`; the level at the
+    fc + (fs - fc) (I(a) - I(b)) / (a - b) with I of :func:`_stribeck_area` (``area_a`` = I(a),
+    computed once by the caller for the several b of an iteration); the level at the
     midpoint when a and b are within 1e-4 (a + b + vs) (error (a - b)^2 |level''| / 24)."""
     if kind == forces.COULOMB:
         return fc
     if abs(a - b) <= 1e-4 * (a + b + vs):
         return _level(kind, fc, fs, vs, delta, 0.5 * (a + b))
-    return fc + (fs - fc) * (_stribeck_area(vs, delta, a) - _stribeck_area(vs, delta, b)) / (a - b)
+    return fc + (fs - fc) * (area_a - _stribeck_area(vs, delta, b)) / (a - b)
 
 
 # Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
 @njit(cache=True, fastmath={"contract"}, nogil=True)
-def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a: float, target: float,
-                    g: float) -> float:
+def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a: float, area_a: float,
+                    target: float, g: float) -> float:
     """The root w in (0, target) of psi(w) = w (1 + g fv / 2) + g (M(w) + fv a / 2) - target, M(w)
-    the mean level over the speed ramp from a to w (:func:`_ramp_mean`), given psi(0) < 0
+    the mean level over the speed ramp from a to w (:func:`_ramp_mean`, ``area_a`` = I(a)), given psi(0) < 0
     (psi(target) > 0): Newton's method, with bisection whenever a step leaves the bracket (the
     Stribeck curve's negative slope can make psi non-monotone, where a plain fixed-point
     iteration would diverge). dM/dw = (M(w) - level(w)) / (a - w), level'(w) / 2 at w = a."""
     lo, hi = 0.0, target
-    w = target
+    w = (target - g * (_level(forces.STRIBECK, fc, fs, vs, delta, a) + 0.5 * fv * a)) / (1.0 + 0.5 * g * fv)
+    if not 0.0 < w < target:
+        w = target
     for _ in range(forces.MAX_ITERATIONS):
-        mean = _ramp_mean(forces.STRIBECK, fc, fs, vs, delta, a, w)
+        mean = _ramp_mean(forces.STRIBECK, fc, fs, vs, delta, a, w, area_a)
         psi = w * (1.0 + 0.5 * g * fv) + g * (mean + 0.5 * fv * a) - target
         if psi == 0.0:  # the root (Newton lands on it where the curve is flat; bisecting on would leave it)
             return w
@@ -320,18 +361,28 @@ def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
-def _ramp_force(kind: int, p: tuple, forward: bool, a: float, target: float, g: float) -> float:
+def _sliding_speed(vs: float, delta: float) -> float:
+    """The speed beyond which the Stribeck term e^{-(w/vs)^delta} is below e^{-SLIDING^2} = 4.5e-19,
+    that is below rounding against the level fc."""
+    return SLIDING * vs if delta == 2.0 else vs * (SLIDING * SLIDING) ** (1.0 / delta)
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _ramp_force(kind: int, p: tuple, forward: bool, a: float, target: float, g: float, area_a: float) -> float:
     """The magnitude of the force held over a sub-step in which the mass moves on one side from
     speed a to the end speed w: the mean of the law over that (linear) speed ramp,
     M(a, w) + fv (a + w) / 2, with w solving w = target - g (M(a, w) + fv (a + w) / 2), which has a
-    root w > 0 when target > g (M(a, 0) + fv a / 2) (the caller's); Coulomb in closed form,
-    Stribeck by :func:`_stribeck_speed`."""
+    root w > 0 when target > g (M(a, 0) + fv a / 2) (the caller's); with M = fc (Coulomb) in
+    closed form, w = (target - g (fc + fv a / 2)) / (1 + g fv / 2). A Stribeck law whose ramp stays
+    beyond :func:`_sliding_speed` (both a and that w) is fc there to rounding, so the closed form is
+    its root as well (the fast sliding of a friction test: no erf and no iteration); otherwise
+    :func:`_stribeck_speed`. ``area_a``: I(a) of :func:`_stribeck_area` (unused by Coulomb)."""
     fc, fs, fv = _side(kind, p, forward)
-    if kind == forces.COULOMB:
-        w = (target - g * (fc + 0.5 * fv * a)) / (1.0 + 0.5 * g * fv)
+    w = (target - g * (fc + 0.5 * fv * a)) / (1.0 + 0.5 * g * fv)
+    if kind == forces.COULOMB or min(a, w) >= _sliding_speed(p[2], p[3]):
         return fc + 0.5 * fv * (a + w)
-    w = _stribeck_speed(fc, fs, p[2], p[3], fv, a, target, g)
-    return _ramp_mean(kind, fc, fs, p[2], p[3], a, w) + 0.5 * fv * (a + w)
+    w = _stribeck_speed(fc, fs, p[2], p[3], fv, a, area_a, target, g)
+    return _ramp_mean(kind, fc, fs, p[2], p[3], a, w, area_a) + 0.5 * fv * (a + w)
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
@@ -343,7 +394,7 @@ def _from_rest(kind: int, p: tuple, s_free: float, g: float) -> float:
     if _stick_or_slip(s_free, g, _side(kind, p, True)[1], _side(kind, p, False)[1]):
         return s_free / g
     forward = s_free > 0.0
-    f = _ramp_force(kind, p, forward, 0.0, abs(s_free), g)
+    f = _ramp_force(kind, p, forward, 0.0, abs(s_free), g, 0.0)
     return f if forward else -f
 
 
@@ -356,8 +407,8 @@ def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> flo
 
     From rest: :func:`_from_rest`. In slip on the side s of v: if the mass is still sliding on
     that side at the end (s v_free > g F_d, F_d = M(|v|, 0) + fv |v| / 2 the mean force of a ramp
-    down to zero), the mean over the ramp from |v| to the end speed (:func:`_ramp_force`).
-    Otherwise the mass reaches v = 0 in the sub-step: with the other forces on the mass held
+    down to zero; first tested against its bound max(fc, fs) + fv |v| / 2, which needs no erf),
+    the mean over the ramp from |v| to the end speed (:func:`_ramp_force`). Otherwise the mass reaches v = 0 in the sub-step: with the other forces on the mass held
     (A = (v_free - v) / g), it decelerates under s F_d and stops at tau = v / (v - v_a),
     v_a = v_free - g s F_d; from rest there, the step over the remaining (1 - tau) h (free end
     velocity (1 - tau) g A, sensitivity (1 - tau) g) decides stick or slip on either side and gives
@@ -370,9 +421,12 @@ def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> flo
     s = 1.0 if forward else -1.0
     fc, fs, fv = _side(kind, p, forward)
     speed = abs(s_now)
-    stopping = _ramp_mean(kind, fc, fs, p[2], p[3], speed, 0.0) + 0.5 * fv * speed
+    if s * s_free > g * (max(fc, fs) + 0.5 * fv * speed):  # beyond the largest F_d: still sliding
+        return s * _ramp_force(kind, p, forward, speed, s * s_free, g, _area(kind, p, speed))
+    area = _area(kind, p, speed)
+    stopping = _ramp_mean(kind, fc, fs, p[2], p[3], speed, 0.0, area) + 0.5 * fv * speed
     if s * s_free > g * stopping:
-        return s * _ramp_force(kind, p, forward, speed, s * s_free, g)
+        return s * _ramp_force(kind, p, forward, speed, s * s_free, g, area)
     tau = s_now / (s_now - (s_free - g * s * stopping))
     rest = 1.0 - tau
     return tau * s * stopping + rest * _from_rest(kind, p, rest * (s_free - s_now), g * rest)
