@@ -58,18 +58,20 @@ def two_mass(m2: float, f2: float, zeta2: float) -> dict:
     return {"type": "transfer_function", "num": [float(c) for c in load], "den": [float(c) for c in den]}
 
 
-def recording(seed: int, forces: list[dict], mass: float = MASS, linear: dict | None = None) -> list[Run]:
-    """The runs measured on the truth: the nominal plant with ``forces`` and ``mass``, or the
-    transfer function ``linear``."""
+def recording(seed: int, forces: list[dict], mass: float = MASS, linear: dict | None = None,
+              snr_db: float = SNR_DB, **changes) -> list[Run]:
+    """The runs measured on the truth: the nominal plant with ``forces``, ``mass`` and the other
+    keys of ``changes`` (an input block), or the transfer function ``linear``; noise ``snr_db``
+    below the output."""
     rng = np.random.default_rng(seed)
     bins, _ = random_grid(np.arange(5, int(150 * N / FS) + 1, 2), 3, rng)
     commands = [np.tile(synthesize(N, bins, flat_amplitudes(bins.size, level), random_phases(bins.size, rng)), 5)
                 for level in LEVELS for _ in range(6)]
-    truth = copy.deepcopy(NOMINAL)["model"] | {"mass": mass}
+    truth = copy.deepcopy(NOMINAL)["model"] | {"mass": mass} | changes
     U = np.stack(commands) + ACTUATOR_OFFSET
     Y = (independent_friction.stribeck_response(truth | {"nonlinearities": forces}, U, FS) if forces
          else independent_plant.outputs({"model": linear or truth}, U, FS))
-    noise = 10 ** (-SNR_DB / 20) * float(np.sqrt(np.mean(Y**2)))
+    noise = 10 ** (-snr_db / 20) * float(np.sqrt(np.mean(Y**2)))
     runs = []
     for i, (u, y) in enumerate(zip(commands, Y)):
         coloured = lfilter([0.6], [1.0, -0.8], rng.standard_normal(y.size)) * noise  # unit variance x noise
@@ -129,4 +131,25 @@ def test_a_coupled_load_mass_is_a_coupled_mode_though_it_moves_the_model_own_mod
     result = diagnose(NOMINAL, "model.yaml", recording(7, [], linear=truth), "recording.h5")
     assert result.verdict.winner == "coupled_mode", result.headline()
     assert result.winner.estimate.values["fr"] == pytest.approx(resonance, rel=0.10)
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+@pytest.mark.slow
+def test_a_saturation_and_a_stiffness_error_give_the_limits_of_the_recorded_input():
+    """An actuator limit of +-8 N behind the actuator offset (0.01 N before the limit: the limits
+    seen from the recorded command are -8.01 and +7.99) and a spring 3 % softer than the model's,
+    at 35 dB. An offset before a saturation is the saturation moved plus a constant force, which
+    the output offset takes through the static gain (nlsid/diagnose/hypotheses/input_blocks.py):
+    with the input offset free the fit wandered along that direction to -9.50 / +6.49 on this
+    record (input offset -1.49, correlation -1.000 with the output offset). Held, the limits must
+    be those of the recorded command within 1 %, the stiffness within 1 %."""
+    result = diagnose(NOMINAL, "model.yaml",
+                      recording(9, [], snr_db=35.0, stiffness=0.97 * STIFFNESS,
+                                input_nonlinearity={"type": "saturation", "lower": -8.0, "upper": 8.0}),
+                      "recording.h5")
+    assert result.verdict.winner == "input_saturation", result.headline()
+    block = result.final.extended["model"]["input_nonlinearity"]
+    assert block["lower"] == pytest.approx(-8.0 - ACTUATOR_OFFSET, rel=0.01)
+    assert block["upper"] == pytest.approx(8.0 - ACTUATOR_OFFSET, rel=0.01)
+    assert result.final.extended["model"]["stiffness"] == pytest.approx(0.97 * STIFFNESS, rel=0.01)
     assert abs(result.final_score().above_floor_db) < 3.0, result.headline()

@@ -1,10 +1,22 @@
 """Actuator nonlinearities at the plant input: saturation, deadzone and backlash, each one parameter
 found by a bounded search of the residual it predicts, e ~ S[f_a(u) - u].
 
-The deadzone's refinement holds the input offset at the value the nuisances got: an offset c before
-a deadzone [l, u] is the deadzone [l - c, u - c] exactly (its output is x + c - u above it, x + c - l
-below), so the two would trade along a direction the data cannot fix, and the limits' values would
-be wherever the search stopped on it."""
+Each refinement holds the input offset at the value the nuisances got (none in open loop: a
+constant at the plant input of a model without a block is a constant force, which the output
+offset takes). An offset c before the block moves along a direction the data cannot fix:
+
+- deadzone [l, h]: f(x + c) is the deadzone [l - c, h - c] exactly (x + c - h above it, x + c - l
+  below);
+- saturation [l, h]: f(x + c) = sat(x; l - c, h - c) + c, the saturation moved by c and a constant
+  force c after it, which a plant with a finite static gain G(0) turns into the constant output
+  c G(0) that the output offset takes;
+- backlash: the play operator commutes with a shift, f(x + c) = f(x) + c in the steady state, the
+  same constant force.
+
+Left free, the offset and the limits trade along that direction, and the limits' values are
+wherever the search stopped on it (a saturation at +-8 came out at -9.50 / +6.49 with the input
+offset at -1.49 on an independent-plant record at 35 dB, tests/test_diagnose_msd_battery.py);
+held, the limits are those of the recorded input."""
 
 from __future__ import annotations
 
@@ -50,7 +62,7 @@ HYPOTHESES = (
                no_block("input_nonlinearity"),
                _input_block(_saturation, "limit", quantile(0.5), lambda x: float(np.max(x))),
                set_block("input_nonlinearity", "saturation"), ("upper", "lower"),
-               block_paths("input_nonlinearity", ("upper", "lower"))),
+               block_paths("input_nonlinearity", ("upper", "lower")), holds=("input_offset",)),
     Hypothesis("deadzone", "Input deadzone", "input", "upper", "input units",
                "odd distortion; BLA gain rises with level; residual where |u| is small",
                no_block("input_nonlinearity"),
@@ -61,5 +73,6 @@ HYPOTHESES = (
                "odd distortion and a phase lag that shrinks with level",
                no_block("input_nonlinearity"),
                _input_block(_backlash, "width", quantile(0.001), quantile(0.9)),
-               set_block("input_nonlinearity", "backlash"), ("width",), block_paths("input_nonlinearity", ("width",))),
+               set_block("input_nonlinearity", "backlash"), ("width",), block_paths("input_nonlinearity", ("width",)),
+               holds=("input_offset",)),
 )
