@@ -38,3 +38,49 @@ def test_the_steps_give_scipys_forward_difference_jacobian(x, lower, upper, rel_
         ours[:, i] = (f(shifted) - f0) / (shifted[i] - x[i])
     theirs = approx_derivative(f, x, method="2-point", rel_step=rel_step, f0=f0, bounds=(lower, upper))
     np.testing.assert_array_equal(ours, theirs)
+
+
+def _offset_problem(closed: bool, periodic: bool):
+    """A mass-spring-damper with Coulomb friction and a free output offset on two runs (periodic
+    multisines with a transient period, or the same samples as arbitrary records)."""
+    from nlsid.fit.extension import FreeParameter, _Cost, _Problem
+    from nlsid.io.run import Run
+
+    rng = np.random.default_rng(3)
+    period = 512
+    model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 400.0, "stiffness": 40000.0, "output_offset": 1e-4,
+             "nonlinearities": [{"type": "coulomb", "fc": 0.3}]}
+    data = {"model": model}
+    if closed:
+        data["closed_loop"] = {"controller": {"type": "pid", "kp": 2000.0}}
+    runs = []
+    for i in range(2):
+        u = np.tile(rng.standard_normal(period), 4)
+        y = 1e-3 * rng.standard_normal(u.size)
+        extra = {"period": period, "transient_periods": 1} if periodic else {}
+        runs.append(Run(f"r{i}", 1000.0, "multisine" if periodic else "arbitrary", u, y=y, r=u if closed else None,
+                        **extra))
+    free = {"model.nonlinearities[0].fc": FreeParameter(), "model.output_offset": FreeParameter()}
+    problem = _Problem(data, free, "m", {}, None)
+    return problem, _Cost.of(problem, runs, problem.inputs(runs))
+
+
+def test_the_output_offset_column_is_the_simulated_derivative():
+    # The offset enters the open-loop output additively, so its exact column must equal the
+    # difference of two simulations (linear in the offset: equal up to rounding), with the runs'
+    # sqrt(P) weights of the compact periodic fit (3 steady periods: sqrt 3; the critically damped
+    # mode at 200 /s settles within the transient period).
+    problem, cost = _offset_problem(closed=False, periodic=True)
+    index, column = cost.offset_column(problem, "y")
+    assert problem.names[index] == "model.output_offset"
+    step = 1e-6
+    base, shifted = cost.residuals(problem, [problem.start, problem.start + step * np.eye(2)[index]], "y")
+    np.testing.assert_allclose(column, (shifted - base) / step, rtol=1e-6)
+    assert column[0] == pytest.approx(np.sqrt(3))
+
+
+@pytest.mark.parametrize("closed, periodic", [(True, True), (False, False)])
+def test_no_exact_offset_column_where_the_offset_is_not_additive(closed, periodic):
+    # closed loop: the controller reads the offset; arbitrary records: the fitted initial state takes part of it
+    problem, cost = _offset_problem(closed, periodic)
+    assert cost.offset_column(problem, "y") is None

@@ -33,7 +33,9 @@ The start itself must be valid (it is evaluated first; its error stops the fit).
 The minimisation is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) in
 normalised coordinates x_i = theta_i / s_i (s_i the start value's magnitude), with a forward
 finite-difference Jacobian whose step is ``diff_step`` relative to each parameter (scipy's own
-rule, :func:`forward_steps`). Simulations of the runs of one evaluation run in parallel threads
+rule, :func:`forward_steps`); the output offset's column, where the offset is added after
+everything else (open loop, no initial state fitted: :meth:`_Cost.offset_column`), is exact and
+costs no simulation. Simulations of the runs of one evaluation run in parallel threads
 (:func:`nlsid.simulate.batch.simulate_all`), those of all the Jacobian's columns in one pool.
 
 Uncertainty: the sandwich estimator (Huber 1967, White 1980), which does not assume white
@@ -415,6 +417,21 @@ class _Cost:
         """Samples of each run's residual (:func:`_steady`'s)."""
         return [run.n_samples if run.period is None else run.n_periods * run.period for run in self.runs]
 
+    def offset_column(self, problem: "_Problem", signal: str) -> tuple[int, np.ndarray] | None:
+        """(index, column) of the output offset c among the free parameters where its Jacobian
+        column is known without a simulation: the engine adds c to the simulated output after
+        everything else, so in open loop d e_r / d c = 1 at every sample and the column of the
+        weighted residual is the run's weight w_r on each of its samples. Not where the output is
+        fed back (a closed loop: the controller reads c too), not for the fitted u, and not where
+        an arbitrary record starts from an initial state fitted to its measured output (the fit
+        takes part of c)."""
+        name = "model.output_offset"
+        if (name not in problem.names or problem.closed or signal != "y"
+                or any(run.period is None for run in self.inputs)):
+            return None
+        return problem.names.index(name), np.concatenate(
+            [np.full(size, w) for w, size in zip(self.weights, self.segments())])
+
 
 def _where(source: str, lines: dict, key_path: tuple) -> str:
     line = (lines or {}).get(key_path)
@@ -598,14 +615,20 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
 
     lower_x, upper_x = problem.lower / scale, problem.upper / scale
 
+    exact = cost.offset_column(problem, fit_on)  # (index, column) of the output offset, or None
+
     def jacobian(x: np.ndarray) -> np.ndarray:
-        """Forward differences at x (:func:`forward_steps`), from the residual already evaluated there."""
+        """Forward differences at x (:func:`forward_steps`), from the residual already evaluated
+        there; the output offset's column exact where it is known (:meth:`_Cost.offset_column`)."""
         f0 = last[1] if np.array_equal(x, last[0]) else residual(x)
         h = forward_steps(x, diff_step, lower_x, upper_x)
-        shifted = list(x + np.diag(h))  # row i: x + h_i e_i
         jac = np.empty((f0.size, x.size))
-        for i, f in enumerate(columns(shifted)):
-            jac[:, i] = (f - f0) / (shifted[i][i] - x[i])
+        differenced = [i for i in range(x.size) if exact is None or i != exact[0]]
+        shifted = [x + h[i] * np.eye(x.size)[i] for i in differenced]
+        for i, xi, f in zip(differenced, shifted, columns(shifted) if shifted else []):
+            jac[:, i] = (f - f0) / (xi[i] - x[i])
+        if exact is not None:
+            jac[:, exact[0]] = exact[1] * scale[exact[0]]
         return jac
 
     result = least_squares(residual, x0, jac=jacobian, bounds=(lower_x, upper_x), method="trf", x_scale=1.0,
