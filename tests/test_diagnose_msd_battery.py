@@ -109,10 +109,11 @@ def test_a_mass_error_and_coulomb_friction_are_both_corrected():
 
 
 @pytest.mark.slow
-def test_a_correct_model_with_offsets_and_coloured_noise_is_nothing_beyond_noise():
+@pytest.mark.parametrize("snr_db", [SNR_DB, 30.0])
+def test_a_correct_model_with_offsets_and_coloured_noise_is_nothing_beyond_noise(snr_db):
     """The offsets are nuisances: their static effect on y (a sensor offset, and the actuator's
-    through the static gain 1 / k) is fitted, not named as a cause."""
-    result = diagnose(NOMINAL, "model.yaml", recording(6, []), "recording.h5")
+    through the static gain 1 / k) is fitted, not named as a cause; at the issue's SNR and lower."""
+    result = diagnose(NOMINAL, "model.yaml", recording(6, [], snr_db=snr_db), "recording.h5")
     assert result.verdict.status == "no_discrepancy", result.headline()
     found = result.nuisances.values
     static = found.get("output_offset", 0.0) + (found.get("force_offset", 0.0) + found.get("input_offset", 0.0)) / STIFFNESS
@@ -152,4 +153,16 @@ def test_a_saturation_and_a_stiffness_error_give_the_limits_of_the_recorded_inpu
     assert block["lower"] == pytest.approx(-8.0 - ACTUATOR_OFFSET, rel=0.01)
     assert block["upper"] == pytest.approx(8.0 - ACTUATOR_OFFSET, rel=0.01)
     assert result.final.extended["model"]["stiffness"] == pytest.approx(0.97 * STIFFNESS, rel=0.01)
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+@pytest.mark.slow
+def test_a_weak_coulomb_friction_10_db_above_the_noise_is_named():
+    """The issue's lower end: an effect about 10 dB above the noise (Coulomb 0.03 N against forces of
+    1 to 4 N rms, 30 dB SNR, coloured). Named, fc within 10 %, the final model at the floor."""
+    result = diagnose(NOMINAL, "model.yaml", recording(10, [{"type": "coulomb", "fc": 0.03}], snr_db=30.0),
+                      "recording.h5")
+    assert 6.0 < result.evidence.overall.above_noise_db < 14.0, result.headline()  # the case is the one described
+    assert [o.hypothesis.name for o in result.chain] == ["coulomb"], result.headline()
+    assert _final_values(result)["coulomb"]["fc"] == pytest.approx(0.03, rel=0.10)
     assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
