@@ -4,6 +4,8 @@ template's response and the added mode."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -90,3 +92,34 @@ def test_missing_resonance_does_not_apply_to_a_stage_with_forces():
     model = dict(TWO_MASS, nonlinearities=[{"type": "coulomb", "fc": 1.0}])
     reason = _hypothesis("missing_resonance").applies(ModelRunner.from_data({"model": model}, "model.yaml"))
     assert reason is not None and "without forces" in reason
+
+
+def test_a_nonlinear_model_response_simulates_each_trajectory_once(monkeypatch):
+    """Along its trajectory a nonlinear model's response is (y(u; s d) - y(u)) / s. Its y(u) is
+    simulated once per run and model however many disturbances a signature's scan tries, and a
+    second run (or the same samples in another run object) gets its own. The response itself
+    must be the difference of the two simulations, computed here without the runner's cache."""
+    from nlsid.io.run import Run
+
+    data = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": 20.0, "stiffness": 4000.0,
+                      "nonlinearities": [{"type": "coulomb", "fc": 0.3}]}}
+    runner = ModelRunner.from_data(data, "m")
+    rng = np.random.default_rng(4)
+    runs = [Run(f"r{i}", 1000.0, "arbitrary", rng.standard_normal(2000)) for i in range(2)]
+    calls = []
+    original = ModelRunner.simulate
+
+    def counted(self, run, process=None, output=None, excite=True):
+        calls.append((run.run_id, process is None and output is None))
+        return original(self, run, process, output, excite)
+
+    monkeypatch.setattr(ModelRunner, "simulate", counted)
+    d = rng.standard_normal(2000)
+    first = runner.response(runs[0], process=d)
+    runner.response(runs[0], process=2 * d)
+    runner.response(runs[1], process=d)
+    assert [c for c in calls if c[1]] == [("r0", True), ("r1", True)]
+    quiet = dataclasses.replace(runs[0], y=None)
+    scale = 1e-3 * float(np.sqrt(np.mean(runs[0].u ** 2))) / float(np.sqrt(np.mean(d ** 2)))
+    expected = (original(runner, quiet, process=scale * d).y - original(runner, quiet).y) / scale
+    np.testing.assert_allclose(first, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))

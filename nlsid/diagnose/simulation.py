@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -51,6 +51,7 @@ class ModelRunner:
     config: object
     plant: object
     loop: object
+    trajectories: dict = field(default_factory=dict, compare=False, repr=False)  # id(run) -> (run, y): :meth:`_along`
 
     @classmethod
     def from_data(cls, data: dict, source: str) -> "ModelRunner":
@@ -160,9 +161,13 @@ class ModelRunner:
         trajectory on ``run``: for each disturbance d (scaled to RESPONSE_STEP times the rms of
         the excitation, respectively of the model's output, that scale s divided out again),
         (y(u; s d) - y(u)) / s, summed. Simulated as the model runs on ``run`` (its periodic
-        steady state), from rest where the record is arbitrary."""
+        steady state), from rest where the record is arbitrary. The trajectory y(u) of each run is
+        simulated once per model (a signature's scan asks for many disturbances on the same runs)."""
         quiet = dataclasses.replace(run, y=None)
-        nominal = self.simulate(quiet).y
+        kept = self.trajectories.get(id(run))
+        if kept is None or kept[0] is not run:
+            kept = self.trajectories[id(run)] = (run, self.simulate(quiet).y)
+        nominal = kept[1]
         total = np.zeros(run.n_samples)
         for name, signal, reference in (("process", process, self.excitation(run).u), ("output", output, nominal)):
             size = _rms(signal) if signal is not None else 0.0
