@@ -189,3 +189,33 @@ def test_command_line_start_estimate(run_cli, tmp_path):
     parameter = result.json()["parameters"]["model.nonlinearities[0].fc"]
     assert parameter["start"] == pytest.approx(0.5, rel=0.25)  # the regression, not the config's 3.0
     assert parameter["value"] == pytest.approx(0.5, rel=0.05)
+
+
+def test_a_fit_creeping_along_a_valley_stops_at_its_stall():
+    # A Stribeck law fitted to LuGre friction (no law of its kind matches the presliding) creeps:
+    # scipy's own tolerances stop it after 72 simulations. With stall_db = 0.01 it stops once four
+    # accepted steps gained less than 0.01 dB together: it must say so, cost fewer simulations,
+    # and its error must be within that 0.01 dB of where the creeping ended.
+    runs, _ = _measure(_msd({"type": "lugre", "sigma0": 2e4, "fc": 0.5, "fs": 0.8, "vs": 0.01}), _excitation(3.0, 1))
+    estimation, _ = split_runs(runs)
+    free = {f"model.nonlinearities[0].{k}": FreeParameter(lower=1e-6) for k in ("fc", "fs", "vs")}
+    free.update({"model.damping": FreeParameter(15.0, 1.0, 100.0), "model.mass": FreeParameter(0.9, 0.1, 10.0)})
+    start = _msd({"type": "stribeck", "fc": 0.4, "fs": 0.6, "vs": 0.01})
+    full = fit_free_parameters(start, free, estimation, [])
+    stalled = fit_free_parameters(start, free, estimation, [], stall_db=0.01)
+    assert stalled.message.startswith("stalled")
+    assert not any("without converging" in w for w in stalled.warnings)  # a stall counts as converged
+    assert stalled.evaluations < full.evaluations
+    assert 20 * np.log10(stalled.estimation_rms / full.estimation_rms) < 0.01
+
+
+def test_a_converging_fit_is_not_stopped_by_the_stall_rule():
+    # Gauss-Newton on the true law converges faster than any stall: the same values and count.
+    runs, _ = _measure(_msd({"type": "coulomb", "fc": 0.5}), _excitation(3.0, 1))
+    estimation, _ = split_runs(runs)
+    free = {"model.nonlinearities[0].fc": FreeParameter(lower=1e-6), "model.mass": FreeParameter(0.9, 0.1, 10.0)}
+    start = _msd({"type": "coulomb", "fc": 0.2})
+    full = fit_free_parameters(start, free, estimation, [])
+    stalled = fit_free_parameters(start, free, estimation, [], stall_db=0.01)
+    np.testing.assert_array_equal(stalled.values, full.values)
+    assert stalled.evaluations == full.evaluations

@@ -32,6 +32,7 @@ from nlsid.io.run import Run
 
 
 FIT_STEPS = 25
+STALL_DB = 0.01  # a refinement stops where its last steps gained less than this (fit_free_parameters)
 MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 NUMERATOR = re.compile(r"\.num\[\d+\]$")  # a numerator coefficient's key path (:func:`refine`)
 LINEAR_REFITS = ("wrong_mechanics", "wrong_dynamics")  # the linear part's refit alone (Outcome.generalizes)
@@ -282,8 +283,11 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     carries a zero of the sampling that a plant of relative degree 2 lacks (a Duffing oscillator
     seen through a 2/2 fit: s-coefficient 74 at the start, about 0 in truth; held at 0.074, the
     lower bound of three decades, the cubic feedback's test error on a larger record was 1.2 mV
-    instead of 0.06 mV). The optimiser gets :func:`budget` cost evaluations (besides its
-    finite-difference Jacobians): the fits of a present effect with a few parameters converge in 5
+    instead of 0.06 mV). The optimiser stops, as converged, where its last four accepted steps
+    lowered the error by less than STALL_DB (0.01 dB) together: a hypothesis that is not the cause
+    creeps along a valley (a Stribeck law on LuGre presliding spent its last 9 Jacobians at the
+    same -0.35 dB; on the battery 795 -> 686 simulations of a LuGre diagnosis, same verdict and
+    values). It gets :func:`budget` cost evaluations (besides its finite-difference Jacobians): the fits of a present effect with a few parameters converge in 5
     to 15; a hypothesis that is not the cause can
     wander into parameters the simulator is slow on (a Stribeck curve steeper than the mass can
     follow), and is then scored where the budget stopped it, with the optimiser's warning.
@@ -317,7 +321,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
             raise InputError(name, f"the signature estimate is {start:g}: nothing to refine (no sign to keep)")
         bounds = (-abs(start) * 1e3, abs(start) * 1e3) if NUMERATOR.search(path) else sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
-    fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free))
+    fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free),
+                              stall_db=STALL_DB)
     values, std = _derived(hypothesis, *_fitted(estimate, fit, paths), free, paths, fit.config["model"])
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
@@ -390,7 +395,8 @@ def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str) -
     data = copy.deepcopy(outcome.extended)
     data.setdefault("simulation", {})["substeps"] = substeps
     free = {path: dataclasses.replace(p, start=None) for path, p in outcome.free.items()}
-    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=budget(free))
+    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=budget(free),
+                              stall_db=STALL_DB)
     est = outcome.estimate
     values, std = _derived(outcome.hypothesis, *_fitted(est, fit, outcome.paths), outcome.free, outcome.paths,
                            fit.config["model"])

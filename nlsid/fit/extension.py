@@ -485,6 +485,16 @@ def forward_steps(x: np.ndarray, rel_step: float, lower: np.ndarray, upper: np.n
 
 
 SPECTRUM_LINES = 17  # neighbouring DFT lines averaged into the residual spectrum of the sandwich
+STALL_STEPS = 4      # accepted steps over which a stall (fit_free_parameters' stall_db) is judged
+
+
+class _Stalled(Exception):
+    """Raised from the Jacobian to stop the optimiser at a stall; carries what its result would
+    (``x``, ``fun``, ``jac``, ``message``; ``status`` 1: a stop that counts as converged)."""
+
+    def __init__(self, x: np.ndarray, fun: np.ndarray, jac: np.ndarray, message: str):
+        super().__init__(message)
+        self.x, self.fun, self.jac, self.message, self.status = x, fun, jac, message, 1
 
 
 def _meat_factor(jac: np.ndarray, residual: np.ndarray, segments: Sequence[int]) -> np.ndarray:
@@ -556,7 +566,7 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
 def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estimation: Sequence[Run],
                         validation: Sequence[Run], *, source: str = "", lines: dict | None = None,
                         workers: int | None = None, diff_step: float = 1e-3, max_evaluations: int = 100,
-                        tolerance: float = 1e-8, fit_on: str = "y") -> ExtensionFit:
+                        tolerance: float = 1e-8, fit_on: str = "y", stall_db: float | None = None) -> ExtensionFit:
     """Estimate the free parameters of a model config by minimising the simulation error.
 
     ``config_data``: the model config as loaded YAML (a dict, e.g. from
@@ -566,6 +576,9 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     measured ``y`` the optimiser sees; ``validation``: runs it does not (may be empty).
     ``source`` and ``lines`` (from ``load_yaml``) let errors name the config file and line.
     ``fit_on``: the signal whose simulation error is minimised, ``y`` or (closed loop) ``u``.
+    ``stall_db``: the fit also stops, as converged, where the last STALL_STEPS accepted steps
+    lowered the cost by less than ``stall_db`` dB together (a search creeping along a valley:
+    its error can no longer change by more than about that).
 
     Returns an :class:`ExtensionFit`: values, std, covariance and correlation, rms errors (with
     the fitted and the start values) on the estimation and validation runs and per run, the
@@ -616,6 +629,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     lower_x, upper_x = problem.lower / scale, problem.upper / scale
 
     exact = cost.offset_column(problem, fit_on)  # (index, column) of the output offset, or None
+    accepted = []  # the cost at each Jacobian's point: the points scipy accepted
 
     def jacobian(x: np.ndarray) -> np.ndarray:
         """Forward differences at x (:func:`forward_steps`), from the residual already evaluated
@@ -629,10 +643,18 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
             jac[:, i] = (f - f0) / (xi[i] - x[i])
         if exact is not None:
             jac[:, exact[0]] = exact[1] * scale[exact[0]]
+        accepted.append(float(f0 @ f0))
+        if stall_db is not None and len(accepted) > STALL_STEPS and accepted[-1] > 0 and (
+                10 * math.log10(accepted[-1 - STALL_STEPS] / accepted[-1]) < stall_db):
+            raise _Stalled(x.copy(), f0, jac, f"stalled: the last {STALL_STEPS} steps lowered the cost by "
+                                              f"{10 * math.log10(accepted[-1 - STALL_STEPS] / accepted[-1]):.3g} dB")
         return jac
 
-    result = least_squares(residual, x0, jac=jacobian, bounds=(lower_x, upper_x), method="trf", x_scale=1.0,
-                           max_nfev=max_evaluations, xtol=tolerance, ftol=tolerance, gtol=tolerance)
+    try:
+        result = least_squares(residual, x0, jac=jacobian, bounds=(lower_x, upper_x), method="trf", x_scale=1.0,
+                               max_nfev=max_evaluations, xtol=tolerance, ftol=tolerance, gtol=tolerance)
+    except _Stalled as stalled:
+        result = stalled
     values = result.x * scale
     warnings = [] if result.status > 0 else [f"optimiser stopped after {evaluations} simulations without converging: {result.message}"]
     if refused:
