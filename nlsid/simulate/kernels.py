@@ -322,6 +322,11 @@ def _ramp_mean(kind: int, fc: float, fs: float, vs: float, delta: float, a: floa
     return fc + (fs - fc) * (area_a - _stribeck_area(vs, delta, b)) / (a - b)
 
 
+# A Newton step of this relative size leaves an error of about K step^2, K = |psi''| / (2 |psi'|)
+# (psi' ~ 1, psi'' ~ g |M''| ~ g (fs - fc) / vs^2, so K (w + vs) << 1): below TOLERANCE (1e-10).
+QUADRATIC_TOLERANCE = 1e-6
+
+
 # Not inlined: its bracketed iteration is long and rarely used; inlined, it slows the common laws.
 @njit(cache=True, fastmath={"contract"}, nogil=True)
 def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a: float, area_a: float,
@@ -351,9 +356,11 @@ def _stribeck_speed(fc: float, fs: float, vs: float, delta: float, fv: float, a:
             ratio = _ratio_power(w, vs, delta)
             d_mean = -0.5 * (fs - fc) * math.exp(-ratio) * delta * ratio / w if w > 0.0 else 0.0
         w_new = w - psi / (1.0 + 0.5 * g * fv + g * d_mean)
+        settled = QUADRATIC_TOLERANCE
         if not lo <= w_new <= hi:
             w_new = 0.5 * (lo + hi)
-        done = abs(w_new - w) <= forces.TOLERANCE * (w_new + vs)
+            settled = forces.TOLERANCE
+        done = abs(w_new - w) <= settled * (w_new + vs)
         w = w_new
         if done:
             break
