@@ -40,19 +40,13 @@ def test_the_steps_give_scipys_forward_difference_jacobian(x, lower, upper, rel_
     np.testing.assert_array_equal(ours, theirs)
 
 
-def _offset_problem(closed: bool, periodic: bool):
-    """A mass-spring-damper with Coulomb friction and a free output offset on two runs (periodic
-    multisines with a transient period, or the same samples as arbitrary records)."""
-    from nlsid.fit.extension import FreeParameter, _Cost, _Problem
+def _offset_runs(closed: bool = False, periodic: bool = True):
+    """Two runs of 4 periods of 512 samples (a transient one, or the same samples as arbitrary
+    records), the output a random signal (the residual's algebra does not need a model's)."""
     from nlsid.io.run import Run
 
     rng = np.random.default_rng(3)
     period = 512
-    model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 400.0, "stiffness": 40000.0, "output_offset": 1e-4,
-             "nonlinearities": [{"type": "coulomb", "fc": 0.3}]}
-    data = {"model": model}
-    if closed:
-        data["closed_loop"] = {"controller": {"type": "pid", "kp": 2000.0}}
     runs = []
     for i in range(2):
         u = np.tile(rng.standard_normal(period), 4)
@@ -60,7 +54,22 @@ def _offset_problem(closed: bool, periodic: bool):
         extra = {"period": period, "transient_periods": 1} if periodic else {}
         runs.append(Run(f"r{i}", 1000.0, "multisine" if periodic else "arbitrary", u, y=y, r=u if closed else None,
                         **extra))
-    free = {"model.nonlinearities[0].fc": FreeParameter(), "model.output_offset": FreeParameter()}
+    return runs
+
+
+def _offset_problem(closed: bool, periodic: bool, force: dict | None = None):
+    """A mass-spring-damper with ``force`` (Coulomb friction) and a free output offset on
+    :func:`_offset_runs`."""
+    from nlsid.fit.extension import FreeParameter, _Cost, _Problem
+
+    model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 400.0, "stiffness": 40000.0, "output_offset": 1e-4,
+             "nonlinearities": [force or {"type": "coulomb", "fc": 0.3}]}
+    data = {"model": model}
+    if closed:
+        data["closed_loop"] = {"controller": {"type": "pid", "kp": 2000.0}}
+    runs = _offset_runs(closed, periodic)
+    key = "fc" if "fc" in model["nonlinearities"][0] else "k3"
+    free = {f"model.nonlinearities[0].{key}": FreeParameter(), "model.output_offset": FreeParameter()}
     problem = _Problem(data, free, "m", {}, None)
     return problem, _Cost.of(problem, runs, problem.inputs(runs))
 
@@ -84,3 +93,27 @@ def test_no_exact_offset_column_where_the_offset_is_not_additive(closed, periodi
     # closed loop: the controller reads the offset; arbitrary records: the fitted initial state takes part of it
     problem, cost = _offset_problem(closed, periodic)
     assert cost.offset_column(problem, "y") is None
+
+
+@pytest.mark.parametrize("force, lead", [({"type": "cubic_stiffness", "k3": 1e9}, 70),
+                                         ({"type": "coulomb", "fc": 0.3}, 512)])
+def test_the_compact_residual_is_the_whole_runs_mean_period(force, lead):
+    # A periodic run is fitted on its mean period: sqrt(P) (s_sim - mean_p s_p), simulated from
+    # rest a lead ahead of one period: the samples in which the model settles to the engine's
+    # 1e-6 (the critically damped mode at 200 /s: ln(1e6) / 200 s, 70 samples), and a whole
+    # period at least for friction, whose stuck positions its decay does not erase (with 70
+    # samples the error periods differed by 0.5 % of the output after a stick). Against the
+    # engine's whole run, simulated as recorded from the run's start: the mean of its P = 3
+    # steady-state error periods times sqrt(3), to that tolerance of the simulated output.
+    problem, cost = _offset_problem(closed=False, periodic=True, force=force)
+    assert all(run.n_samples == 512 + lead for run in cost.inputs)
+    compact = cost.residuals(problem, [problem.start], "y")[0]
+    runs = _offset_runs()
+    whole = problem.errors(problem.start, runs, problem.inputs(runs))["y"]
+    expected = np.concatenate([np.sqrt(3) * e.reshape(3, 512).mean(axis=0) for e in whole])
+    simulated = max(float(np.max(np.abs(e + _steady_y(run)))) for e, run in zip(whole, runs))
+    np.testing.assert_allclose(compact, expected, rtol=0, atol=1e-5 * np.sqrt(3) * simulated)
+
+
+def _steady_y(run):
+    return run.y[run.transient_periods * run.period:]

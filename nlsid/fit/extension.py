@@ -66,16 +66,20 @@ below 1e-6), a pair with correlation above 0.99 in magnitude, a relative standar
 Periodic runs are fitted on their mean period. With P steady-state periods of a periodic model
 response s_sim, sum_p ||s_sim - s_p||^2 = P ||s_sim - mean_p s_p||^2 + sum_p ||s_p - mean_p s_p||^2,
 and the last term does not depend on theta; so the optimiser's residual of such a run is
-sqrt(P) (s_sim - mean_p s_p) over one period, and the run is simulated through its transient
-periods and one period instead of all P (:func:`_compact`), driven in that period by the mean
-period of the recorded excitation (its measurement noise averaged like the output's, where the
-whole run would carry each period's own). The model's response is periodic there
-when its linear dynamics (forces aside) decay to the engine's STEADY_TOLERANCE within the
-transient periods (or, without them, within the lead periods of the periodic steady state:
-:func:`nlsid.simulate.engine.lead_periods`); a run where they do not (an integrator, a slow mode),
-a range part and a run with measured input channels (not periodic) are fitted whole. The
-sandwich below is the same in this form: its noise is divided by P and multiplied by P again. The
-errors reported are those of the whole runs.
+sqrt(P) (s_sim - mean_p s_p) over one period. The run is simulated as that one period, driven
+by the mean period of the recorded excitation (its measurement noise averaged like the output's,
+where the whole run would carry each period's own), from rest a lead ahead of it: the samples in
+which the model's linear dynamics (forces aside) decay to the engine's STEADY_TOLERANCE
+(:func:`nlsid.simulate.engine.lead_samples`), the same excitation continued backwards. That is
+the periodic steady state to the tolerance the engine simulates it to with whole lead periods,
+and fewer samples than whole periods (the battery's 32 Hz plant with damping ratio 0.03: 2290
+samples ahead of its 4096 instead of a transient period of 4096). A model with friction or
+backlash keeps a memory its decay does not erase (:func:`nlsid.simulate.engine.hysteretic`): its
+lead is a whole period at least, whose extremes wipe that memory out. A run whose model does not
+settle within its recorded transient periods (its measured periods are then not in steady state
+either), a model without a steady state (an integrator), a range part and a run with measured
+input channels (not periodic) are fitted whole. The sandwich below is the same in this form: its
+noise is divided by P and multiplied by P again. The errors reported are those of the whole runs.
 
 The validation runs are never used by the optimiser: their rms errors, and each run's noise level
 (the period-to-period standard deviation of the fitted signal, a lower limit no model can beat),
@@ -258,41 +262,43 @@ def split_runs(runs: Sequence[Run], validation_ids: Sequence[str] | None = None,
 
 
 def _steady(run: Run, x: np.ndarray) -> np.ndarray:
-    """The samples of ``x`` (a signal of ``run``) that the error is measured on: the last
-    ``n_periods`` whole periods (the steady state; a range part's range), an arbitrary run's whole record."""
+    """The samples of ``x`` (a signal of ``run``, or its simulation with a lead ahead of it) that
+    the error is measured on: the last ``n_periods`` whole periods (the steady state; a range
+    part's range), an arbitrary run's whole record."""
     if run.period is None:
         return x
-    return x[run.n_samples - run.n_periods * run.period:]
+    return x[x.size - run.n_periods * run.period:]
 
 
 def _compact(run: Run, excitation: Run, point, signals: Sequence[str]) -> tuple[Run, Run, float] | None:
-    """(measured, excitation, weight) of ``run`` fitted on its mean period (module docstring):
-    the transient periods and one period, the last period of the measured signals and of the
-    excitation their mean over the steady-state periods (a recorded input's noise averaged as the
-    output's), the weight sqrt(P); None where the run is fitted whole."""
+    """(measured, excitation, weight) of ``run`` fitted on its mean period (module docstring): the
+    measured signals' mean over the steady-state periods; the excitation's mean period with the
+    lead in which the model settles ahead of it (:func:`nlsid.simulate.engine.lead_samples`, the
+    mean period continued backwards), an arbitrary record simulated from rest; the weight sqrt(P).
+    None where the run is fitted whole: a range part, fewer than two periods, measured channels, a
+    model without a periodic steady state, or one that does not settle within the run's
+    transient periods (the measured periods after them are then not in steady state either)."""
     from nlsid.io.ranges import RangeRun
     from nlsid.simulate.batch import _build
-    from nlsid.simulate.engine import lead_periods
+    from nlsid.simulate.engine import hysteretic, lead_samples
 
     if run.period is None or isinstance(run, RangeRun) or run.n_periods < 2 or run.channels:
         return None
     model, loop = _build(point)
-    needed = lead_periods(model, loop, dataclasses.replace(excitation, transient_periods=0))
-    if needed == 0 or (run.transient_periods and needed > run.transient_periods):
+    lead = lead_samples(model, loop, dataclasses.replace(excitation, transient_periods=0))
+    if lead == 0 or (run.transient_periods and lead > run.transient_periods * run.period):
         return None
-    length = (run.transient_periods + 1) * run.period
-    head = run.transient_periods * run.period
+    if hysteretic(model):  # a whole period ahead wipes its memory out (engine.hysteretic)
+        lead = max(lead, run.period)
 
     def mean_period(x: np.ndarray | None) -> np.ndarray | None:
-        if x is None:
-            return None
-        return np.concatenate([x[:head], _steady(run, x).reshape(run.n_periods, run.period).mean(axis=0)])
+        return None if x is None else _steady(run, x).reshape(run.n_periods, run.period).mean(axis=0)
 
-    measured = dataclasses.replace(run, **{name: mean_period(getattr(run, name)) for name in signals})
-    measured = dataclasses.replace(measured, **{name: getattr(measured, name)[:length]
-                                                for name in ("u", "y", "r") if getattr(measured, name) is not None})
-    short = dataclasses.replace(excitation, u=mean_period(excitation.u)[:length],
-                                y=None if excitation.y is None else excitation.y[:length])
+    measured = dataclasses.replace(run, transient_periods=0, **{name: mean_period(getattr(run, name))
+                                                                for name in ("u", "y", "r")})
+    one = mean_period(excitation.u)
+    ahead = np.tile(one, -(-lead // run.period))[-lead:]
+    short = dataclasses.replace(excitation, u=np.concatenate([ahead, one]), y=None, period=None, transient_periods=0)
     return measured, short, math.sqrt(run.n_periods)
 
 
@@ -427,7 +433,7 @@ class _Cost:
         takes part of c)."""
         name = "model.output_offset"
         if (name not in problem.names or problem.closed or signal != "y"
-                or any(run.period is None for run in self.inputs)):
+                or any(run.period is None and run.y is not None for run in self.inputs)):
             return None
         return problem.names.index(name), np.concatenate(
             [np.full(size, w) for w, size in zip(self.weights, self.segments())])

@@ -53,4 +53,9 @@ def static_map(config) -> Callable[[np.ndarray], np.ndarray]:
     from nlsid.simulate.kernels import apply_block
 
     kind, params = encode(config)
-    return lambda x: apply_block(kind, params, np.ascontiguousarray(x, dtype=np.float64))
+
+    def apply(x: np.ndarray) -> np.ndarray:
+        return apply_block(kind, params, np.ascontiguousarray(x, dtype=np.float64))
+
+    apply.memory = kind == BACKLASH  # its output depends on the input's history (:func:`nlsid.simulate.engine.hysteretic`)
+    return apply

@@ -334,15 +334,13 @@ def _loop_decay_rate(plant: Plant, loop: ClosedLoop, fs: float, n: int) -> float
         return max(float(np.min(-np.log(np.abs(poles)) * fs)), 0.0)
 
 
-def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
-    """The periods to simulate ahead of a periodic run without transient periods, so that its first
-    period is in periodic steady state, as it was measured: the time t = ln(1 / STEADY_TOLERANCE) /
-    sigma in which the slowest mode of the linear dynamics (rate sigma: :func:`_decay_rate` of a
-    plant's linear part, forces aside, or of every stage of a structure; in closed loop
-    :func:`_loop_decay_rate`, the loop's modes) decays to STEADY_TOLERANCE, in periods, at most
-    MAX_LEAD_PERIODS. A run with transient periods is simulated as measured: from rest through
-    them. None (0) for an arbitrary record, and for a model (or loop) with an integrator or an
-    unstable mode (no periodic steady state to reach)."""
+def lead_samples(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
+    """The samples t fs in which the slowest mode of the linear dynamics (rate sigma:
+    :func:`_decay_rate` of a plant's linear part, forces aside, or of every stage of a structure; in
+    closed loop :func:`_loop_decay_rate`, the loop's modes) decays to STEADY_TOLERANCE, t =
+    ln(1 / STEADY_TOLERANCE) / sigma, at most MAX_LEAD_PERIODS periods. 0 for an arbitrary record,
+    a run with transient periods (simulated as measured), and a model (or loop) with an integrator
+    or an unstable mode (no periodic steady state to reach) or without modes."""
     from nlsid.io.ranges import RangeRun
 
     if run.period is None or isinstance(run, RangeRun) or run.transient_periods:
@@ -354,8 +352,27 @@ def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) ->
         sigma = min((_decay_rate(ss, run.fs) for ss in stages), default=math.inf)
     if sigma == 0 or not math.isfinite(sigma):
         return 0
-    needed = math.ceil(math.log(1 / STEADY_TOLERANCE) / sigma * run.fs / run.period)
-    return min(needed, MAX_LEAD_PERIODS)
+    return min(math.ceil(math.log(1 / STEADY_TOLERANCE) / sigma * run.fs), MAX_LEAD_PERIODS * run.period)
+
+
+def hysteretic(model: Plant | Structure) -> bool:
+    """Whether a nonlinearity of ``model`` keeps a memory of the excitation's past that its decay
+    does not erase: friction (a stuck mass holds its place), backlash (the play's position). Such
+    a memory is wiped out by the excitation's extremes (Mayergoyz 1991, the wiping-out property of
+    rate-independent hysteresis), which a whole period of a periodic excitation holds."""
+    from nlsid.models import blocks, forces
+
+    if isinstance(model, Structure):
+        return any(getattr(stage, "memory", False) for branch in model.branches for stage in branch)
+    return (any(f.kind in (forces.COULOMB, forces.STRIBECK, forces.LUGRE) for f in model.forces)
+            or blocks.BACKLASH in (model.input_block[0], model.output_block[0]))
+
+
+def lead_periods(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
+    """The periods to simulate ahead of a periodic run without transient periods, so that its first
+    period is in periodic steady state, as it was measured: :func:`lead_samples` in whole periods
+    (0 where no lead is simulated)."""
+    return -(-lead_samples(model, loop, run) // run.period) if run.period else 0
 
 
 def _lead(x: np.ndarray | None, period: int, count: int) -> np.ndarray | None:
