@@ -270,7 +270,7 @@ def _steady(run: Run, x: np.ndarray) -> np.ndarray:
     return x[x.size - run.n_periods * run.period:]
 
 
-def _compact(run: Run, excitation: Run, point, signals: Sequence[str]) -> tuple[Run, Run, float] | None:
+def _compact(run: Run, excitation: Run, point) -> tuple[Run, Run, float] | None:
     """(measured, excitation, weight) of ``run`` fitted on its mean period (module docstring): the
     measured signals' mean over the steady-state periods; the excitation's mean period with the
     lead in which the model settles ahead of it (:func:`nlsid.simulate.engine.lead_samples`, the
@@ -407,7 +407,7 @@ class _Cost:
         point = problem.point(problem.start)
         out = cls([], [], np.ones(len(runs)))
         for i, (run, excitation) in enumerate(zip(runs, inputs)):
-            compact = _compact(run, excitation, point, problem.signals)
+            compact = _compact(run, excitation, point)
             measured, short, weight = compact if compact is not None else (run, excitation, 1.0)
             out.runs.append(measured)
             out.inputs.append(short)
