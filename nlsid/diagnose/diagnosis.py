@@ -287,10 +287,10 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     lowered the error by less than STALL_DB (0.01 dB) together: a hypothesis that is not the cause
     creeps along a valley (a Stribeck law on LuGre presliding spent its last 9 Jacobians at the
     same -0.35 dB; on the battery 795 -> 686 simulations of a LuGre diagnosis, same verdict and
-    values). It gets :func:`budget` cost evaluations (besides its finite-difference Jacobians): the fits of a present effect with a few parameters converge in 5
-    to 15; a hypothesis that is not the cause can
-    wander into parameters the simulator is slow on (a Stribeck curve steeper than the mass can
-    follow), and is then scored where the budget stopped it, with the optimiser's warning.
+    values). It gets :func:`budget` cost evaluations (besides its finite-difference Jacobians):
+    the fits of a present effect with a few parameters converge in 5 to 15; a hypothesis that is
+    not the cause can wander into parameters the simulator is slow on (a Stribeck curve steeper
+    than the mass can follow), and is then scored where the budget stopped it, with the optimiser's warning.
     """
     from nlsid.fit.extension import FreeParameter, fit_free_parameters, value_at
 

@@ -494,6 +494,14 @@ SPECTRUM_LINES = 17  # neighbouring DFT lines averaged into the residual spectru
 STALL_STEPS = 4      # accepted steps over which a stall (fit_free_parameters' stall_db) is judged
 
 
+def _recent_gain_db(costs: list[float]) -> float:
+    """10 log10 of the cost STALL_STEPS accepted points ago over the last one (inf before there are
+    that many, or at a zero cost)."""
+    if len(costs) <= STALL_STEPS or costs[-1] <= 0:
+        return math.inf
+    return 10 * math.log10(costs[-1 - STALL_STEPS] / costs[-1])
+
+
 class _Stalled(Exception):
     """Raised from the Jacobian to stop the optimiser at a stall; carries what its result would
     (``x``, ``fun``, ``jac``, ``message``; ``status`` 1: a stop that counts as converged)."""
@@ -644,16 +652,15 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         h = forward_steps(x, diff_step, lower_x, upper_x)
         jac = np.empty((f0.size, x.size))
         differenced = [i for i in range(x.size) if exact is None or i != exact[0]]
-        shifted = [x + h[i] * np.eye(x.size)[i] for i in differenced]
+        shifted = [x + np.diag(h)[i] for i in differenced]  # x + h_i e_i
         for i, xi, f in zip(differenced, shifted, columns(shifted) if shifted else []):
             jac[:, i] = (f - f0) / (xi[i] - x[i])
         if exact is not None:
             jac[:, exact[0]] = exact[1] * scale[exact[0]]
         accepted.append(float(f0 @ f0))
-        if stall_db is not None and len(accepted) > STALL_STEPS and accepted[-1] > 0 and (
-                10 * math.log10(accepted[-1 - STALL_STEPS] / accepted[-1]) < stall_db):
-            raise _Stalled(x.copy(), f0, jac, f"stalled: the last {STALL_STEPS} steps lowered the cost by "
-                                              f"{10 * math.log10(accepted[-1 - STALL_STEPS] / accepted[-1]):.3g} dB")
+        gained = _recent_gain_db(accepted)
+        if stall_db is not None and gained < stall_db:
+            raise _Stalled(x.copy(), f0, jac, f"stalled: the last {STALL_STEPS} steps lowered the cost by {gained:.3g} dB")
         return jac
 
     try:

@@ -414,8 +414,9 @@ def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> flo
 
     From rest: :func:`_from_rest`. In slip on the side s of v: if the mass is still sliding on
     that side at the end (s v_free > g F_d, F_d = M(|v|, 0) + fv |v| / 2 the mean force of a ramp
-    down to zero; first tested against its bound max(fc, fs) + fv |v| / 2, which needs no erf),
-    the mean over the ramp from |v| to the end speed (:func:`_ramp_force`). Otherwise the mass reaches v = 0 in the sub-step: with the other forces on the mass held
+    down to zero; first tested against its bound max(fc, fs) + fv |v| / 2, which needs no ramp
+    mean), the mean over the ramp from |v| to the end speed (:func:`_ramp_force`). Otherwise the
+    mass reaches v = 0 in the sub-step: with the other forces on the mass held
     (A = (v_free - v) / g), it decelerates under s F_d and stops at tau = v / (v - v_a),
     v_a = v_free - g s F_d; from rest there, the step over the remaining (1 - tau) h (free end
     velocity (1 - tau) g A, sensitivity (1 - tau) g) decides stick or slip on either side and gives
@@ -428,9 +429,9 @@ def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> flo
     s = 1.0 if forward else -1.0
     fc, fs, fv = _side(kind, p, forward)
     speed = abs(s_now)
-    if s * s_free > g * (max(fc, fs) + 0.5 * fv * speed):  # beyond the largest F_d: still sliding
-        return s * _ramp_force(kind, p, forward, speed, s * s_free, g, _area(kind, p, speed))
     area = _area(kind, p, speed)
+    if s * s_free > g * (max(fc, fs) + 0.5 * fv * speed):  # beyond the largest F_d: still sliding
+        return s * _ramp_force(kind, p, forward, speed, s * s_free, g, area)
     stopping = _ramp_mean(kind, fc, fs, p[2], p[3], speed, 0.0, area) + 0.5 * fv * speed
     if s * s_free > g * stopping:
         return s * _ramp_force(kind, p, forward, speed, s * s_free, g, area)
