@@ -60,7 +60,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import read_runs
     from nlsid.io.units import common_units
-    from nlsid.simulate.batch import default_threads
+    from nlsid.simulate.threads import default_threads
 
     data, _ = load_yaml(model_path)
     if not isinstance(data, dict):

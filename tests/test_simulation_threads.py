@@ -1,4 +1,4 @@
-"""How many simulation threads a stage uses (nlsid.simulate.batch.thread_count): an explicit
+"""How many simulation threads a stage uses (nlsid.simulate.threads.thread_count): an explicit
 ``--workers``, else the command's default (``diagnose --workers``), else ``NLSID_THREADS``, else
 every core; ``nlsid batch`` sets ``NLSID_THREADS`` to cores / N in its N worker processes."""
 
@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from nlsid.errors import InputError
-from nlsid.simulate.batch import default_threads, thread_count
+from nlsid.simulate.threads import default_threads, thread_count
 
 
 def test_explicit_then_command_default_then_environment_then_cores(monkeypatch):
@@ -66,3 +66,47 @@ def test_batch_workers_start_with_cores_over_n_threads():
     assert done.returncode == 0, done.stderr
     # the worker saw it; the calling process's own environment is left as it was
     assert done.stdout.split() == ["0", "None"], done.stdout + done.stderr
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"]
+
+
+def test_fits_and_diagnose_run_blas_in_one_thread_and_restore_it(monkeypatch):
+    """The optimiser's BLAS calls between the simulation pool's batches run in one thread (BLAS
+    threads spin-wait and take the cores the simulations fill: nlsid.simulate.threads); the
+    caller's BLAS threads are restored afterwards, also when the stage fails."""
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    import nlsid.diagnose.diagnosis as diagnosis
+    import nlsid.simulate.batch as batch
+    from nlsid.fit.extension import FreeParameter, fit_free_parameters
+    from nlsid.io.run import Run
+
+    seen = []
+    simulate_all = batch.simulate_all
+
+    def recording_threads(*args, **kwargs):
+        seen.append(_blas_threads())
+        return simulate_all(*args, **kwargs)
+
+    monkeypatch.setattr(batch, "simulate_all", recording_threads)
+    model = {"model": {"type": "mass_spring_damper", "mass": 0.5, "damping": 6.0, "stiffness": 2e4}}
+    u = np.random.default_rng(0).standard_normal(512)
+    run = Run("r", 1000.0, "arbitrary", u, y=np.zeros(512))
+    with threadpool_limits(limits=2, user_api="blas"):
+        fit_free_parameters(model, {"model.stiffness": FreeParameter(2e4, 1e4, 4e4)}, [run], [], max_evaluations=3)
+        assert seen and all(threads == [1] * len(threads) for threads in seen)
+        assert set(_blas_threads()) == {2}
+
+        def failing(*args, **kwargs):
+            assert set(_blas_threads()) == {1}
+            raise InputError("here", "a failing round")
+
+        monkeypatch.setattr(diagnosis, "_round", failing)
+        with pytest.raises(InputError):
+            diagnosis.diagnose(model, "m.yaml", [run], "rec")
+        assert set(_blas_threads()) == {2}

@@ -12,7 +12,7 @@ in it).
 
 Workers ignore Ctrl-C (the batch process handles it and terminates them). The fork server, and so
 every worker, starts with the BLAS/OpenMP thread variables and ``NLSID_THREADS`` (the default of
-the stages' simulation threads, :func:`nlsid.simulate.batch.thread_count`) set to cores / N (at
+the stages' simulation threads, :func:`nlsid.simulate.threads.thread_count`) set to cores / N (at
 least 1) unless they are set already, so N processes do not oversubscribe the machine; a step's own
 ``--workers`` (``simulate``, ``fit``, ``diagnose``) still sets its threads.
 """

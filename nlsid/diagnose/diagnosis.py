@@ -29,6 +29,7 @@ from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
+from nlsid.simulate.threads import blas_in_one_thread
 
 
 FIT_STEPS = 25
@@ -452,6 +453,7 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
 MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits the whole library)
 
 
+@blas_in_one_thread
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
              step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
              estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None) -> Diagnosis:

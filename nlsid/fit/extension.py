@@ -101,6 +101,7 @@ from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
 from nlsid.io.ranges import SampleRange, check_sources, check_unique, cut, record
 from nlsid.simulate.sweep import SweepPoint, _deep_copy, _keys, _set, check_step
+from nlsid.simulate.threads import blas_in_one_thread
 
 IDENTIFIABLE_RATIO = 1e-6   # singular value ratio of J below which a parameter combination is not identifiable
 CORRELATION_LIMIT = 0.99
@@ -577,6 +578,7 @@ def _uncertainty(jac: np.ndarray, residual: np.ndarray, scale: np.ndarray, names
     return cov, corr, warnings
 
 
+@blas_in_one_thread
 def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estimation: Sequence[Run],
                         validation: Sequence[Run], *, source: str = "", lines: dict | None = None,
                         workers: int | None = None, diff_step: float = 1e-3, max_evaluations: int = 100,

@@ -12,11 +12,8 @@ their units) are carried unchanged into the simulated run.
 from __future__ import annotations
 
 import dataclasses
-import os
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
-from contextvars import ContextVar
-from typing import Callable, Iterator
+from typing import Callable
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
@@ -25,37 +22,7 @@ from nlsid.models.from_config import ClosedLoop
 from nlsid.simulate.engine import simulate_run
 from nlsid.simulate.noise import NoiseLevels, draw, run_streams
 from nlsid.simulate.sweep import SweepPoint
-
-
-THREADS_VARIABLE = "NLSID_THREADS"  # the default number of simulation threads of a process
-_threads: ContextVar[int | None] = ContextVar("nlsid_threads", default=None)
-
-
-def thread_count(workers: int | None = None) -> int:
-    """The simulation threads to use: ``workers`` when given, else the default of the command
-    running (:func:`default_threads`, e.g. ``diagnose --workers``), else the environment's
-    ``NLSID_THREADS`` (``nlsid batch`` sets it to cores / worker processes in its workers), else
-    every core."""
-    default = workers or _threads.get()
-    if default:
-        return default
-    text = os.environ.get(THREADS_VARIABLE, "").strip()
-    if text:
-        if not text.isdigit() or int(text) < 1:
-            raise InputError(THREADS_VARIABLE, f"expected a whole number of threads, 1 or more; got {text!r}")
-        return int(text)
-    return os.cpu_count() or 1
-
-
-@contextmanager
-def default_threads(workers: int | None) -> Iterator[None]:
-    """Within the block, :func:`thread_count` without an explicit number gives ``workers`` (None:
-    no command default, so ``NLSID_THREADS`` or every core)."""
-    token = _threads.set(workers)
-    try:
-        yield
-    finally:
-        _threads.reset(token)
+from nlsid.simulate.threads import thread_count
 
 
 def run_id(base: str, index: int, count: int) -> str:
