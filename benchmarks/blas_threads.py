@@ -29,8 +29,9 @@ import os
 import time
 
 import numpy as np
+from battery_runs import multisine_runs
 
-FS, N, PERIODS = 1000.0, 4096, 4
+PERIODS = 4
 MASS = 0.5
 STIFFNESS = MASS * (2 * np.pi * 32) ** 2
 DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
@@ -44,24 +45,13 @@ def recording():
     from scipy.signal import lfilter
 
     from nlsid.diagnose.simulation import ModelRunner
-    from nlsid.io.run import Run
 
     rng = np.random.default_rng(1)
-    bins = np.arange(5, int(150 * N / FS) + 1, 2)
-    bins = bins[rng.random(bins.size) > 1 / 3]  # random odd: a third of the odd lines left out
     truth = copy.deepcopy(NOMINAL)
     truth["model"]["nonlinearities"] = EFFECTS
     truth["simulation"] = {"substeps": 100}
     runner = ModelRunner.from_data(truth, "benchmark")
-    runs = []
-    for level in (1.0, 2.0, 4.0):
-        for m in range(6):
-            spectrum = np.zeros(N // 2 + 1, complex)
-            spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
-            one = np.fft.irfft(spectrum, N)
-            one *= level / np.sqrt(np.mean(one ** 2))
-            runs.append(Run(f"l{level:g}m{m}", FS, "multisine", np.tile(one, PERIODS + 1), period=N,
-                            transient_periods=1, realization=m, level=level, excited_bins=bins))
+    runs = multisine_runs(rng, realizations=6, steady_periods=PERIODS, random_odd=True)
     outputs = [runner.simulate(run).y for run in runs]
     scale = np.sqrt(np.mean(np.square(outputs))) * 10 ** (-50 / 20)
     return [dataclasses.replace(run, y=y + scale * lfilter([0.6], [1, -0.8], rng.standard_normal(y.size)))

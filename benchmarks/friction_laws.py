@@ -26,8 +26,8 @@ import json
 import time
 
 import numpy as np
+from battery_runs import multisine_runs
 
-FS, N = 1000.0, 4096
 MASS = 0.5
 STIFFNESS = MASS * (2 * np.pi * 32) ** 2
 DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
@@ -41,20 +41,7 @@ LAWS = {
 
 
 def runs():
-    from nlsid.io.run import Run
-
-    rng = np.random.default_rng(1)
-    bins = np.arange(5, int(150 * N / FS) + 1, 2)
-    out = []
-    for level in (1.0, 2.0, 4.0):
-        for m in range(3):
-            spectrum = np.zeros(N // 2 + 1, complex)
-            spectrum[bins] = np.exp(2j * np.pi * rng.random(bins.size))
-            one = np.fft.irfft(spectrum, N)
-            one *= level / np.sqrt(np.mean(one ** 2))
-            out.append(Run(f"l{level:g}m{m}", FS, "multisine", np.tile(one, 2), period=N, transient_periods=1,
-                           realization=m, level=level, excited_bins=bins))
-    return out
+    return multisine_runs(np.random.default_rng(1), realizations=3, steady_periods=1, random_odd=False)
 
 
 def law_time(law: dict, excitations, repeats: int) -> dict:

@@ -33,6 +33,10 @@ from .options import map_option, parse_map, read_split, split_options
 @click.option("--fit-on", type=click.Choice(["y", "u"]), default="y", show_default=True,
               help="The simulated signal fitted to the recorded one: the output y, or in closed loop the plant input u "
                    "(the controller's output).")
+@click.option("--jacobian", type=click.Choice(["differences", "sensitivities"]), default="differences",
+              show_default=True,
+              help="How the fit differentiates the simulation: forward finite differences, or exact forward "
+                   "sensitivities where the model is smooth in its parameters (finite differences elsewhere).")
 @click.option("--start-estimate", is_flag=True,
               help="Start free force parameters (fc, fv, k3 of a mass_spring_damper) without a start: value at a "
                    "regression of the residual force instead of the config's value.")
@@ -43,7 +47,8 @@ from .options import map_option, parse_map, read_split, split_options
 @force_option
 @json_option
 def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, validate_on,
-        estimation_range, validation_range, fit_on, start_estimate, workers, mapping, output, force, as_json) -> None:
+        estimation_range, validation_range, fit_on, jacobian, start_estimate, workers, mapping, output, force,
+        as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
@@ -69,11 +74,11 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
         if model_config is None or data is None:
             raise InputError("nlsid fit", "--model and --data go together")
         _fit_extension(model_config, data, list(validation), validate_on, estimation_range, validation_range, fit_on,
-                       start_estimate, workers, parse_map(mapping), output, force, as_json)
+                       jacobian, start_estimate, workers, parse_map(mapping), output, force, as_json)
         return
-    if validate_on or estimation_range or validation_range or fit_on != "y":
-        raise InputError("nlsid fit", "--validate-on, --estimation-range, --validation-range and --fit-on go with "
-                                      "--model and --data")
+    if validate_on or estimation_range or validation_range or fit_on != "y" or jacobian != "differences":
+        raise InputError("nlsid fit", "--validate-on, --estimation-range, --validation-range, --fit-on and --jacobian "
+                                      "go with --model and --data")
     if bla_file is None or order is None:
         raise InputError("nlsid fit", "give BLA_FILE and --order NB/NA (or auto), or --model with --data")
     _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
@@ -135,7 +140,7 @@ def _cost_check(fit_) -> str:
     return f"expected {fit_.expected_cost:.6g} {spread}, bound {fit_.cost_bound:.6g}"
 
 
-def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on,
+def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on, jacobian,
                    start_estimate, workers, mapping, output, force, as_json) -> None:
     from nlsid.fit.extension import fit_config_file
     from nlsid.io.fit_file import report_path, write_fit
@@ -148,7 +153,8 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
     estimation, validation_part, extra = read_split(validate_on, estimation_range, validation_range, mapping)
     runs = read_runs(data, require_y=True, mapping=mapping)
     result = fit_config_file(model_config, runs, validation or None, workers, start_estimate, validate_on=extra,
-                             estimation_range=estimation, validation_range=validation_part, fit_on=fit_on, where=data)
+                             estimation_range=estimation, validation_range=validation_part, fit_on=fit_on, where=data,
+                             jacobian=jacobian)
     summary = result.summary()
     header = [f"nlsid fit --model {model_config} --data {data}",
               "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),

@@ -27,7 +27,6 @@ import shlex
 from pathlib import Path
 from types import SimpleNamespace
 
-from nlsid.errors import InputError
 
 PLACEHOLDERS = ("{recording}", "{out}", "{name}")
 _ANY_PLACEHOLDER = re.compile(r"\{[A-Za-z_][A-Za-z0-9_]*\}")

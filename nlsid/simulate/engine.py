@@ -133,24 +133,33 @@ def _force_rows(plant: Plant, fs: float) -> tuple[np.ndarray, np.ndarray]:
     return rows, np.array([f.column for f in plant.forces])
 
 
-def _run_kernel(Phi, Gu, ss: StateSpace, x0, kinds, params, rows, columns, substeps: int, h: float,
-                shift: Timing, fs: float, controller, r, ff, u, process, y_noise,
-                input_block=_IDENTITY, output_block=_IDENTITY, p_bias: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    n_el, n = len(kinds), ss.order
+def _kernel_arguments(Phi, Gu, ss: StateSpace, x0, kinds, params, rows, columns, substeps: int, h: float,
+                      shift: Timing, fs: float, controller, r, ff, u, process, y_noise,
+                      input_block=_IDENTITY, output_block=_IDENTITY, p_bias: float = 0.0) -> tuple:
+    """The arguments of the kernel's ``loop`` (:func:`nlsid.simulate.kernels._make_loop`) but its
+    two output arrays, in its order, as the kernel takes them (float64, C-ordered)."""
+    n_el = len(kinds)
     force_gammas = columns if ss.discrete else (zoh(ss.A, columns.T.copy(), h)[1].T.copy() if n_el else columns)
     prop = propagation(Phi, Gu, rows, force_gammas, substeps)
     c_x, c_p, c_f = readout(ss, columns, h, substeps, shift.phi, fs)
     closed = controller is not None
     Ac, Bc, Cc, Dc = controller if closed else (_EMPTY_2, np.zeros((0, 2)), _EMPTY_1, np.zeros(2))
-    length = (r if closed else u).shape[0]
+    return (_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), _f64(x0), kinds, _f64(params),
+            _f64(prop.row_pow), _f64(prop.row_gamma), _f64(prop.coupling), _f64(prop.col_pow),
+            float(h), int(shift.delay), closed, _f64(Ac), _f64(Bc), _f64(Cc), _f64(Dc),
+            _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),
+            int(input_block[0]), _f64(input_block[1]), int(output_block[0]), _f64(output_block[1]),
+            float(p_bias), bool(shift.lag), _f64(c_x), float(c_p), _f64(c_f))
+
+
+def _run_kernel(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel on :func:`_kernel_arguments` (same parameters): (u_out, y_out)."""
+    arguments = _kernel_arguments(*args, **kwargs)
+    n, length = arguments[0].shape[0], max(arguments[17].shape[0], arguments[19].shape[0])
+    nc = arguments[13].shape[0]
     u_out, y_out = np.empty(length), np.empty(length)
-    sizes = (n, Ac.shape[0]) if length >= SIZED_SAMPLES else None
-    simulate_loop(n_el, sizes)(_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), _f64(x0), kinds, _f64(params),
-                  _f64(prop.row_pow), _f64(prop.row_gamma), _f64(prop.coupling), _f64(prop.col_pow),
-                  float(h), int(shift.delay), closed, _f64(Ac), _f64(Bc), _f64(Cc), _f64(Dc),
-                  _signal(r), _signal(ff), _signal(u), _signal(process), _signal(y_noise),
-                  int(input_block[0]), _f64(input_block[1]), int(output_block[0]), _f64(output_block[1]),
-                  float(p_bias), bool(shift.lag), _f64(c_x), float(c_p), _f64(c_f), u_out, y_out)
+    sizes = (n, nc) if length >= SIZED_SAMPLES else None
+    simulate_loop(len(arguments[4]), sizes)(*arguments, u_out, y_out)
     return u_out, y_out
 
 
@@ -218,8 +227,9 @@ def _controller(loop: ClosedLoop, fs: float):
     return two_input(discrete_path(loop.controller, fs), discrete_path(loop.measurement, fs))
 
 
-def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> Run:
-    """Run ``plant`` on ``run`` (open loop: u is the plant input; closed loop: u is the reference)."""
+def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> tuple:
+    """The parameters of :func:`_kernel_arguments` for ``plant`` on ``run`` (open loop: u is the
+    plant input; closed loop: u is the reference)."""
     ss, n, fs = plant.ss, run.n_samples, run.fs
     if plant.difference_output:
         ss = dataclasses.replace(ss, C=ss.C * fs)
@@ -242,9 +252,14 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
     kinds = np.array([f.kind for f in plant.forces], dtype=np.int64) if plant.forces else _EMPTY_I
     params = np.array([f.params for f in plant.forces]) if plant.forces else np.zeros((0, forces.MAX_PARAMS))
     rows, columns = _force_rows(plant, fs)
-    u_out, y_out = _run_kernel(Phi, Gu, ss, plant.x0, kinds, params, rows, columns, m, h, shift, fs, controller,
-                               r, ff, run.u, plant_input_terms(plant.offsets, run, noise.process),
-                               noise.y + plant.offsets.output, plant.input_block, plant.output_block, plant.force_bias)
+    return (Phi, Gu, ss, plant.x0, kinds, params, rows, columns, m, h, shift, fs, controller, r, ff, run.u,
+            plant_input_terms(plant.offsets, run, noise.process), noise.y + plant.offsets.output,
+            plant.input_block, plant.output_block, plant.force_bias)
+
+
+def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> Run:
+    """Run ``plant`` on ``run`` (open loop: u is the plant input; closed loop: u is the reference)."""
+    u_out, y_out = _run_kernel(*plant_arguments(plant, loop, run, substeps, noise))
     _check_finite(y_out, run.run_id)
     u_out += noise.u  # in place: a fresh 8 MB array costs ~2 ms of page faults per 1e6 samples
     if loop is None:
@@ -379,6 +394,13 @@ def _lead(x: np.ndarray | None, period: int, count: int) -> np.ndarray | None:
     return None if x is None else np.concatenate([np.tile(x[:period], count), x])
 
 
+def with_lead(run: Run, count: int) -> Run:
+    """``run`` with its first period repeated ``count`` times ahead of it, in every signal."""
+    return dataclasses.replace(run, u=_lead(run.u, run.period, count), y=_lead(run.y, run.period, count),
+                               r=_lead(run.r, run.period, count),
+                               channels={k: _lead(v, run.period, count) for k, v in run.channels.items()})
+
+
 def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, substeps: int | None,
                  noise: Noise | None = None, steady: bool = False) -> Run:
     """Simulate one run; ``noise`` defaults to none. ``steady`` (the run as it was measured): a
@@ -391,9 +413,7 @@ def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, su
     count = lead_periods(model, loop, run) if steady else 0
     if count:
         original, m = run, count * run.period
-        run = dataclasses.replace(run, u=_lead(run.u, run.period, count), y=_lead(run.y, run.period, count),
-                                  r=_lead(run.r, run.period, count),
-                                  channels={k: _lead(v, run.period, count) for k, v in run.channels.items()})
+        run = with_lead(run, count)
         noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
     out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
            else simulate_plant(model, loop, run, substeps, noise))
