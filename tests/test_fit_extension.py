@@ -219,3 +219,52 @@ def test_a_converging_fit_is_not_stopped_by_the_stall_rule():
     stalled = fit_free_parameters(start, free, estimation, [], stall_db=0.01)
     np.testing.assert_array_equal(stalled.values, full.values)
     assert stalled.evaluations == full.evaluations
+
+
+def test_the_cost_at_the_noise_floor_is_the_noise_variance_per_residual_sample():
+    """The stall share's floor (nlsid.fit.extension._floor_cost): the true model's cost on white
+    noise of variance sigma^2 is sigma^2 per residual sample, for runs fitted on their mean period
+    (sqrt(P) times a mean of P periods) as for whole runs. The output is simulated independently
+    (tests/independent_plant.py); over 4 x 2048 residual samples the cost's relative spread is
+    sqrt(2 / 8192) = 1.6 %, so 8 % is five of it; the floor's own estimate (period-to-period
+    variance, 4 x 2048 x 2 degrees of freedom) adds less."""
+    import independent_plant as IP
+
+    from nlsid.fit.extension import _Cost, _floor_cost, _Problem
+
+    rng = np.random.default_rng(7)
+    n, sigma = 2048, 1e-5
+    bins = np.arange(1, 60)
+    truth = _msd({"type": "cubic_stiffness", "k3": 0.0})
+    truth["model"].pop("nonlinearities")
+    U = np.stack([np.tile(multisine(n, bins, 3.0, rng), P + 1) for _ in range(M)])
+    Y = IP.outputs(truth, U, FS)
+    runs = [Run(f"r{i}", FS, "multisine", u, y=y + sigma * rng.standard_normal(y.size), period=n,
+                transient_periods=1, realization=i, excited_bins=bins) for i, (u, y) in enumerate(zip(U, Y))]
+    problem = _Problem(truth, {"model.mass": FreeParameter(1.0, 0.1, 10.0)}, "m.yaml", {}, None)
+    cost = _Cost.of(problem, runs, problem.inputs(runs))
+    assert np.all(cost.weights == np.sqrt(P))  # fitted on their mean period
+    floor = _floor_cost(cost, runs, "y")
+    assert floor == pytest.approx(M * n * sigma ** 2, rel=0.08)
+    residual = cost.residuals(problem, [problem.start], "y")[0]
+    assert float(residual @ residual) == pytest.approx(floor, rel=0.08)
+
+
+def test_a_creeping_fit_far_above_the_floor_stops_at_its_share():
+    """The creeping Stribeck fit of the test above, far above the noise floor: with stall_share
+    = 0.01 its stall threshold is 1 % of its distance in dB above the floor (11.6 dB: 0.116 dB
+    rather than 0.01), so it stops sooner (measured: 46 evaluations against 59), where the last four
+    steps gained less than that share, and its error is within that share of the longer fit's."""
+    runs, _ = _measure(_msd({"type": "lugre", "sigma0": 2e4, "fc": 0.5, "fs": 0.8, "vs": 0.01}), _excitation(3.0, 1))
+    estimation, _ = split_runs(runs)
+    free = {f"model.nonlinearities[0].{k}": FreeParameter(lower=1e-6) for k in ("fc", "fs", "vs")}
+    free.update({"model.damping": FreeParameter(15.0, 1.0, 100.0), "model.mass": FreeParameter(0.9, 0.1, 10.0)})
+    start = _msd({"type": "stribeck", "fc": 0.4, "fs": 0.6, "vs": 0.01})
+    stalled = fit_free_parameters(start, free, estimation, [], stall_db=0.01)
+    shared = fit_free_parameters(start, free, estimation, [], stall_db=0.01, stall_share=0.01)
+    assert shared.message.startswith("stalled")
+    assert shared.evaluations < stalled.evaluations
+    distance = 20 * np.log10(shared.estimation_rms / shared.noise_rms_estimation)
+    gained = float(shared.message.split("by ")[1].split(" dB")[0])
+    assert 0.01 < gained < 0.01 * distance
+    assert 20 * np.log10(shared.estimation_rms / stalled.estimation_rms) < 0.01 * distance

@@ -33,7 +33,8 @@ from nlsid.simulate.threads import blas_in_one_thread
 
 
 FIT_STEPS = 25
-STALL_DB = 0.01  # a refinement stops where its last steps gained less than this (fit_free_parameters)
+STALL_DB = 0.01  # a refinement stops where its last steps gained less than this (fit_free_parameters) ...
+STALL_SHARE = 0.01  # ... or less than this share of its distance in dB above the noise floor
 MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 NUMERATOR = re.compile(r"\.num\[\d+\]$")  # a numerator coefficient's key path (:func:`refine`)
 LINEAR_REFITS = ("wrong_mechanics", "wrong_dynamics")  # the linear part's refit alone (Outcome.generalizes)
@@ -51,6 +52,7 @@ class Outcome:
     residuals: list = field(default_factory=list)  # validation residuals of the extended model
     free: dict = field(default_factory=dict)   # key path -> FreeParameter of its refinement
     paths: dict = field(default_factory=dict)  # its parameter -> key path
+    model: dict | None = None  # the config the round diagnoses (the user's, or the last round's extension)
 
     def fitted_mechanics(self) -> dict[str, str]:
         """The linear mechanics (name -> key path, :func:`linear_paths`) its refinement fitted."""
@@ -84,12 +86,20 @@ class Outcome:
 
     def mechanics_changed(self) -> str:
         """The linear mechanics its refinement moved significantly from the model's values (by more
-        than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or ""."""
+        than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or "". The
+        model's value is that of the config the round diagnoses, not the refinement's start (a
+        LuGre law starts from the Stribeck fit's mechanics); a transfer function's coefficients,
+        refined in the form the hypothesis extends (a discrete model's continuous equivalent), are
+        counted against their start."""
+        from nlsid.fit.extension import value_at
+
         if self.estimate is None:
             return ""
         parts, coefficients, moved = [], 0, 0
         for name, path in self.fitted_mechanics().items():
             start, value, std = self.free[path].start, self.estimate.values[name], self.estimate.std[name]
+            own = value_at(self.model, path) if self.model is not None and not is_coefficient(name) else None
+            start = float(own) if isinstance(own, (int, float)) and own != 0 else start
             significant = math.isfinite(std) and abs(value - start) > MOVED * std
             if is_coefficient(name):
                 coefficients, moved = coefficients + 1, moved + significant
@@ -285,7 +295,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     seen through a 2/2 fit: s-coefficient 74 at the start, about 0 in truth; held at 0.074, the
     lower bound of three decades, the cubic feedback's test error on a larger record was 1.2 mV
     instead of 0.06 mV). The optimiser stops, as converged, where its last four accepted steps
-    lowered the error by less than STALL_DB (0.01 dB) together: a hypothesis that is not the cause
+    lowered the error by less than STALL_DB (0.01 dB) together, or less than STALL_SHARE (1 %) of
+    its distance in dB above the estimation runs' noise floor: a hypothesis that is not the cause
     creeps along a valley (a Stribeck law on LuGre presliding spent its last 9 Jacobians at the
     same -0.35 dB; on the battery 795 -> 686 simulations of a LuGre diagnosis, same verdict and
     values). It gets :func:`budget` cost evaluations (besides its finite-difference Jacobians):
@@ -323,7 +334,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         bounds = (-abs(start) * 1e3, abs(start) * 1e3) if NUMERATOR.search(path) else sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
     fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free),
-                              stall_db=STALL_DB)
+                              stall_db=STALL_DB, stall_share=STALL_SHARE)
     values, std = _derived(hypothesis, *_fitted(estimate, fit, paths), free, paths, fit.config["model"])
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
@@ -580,7 +591,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
                       evidence.bla_levels)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
-        outcome = Outcome(hypothesis)
+        outcome = Outcome(hypothesis, model=data)
         outcomes.append(outcome)
         if hypothesis.family in accepted:
             outcome.reason = f"not fitted: a {hypothesis.family} cause is already in the model (an earlier step)"

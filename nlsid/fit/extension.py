@@ -537,6 +537,22 @@ def _recent_gain_db(costs: list[float]) -> float:
     return 10 * math.log10(costs[-1 - STALL_STEPS] / costs[-1])
 
 
+def _floor_cost(cost: "_Cost", runs: Sequence[Run], signal: str) -> float:
+    """The cost expected at the noise floor of ``runs`` (the estimation runs ``cost`` was made of):
+    the sum over runs of (residual samples) x (noise variance per sample, :func:`noise_rms`). A
+    compact run's residual is sqrt(P) times the error of the mean of P periods, whose noise
+    variance is sigma^2 / P, so each of its samples contributes sigma^2 as a whole run's does. NaN
+    where a run has no noise level (fewer than two periods)."""
+    return float(sum(size * noise_rms(run, signal) ** 2 for size, run in zip(cost.segments(), runs)))
+
+
+def _stall_threshold(stall_db: float, share: float | None, current: float, floor: float) -> float:
+    """``stall_db``, or ``share`` of the current cost's dB above ``floor`` where that is larger."""
+    if share is None or not (floor > 0 and current > floor):
+        return stall_db
+    return max(stall_db, share * 10 * math.log10(current / floor))
+
+
 class _Stalled(Exception):
     """Raised from the Jacobian to stop the optimiser at a stall; carries what its result would
     (``x``, ``fun``, ``jac``, ``message``; ``status`` 1: a stop that counts as converged)."""
@@ -620,6 +636,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                         validation: Sequence[Run], *, source: str = "", lines: dict | None = None,
                         workers: int | None = None, diff_step: float = 1e-3, max_evaluations: int = 100,
                         tolerance: float = 1e-8, fit_on: str = "y", stall_db: float | None = None,
+                        stall_share: float | None = None,
                         jacobian: str = "differences") -> ExtensionFit:
     """Estimate the free parameters of a model config by minimising the simulation error.
 
@@ -632,7 +649,10 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     ``fit_on``: the signal whose simulation error is minimised, ``y`` or (closed loop) ``u``.
     ``stall_db``: the fit also stops, as converged, where the last STALL_STEPS accepted steps
     lowered the cost by less than ``stall_db`` dB together (a search creeping along a valley:
-    its error can no longer change by more than about that).
+    its error can no longer change by more than about that). ``stall_share``: the threshold is
+    at least this share of the cost's distance in dB above the noise floor of the estimation runs
+    (where they measure it: P >= 2 steady periods each; :func:`_floor_cost`): at that pace the
+    search would need STALL_STEPS / stall_share more steps to reach the floor.
     ``jacobian``: ``"differences"``, forward finite differences (:func:`forward_steps`);
     ``"sensitivities"``, the exact derivatives of the simulation by forward sensitivities where the
     model's simulation is smooth in the parameters (:meth:`_Cost.sensitivities`), finite
@@ -691,6 +711,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         raise ValueError(f"jacobian must be one of {JACOBIANS}, not {jacobian!r}")
     formed = {name: 0 for name in JACOBIANS}  # how many Jacobians each way
     exact = cost.offset_column(problem, fit_on)  # (index, column) of the output offset, or None
+    floor = _floor_cost(cost, estimation, fit_on)
     accepted = []  # the cost at each Jacobian's point: the points scipy accepted
 
     def jacobian_at(x: np.ndarray) -> np.ndarray:
@@ -713,7 +734,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                 jac[:, exact[0]] = exact[1] * scale[exact[0]]
         accepted.append(float(f0 @ f0))
         gained = _recent_gain_db(accepted)
-        if stall_db is not None and gained < stall_db:
+        if stall_db is not None and gained < _stall_threshold(stall_db, stall_share, accepted[-1], floor):
             raise _Stalled(x.copy(), f0, jac, f"stalled: the last {STALL_STEPS} steps lowered the cost by {gained:.3g} dB")
         return jac
 
