@@ -17,7 +17,7 @@ LUGRE = next(h for h in LIBRARY if h.name == "lugre")
 def _outcome(mass: float, start: float, std: float) -> Outcome:
     extended = {"model": {**MODEL["model"], "mass": mass}}
     paths = {"mass": "model.mass"}
-    return Outcome(LUGRE, Estimate({"mass": mass}, {"mass": std}, 0.0, ""), extended=extended,
+    return Outcome(LUGRE, Estimate({"mass": mass, LUGRE.main: 0.0}, {"mass": std}, 0.0, ""), extended=extended,
                    free={"model.mass": FreeParameter(start, 0.05, 5.0)}, paths=paths, model=MODEL)
 
 
@@ -31,3 +31,14 @@ def test_a_changed_mass_is_named_against_the_models_value():
     text = _outcome(0.525, 0.52, 1e-4).mechanics_changed()
     assert text == "the mass 5 % above the model's", text
     assert 0.025 / 1e-4 > MOVED
+
+
+def test_a_later_step_of_the_chain_does_not_repeat_the_mechanics_an_earlier_one_stated():
+    """Every step of a chain reports the final model's values against the user's model, so a
+    second cause refined with the same mechanics would repeat the first's words: the headline
+    gives them once."""
+    first, second = _outcome(0.525, 0.52, 1e-4), _outcome(0.525, 0.5, 1e-4)
+    stated = first.mechanics_changed()
+    assert stated == second.mechanics_changed() == "the mass 5 % above the model's"
+    assert second.headline_values((stated,)) == f"{LUGRE.main} = {0.0:.4g} {LUGRE.unit}"
+    assert stated in first.headline_values()

@@ -52,7 +52,7 @@ class Outcome:
     residuals: list = field(default_factory=list)  # validation residuals of the extended model
     free: dict = field(default_factory=dict)   # key path -> FreeParameter of its refinement
     paths: dict = field(default_factory=dict)  # its parameter -> key path
-    model: dict | None = None  # the config the round diagnoses (the user's, or the last round's extension)
+    model: dict | None = None  # the user's config, which the mechanics changes are stated against
 
     def fitted_mechanics(self) -> dict[str, str]:
         """The linear mechanics (name -> key path, :func:`linear_paths`) its refinement fitted."""
@@ -69,11 +69,13 @@ class Outcome:
         freed = self.hypothesis.distorts and self.fitted_mechanics()
         return self.hypothesis.generalizes + (LINEAR_REFITS if freed else ())
 
-    def headline_values(self) -> str:
-        """The main parameter with its unit and the mechanics it moved, as the headline gives them."""
+    def headline_values(self, stated: tuple[str, ...] = ()) -> str:
+        """The main parameter with its unit and the mechanics it moved, as the headline gives them;
+        the mechanics left out where an earlier step of the chain stated the same (``stated``)."""
         h = self.hypothesis
         main = f"{h.main} = {self.estimate.values[h.main]:.4g} {h.unit}"
-        return "; ".join(filter(None, [main, self.mechanics_changed()]))
+        moved = self.mechanics_changed()
+        return "; ".join(filter(None, [main, "" if moved in stated else moved]))
 
     def qualifier(self) -> str:
         """The fitted values' physical reading in a word or two ("hardening"), or ""."""
@@ -87,8 +89,9 @@ class Outcome:
     def mechanics_changed(self) -> str:
         """The linear mechanics its refinement moved significantly from the model's values (by more
         than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or "". The
-        model's value is that of the config the round diagnoses, not the refinement's start (a
-        LuGre law starts from the Stribeck fit's mechanics); a transfer function's coefficients,
+        model's value is that of the user's config, not the refinement's start (a LuGre law starts
+        from the Stribeck fit's mechanics, a later round from the last round's); a transfer
+        function's coefficients,
         refined in the form the hypothesis extends (a discrete model's continuous equivalent), are
         counted against their start."""
         from nlsid.fit.extension import value_at
@@ -172,7 +175,8 @@ class Diagnosis:
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
                     "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
-            causes = ", then ".join(f"{o.named()} ({o.headline_values()})" for o in self.chain)
+            causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(e.mechanics_changed() for e in self.chain[:i]))})"
+                                    for i, o in enumerate(self.chain))
             final = self.final_score()
             return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
                     f"{gain_text(final)}, {versus_floor(final)}")
@@ -492,7 +496,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
             break
         accepted = tuple(o.hypothesis.family for o in first.chain)
         carried = {name: path for o in first.chain for name, path in o.paths.items()}
-        current = _round(current.winner.extended, source, runs, roles, where, step, accepted, carried)
+        current = _round(current.winner.extended, source, runs, roles, where, step, accepted, carried, data)
     first.accuracy = _accurate(first, last, data, source, runs, roles)
     return first
 
@@ -565,9 +569,13 @@ def _decide(evidence: Evidence, found: nuisances.Nuisances, baseline: Score, out
 
 
 def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], where: str,
-           step: Callable[[str], None], accepted: tuple[str, ...], carried: dict[str, str] | None = None) -> Diagnosis:
+           step: Callable[[str], None], accepted: tuple[str, ...], carried: dict[str, str] | None = None,
+           users: dict | None = None) -> Diagnosis:
     """One diagnosis of the model ``data``: evidence, nuisances, every hypothesis of a family not in
-    ``accepted``, the verdict.
+    ``accepted``, the verdict. ``users``: the user's model (default ``data``), against which the
+    outcomes state the mechanics they changed (:meth:`Outcome.mechanics_changed`): the chain
+    reports the final model's values for every step (:func:`_update_earlier`), so every step's
+    changes are those of the final model against the user's.
 
     The evidence and the hypotheses' signatures are those of the model as given. The nuisances
     (:mod:`nlsid.diagnose.nuisances`) are fitted to it first; the model with them is the baseline:
@@ -591,7 +599,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
                       evidence.bla_levels)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
-        outcome = Outcome(hypothesis, model=data)
+        outcome = Outcome(hypothesis, model=users or data)
         outcomes.append(outcome)
         if hypothesis.family in accepted:
             outcome.reason = f"not fitted: a {hypothesis.family} cause is already in the model (an earlier step)"
