@@ -66,7 +66,7 @@ class Outcome:
         """Families or hypotheses whose models are special cases of this one's (the verdict's ties):
         the hypothesis' own, and the linear refit alone (wrong mechanics, wrong linear dynamics)
         where a force or block was refined with the linear part."""
-        freed = self.hypothesis.distorts and self.fitted_mechanics()
+        freed = self.hypothesis.refits_linear and self.fitted_mechanics()
         return self.hypothesis.generalizes + (LINEAR_REFITS if freed else ())
 
     def headline_values(self, stated: tuple[str, ...] = ()) -> str:
@@ -319,7 +319,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         if "output_timing" in nominal["model"]:
             extended["model"]["output_timing"] = nominal["model"]["output_timing"]
     paths = estimate.paths if estimate.paths is not None else hypothesis.paths(data) if hypothesis.paths else {}
-    if hypothesis.distorts:
+    if hypothesis.refits_linear:
         paths = {**linear_paths(extended), **paths}
     paths = {**_carried(carried or {}, extended), **paths}
     free = nuisances.free_nuisances(ModelRunner.from_data(extended, source), runs, timing)
@@ -479,7 +479,8 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     already accepted left out), until its validation error is at the noise floor, no hypothesis
     improves it significantly, or :data:`MAX_CAUSES` are named; in a later round every hypothesis
     is refined together with the parameters of the causes accepted before it (:func:`_carried`).
-    The result is the first round's
+    A tie between families (an ambiguous verdict) is resolved by the next round where it can be
+    (:func:`_resolve_tie`). The result is the first round's
     diagnosis (the evidence against the user's model) with the ``chain`` of accepted causes; the
     extended model is the last one's.
     """
@@ -487,18 +488,64 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     ModelRunner.from_data(data, source)  # the model is valid before the data are looked at
     runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
     first = current = last = _round(data, source, runs, roles, where, step, ())
-    while current.verdict.status == rules.EXPLAINED:
+    following = None  # the next round, where resolving a tie computed it already
+    while True:
+        if current.verdict.status == rules.AMBIGUOUS and len(first.chain) + 1 < MAX_CAUSES:
+            resolved = _resolve_tie(current, first.chain, data, source, runs, roles, where, step)
+            if resolved is not None:
+                current.verdict, following = resolved
+        if current.verdict.status != rules.EXPLAINED:
+            break
         first.chain.append(current.winner)
         _update_earlier(first.chain)
         last = current
         done = current.winner.score.within_floor
         if done or len(first.chain) == MAX_CAUSES:
             break
-        accepted = tuple(o.hypothesis.family for o in first.chain)
-        carried = {name: path for o in first.chain for name, path in o.paths.items()}
-        current = _round(current.winner.extended, source, runs, roles, where, step, accepted, carried, data)
+        current = following or _next_round(current.winner, first.chain, data, source, runs, roles, where, step)
+        following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles)
     return first
+
+
+def _next_round(cause: Outcome, chain: list[Outcome], data: dict, source: str, runs: list[Run],
+                roles: dict[str, str], where: str, step: Callable[[str], None]) -> "Diagnosis":
+    """The round that diagnoses ``cause``'s extended model, the families of ``chain`` (which ends
+    with ``cause``) left out and their parameters refined again (:func:`_carried`)."""
+    accepted = tuple(o.hypothesis.family for o in chain)
+    carried = {name: path for o in chain for name, path in o.paths.items()}
+    return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data)
+
+
+def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source: str, runs: list[Run],
+                 roles: dict[str, str], where: str, step: Callable[[str], None]):
+    """A tie between families resolved by what comes after each: two differences from reality at
+    once (a dead time and a quadratic output) leave each of their hypotheses alone an equal share
+    of the error, and a missing resonance, which mimics a dead time's phase lag in the band, ties
+    with the dead time until the other difference is in the model. Each tied hypothesis is taken as
+    a cause and the next round run on its extended model; a branch ends with that round's cause if
+    it names one, else with the tied hypothesis. The branches whose final validation error is
+    within the verdict's F* of the best are equally good; of them the simplest (the fewest
+    parameters of their causes' own, as rule 3 of :mod:`nlsid.diagnose.verdict` within a family)
+    is taken when the simplest name one set of causes (a dead time then a quadratic output, or the
+    other way round). Returns (the verdict with that branch's first cause, its next round), or
+    None (the verdict stays ambiguous)."""
+    tied = [o for o in current.outcomes if o.hypothesis.name in current.verdict.tied and o.score is not None]
+    branches = []
+    for outcome in tied:
+        following = _next_round(outcome, [*chain, outcome], data, source, runs, roles, where, step)
+        causes = [outcome] + ([following.winner] if following.verdict.status == rules.EXPLAINED else [])
+        power = causes[-1].score.error_rms ** 2
+        size = sum(len(o.hypothesis.parameters) for o in causes)
+        branches.append((power, size, frozenset(o.hypothesis.name for o in causes), outcome, following))
+    best = min(branch[0] for branch in branches)
+    near = [branch for branch in branches if rules.ratio(branch[0], best) <= current.verdict.threshold]
+    fewest = min(branch[1] for branch in near)
+    simplest = sorted((branch for branch in near if branch[1] == fewest), key=lambda branch: branch[0])
+    if len({branch[2] for branch in simplest}) > 1:
+        return None
+    _, _, _, outcome, following = simplest[0]
+    return dataclasses.replace(current.verdict, status=rules.EXPLAINED, winner=outcome.hypothesis.name), following
 
 
 def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: list[Run],
