@@ -517,35 +517,67 @@ def _next_round(cause: Outcome, chain: list[Outcome], data: dict, source: str, r
     return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data)
 
 
+@dataclass(frozen=True)
+class _Branch:
+    """A tied hypothesis taken as the cause, and the round after it (:func:`_resolve_tie`)."""
+
+    outcome: Outcome
+    following: "Diagnosis"
+
+    @property
+    def causes(self) -> list[Outcome]:
+        explained = self.following.verdict.status == rules.EXPLAINED
+        return [self.outcome] + ([self.following.winner] if explained else [])
+
+    @property
+    def power(self) -> float:
+        return self.causes[-1].score.error_rms ** 2
+
+    @property
+    def size(self) -> int:
+        return sum(len(o.hypothesis.parameters) for o in self.causes)
+
+    @property
+    def names(self) -> frozenset:
+        return frozenset(o.hypothesis.name for o in self.causes)
+
+
 def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source: str, runs: list[Run],
                  roles: dict[str, str], where: str, step: Callable[[str], None]):
     """A tie between families resolved by what comes after each: two differences from reality at
     once (a dead time and a quadratic output) leave each of their hypotheses alone an equal share
     of the error, and a missing resonance, which mimics a dead time's phase lag in the band, ties
-    with the dead time until the other difference is in the model. Each tied hypothesis is taken as
-    a cause and the next round run on its extended model; a branch ends with that round's cause if
-    it names one, else with the tied hypothesis. The branches whose final validation error is
+    with the dead time until the other difference is in the model. Each tied hypothesis is taken
+    as a cause and the next round run on its extended model; a branch ends with that round's cause
+    if it names one, else with the tied hypothesis. The branches whose final validation error is
     within the verdict's F* of the best are equally good; of them the simplest (the fewest
     parameters of their causes' own, as rule 3 of :mod:`nlsid.diagnose.verdict` within a family)
     is taken when the simplest name one set of causes (a dead time then a quadratic output, or the
-    other way round). Returns (the verdict with that branch's first cause, its next round), or
-    None (the verdict stays ambiguous)."""
-    tied = [o for o in current.outcomes if o.hypothesis.name in current.verdict.tied and o.score is not None]
-    branches = []
+    other way round). The tied hypotheses are tried from the fewest parameters up, and one whose
+    branch would have more parameters than a branch that ends at the noise floor has in all (its
+    own, and one more where it alone is not at the floor) is not tried: it could only be richer
+    (a missing resonance, three parameters, after a dead time and a quadratic term at the floor:
+    39 -> 14 s). Returns (the verdict with that branch's first cause, its next round), or None
+    (the verdict stays ambiguous)."""
+    tied = sorted((o for o in current.outcomes if o.hypothesis.name in current.verdict.tied and o.score is not None),
+                  key=lambda o: len(o.hypothesis.parameters))
+    branches: list[_Branch] = []
     for outcome in tied:
-        following = _next_round(outcome, [*chain, outcome], data, source, runs, roles, where, step)
-        causes = [outcome] + ([following.winner] if following.verdict.status == rules.EXPLAINED else [])
-        power = causes[-1].score.error_rms ** 2
-        size = sum(len(o.hypothesis.parameters) for o in causes)
-        branches.append((power, size, frozenset(o.hypothesis.name for o in causes), outcome, following))
-    best = min(branch[0] for branch in branches)
-    near = [branch for branch in branches if rules.ratio(branch[0], best) <= current.verdict.threshold]
-    fewest = min(branch[1] for branch in near)
-    simplest = sorted((branch for branch in near if branch[1] == fewest), key=lambda branch: branch[0])
-    if len({branch[2] for branch in simplest}) > 1:
+        at_floor = [b.size for b in branches if b.causes[-1].score.within_floor]
+        least = len(outcome.hypothesis.parameters) + (not outcome.score.within_floor)
+        if at_floor and least > min(at_floor):
+            continue
+        branches.append(_Branch(outcome, _next_round(outcome, [*chain, outcome], data, source, runs, roles, where,
+                                                     step)))
+    best = min(b.power for b in branches)
+    near = [b for b in branches if rules.ratio(b.power, best) <= current.verdict.threshold]
+    fewest = min(b.size for b in near)
+    simplest = sorted((b for b in near if b.size == fewest), key=lambda b: b.power)
+    if len({b.names for b in simplest}) > 1:
         return None
-    _, _, _, outcome, following = simplest[0]
-    return dataclasses.replace(current.verdict, status=rules.EXPLAINED, winner=outcome.hypothesis.name), following
+    chosen = simplest[0]
+    return dataclasses.replace(current.verdict, status=rules.EXPLAINED, winner=chosen.outcome.hypothesis.name), \
+        chosen.following
 
 
 def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: list[Run],
