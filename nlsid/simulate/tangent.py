@@ -34,7 +34,7 @@ the error is O(h^2) relative, about 1e-10, far below the finite-difference Jacob
 
 Used by ``nlsid fit --model --jacobian sensitivities`` (:meth:`nlsid.fit.extension._Cost.sensitivities`).
 Measured against the fit's forward differences (``benchmarks/jacobian.py``, docs/commands.md): exact
-to 1.5e-9 where the differences err by 1.3 % of a column, 2.2 times their cost per Jacobian on 2
+to 1.5e-9 where the differences err by 1.4 % of a column, 2.2 times their cost per Jacobian on 2
 cores, fewer steps from a distant start.
 """
 
