@@ -91,9 +91,8 @@ class Outcome:
         than MOVED standard errors), in words ("the mass 18.9 % above the model's"), or "". The
         model's value is that of the user's config, not the refinement's start (a LuGre law starts
         from the Stribeck fit's mechanics, a later round from the last round's); a transfer
-        function's coefficients,
-        refined in the form the hypothesis extends (a discrete model's continuous equivalent), are
-        counted against their start."""
+        function's coefficients, refined in the form the hypothesis extends (a discrete model's
+        continuous equivalent), are counted against their start."""
         from nlsid.fit.extension import value_at
 
         if self.estimate is None:
@@ -175,7 +174,8 @@ class Diagnosis:
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
                     "it, and no hypothesis lowers the validation error significantly")
         if status == rules.EXPLAINED:
-            causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(e.mechanics_changed() for e in self.chain[:i]))})"
+            stated = [o.mechanics_changed() for o in self.chain]
+            causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(stated[:i]))})"
                                     for i, o in enumerate(self.chain))
             final = self.final_score()
             return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
