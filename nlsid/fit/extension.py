@@ -427,6 +427,12 @@ class _Cost:
         """Samples of each run's residual (:func:`_steady`'s)."""
         return [run.n_samples if run.period is None else run.n_periods * run.period for run in self.runs]
 
+    @property
+    def fits_initial_states(self) -> bool:
+        """Some run is an arbitrary record simulated from the initial state fitted to its measured
+        output (:mod:`nlsid.simulate.initial_state`), which depends on the parameters too."""
+        return any(run.period is None and run.y is not None for run in self.inputs)
+
     def sensitivities(self, problem: "_Problem", theta: np.ndarray, signal: str) -> np.ndarray | None:
         """The Jacobian of the weighted residual in theta by forward sensitivities
         (:mod:`nlsid.simulate.tangent`), the runs in parallel threads, where the model is a plant
@@ -440,10 +446,11 @@ class _Cost:
         from nlsid.simulate.threads import thread_count
 
         model, loop = _build(problem.point(theta))
-        if not isinstance(model, Plant) or any(run.period is None and run.y is not None for run in self.inputs):
+        if not isinstance(model, Plant) or self.fits_initial_states:
             return None
-        leads = [lead_periods(model, loop, run) * (run.period or 0) for run in self.inputs]
-        led = [with_lead(run, lead // run.period) if lead else run for run, lead in zip(self.inputs, leads)]
+        counts = [lead_periods(model, loop, run) for run in self.inputs]
+        led = [with_lead(run, count) if count else run for run, count in zip(self.inputs, counts)]
+        leads = [count * (run.period or 0) for run, count in zip(self.inputs, counts)]
 
         def arguments_at(values: np.ndarray) -> list[tuple]:
             point = problem.point(values)
@@ -467,8 +474,7 @@ class _Cost:
         an arbitrary record starts from an initial state fitted to its measured output (the fit
         takes part of c)."""
         name = "model.output_offset"
-        if (name not in problem.names or problem.closed or signal != "y"
-                or any(run.period is None and run.y is not None for run in self.inputs)):
+        if name not in problem.names or problem.closed or signal != "y" or self.fits_initial_states:
             return None
         return problem.names.index(name), np.concatenate(
             [np.full(size, w) for w, size in zip(self.weights, self.segments())])

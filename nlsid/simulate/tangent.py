@@ -359,8 +359,9 @@ SIGNALS = (17, 18, 20, 21)  # r, ff, process, y_noise: a run's own; the rest is 
 
 def run_arguments(plant, loop, runs, substeps: int | None) -> list[tuple]:
     """The kernel's arguments (:func:`nlsid.simulate.engine._kernel_arguments`) of each run,
-    noise-free; the coefficients computed once per sample rate (the same objects in every run of
-    it), the signals per run."""
+    noise-free, c_f with a row per sub-step (:func:`_padded`); the coefficients computed once per
+    sample rate (the same objects in every run of it: :func:`derivatives` differentiates them
+    once), the signals per run."""
     from nlsid.simulate.engine import _kernel_arguments, _signal, plant_arguments
     from nlsid.simulate.noise import Noise
 
@@ -368,12 +369,11 @@ def run_arguments(plant, loop, runs, substeps: int | None) -> list[tuple]:
     for run in runs:
         parts = plant_arguments(plant, loop, run, substeps, Noise.zero(run.n_samples))
         if run.fs not in first:
-            first[run.fs] = _kernel_arguments(*parts)
+            first[run.fs] = _padded(_kernel_arguments(*parts))
             out.append(first[run.fs])
             continue
         shared = list(first[run.fs])
-        r, ff, u, process, y_noise = (_signal(x) for x in parts[13:18])
-        shared[17:22] = r, ff, u, process, y_noise
+        shared[17:22] = (_signal(x) for x in parts[13:18])  # r, ff, u, process, y_noise
         out.append(tuple(shared))
     return out
 
@@ -384,35 +384,39 @@ def derivatives(arguments_at, theta: np.ndarray) -> list[tuple[tuple, list[np.nd
     (theta -> every run's kernel arguments, :func:`run_arguments`; it raises
     :class:`~nlsid.errors.InputError` where the model refuses theta). None where the simulation is
     not smooth, a parameter changes the structure, or theta +- h is refused: the caller
-    differentiates by finite differences of the simulations then. The derivatives of coefficients
-    that runs share (the same object) are computed once and shared too."""
+    differentiates by finite differences of the simulations then. The coefficients that runs of
+    one sample rate share are differentiated once (keyed by their Phi^M, one object per rate)."""
     from nlsid.errors import InputError
 
-    base = [_padded(arguments) for arguments in arguments_at(theta)]
+    base = arguments_at(theta)
     if not all(smooth(arguments) for arguments in base):
         return None
     steps = coefficient_steps(theta)
-    stacks = []
-    for r, arguments in enumerate(base):
-        owner = next(q for q in range(r + 1) if all(base[q][i] is arguments[i] for i in PROPAGATION))
-        stacks.append([stacks[owner][k] if owner < r and i not in SIGNALS else
-                       np.empty((theta.size, *np.shape(arguments[i]))) for k, i in enumerate(DIFFERENTIATED)])
+    shifted = []  # per parameter: (every run's arguments at theta + h e_a, at theta - h e_a)
     for a, step in enumerate(steps):
         shift = np.zeros(theta.size)
         shift[a] = step
         try:
-            plus, minus = ([_padded(arguments) for arguments in arguments_at(theta + sign * shift)] for sign in (1, -1))
+            shifted.append((arguments_at(theta + shift), arguments_at(theta - shift)))
         except InputError:
             return None
-        done = set()
-        for arguments, up, down, stack in zip(base, plus, minus, stacks):
-            if id(stack[0]) not in done and not (_same_structure(arguments, up) and _same_structure(arguments, down)):
-                return None
-            for k, i in enumerate(DIFFERENTIATED):
-                if i in SIGNALS or id(stack[k]) not in done:
-                    stack[k][a] = (np.asarray(up[i], dtype=float) - np.asarray(down[i], dtype=float)) / (2 * step)
-            done.update(id(stack[k]) for k, i in enumerate(DIFFERENTIATED) if i not in SIGNALS)
-    return list(zip(base, stacks))
+    if not all(_same_structure(arguments, up[r]) and _same_structure(arguments, down[r])
+               for up, down in shifted for r, arguments in enumerate(base)):
+        return None
+
+    def stacked(r: int, i: int) -> np.ndarray:
+        return np.stack([(np.asarray(up[r][i], dtype=float) - np.asarray(down[r][i], dtype=float)) / (2 * step)
+                         for (up, down), step in zip(shifted, steps)])
+
+    model_parts: dict[int, dict[int, np.ndarray]] = {}
+    out = []
+    for r, arguments in enumerate(base):
+        key = id(arguments[0])
+        if key not in model_parts:
+            model_parts[key] = {i: stacked(r, i) for i in DIFFERENTIATED if i not in SIGNALS}
+        own = {**model_parts[key], **{i: stacked(r, i) for i in SIGNALS}}
+        out.append((arguments, [own[i] for i in DIFFERENTIATED]))
+    return out
 
 
 PROPAGATION = (0, 1, 2, 6, 7, 8, 9, 28, 29, 30)  # phi .. col_pow, C, c_x, c_p, c_f (moves)
