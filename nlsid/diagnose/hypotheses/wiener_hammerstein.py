@@ -13,7 +13,8 @@ are those of the two filters, distributed over them in some way: every distribut
 best linear approximation", Automatica 48(2); :mod:`~nlsid.diagnose.hypotheses.filter_split`). The
 Wiener (G2 a gain) and Hammerstein (G1 a gain) splits are among them.
 
-1. *Scan.* For given filters the output is linear in f's parameters theta and c: with x = G1 u,
+1. *Scan.* For given filters the output is linear in f's parameters theta and c: with x = G1 u (u after the
+   model's dead time, which the extension moves into G1),
 
        y(n) ~ c + sum_j theta_j (G2[b_j(x)])(n),
 
@@ -88,10 +89,23 @@ def plant_input(model: dict, run) -> np.ndarray:
     return u
 
 
+def delayed_input(model: dict, run) -> np.ndarray:
+    """The plant input (:func:`plant_input`) after the model's dead time, a whole number of
+    samples d, as the first filter of the extended structure gets it (:func:`_extend` moves the
+    dead time there): u(n - d), zero before the record starts."""
+    from nlsid.models.lti import delay_samples
+
+    u = plant_input(model, run)
+    d = min(delay_samples(float(model.get("delay", 0.0)), run.fs, "model.delay"), u.size)
+    return np.concatenate([np.zeros(d), u[:u.size - d]])
+
+
 def _intermediate(ctx: Context, first: dict) -> list[np.ndarray]:
-    """x = G1 u of every estimation run, over its whole length."""
+    """x = G1 u of every estimation run, over its whole length, u after the model's dead time
+    (:func:`delayed_input`; without it the root search makes up the dead time by moving zeros
+    towards infinity, and the extension then delays the output twice)."""
     model = ctx.runner.data["model"]
-    return [fsplit.apply(first, run.fs, plant_input(model, run)) for run in ctx.runs]
+    return [fsplit.apply(first, run.fs, delayed_input(model, run)) for run in ctx.runs]
 
 
 def _columns(ctx: Context, xs: list[np.ndarray], second: dict, curve) -> np.ndarray:
@@ -233,6 +247,10 @@ def _applies(runner: ModelRunner) -> str | None:
 
 def _estimate(ctx: Context) -> Estimate | str:
     """Steps 1 to 3 of the module docstring."""
+    delay = float(ctx.runner.data["model"].get("delay", 0.0))
+    if any(abs(delay * run.fs - round(delay * run.fs)) > 1e-6 * max(1.0, delay * run.fs) for run in ctx.runs):
+        return (f"the model's dead time ({delay:g} s) is not a whole number of samples, which the filters of a "
+                "block structure need (fit the dead time first)")
     f = fsplit.factors(ctx.runner.data["model"])
     y = np.concatenate([steady_mean(run, run.y) for run in ctx.runs])
     scanned = _scan(ctx, f, y)
