@@ -90,7 +90,7 @@ def _outputs(data: dict, source: str, runs: list[Run], substeps: int) -> np.ndar
     trial = copy.deepcopy(data)
     trial.setdefault("simulation", {})["substeps"] = substeps
     runner = ModelRunner.from_data(trial, source)
-    return _ac_mean(runs, [runner.simulate(run).y for run in runs])
+    return _ac_mean(runs, runner.simulate_each(runs))
 
 
 def _rms(x: np.ndarray) -> float:

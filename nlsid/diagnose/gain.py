@@ -88,7 +88,7 @@ def _db20(rms: float) -> float:
 
 def model_residuals(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> list[Residual]:
     """The residuals of ``runner``'s model on the validation ``runs`` (same order and roles as ``residuals``)."""
-    return [residual_of(run, runner.simulate(run).y, res.role) for run, res in zip(runs, residuals)]
+    return [residual_of(run, y, res.role) for run, y, res in zip(runs, runner.simulate_each(runs), residuals)]
 
 
 def _detection_power(residuals: list[Residual]) -> tuple[float, float]:

@@ -108,6 +108,13 @@ class ModelRunner:
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 
+    def simulate_each(self, runs: list[Run]) -> list[np.ndarray]:
+        """The simulated output y of every run (:meth:`simulate`), in parallel threads
+        (:func:`~nlsid.simulate.threads.in_threads`)."""
+        from nlsid.simulate.threads import in_threads
+
+        return in_threads(lambda run: self.simulate(run).y, runs)
+
     def initial_state(self, run: Run):
         """The initial state fitted to the start of an arbitrary record as the model simulates it
         (:class:`nlsid.simulate.initial_state.InitialState`; of a block structure its filters'

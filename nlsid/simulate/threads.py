@@ -65,3 +65,14 @@ def blas_in_one_thread(function: Callable) -> Callable:
             return function(*args, **kwargs)
 
     return limited
+
+
+def in_threads(function: Callable, items: list) -> list:
+    """``[function(item) for item in items]`` in a pool of :func:`thread_count` threads, in order
+    (for numba kernels, which release the GIL); one item runs in the calling thread."""
+    if len(items) < 2:
+        return [function(item) for item in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=min(thread_count(), len(items))) as pool:
+        return list(pool.map(function, items))

@@ -33,14 +33,18 @@ class Context:
 
     def simulation_rss(self, data: dict) -> float:
         """Sum of squares of measured minus simulated mean steady-state periods of the model ``data``."""
-        runner = self.runner.with_changes(data)
-        return float(sum(np.sum((steady_mean(run, run.y) - steady_mean(run, runner.simulate(run).y)) ** 2)
-                         for run in self.runs))
+        simulated = self.runner.with_changes(data).simulate_each(self.runs)
+        return float(sum(np.sum((steady_mean(run, run.y) - steady_mean(run, y)) ** 2)
+                         for run, y in zip(self.runs, simulated)))
 
     def response(self, signals: list[np.ndarray], where: str) -> np.ndarray:
-        """Stacked mean steady-state response of every run to its disturbance (``process`` or ``output``)."""
-        return np.concatenate([steady_mean(run, self.runner.response(run, **{where: signal}))
-                               for run, signal in zip(self.runs, signals)])
+        """Stacked mean steady-state response of every run to its disturbance (``process`` or
+        ``output``), the runs in parallel threads."""
+        from nlsid.simulate.threads import in_threads
+
+        def one(pair: tuple[Run, np.ndarray]) -> np.ndarray:
+            return steady_mean(pair[0], self.runner.response(pair[0], **{where: pair[1]}))
+        return np.concatenate(in_threads(one, list(zip(self.runs, signals))))
 
 @dataclass(frozen=True)
 class Estimate:

@@ -85,7 +85,7 @@ def _applies(runner: ModelRunner) -> str | None:
 
 def _responses(ctx: Context, powers: tuple[int, ...]) -> list[np.ndarray]:
     """The model's responses to the input errors -y_model^p, one column per power p."""
-    outputs = [ctx.runner.simulate(run).y for run in ctx.runs]
+    outputs = ctx.runner.simulate_each(ctx.runs)
     return [ctx.response([-x**p for x in outputs], "process") for p in powers]
 
 

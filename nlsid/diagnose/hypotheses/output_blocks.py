@@ -9,7 +9,7 @@ from nlsid.diagnose.hypotheses.plant_blocks import no_block
 
 
 def _estimate_quadratic(ctx: Context) -> Estimate | str:
-    outputs = [ctx.runner.simulate(run).y for run in ctx.runs]
+    outputs = ctx.runner.simulate_each(ctx.runs)
     return regress(ctx.target(), [ctx.response([x**2 for x in outputs], "output")], ["a2"])
 
 def _extend_quadratic(data: dict, values: dict) -> dict:
