@@ -53,6 +53,7 @@ from nlsid.diagnose.hypotheses import filter_split as fsplit, static_curve
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db
 from nlsid.diagnose.hypotheses.static_curve import PiecewiseLinear, Polynomial, end_slope_ratio, reading
 from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
+from nlsid.simulate.threads import in_threads
 
 SCAN = Polynomial(3)          # the curve every split is scored with
 POLYNOMIAL_DEGREES = (3, 5, 7)
@@ -169,7 +170,7 @@ def separable(ctx: Context, start: Candidate, curve, y: np.ndarray, steps: int) 
     """The filters' roots that minimise the regression's residual with ``curve``, f and c
     eliminated: variable projection (Golub and Pereyra 1973), a trust-region least-squares search
     (scipy's ``trf``, at most ``steps`` residual evaluations besides its
-    forward-difference Jacobians). The roots move as section coefficients
+    forward-difference Jacobians, whose columns run in parallel threads). The roots move as section coefficients
     (:func:`~nlsid.diagnose.hypotheses.filter_split.to_sections`: a pair can become two real roots),
     in coordinates relative to the start; those of roots at the origin stay. An unstable trial
     filter, or one whose regressors overflow, gets a residual of 10 rms(y) everywhere, a step the
@@ -200,7 +201,22 @@ def separable(ctx: Context, start: Candidate, curve, y: np.ndarray, steps: int) 
             e = y - X @ _solve(X, y)
         return e if np.all(np.isfinite(e)) else penalty
 
-    fit = least_squares(residual, x0 / scale, method="trf", max_nfev=steps)
+    last: dict = {}
+
+    def evaluated(v: np.ndarray) -> np.ndarray:
+        last["x"], last["e"] = v.copy(), residual(v)
+        return last["e"]
+
+    def jacobian(v: np.ndarray) -> np.ndarray:
+        """Forward differences with scipy's '2-point' steps, the columns in parallel threads (the
+        filters release the GIL: 1.9x on 2 cores), from the residual already evaluated at v."""
+        e0 = last["e"] if np.array_equal(last.get("x"), v) else evaluated(v)
+        h = np.sqrt(np.finfo(float).eps) * np.where(v >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(v))
+        points = [v + np.eye(v.size)[i] * h[i] for i in range(v.size)]
+        columns = in_threads(residual, points)
+        return np.column_stack([(e - e0) / (x[i] - v[i]) for i, (x, e) in enumerate(zip(points, columns))])
+
+    fit = least_squares(evaluated, x0 / scale, jac=jacobian, method="trf", max_nfev=steps)
     return regress(ctx, *filters(fit.x), curve, y)
 
 
