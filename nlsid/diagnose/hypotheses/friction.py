@@ -141,7 +141,8 @@ def _estimate_stribeck(ctx: Context) -> Estimate | str:
     one regressed on what the Coulomb law leaves (:func:`_beyond_coulomb`), all with the linear
     mechanics the Coulomb fit refined; the start next to the Coulomb law unless another lowers
     the error by more than fitting noise could (:func:`_noise_share`: on Coulomb data the regressed
-    start was 3e-7 better, and its refinement moved fs 2 % off fc along a valley of the damping). A Stribeck law with fs = fc is Coulomb's, so
+    start was 3e-7 better, and its refinement moved fs 2 % off fc along a valley of the damping).
+    A Stribeck law with fs = fc is Coulomb's, so
     where friction is Coulomb-like (the break-away peak small or absent) the refinement starts
     next to an optimum the simpler law's fit has already found, instead of from the mechanics the
     model was given: on a stage recording whose friction no law of the library fits exactly, it
