@@ -110,3 +110,37 @@ def test_fits_and_diagnose_run_blas_in_one_thread_and_restore_it(monkeypatch):
         with pytest.raises(InputError):
             diagnosis.diagnose(model, "m.yaml", [run], "rec")
         assert set(_blas_threads()) == {2}
+
+
+def test_in_threads_keeps_the_order_and_the_thread_count():
+    """``in_threads`` returns the results in the items' order, runs at most ``thread_count()``
+    threads at once (the command's default, here 2 of 8 items that each wait until two run
+    together or a timeout passes), and runs a single item, or everything under a default of one
+    thread, one at a time."""
+    import threading
+    import time
+
+    from nlsid.simulate.threads import in_threads
+
+    running, most, lock = [0], [0], threading.Lock()
+
+    def item(k: int) -> tuple[int, str]:
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
+        deadline = time.monotonic() + 0.5
+        while running[0] < 2 and time.monotonic() < deadline and k < 7:
+            time.sleep(0.001)
+        with lock:
+            running[0] -= 1
+        return k * k, threading.current_thread().name
+
+    with default_threads(2):
+        out = in_threads(item, list(range(8)))
+    assert [v for v, _ in out] == [k * k for k in range(8)]
+    assert most[0] == 2
+    most[0] = 0
+    with default_threads(1):
+        assert [v for v, _ in in_threads(item, [1, 2, 3])] == [1, 4, 9]
+    assert most[0] == 1
+    assert in_threads(item, [3])[0][1] == threading.current_thread().name
