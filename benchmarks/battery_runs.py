@@ -1,12 +1,17 @@
-"""The excitation of the diagnose battery (tests/test_diagnose_msd_battery.py) for the benchmarks:
-odd multisines over 1-150 Hz of N = 4096 samples at fs = 1 kHz, flat amplitudes scaled to each
-level's rms, random phases, a transient period and the steady ones."""
+"""The diagnose battery (tests/test_diagnose_msd_battery.py) for the benchmarks: its plant, a
+mass-spring-damper near 32 Hz with damping ratio 0.03 (m = 0.5 kg); its excitation, odd multisines
+over 1-150 Hz of N = 4096 samples at fs = 1 kHz, flat amplitudes scaled to each level's rms, random
+phases, a transient period and the steady ones; and a recording of the plant with forces."""
 
 from __future__ import annotations
 
 import numpy as np
 
 FS, N = 1000.0, 4096
+MASS = 0.5
+STIFFNESS = MASS * (2 * np.pi * 32) ** 2
+DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
+NOMINAL = {"model": {"type": "mass_spring_damper", "mass": MASS, "damping": DAMPING, "stiffness": STIFFNESS}}
 
 
 def multisine_runs(rng: np.random.Generator, realizations: int, steady_periods: int, random_odd: bool,
@@ -28,3 +33,27 @@ def multisine_runs(rng: np.random.Generator, realizations: int, steady_periods: 
             out.append(Run(f"l{level:g}m{m}", FS, "multisine", np.tile(one, steady_periods + 1), period=N,
                            transient_periods=1, realization=m, level=level, excited_bins=bins))
     return out
+
+
+
+def recording(forces: list[dict], steady_periods: int = 4) -> list:
+    """The battery's 18 runs (3 levels x 6 realizations, random-odd) measured on the plant with
+    ``forces``: nlsid's own simulation at 100 sub-steps (a benchmark of speed, not of correctness:
+    the tests use independent generators) plus coloured output noise 50 dB below the output."""
+    import copy
+    import dataclasses
+
+    from scipy.signal import lfilter
+
+    from nlsid.diagnose.simulation import ModelRunner
+
+    rng = np.random.default_rng(1)
+    truth = copy.deepcopy(NOMINAL)
+    truth["model"]["nonlinearities"] = forces
+    truth["simulation"] = {"substeps": 100}
+    runner = ModelRunner.from_data(truth, "benchmark")
+    runs = multisine_runs(rng, realizations=6, steady_periods=steady_periods, random_odd=True)
+    outputs = [runner.simulate(run).y for run in runs]
+    scale = np.sqrt(np.mean(np.square(outputs))) * 10 ** (-50 / 20)
+    return [dataclasses.replace(run, y=y + scale * lfilter([0.6], [1, -0.8], rng.standard_normal(y.size)))
+            for run, y in zip(runs, outputs)]

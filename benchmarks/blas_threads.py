@@ -23,39 +23,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import copy
 import json
 import os
 import time
 
-import numpy as np
-from battery_runs import multisine_runs
+from battery_runs import NOMINAL, recording
 
-PERIODS = 4
-MASS = 0.5
-STIFFNESS = MASS * (2 * np.pi * 32) ** 2
-DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
-NOMINAL = {"model": {"type": "mass_spring_damper", "mass": MASS, "damping": DAMPING, "stiffness": STIFFNESS}}
 EFFECTS = [{"type": "coulomb", "fc": 0.2}, {"type": "cubic_stiffness", "k3": 1e9}]
-
-
-def recording():
-    import dataclasses
-
-    from scipy.signal import lfilter
-
-    from nlsid.diagnose.simulation import ModelRunner
-
-    rng = np.random.default_rng(1)
-    truth = copy.deepcopy(NOMINAL)
-    truth["model"]["nonlinearities"] = EFFECTS
-    truth["simulation"] = {"substeps": 100}
-    runner = ModelRunner.from_data(truth, "benchmark")
-    runs = multisine_runs(rng, realizations=6, steady_periods=PERIODS, random_odd=True)
-    outputs = [runner.simulate(run).y for run in runs]
-    scale = np.sqrt(np.mean(np.square(outputs))) * 10 ** (-50 / 20)
-    return [dataclasses.replace(run, y=y + scale * lfilter([0.6], [1, -0.8], rng.standard_normal(y.size)))
-            for run, y in zip(runs, outputs)]
 
 
 @contextlib.contextmanager
@@ -92,7 +66,7 @@ def main() -> None:
     args = parser.parse_args()
     from threadpoolctl import threadpool_info
 
-    runs = recording()
+    runs = recording(EFFECTS)
     timed(runs[:2])  # warm-up: numba's kernels
     walls = {"one_thread": [], "threaded": []}
     chains = {}

@@ -19,13 +19,9 @@ import os
 import time
 
 import numpy as np
-from battery_runs import multisine_runs
+from battery_runs import NOMINAL, multisine_runs
 
-MASS = 0.5
-STIFFNESS = MASS * (2 * np.pi * 32) ** 2
-DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
-MODEL = {"model": {"type": "mass_spring_damper", "mass": MASS, "damping": DAMPING, "stiffness": STIFFNESS,
-                   "nonlinearities": [{"type": "coulomb", "fc": 0.2}]}}
+MODEL = {"model": {**NOMINAL["model"], "nonlinearities": [{"type": "coulomb", "fc": 0.2}]}}
 
 
 def main() -> None:

@@ -22,39 +22,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import copy
 import json
 import os
 import time
 
 import numpy as np
-from battery_runs import multisine_runs
+from battery_runs import NOMINAL, recording
 
-PERIODS = 4
-MASS = 0.5
-STIFFNESS = MASS * (2 * np.pi * 32) ** 2
-DAMPING = 2 * 0.03 * np.sqrt(STIFFNESS * MASS)
-NOMINAL = {"model": {"type": "mass_spring_damper", "mass": MASS, "damping": DAMPING, "stiffness": STIFFNESS}}
 EFFECT = {"type": "stribeck", "fc": 0.2, "fs": 0.4, "vs": 0.002}
-
-
-def recording():
-    import dataclasses
-
-    from scipy.signal import lfilter
-
-    from nlsid.diagnose.simulation import ModelRunner
-
-    rng = np.random.default_rng(1)
-    truth = copy.deepcopy(NOMINAL)
-    truth["model"]["nonlinearities"] = [EFFECT]
-    truth["simulation"] = {"substeps": 100}
-    runner = ModelRunner.from_data(truth, "benchmark")
-    runs = multisine_runs(rng, realizations=6, steady_periods=PERIODS, random_odd=True)
-    outputs = [runner.simulate(run).y for run in runs]
-    scale = np.sqrt(np.mean(np.square(outputs))) * 10 ** (-50 / 20)
-    return [dataclasses.replace(run, y=y + scale * lfilter([0.6], [1, -0.8], rng.standard_normal(y.size)))
-            for run, y in zip(runs, outputs)]
 
 
 @contextlib.contextmanager
@@ -112,7 +87,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args()
 
-    runs = recording()
+    runs = recording([EFFECT])
     timed(runs[:2])  # warm-up: numba's kernels
     walls = {"regressed_start": [], "without": []}
     chains, errors, simulations = {}, {}, {}

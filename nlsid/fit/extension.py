@@ -90,7 +90,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -443,7 +442,7 @@ class _Cost:
         from nlsid.simulate import tangent
         from nlsid.simulate.batch import _build
         from nlsid.simulate.engine import lead_periods, with_lead
-        from nlsid.simulate.threads import thread_count
+        from nlsid.simulate.threads import in_threads
 
         model, loop = _build(problem.point(theta))
         if not isinstance(model, Plant) or self.fits_initial_states:
@@ -459,8 +458,7 @@ class _Cost:
         found = tangent.derivatives(arguments_at, theta)
         if found is None:
             return None
-        with ThreadPoolExecutor(max_workers=thread_count(problem.workers)) as pool:
-            simulated = list(pool.map(lambda pair: tangent.simulate(*pair), found))
+        simulated = in_threads(lambda pair: tangent.simulate(*pair), found, problem.workers)
         column = {"u": 2, "y": 3}[signal]
         return np.concatenate([w * np.stack([_steady(run, d[lead:]) for d in out[column]], axis=1)
                                for w, run, lead, out in zip(self.weights, self.runs, leads, simulated)])

@@ -67,12 +67,13 @@ def blas_in_one_thread(function: Callable) -> Callable:
     return limited
 
 
-def in_threads(function: Callable, items: list) -> list:
-    """``[function(item) for item in items]`` in a pool of :func:`thread_count` threads, in order
-    (for numba kernels, which release the GIL); one item runs in the calling thread."""
+def in_threads(function: Callable, items: list, workers: int | None = None) -> list:
+    """``[function(item) for item in items]`` in a pool of :func:`thread_count` threads (``workers``
+    when given), in order (for numba kernels, which release the GIL); one item runs in the calling
+    thread."""
     if len(items) < 2:
         return [function(item) for item in items]
     from concurrent.futures import ThreadPoolExecutor
 
-    with ThreadPoolExecutor(max_workers=min(thread_count(), len(items))) as pool:
+    with ThreadPoolExecutor(max_workers=min(thread_count(workers), len(items))) as pool:
         return list(pool.map(function, items))

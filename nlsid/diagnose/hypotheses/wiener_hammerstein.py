@@ -53,6 +53,7 @@ from nlsid.diagnose.hypotheses import filter_split as fsplit, static_curve
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db
 from nlsid.diagnose.hypotheses.static_curve import PiecewiseLinear, Polynomial, end_slope_ratio, reading
 from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
+from nlsid.errors import InputError
 from nlsid.simulate.threads import in_threads
 
 SCAN = Polynomial(3)          # the curve every split is scored with
@@ -212,7 +213,7 @@ def separable(ctx: Context, start: Candidate, curve, y: np.ndarray, steps: int) 
         filters release the GIL: 1.9x on 2 cores), from the residual already evaluated at v."""
         e0 = last["e"] if np.array_equal(last.get("x"), v) else evaluated(v)
         h = np.sqrt(np.finfo(float).eps) * np.where(v >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(v))
-        points = [v + np.eye(v.size)[i] * h[i] for i in range(v.size)]
+        points = list(v + np.diag(h))  # v + h_i e_i
         columns = in_threads(residual, points)
         return np.column_stack([(e - e0) / (x[i] - v[i]) for i, (x, e) in enumerate(zip(points, columns))])
 
@@ -263,8 +264,13 @@ def _applies(runner: ModelRunner) -> str | None:
 
 def _estimate(ctx: Context) -> Estimate | str:
     """Steps 1 to 3 of the module docstring."""
+    from nlsid.models.lti import delay_samples
+
     delay = float(ctx.runner.data["model"].get("delay", 0.0))
-    if any(abs(delay * run.fs - round(delay * run.fs)) > 1e-6 * max(1.0, delay * run.fs) for run in ctx.runs):
+    try:
+        for run in ctx.runs:
+            delay_samples(delay, run.fs, "model.delay")
+    except InputError:
         return (f"the model's dead time ({delay:g} s) is not a whole number of samples, which the filters of a "
                 "block structure need (fit the dead time first)")
     f = fsplit.factors(ctx.runner.data["model"])
