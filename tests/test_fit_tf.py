@@ -283,8 +283,9 @@ def test_order_scan_goes_beyond_the_default_only_while_no_order_passes():
     """A sixth-order system (the zero-order-hold equivalent of a third-order Chebyshev I low-pass in
     series with a third-order inverse Chebyshev, as in the SYSID 2009 circuit), exact variances:
     scanned up to na = 4 no order reaches its bound (the data hold six poles); extended, the scan
-    stops at the first na where one does, and that is the system's own na = 6 (a fit of the true
-    order passes with probability 0.99865). With an explicit limit the scan does not go on."""
+    reaches the first na where one does, and that is the system's own na = 6 (a fit of the true
+    order passes with probability 0.99865), and goes one na further to test the larger nested
+    orders, which do not win. With an explicit limit the scan does not go on."""
     fs, N = 51200.0, 4096
     bins = np.arange(1, 700)
     first = signal.cont2discrete(signal.cheby1(3, 0.5, 2 * np.pi * 4400, analog=True), 1 / fs, method="zoh")
@@ -297,6 +298,49 @@ def test_order_scan_goes_beyond_the_default_only_while_no_order_passes():
     assert not any(r.accepted for r in limited.scan) and max(r.na for r in limited.scan) == 4
     extended = select_order(data, 4, "z", extend_to=10)
     assert extended.fit.na == 6, extended.reason
-    assert max(r.na for r in extended.scan) == 6
-    assert {(r.nb, r.na) for r in extended.scan if r.na > 4} == {(3, 5), (4, 5), (5, 5), (4, 6), (5, 6), (6, 6)}
-    assert "went on to na = 6" in extended.reason
+    assert max(r.na for r in extended.scan) == 7
+    assert {(r.nb, r.na) for r in extended.scan if r.na > 4} == {(3, 5), (4, 5), (5, 5), (4, 6), (5, 6), (6, 6),
+                                                                 (5, 7), (6, 7), (7, 7)}
+    assert "went on to na = 6" in extended.reason and "went on to na = 7" in extended.reason
+
+
+def test_a_model_one_pole_short_that_passes_its_cost_bound_loses_to_the_nested_likelihood_ratio():
+    """A second-order Chebyshev I with a real pole at z = 0.1 (2000 lines, exact variances, 10 % of
+    |G0|): the 2/2 model, one pole short, lies within its cost bound (the bound's spread, 3 std of
+    2000 lines, is 134; the missing pole adds about 35), so the cost check alone takes it. Fitting
+    the pole lowers the cost by about 35 (the model error) where one parameter fitting noise lowers
+    it by at most chi^2_0.99865(1) / 2 = 4.5 (Soderstrom and Stoica 1989, Section 11.5): 2/3 is
+    chosen, and the reason says why."""
+    b, a = signal.cheby1(2, 3, 2 * 0.08)
+    N, bins = 8192, np.arange(1, 2001)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z) * 0.9 / (1 - 0.1 / z)
+    sigma = 0.1 * np.abs(G0)
+    data = FRFData(bins, _synthetic(G0, sigma, np.random.default_rng(0)), sigma ** 2, 1.0, N)
+    selection = select_order(data, 4, "z")
+    short = next(r for r in selection.scan if (r.nb, r.na) == (2, 2))
+    assert short.accepted and short.eligible  # the case is the one described
+    assert (selection.fit.nb, selection.fit.na) == (2, 3), selection.reason
+    assert "2/3 instead" in selection.reason and "likelihood ratio" in selection.reason
+
+
+def test_the_cost_drop_of_a_nested_correct_model_is_half_a_chi_square():
+    """The likelihood-ratio bound's premise (nlsid.fit.order.likelihood_ratio_bound), by Monte Carlo:
+    data of a 2/2 system with exact variances (200 lines, 600 records); fitted as 2/2 and as the
+    nested 2/3, the cost drop is (1/2) chi^2(1): mean 1/2 (4 std of the mean of 600, 0.12), and it
+    exceeds the bound in 0.135 % of the records (0.8 of 600 expected; at most 6, Poisson tail 1e-4)."""
+    from nlsid.fit.order import likelihood_ratio_bound
+
+    b, a = signal.cheby1(2, 3, 2 * 0.08)
+    N, bins = 1024, np.arange(1, 201)
+    z = np.exp(2j * np.pi * bins / N)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z)
+    sigma = 0.01 * np.abs(G0) + 1e-4
+    rng = np.random.default_rng(3)
+    drops = []
+    for _ in range(600):
+        data = FRFData(bins, _synthetic(G0, sigma, rng), sigma ** 2, 1.0, N)
+        drops.append(fit_transfer_function(data, 2, 2, "z", 0).cost - fit_transfer_function(data, 2, 3, "z", 0).cost)
+    drops = np.array(drops)
+    assert abs(np.mean(drops) - 0.5) < 0.12, np.mean(drops)
+    assert np.sum(drops > likelihood_ratio_bound(1, None)) <= 6

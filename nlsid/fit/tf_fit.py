@@ -456,15 +456,16 @@ def _numerator_for(basis: _Basis, a: np.ndarray, weight: np.ndarray) -> np.ndarr
     z = basis.data.z
     full = basis.full_denominator(a)
     columns = []
-    for i in range(basis.nb + 1):
-        if basis.domain == "z":
-            column = basis.powers[:, i] / (basis.powers[:, : full.size] @ full)
-        else:
-            unit = np.zeros(basis.nb + 1)
-            unit[i] = 1.0
-            column = _zoh_response(unit, full, basis.h * basis.scale, z)
-        columns.append(column * z ** (-basis.delay))
-    K = np.stack(columns, axis=1) * weight[:, None]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # None below, not warnings
+        for i in range(basis.nb + 1):
+            if basis.domain == "z":
+                column = basis.powers[:, i] / (basis.powers[:, : full.size] @ full)
+            else:
+                unit = np.zeros(basis.nb + 1)
+                unit[i] = 1.0
+                column = _zoh_response(unit, full, basis.h * basis.scale, z)
+            columns.append(column * z ** (-basis.delay))
+        K = np.stack(columns, axis=1) * weight[:, None]
     rhs = basis.data.G * weight
     if not (np.all(np.isfinite(K)) and np.all(np.isfinite(rhs))):
         return None
