@@ -128,7 +128,8 @@ def _lpm_level(path, chosen: dict) -> BLALevel:
     warnings.append("the LPM's estimates at neighbouring lines share their windows: the cost check's spread "
                     "assumes independent lines and is approximate")
     data = FRFData(np.asarray(chosen["bins"], dtype=np.int64)[usable], np.asarray(chosen["G"], dtype=complex)[usable],
-                   variance[usable], float(attrs["fs"]), int(attrs["n_samples"]), dof + 1)
+                   variance[usable], float(attrs["fs"]), int(attrs["n_samples"]), dof + 1,
+                   2 * int(attrs.get("half_width", 0)))
     size = data.bins.size
     weights = WEIGHTS["lpm"]
     if smoothed:

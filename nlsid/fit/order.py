@@ -111,27 +111,46 @@ def holdout_error(data: FRFData, fit: TFFit) -> float:
     return float(np.mean(np.abs(error) ** 2 / test.variance))
 
 
-def likelihood_ratio_bound(extra: int, realizations: int | None) -> float:
+def likelihood_ratio_bound(extra: int, realizations: int | None, correlation: float = 1.0) -> float:
     """How much ``extra`` parameters fitting noise lower the cost of a correct nested model, at most
     (with probability ACCEPT_PROBABILITY): V_small - V_large ~ (1/2) chi^2(extra) for exact
-    variances (the likelihood ratio of nested Gaussian models, Soderstrom and Stoica 1989, Section
-    11.5), scaled by (M-1)/(M-2) for variances from M realizations as the expected cost is
-    (:func:`nlsid.fit.tf_fit.expected_cost`; approximate: the weights are shared by both models).
-    M <= 2: no finite bound (inf)."""
+    variances and independent lines (the likelihood ratio of nested Gaussian models, Soderstrom
+    and Stoica 1989, Section 11.5), scaled by (M-1)/(M-2) for variances from M realizations as the
+    expected cost is (:func:`nlsid.fit.tf_fit.expected_cost`; approximate: the weights are shared
+    by both models), and by ``correlation`` (:func:`line_correlation`) for lines whose errors are
+    correlated. M <= 2: no finite bound (inf)."""
     from scipy.stats import chi2
 
-    from nlsid.fit.tf_fit import ACCEPT_PROBABILITY
-
-    scale = expected_cost(1, 0, realizations)[0]
+    scale = expected_cost(1, 0, realizations)[0] * correlation
     return float(chi2.ppf(ACCEPT_PROBABILITY, extra) / 2 * scale) if math.isfinite(scale) else math.inf
 
 
-def _nested_better(best: OrderResult, eligible: list[OrderResult], realizations: int | None) -> OrderResult | None:
+def line_correlation(data: FRFData, fit: TFFit) -> float:
+    """kappa = 1 + 2 sum_{d=1..D} rho(d), at least 1: rho(d) the correlation of the weighted
+    residuals e_k = (G_k - G(Omega_k, theta)) / sigma_k of lines d apart (Re of the mean of
+    e_k conj(e_{k+d}), over the mean of |e_k|^2), D = ``data.shared_lags`` (lines whose LPM
+    windows overlap); 1 for independent lines (D = 0). The cost drop of nested models is
+    (1/2) e^T P e, P the projection on the extra parameters' whitened directions; with errors of
+    correlation R its mean is (1/2) tr(P R), and for directions smooth over D lines (a pole's or a
+    zero's effect) tr(P R) = kappa tr(P) (docs/commands.md, "--order auto"; Monte Carlo in
+    tests/test_fit_tf.py). From the residuals of ``fit``: a model within its cost bound leaves
+    mostly the errors of the data there."""
+    if data.shared_lags <= 0:
+        return 1.0
+    e = (data.G - fit.model.response(data.bins, data.period)) / np.sqrt(data.variance)
+    power = float(np.mean(np.abs(e) ** 2))
+    lags = range(1, min(data.shared_lags, e.size - 1) + 1)
+    rho = [float(np.real(np.mean(e[:-d] * np.conj(e[d:])))) / power for d in lags]
+    return max(1.0, 1.0 + 2.0 * sum(rho))
+
+
+def _nested_better(best: OrderResult, eligible: list[OrderResult], realizations: int | None,
+                   correlation: float) -> OrderResult | None:
     """The order of fewest parameters, nesting ``best``, whose cost is lower than best's by more
     than its extra parameters explain (:func:`likelihood_ratio_bound`); None if there is none."""
     size = best.nb + best.na
     better = [q for q in eligible if q.nb >= best.nb and q.na >= best.na and q.nb + q.na > size
-              and best.cost - q.cost > likelihood_ratio_bound(q.nb + q.na - size, realizations)]
+              and best.cost - q.cost > likelihood_ratio_bound(q.nb + q.na - size, realizations, correlation)]
     return min(better, key=lambda q: (q.nb + q.na, q.cost)) if better else None
 
 
@@ -205,14 +224,16 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
                     scan_order(nb, na)
             for nb, na in sorted(o for o in quick if o[0] >= best.nb and o[1] >= best.na):
                 scan_order(nb, na, thorough=True)  # a candidate now: fitted as thoroughly as best
-            step = _nested_better(best, [r for r in scan if r.eligible], data.realizations)
+            kappa = line_correlation(data, fits[(best.nb, best.na)])
+            step = _nested_better(best, [r for r in scan if r.eligible], data.realizations, kappa)
             if step is None:
                 break
             size = step.nb + step.na - best.nb - best.na
+            shared = f", times {kappa:.3g} for the lines' correlated errors" if kappa > 1 else ""
             reason += (f"; {step.nb}/{step.na} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower "
                        f"than {best.nb}/{best.na}'s, more than {size} more parameter{'s' * (size > 1)} fitting noise "
-                       f"would lower it ({likelihood_ratio_bound(size, data.realizations):.3g}, likelihood ratio at "
-                       f"probability {ACCEPT_PROBABILITY})")
+                       f"would lower it ({likelihood_ratio_bound(size, data.realizations, kappa):.3g}, likelihood "
+                       f"ratio at probability {ACCEPT_PROBABILITY}{shared})")
             best = step
     elif eligible and not any(math.isfinite(r.cost_bound) for r in eligible):
         best = min(eligible, key=lambda r: r.holdout_error)

@@ -74,6 +74,7 @@ class FRFData:
     fs: float
     period: int
     realizations: int | None = None   # M behind sample variances (None: variances taken as exact)
+    shared_lags: int = 0              # lines this many apart or closer share samples (LPM windows); 0: independent
 
     @property
     def frequency(self) -> np.ndarray:
@@ -85,7 +86,8 @@ class FRFData:
         return np.exp(2j * np.pi * self.bins / self.period)
 
     def subset(self, index: np.ndarray) -> "FRFData":
-        return FRFData(self.bins[index], self.G[index], self.variance[index], self.fs, self.period, self.realizations)
+        return FRFData(self.bins[index], self.G[index], self.variance[index], self.fs, self.period, self.realizations,
+                       self.shared_lags)
 
 
 @dataclass(frozen=True)
