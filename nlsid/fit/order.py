@@ -172,7 +172,7 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
     ``extend_to``: when no eligible order up to ``max_order`` is within its cost bound, go on
     with :func:`extension_orders` of na = max_order + 1, ... up to ``extend_to``, until one is."""
     scan, fits = [], {}
-    enough = None  # parameter count of the first stable order within its bound: larger ones cannot be chosen
+    enough = None  # parameter count of the first stable order within its bound: larger ones fitted quickly
 
     quick = set()  # orders fitted from the linear start only (thorough=False)
 
@@ -184,12 +184,15 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         fit = fit_stable(data, nb, na, domain, delay, thorough=thorough)
         (quick.discard if thorough else quick.add)((nb, na))
         fits[(nb, na)] = fit
-        scan[:] = [r for r in scan if (r.nb, r.na) != (nb, na)]
-        scan.append(OrderResult(nb, na, fit.cost, fit.expected_cost, fit.cost_std,
-                                holdout_error(data, fit), fit.accepted, fit.cost_bound,
-                                fit.model.stability(), fit.how, fit.free_pole,
-                                fit.how == "stabilised" and on_boundary(fit)))
-        if enough is None and scan[-1].eligible and scan[-1].accepted:
+        result = OrderResult(nb, na, fit.cost, fit.expected_cost, fit.cost_std, holdout_error(data, fit),
+                             fit.accepted, fit.cost_bound, fit.model.stability(), fit.how, fit.free_pole,
+                             fit.how == "stabilised" and on_boundary(fit))
+        again = [i for i, r in enumerate(scan) if (r.nb, r.na) == (nb, na)]  # a refit keeps its row's place
+        if again:
+            scan[again[0]] = result
+        else:
+            scan.append(result)
+        if enough is None and result.eligible and result.accepted:
             enough = nb + na
 
     for nb, na in candidate_orders(max_order):
