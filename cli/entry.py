@@ -9,7 +9,23 @@ import sys
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report an interrupted command
 
 
+def _interrupt_again(unraisable) -> None:
+    """``sys.unraisablehook``: an interrupt that lands in a finalizer or a weakref callback during a
+    garbage collection is, for Python, an exception it cannot raise: it prints "Exception ignored
+    in ... Traceback ... KeyboardInterrupt" and goes on. Delivered again, by a thread once this
+    hook has returned (raised in the hook, it would be another exception Python cannot raise), it
+    ends the command as any interrupt does (one line, exit 130); other such exceptions go to
+    Python's hook."""
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        import _thread
+
+        _thread.start_new_thread(_thread.interrupt_main, ())  # not threading's: its start() waits
+    else:
+        sys.__unraisablehook__(unraisable)
+
+
 def main() -> None:
+    sys.unraisablehook = _interrupt_again
     # One BLAS thread unless the user says otherwise: nlsid's matrix products are small or run in
     # its own worker threads, and OpenBLAS's spinning helpers cost a core for nothing (bla spent
     # twice the CPU with them, benchmarks/bla.py). Set before numpy is first imported.

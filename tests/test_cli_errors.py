@@ -139,6 +139,31 @@ def test_ctrl_c_while_writing_leaves_nothing(run_cli, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_interrupt_in_a_weakref_callback_ends_the_command():
+    """An interrupt that lands in a weakref callback during a collection is one Python cannot raise:
+    it printed "Exception ignored in ... Traceback ... KeyboardInterrupt" and the command went on
+    (seen once in test_ctrl_c_at_any_moment_of_a_real_process). The entry point's unraisable hook
+    delivers it again, so it ends the command as any interrupt does."""
+    code = "\n".join([
+        "import time, weakref",
+        "from nlsid.cli import entry",
+        "import sys",
+        "sys.unraisablehook = entry._interrupt_again",
+        "class Thing: pass",
+        "def callback(ref): raise KeyboardInterrupt",
+        "thing = Thing(); ref = weakref.ref(thing, callback)",
+        "try:",
+        "    del thing",
+        "    start = time.perf_counter()",
+        "    while time.perf_counter() - start < 5: pass",
+        "    print('went on')",
+        "except KeyboardInterrupt:",
+        "    print('interrupted')",
+    ])
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.stdout.strip() == "interrupted" and "Exception ignored" not in result.stderr, result
+
+
 @pytest.mark.parametrize("after_start", [0.0, 0.1, 0.3, 0.6])
 def test_ctrl_c_at_any_moment_of_a_real_process(tmp_path, after_start):
     """SIGINT at several moments of start-up and work: either the command finished first (exit 0, its
