@@ -226,3 +226,46 @@ def test_the_start_simulates_as_its_regression_predicts(dead_time):
     simulated = float(np.sum((steady_mean(run, run.y) - steady_mean(run, extended.simulate(run).y)) ** 2))
     assert simulated == pytest.approx(predicted, rel=1e-3)  # measured 4e-5: state-space form against lfilter
     assert simulated < 0.01 * float(np.sum(residual**2))
+
+
+@pytest.mark.slow
+def test_continuous_filters_are_refitted_at_the_step_the_circuit_needs(tmp_path):
+    """The analog circuit (wh_cases.circuit: its diode between the filters acts on the signal
+    sampled 8 times finer, so the curve's output varies within a sample) and the model of the
+    circuit's own orders in continuous time (``fit --order 2/6 --domain s``: the Chebyshev I's
+    three poles, the inverse Chebyshev's three poles and two zeros). Simulated at one sub-step, the
+    curve's output is held over each sample into the second filter, an error the filters of these
+    orders cannot absorb: measured 1.45 mV on the held-out samples (here and at the SYSID 2009
+    benchmark's size), above the issue's 1 mV for this circuit. The accuracy check
+    (nlsid/diagnose/accuracy.py) finds the step's error above a tenth of the floor and the model is
+    re-fitted at finer sub-steps (16 at most): below 1 mV (measured 0.18 mV against 0.1 mV of
+    noise, diagnose in 16 s), the summary saying which step was used."""
+    from click.testing import CliRunner
+
+    from nlsid.cli.main import cli
+
+    n, lead = 24000, 2000
+    rng = np.random.default_rng(3)
+    u = wh_cases.excitation(n + lead, rng)
+    clean, u = wh_cases.circuit(u)[lead:], u[lead:]
+    y = clean + 1e-4 * rng.standard_normal(n) + OFFSET
+    write_recording(tmp_path / "circuit.h5", [Run("circuit", wh_cases.FS, "arbitrary", u, y=y)])
+
+    def nlsid(*args):
+        result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+        assert result.exit_code == 0, result.output
+        return result.stdout
+
+    nlsid("bla", tmp_path / "circuit.h5", "-o", tmp_path / "bla.h5")
+    nlsid("fit", tmp_path / "bla.h5", "--order", "2/6", "--domain", "s", "-o", tmp_path / "linear.yaml")
+    summary = json.loads(nlsid("diagnose", "--model", tmp_path / "linear.yaml", "--data", tmp_path / "circuit.h5",
+                               "-o", tmp_path / "diagnosis", "--estimation-range", "0:16000",
+                               "--validation-range", "16000:20000", "--json"))
+    assert summary["verdict"]["winner"] == "wiener_hammerstein", summary["headline"]
+    accuracy = summary["simulation_accuracy"]
+    assert accuracy["refit"] and accuracy["substeps"] > 1, accuracy
+    extended = yaml.safe_load((tmp_path / "diagnosis" / "extended_model.yaml").read_text())
+    assert extended["simulation"]["substeps"] == accuracy["substeps"]
+    model = ModelRunner.from_data(extended, "extended_model.yaml").simulate(Run("c", wh_cases.FS, "arbitrary", u, y=y)).y
+    error = np.sqrt(np.mean((model[20000:] - clean[20000:] - OFFSET) ** 2))
+    assert error < 1e-3, error

@@ -13,12 +13,13 @@ it is measured, else the best model's validation error (``diagnose``: the final 
 Where the aim is missed, the sub-steps that reach it are N = M (change / aim)^(1/p), rounded up
 to tens (to whole sub-steps below 10); ``diagnose`` re-fits its final model at N when N <=
 MAX_SUBSTEPS (the cost of a simulation with forces grows faster than M beyond about 40) and
-otherwise says which N the data need. Models without forces are exact at one sub-step and are not
-checked. (A block structure with a curve between two continuous filters is not exact at one
-sub-step, the curve's output being held over each sample into the second filter, but its filters
-are fitted at the step it is simulated with and absorb that: on tests/wh_cases.py's analog
-circuit the diagnosed model's test error was 0.50 mV at its default one sub-step and 0.56 mV fitted
-at four, against 0.3 mV of noise; so its step is the model's, as written in its config.)
+otherwise says which N the data need. A static curve between two continuous filters
+(``wiener_hammerstein``) is checked the same way from the engine's one sub-step: at one step the
+curve's output is held over each sample into the second filter, while in the circuit it varies
+within the sample. Filters with freedom to spare absorb that (a 5/6 BLA fit split over them: 0.41
+mV of test error at one sub-step on the analog stand-in of tests/wh_cases.py), filters of the
+circuit's own orders cannot (a 2/6 fit: 1.45 mV at one sub-step, 0.18 mV re-fitted at 16,
+:func:`refit_substeps`). Other models are exact at one sub-step and are not checked.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from nlsid.io.run import Run
 
 ACCURACY = 0.1
 MAX_SUBSTEPS = 80  # re-fitted at most at this (a simulation costs ~15x that at 10); beyond, the user's choice
+STRUCTURE_SUBSTEPS = 16  # a block structure re-fitted at most at this (refit_substeps)
 DEFAULT_SUBSTEPS = 10  # the engine's default for a plant with forces (nlsid.simulate.engine)
 
 
@@ -73,9 +75,18 @@ FLOOR_TEXT = {"noise": "the noise in the averaged periods",
 
 
 def _stepped(data: dict) -> bool:
-    """The model's simulation depends on its sub-steps: continuous-time forces (module docstring)."""
+    """The model's simulation depends on its sub-steps: continuous-time forces, or a static curve
+    between two continuous filters (module docstring)."""
     model = data["model"]
+    if model.get("type") == "wiener_hammerstein":
+        return all(model[part].get("domain", "continuous") != "discrete" for part in ("first", "second"))
     return bool(model.get("nonlinearities")) and model.get("linear", {}).get("domain") != "discrete"
+
+
+def _default_substeps(data: dict) -> int:
+    """The engine's sub-steps where the config sets none: 1 for a block structure, else
+    DEFAULT_SUBSTEPS."""
+    return 1 if data["model"].get("type") == "wiener_hammerstein" else DEFAULT_SUBSTEPS
 
 
 def _ac_mean(runs: list[Run], outputs: list[np.ndarray]) -> np.ndarray:
@@ -102,12 +113,29 @@ def _rounded(substeps: float) -> int:
     return int(math.ceil(substeps)) if substeps <= 10 else int(math.ceil(substeps / 10) * 10)
 
 
+def refit_substeps(found: Accuracy, data: dict) -> int | None:
+    """The sub-steps to re-fit a model at whose step missed the aim. With forces: the ones needed,
+    or None beyond MAX_SUBSTEPS (a simulation with forces at N sub-steps costs more than N times
+    one; the note tells the user which N the data need). A static curve between two continuous
+    filters: the ones needed, at most STRUCTURE_SUBSTEPS. Its step error is of first order with a
+    large constant (the curve's output held over each sub-step into the second filter), so the
+    need is in the hundreds, while each re-fit multiplies the cost of its simulations; measured on
+    the analog stand-in of tests/wh_cases.py at the SYSID 2009 benchmark's size (needed: 90 to
+    1030): a 2/6 s fit's test error 1.45 mV at one sub-step, 0.18 mV re-fitted at 16 (35 s in
+    all), 0.31 mV at 80 (96 s); a 5/6 fit 0.41 mV at one, 0.05 mV at 80 (435 s). That stand-in
+    holds the curve's output over an eighth of a sample itself, so it cannot tell steps finer than
+    8 apart; a circuit is continuous. The note still says which N the data need."""
+    if data["model"].get("type") == "wiener_hammerstein":
+        return min(found.needed, STRUCTURE_SUBSTEPS)
+    return found.needed if found.needed <= MAX_SUBSTEPS else None
+
+
 def check(data: dict, source: str, runs: list[Run], floor_rms: float, floor_from: str = "noise") -> Accuracy | None:
     """The accuracy of the model ``data`` on ``runs`` (module docstring); None for a model exact at
     one sub-step (:func:`_stepped`) or without a floor."""
     if not _stepped(data) or not math.isfinite(floor_rms) or floor_rms <= 0:
         return None
-    m = int((data.get("simulation") or {}).get("substeps") or DEFAULT_SUBSTEPS)
+    m = int((data.get("simulation") or {}).get("substeps") or _default_substeps(data))
     y1, y2, y4 = (_outputs(data, source, runs, k * m) for k in (1, 2, 4))
     first, second = _rms(y2 - y1), _rms(y4 - y2)
     order = min(max(math.log2(first / second), 1.0), 2.0) if first > 0 and second > 0 else 1.0

@@ -585,8 +585,8 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
     """The accuracy of the final model (:mod:`nlsid.diagnose.accuracy`) against the noise where it
     is measured, else the best model's validation error.
 
-    Where the default step misses a tenth of it and the sub-steps that reach it are at most
-    :data:`accuracy.MAX_SUBSTEPS`, every scored hypothesis of the final cause's family in the round
+    Where the default step misses a tenth of it and :func:`accuracy.refit_substeps` gives the
+    sub-steps to re-fit at, every scored hypothesis of the final cause's family in the round
     that accepted it (``last``) is re-fitted at them (:func:`refit_finer`) and scored again, and
     that round's verdict is taken again: the step's error is what a richer law of one family fits
     (Coulomb named LuGre at 10 sub-steps), so the laws of the family are compared at the step the
@@ -599,8 +599,10 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
     estimation = [run for run in runs if roles.get(run.run_id) == ESTIMATION]
     floor, floor_from = _accuracy_floor(first, outcome)
     checked = accuracy.check(outcome.extended if outcome is not None else data, source, estimation, floor, floor_from)
-    if (checked is None or checked.sufficient or outcome is None or not outcome.free
-            or checked.needed > accuracy.MAX_SUBSTEPS):
+    if checked is None or checked.sufficient or outcome is None or not outcome.free:
+        return checked
+    substeps = accuracy.refit_substeps(checked, outcome.extended)
+    if substeps is None:
         return checked
     val = [res for res in last.evidence.residuals if res.role == VALIDATION]
     by_id = {run.run_id: run for run in runs}
@@ -609,7 +611,7 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
         if member.hypothesis.family == outcome.hypothesis.family and member.score is not None and member.free:
             own = member is outcome or accuracy.check(member.extended, source, estimation, floor, floor_from)
             if own is True or own is None or not own.sufficient:
-                refit_finer(member, checked.needed, estimation, source)
+                refit_finer(member, substeps, estimation, source)
                 _score(member, runner, [by_id[res.run_id] for res in val], val)
     last.outcomes.sort(key=_rank)
     last.verdict = _decide(last.evidence, last.nuisances, last.baseline, last.outcomes, val)
