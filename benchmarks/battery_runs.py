@@ -57,3 +57,10 @@ def recording(forces: list[dict], steady_periods: int = 4) -> list:
     scale = np.sqrt(np.mean(np.square(outputs))) * 10 ** (-50 / 20)
     return [dataclasses.replace(run, y=y + scale * lfilter([0.6], [1, -0.8], rng.standard_normal(y.size)))
             for run, y in zip(runs, outputs)]
+
+
+def same_chain(a: list, b: list, rtol: float) -> bool:
+    """Two diagnoses' chains ([(cause, values)]) name the same causes with values within ``rtol``."""
+    if [name for name, _ in a] != [name for name, _ in b]:
+        return False
+    return all(abs(va[k] - vb[k]) <= rtol * abs(va[k]) for (_, va), (_, vb) in zip(a, b) for k in va)

@@ -27,7 +27,7 @@ import json
 import os
 import time
 
-from battery_runs import NOMINAL, recording
+from battery_runs import NOMINAL, recording, same_chain
 
 EFFECTS = [{"type": "coulomb", "fc": 0.2}, {"type": "cubic_stiffness", "k3": 1e9}]
 
@@ -54,12 +54,6 @@ def timed(runs) -> tuple[float, list]:
     return wall, [(o.hypothesis.name, o.estimate.values) for o in result.chain]
 
 
-def same(a: list, b: list) -> bool:
-    if [name for name, _ in a] != [name for name, _ in b]:
-        return False
-    return all(abs(va[k] - vb[k]) <= 1e-6 * abs(va[k]) for (_, va), (_, vb) in zip(a, b) for k in va)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=2)
@@ -81,7 +75,7 @@ def main() -> None:
                                           if i["user_api"] == "blas"],
         "runs": len(runs), "causes": [name for name, _ in chains["one_thread"]],
         "wall_s": best, "all_wall_s": walls, "ratio_threaded_to_one_thread": best["threaded"] / best["one_thread"],
-        "same_result": same(chains["one_thread"], chains["threaded"]),
+        "same_result": same_chain(chains["one_thread"], chains["threaded"], 1e-6),
     }, indent=2))
 
 

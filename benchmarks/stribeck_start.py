@@ -27,7 +27,7 @@ import os
 import time
 
 import numpy as np
-from battery_runs import NOMINAL, recording
+from battery_runs import NOMINAL, recording, same_chain
 
 EFFECT = {"type": "stribeck", "fc": 0.2, "fs": 0.4, "vs": 0.002}
 
@@ -76,12 +76,6 @@ def timed(runs) -> tuple[float, list, float, int]:
         sum(counts)
 
 
-def same(a: list, b: list) -> bool:
-    if [name for name, _ in a] != [name for name, _ in b]:
-        return False
-    return all(abs(va[k] - vb[k]) <= 1e-3 * abs(va[k]) for (_, va), (_, vb) in zip(a, b) for k in va)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=2)
@@ -101,7 +95,7 @@ def main() -> None:
         "cores": os.cpu_count(), "runs": len(runs), "causes": [name for name, _ in chains["regressed_start"]],
         "wall_s": best, "all_wall_s": walls, "stribeck_simulations": simulations,
         "ratio_without_to_regressed_start": best["without"] / best["regressed_start"],
-        "same_result": bool(same(chains["regressed_start"], chains["without"])
+        "same_result": bool(same_chain(chains["regressed_start"], chains["without"], 1e-3)
                             and abs(20 * np.log10(errors["regressed_start"] / errors["without"])) < 0.01),
     }, indent=2))
 

@@ -74,19 +74,19 @@ FLOOR_TEXT = {"noise": "the noise in the averaged periods",
               "model": "the model's validation error (noise level unknown)"}
 
 
+def _structure(data: dict) -> bool:
+    """A static curve between two filters (the block structure the engine steps once per sample
+    unless told otherwise)."""
+    return data["model"].get("type") == "wiener_hammerstein"
+
+
 def _stepped(data: dict) -> bool:
     """The model's simulation depends on its sub-steps: continuous-time forces, or a static curve
     between two continuous filters (module docstring)."""
     model = data["model"]
-    if model.get("type") == "wiener_hammerstein":
+    if _structure(data):
         return all(model[part].get("domain", "continuous") != "discrete" for part in ("first", "second"))
     return bool(model.get("nonlinearities")) and model.get("linear", {}).get("domain") != "discrete"
-
-
-def _default_substeps(data: dict) -> int:
-    """The engine's sub-steps where the config sets none: 1 for a block structure, else
-    DEFAULT_SUBSTEPS."""
-    return 1 if data["model"].get("type") == "wiener_hammerstein" else DEFAULT_SUBSTEPS
 
 
 def _ac_mean(runs: list[Run], outputs: list[np.ndarray]) -> np.ndarray:
@@ -125,7 +125,7 @@ def refit_substeps(found: Accuracy, data: dict) -> int | None:
     all), 0.31 mV at 80 (96 s); a 5/6 fit 0.41 mV at one, 0.05 mV at 80 (435 s). That stand-in
     holds the curve's output over an eighth of a sample itself, so it cannot tell steps finer than
     8 apart; a circuit is continuous. The note still says which N the data need."""
-    if data["model"].get("type") == "wiener_hammerstein":
+    if _structure(data):
         return min(found.needed, STRUCTURE_SUBSTEPS)
     return found.needed if found.needed <= MAX_SUBSTEPS else None
 
@@ -135,7 +135,7 @@ def check(data: dict, source: str, runs: list[Run], floor_rms: float, floor_from
     one sub-step (:func:`_stepped`) or without a floor."""
     if not _stepped(data) or not math.isfinite(floor_rms) or floor_rms <= 0:
         return None
-    m = int((data.get("simulation") or {}).get("substeps") or _default_substeps(data))
+    m = int((data.get("simulation") or {}).get("substeps") or (1 if _structure(data) else DEFAULT_SUBSTEPS))
     y1, y2, y4 = (_outputs(data, source, runs, k * m) for k in (1, 2, 4))
     first, second = _rms(y2 - y1), _rms(y4 - y2)
     order = min(max(math.log2(first / second), 1.0), 2.0) if first > 0 and second > 0 else 1.0

@@ -459,9 +459,10 @@ def _numerator_for(basis: _Basis, a: np.ndarray, weight: np.ndarray) -> np.ndarr
     full = basis.full_denominator(a)
     columns = []
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # None below, not warnings
+        denominator = basis.powers[:, : full.size] @ full if basis.domain == "z" else None
         for i in range(basis.nb + 1):
             if basis.domain == "z":
-                column = basis.powers[:, i] / (basis.powers[:, : full.size] @ full)
+                column = basis.powers[:, i] / denominator
             else:
                 unit = np.zeros(basis.nb + 1)
                 unit[i] = 1.0

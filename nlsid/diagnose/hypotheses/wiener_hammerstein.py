@@ -178,7 +178,7 @@ def separable(ctx: Context, start: Candidate, curve, y: np.ndarray, steps: int) 
     sampling zeros of a zero-order-hold equivalent: on the circuit of tests/wh_cases.py the
     BLA's fit puts the first filter's zeros, -3.10 and -0.23, into the product's, and with them held
     at the origin the search ended with its real pole 5 % low, at 2614 instead of 2756 Hz, and
-    2.9x the residual; test error 0.93 -> 0.40 mV at the benchmark's size). Poles at the origin
+    2.9x the residual; test error 0.93 -> 0.39 mV at the benchmark's size). Poles at the origin
     stay (moved, they add an order to the filter). An unstable trial filter, or one whose
     regressors overflow, gets a residual of 10 rms(y) everywhere, a step the method rejects."""
     from scipy.optimize import least_squares
