@@ -137,7 +137,8 @@ def import_file(path: str | Path, options: ImportOptions) -> Imported:
     level = _shared_level([inference for _, _, inference in inferred])
     realization = 0
     for record, driver, inference in inferred:
-        runs = _runs(record, inference, options.transient_periods, f"{path}:{record.name}", realization, level)
+        runs = _runs(record, inference, options.transient_periods, f"{path}:{record.name}", realization, level,
+                     source.units)
         realization += len(runs)
         if level is not None:
             numbers = ", ".join(str(run.realization) for run in runs)
@@ -174,12 +175,13 @@ def _shared_level(inferences: list[Inference]) -> float | None:
 
 
 def _runs(record: Record, inference: Inference, extra_transient: int, where: str, first_realization: int = 0,
-          level: float | None = None) -> list[Run]:
+          level: float | None = None, units: dict[str, str] | None = None) -> list[Run]:
     """The runs of one record: one per realization (numbered from ``first_realization``; ``level``
     replaces the record's own level), or one arbitrary run."""
     signals = record.signals
+    units = units or {}
     if inference.kind == "arbitrary":
-        return [_make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where)]
+        return [_make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where, units)]
     period = inference.period
     runs = []
     several = len(inference.realizations) > 1
@@ -196,15 +198,18 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
             attrs["realization"] = first_realization + index
         run_id = f"{record.name}_m{index:02d}" if several else record.name
         cut = {name: x[real.start:real.stop(period)] for name, x in signals.items()}
-        runs.append(_make_run(run_id, attrs, cut, f"{where}/{run_id}"))
+        runs.append(_make_run(run_id, attrs, cut, f"{where}/{run_id}", units))
     return runs
 
 
-def _make_run(run_id: str, attrs: dict, arrays: dict[str, np.ndarray], where: str) -> Run:
-    """A run of the signals and (keys ``channels.NAME``) channels in ``arrays``."""
+def _make_run(run_id: str, attrs: dict, arrays: dict[str, np.ndarray], where: str, units: dict[str, str]) -> Run:
+    """A run of the signals and (keys ``channels.NAME``) channels in ``arrays``, with their ``units``
+    (same keys)."""
     channels = {key[len(CHANNEL_KEY):]: x for key, x in arrays.items() if key.startswith(CHANNEL_KEY)}
     signals = {key: x for key, x in arrays.items() if not key.startswith(CHANNEL_KEY)}
-    return make_run(run_id, attrs, signals, where, require_y=False, channels=channels)
+    run_units = {(key[len(CHANNEL_KEY):] if key.startswith(CHANNEL_KEY) else key): unit
+                 for key, unit in units.items() if key in arrays}
+    return make_run(run_id, attrs, signals, where, require_y=False, units=run_units, channels=channels)
 
 
 def describe_overrides(options: ImportOptions) -> dict:

@@ -54,7 +54,8 @@ def pick(wanted: dict[str, str], optional: set[str], read: Callable[[str, str], 
 
 @dataclass
 class Source:
-    """Arrays read from a foreign file: ``arrays`` by signal name, ``where`` names each one's origin."""
+    """Arrays read from a foreign file: ``arrays`` by signal name, ``where`` names each one's origin,
+    ``units`` the unit of a signal where the file or the user gives one (signal key -> unit text)."""
 
     path: str
     format: str
@@ -65,6 +66,7 @@ class Source:
     time: np.ndarray | None = None
     time_where: str | None = None
     details: dict = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
