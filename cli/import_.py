@@ -10,7 +10,7 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 
 
 @click.command("import", cls=StageCommand)
-@click.argument("source", type=click.Path(dir_okay=False))
+@click.argument("sources", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Recording to write (.h5 or .mcap).")
 @click.option("--u", "u", metavar="NAME", help="Input: CSV column (header or number from 1), MAT variable (struct.field), "
                                                 "HDF5 dataset path, or MCAP /topic:field. Default: u.")
@@ -28,14 +28,23 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
               help="Split back-to-back realizations into runs (else such a record is imported as arbitrary).")
 @click.option("--matrix", "layout", type=click.Choice(["realizations", "periods"]), default="realizations", show_default=True,
               help="What the records of a matrix are: separate realizations, or consecutive periods of one.")
+@click.option("--unit", "units", metavar="NAME=UNIT", multiple=True,
+              help="Unit of a signal or channel (u=N, y=m, d=N); overrides a unit in the file's header. Repeatable.")
+@click.option("--range", "crop", metavar="A:B", help="Keep samples A..B-1 of each record (a Python slice; either end may be left out).")
+@click.option("--decimate", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Keep every K-th sample, after an anti-alias low-pass (stated in the output).")
 @click.option("--format", "fmt", type=click.Choice(["csv", "mat", "hdf5", "mcap"]), help="Source format (default: from the file).")
 @force_option
 @json_option
-def import_(source: str, output: str, u: str | None, y: str | None, r: str | None, channels: tuple[str, ...],
+def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None, r: str | None, channels: tuple[str, ...],
             time: str | None, fs: float | None,
-            period: int | None, transient_periods: int, split: bool, layout: str, fmt: str | None, force: bool,
-            as_json: bool) -> None:
+            period: int | None, transient_periods: int, split: bool, layout: str, units: tuple[str, ...],
+            crop: str | None, decimate: int, fmt: str | None, force: bool, as_json: bool) -> None:
     """Import measured data from CSV/TSV, MATLAB .mat, plain HDF5 or foreign MCAP files.
+
+    Several SOURCES: one experiment per file when every file holds every signal (levels, repeats),
+    else each signal is looked up across the files (u in one, y in another), moved onto u's clock
+    when the files were logged on different clocks.
 
     When the file says nothing about the excitation, its period, lead-in, realizations, excited
     lines and grid (or single-sine frequency) are inferred from the input (from r when given) and
@@ -49,26 +58,30 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
       nlsid import old_toolbox.mat --u data.u --y data.y --fs 2048 -o recording.h5
       nlsid import log.mcap --u /cmd:effort --y /joint_states:position -o recording.h5
       nlsid import rig.csv --u u --y y --channel d=force -o recording.h5
+      nlsid import uval.mat yval.mat --fs 610.35 -o recording.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.io.importers.convert import ImportOptions, import_file, provenance_record
     from nlsid.io.provenance import provenance
+    from nlsid.io.ranges import parse_range
     from nlsid.io.recording import write_recording
 
     check_suffix(output, RECORDING_SUFFIXES)
     check_writable(output, force)
     names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
     options = ImportOptions(names=names, channels=_channels(channels), time=time, fs=fs, period=period, transient_periods=transient_periods,
-                            split=split, layout=layout, format=fmt)
-    imported = import_file(source, options)
-    record = provenance(input_paths=[source])
+                            split=split, layout=layout, format=fmt, units=_pairs(units, "--unit", "UNIT", "u=N"),
+                            crop=parse_range(crop, "--range"), decimate=decimate)
+    imported = import_file(list(sources), options)
+    record = provenance(input_paths=list(sources))
     record["import"] = provenance_record(imported, options)
     write_recording(output, imported.runs, provenance=record, force=force)
     summary = {
-        "output": output, "source": source, "format": imported.source.format, "fs": imported.fs,
+        "output": output, "source": sources[0], "sources": list(sources), "format": imported.source.format, "fs": imported.fs,
         "fs_from": imported.fs_from, "signals": sorted(set(imported.source.arrays) & {"u", "y", "r"}),
         "channels": sorted(options.channels), "records": imported.records,
         "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
+        "notes": imported.notes, "units": _run_units(imported.runs),
     }
     if as_json:
         emit_json(summary)
@@ -78,15 +91,26 @@ def import_(source: str, output: str, u: str | None, y: str | None, r: str | Non
 
 def _channels(items: tuple[str, ...]) -> dict[str, str]:
     """``--channel d=force`` options as ``{"d": "force"}`` (names are checked by the importer)."""
+    return _pairs(items, "--channel", "SOURCE", "d=force")
+
+
+def _pairs(items: tuple[str, ...], option: str, value_name: str, example: str) -> dict[str, str]:
+    """Repeated ``NAME=VALUE`` options as a dict; a name given twice is refused."""
     out: dict[str, str] = {}
     for item in items:
-        name, sep, where = item.partition("=")
-        if not sep or not name or not where:
-            raise InputError("--channel", f"expected NAME=SOURCE (e.g. d=force), got {item!r}")
+        name, sep, value = item.partition("=")
+        if not sep or not name or not value:
+            raise InputError(option, f"expected NAME={value_name} (e.g. {example}), got {item!r}")
         if name in out:
-            raise InputError("--channel", f"channel {name} is given twice")
-        out[name] = where
+            raise InputError(option, f"{option.lstrip('-')} {name} is given twice")
+        out[name] = value
     return out
+
+
+def _run_units(runs) -> dict[str, str]:
+    from nlsid.io.units import common_units
+
+    return common_units(run.units for run in runs)
 
 
 def _print(summary: dict) -> None:
@@ -94,6 +118,8 @@ def _print(summary: dict) -> None:
     channels = f", channels {', '.join(summary['channels'])}" if summary["channels"] else ""
     console.print(f"{summary['source']} ({summary['format']}, fs = {summary['fs']:.9g} Hz from {summary['fs_from']}, "
                   f"signals {', '.join(summary['signals'])}{channels}) -> {summary['output']}: {summary['runs']} run(s)")
+    for note in summary["notes"]:
+        console.print(f"  - {note}")
     for record in summary["records"]:
         inf = record["inference"]
         console.print(f"  {record['record']}: {_headline(inf)} (inferred from {record['inferred_from']})")

@@ -11,13 +11,16 @@ numbered across all records, so ``nlsid bla`` takes them as M realizations of th
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
 from nlsid.io.importers.source import LAYOUTS, Record, Source, records_of
+from nlsid.io.ranges import SampleRange
 from nlsid.io.run import CHANNEL_KEY, Run, check_channel_name, make_run
 from nlsid.signals.inference import Inference, infer_excitation
 
@@ -32,7 +35,10 @@ SHARED_LEVEL_TOL = 0.01  # records whose levels agree this closely (relative) ar
 @dataclass(frozen=True)
 class ImportOptions:
     """What the user selected or overrode (``None``: infer it). ``channels``: channel name -> its
-    name in the file (like ``names`` of u, y, r)."""
+    name in the file (like ``names`` of u, y, r); ``units``: signal or channel name -> its unit
+    (overrides a unit the file gives); ``crop``: the samples of each source record kept (before
+    decimation); ``decimate``: keep every K-th sample after an anti-alias filter
+    (:mod:`nlsid.io.importers.resample`)."""
 
     names: dict[str, str]
     channels: dict[str, str] = field(default_factory=dict)
@@ -43,17 +49,24 @@ class ImportOptions:
     split: bool = True
     layout: str = "realizations"
     format: str | None = None
+    units: dict[str, str] = field(default_factory=dict)
+    crop: SampleRange | None = None
+    decimate: int = 1
 
 
 @dataclass
 class Imported:
-    """The runs to write, and per record what was inferred."""
+    """The runs to write, per record what was inferred, and what was done to the samples on the way
+    (``notes``: files joined or moved onto one clock, cropped, decimated). ``sources`` holds every
+    file read (``source`` is the first, or the files' signals joined)."""
 
     source: Source
     fs: float
     fs_from: str
     runs: list[Run] = field(default_factory=list)
     records: list[dict] = field(default_factory=list)
+    sources: list[Source] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 def detect_format(path: Path) -> str:
@@ -77,8 +90,9 @@ def detect_format(path: Path) -> str:
                                 "or .mcap (or name it with --format)")
 
 
-def read_source(path: Path, options: ImportOptions) -> Source:
-    """Read the selected signals with the reader of the file's format."""
+def read_source(path: Path, options: ImportOptions, every_signal_optional: bool = False) -> Source:
+    """Read the selected signals with the reader of the file's format (with ``every_signal_optional``,
+    those the file holds: one of several files)."""
     fmt = options.format or detect_format(path)
     names = dict(options.names)
     optional: set[str] = set()
@@ -94,6 +108,8 @@ def read_source(path: Path, options: ImportOptions) -> Source:
                 names[key] = key
                 if key != "u":
                     optional.add(key)
+    if every_signal_optional:
+        optional |= set(names)
     if fmt == "csv":
         from nlsid.io.importers.csv_file import read_csv
 
@@ -114,17 +130,35 @@ def read_source(path: Path, options: ImportOptions) -> Source:
         if source.fs is not None:
             source.details["overridden_fs"] = {"value": source.fs, "from": source.fs_from}
         source.fs, source.fs_from = options.fs, "--fs"
+    source.units.update({_unit_key(name, source): unit for name, unit in options.units.items()})
     return source
 
 
-def import_file(path: str | Path, options: ImportOptions) -> Imported:
-    """Read, infer and cut ``path`` into validated runs (nothing is written)."""
-    path = Path(path)
+def _unit_key(name: str, source: Source) -> str:
+    """The signal key of a ``--unit NAME=UNIT``: u, y, r, or ``channels.NAME``."""
+    return name if name in ("u", "y", "r") else CHANNEL_KEY + name
+
+
+def check_units(units: dict[str, str], options: ImportOptions) -> None:
+    """``--unit NAME=UNIT`` must name a signal or channel of the import."""
+    for name, unit in units.items():
+        if name not in ("u", "y", "r") and name not in options.channels:
+            raise InputError(f"--unit {name}={unit}", f"{name} is not a signal (u, y, r) nor a --channel of this import")
+        if not unit.strip() or not unit.isprintable():
+            raise InputError(f"--unit {name}={unit}", "expected a unit text such as N, m/s^2 or V")
+
+
+def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions) -> Imported:
+    """Read, infer and cut ``path`` (a file, or several: :mod:`nlsid.io.importers.several`) into
+    validated runs (nothing is written)."""
+    paths = [Path(path)] if isinstance(path, (str, Path)) else [Path(p) for p in path]
+    if not paths:
+        raise InputError("SOURCE", "no file to import")
     if options.layout not in LAYOUTS:
         raise InputError("--matrix", f"expected one of {', '.join(LAYOUTS)}, got {options.layout!r}")
-    source = read_source(path, options)
-    records, fs, fs_from = records_of(source, options.layout)
-    out = Imported(source=source, fs=fs, fs_from=fs_from)
+    check_units(options.units, options)
+    out, records, origin = _read_records(paths, options)
+    source, fs = out.source, out.fs
     inferred = []
     for record in records:
         period = _period(record, options)
@@ -137,8 +171,8 @@ def import_file(path: str | Path, options: ImportOptions) -> Imported:
     level = _shared_level([inference for _, _, inference in inferred])
     realization = 0
     for record, driver, inference in inferred:
-        runs = _runs(record, inference, options.transient_periods, f"{path}:{record.name}", realization, level,
-                     source.units)
+        runs = _runs(record, inference, options.transient_periods, f"{origin[record.name]}:{record.name}", realization,
+                     level, source.units)
         realization += len(runs)
         if level is not None:
             numbers = ", ".join(str(run.realization) for run in runs)
@@ -148,6 +182,80 @@ def import_file(path: str | Path, options: ImportOptions) -> Imported:
         out.records.append({"record": record.name, "inferred_from": driver, "inference": inference.report(),
                             "runs": [run.run_id for run in runs]})
     return out
+
+
+def _read_records(paths: list[Path], options: ImportOptions) -> tuple[Imported, list[Record], dict[str, str]]:
+    """The records of every file, cropped and decimated as asked, with the file each came from."""
+    notes: list[str] = []
+    if len(paths) == 1:
+        sources = groups = [read_source(paths[0], options)]
+    else:
+        distinct_paths(paths)
+        sources = [read_source(path, options, every_signal_optional=True) for path in paths]
+        if spread(sources):
+            merged, notes = merge(sources)
+            groups = [merged]
+        else:
+            groups = sources
+            notes.append(f"{len(sources)} files, each with every signal: one experiment per file, records named "
+                         "after the files and numbered together")
+    records: list[Record] = []
+    origin: dict[str, str] = {}
+    rates: list[tuple[float, str]] = []
+    for group, stem in zip(groups, unique_stems(groups)):
+        found, fs, fs_from = records_of(group, options.layout)
+        old = Path(group.path).stem or "record"
+        for record in found:
+            record = replace(record, name=stem + record.name[len(old):])
+            records.append(record)
+            origin[record.name] = group.path
+        rates.append((fs, fs_from))
+    fs, fs_from = rates[0]
+    for other, other_from in rates[1:]:
+        if abs(other / fs - 1) > SAME_RATE_TOL:
+            raise InputError(", ".join(g.path for g in groups), f"the files have different sample rates ({fs:.9g} Hz from "
+                                                               f"{fs_from}, {other:.9g} Hz from {other_from}): one "
+                                                               "recording holds one rate; import them separately")
+    records, fs, trimmed = _trimmed(records, fs, options)
+    fs_from = fs_from if options.decimate == 1 else f"{fs_from}, decimated by {options.decimate}"
+    out = Imported(source=groups[0], fs=fs, fs_from=fs_from, sources=sources, notes=notes + trimmed)
+    return out, records, origin
+
+
+def _trimmed(records: list[Record], fs: float, options: ImportOptions) -> tuple[list[Record], float, list[str]]:
+    """``records`` cropped to ``options.crop`` and decimated by ``options.decimate``, with notes."""
+    notes = []
+    if options.crop is not None:
+        cut = []
+        for record in records:
+            a, b = options.crop.bounds(next(iter(record.signals.values())).size, f"{options.crop.option} ({record.name})")
+            cut.append(replace(record, signals={k: v[a:b] for k, v in record.signals.items()}))
+        records = cut
+        notes.append(f"{options.crop.option} {options.crop.text}: samples {a}..{b - 1} of each record kept")
+    if options.decimate > 1:
+        from nlsid.io.importers.resample import anti_alias, decimate, edge_samples
+
+        k = options.decimate
+        fir = anti_alias(k)
+        edge = edge_samples(k, fir)
+        reduced = []
+        for record in records:
+            n = next(iter(record.signals.values())).size
+            if n // k <= 2 * edge + 1:
+                raise InputError(f"--decimate {k}", f"record {record.name} has {n} samples; decimation by {k} drops "
+                                                    f"{edge} decimated samples at each end (the anti-alias filter's "
+                                                    f"reach), which leaves too few")
+            if record.period is not None and record.period % k:
+                raise InputError(f"--decimate {k}", f"the period of --matrix periods, {record.period} samples, is not "
+                                                    f"a multiple of {k}")
+            signals = {key: decimate(x, k, fir)[edge:-edge] for key, x in record.signals.items()}
+            reduced.append(replace(record, signals=signals, period=None if record.period is None else record.period // k))
+        records = reduced
+        notes.append(f"decimated by {k}: fs {fs:.9g} -> {fs / k:.9g} Hz, every signal through one {fir.describe()}; "
+                     f"{edge} samples at each end of every record dropped (the filter reaches past the record there); "
+                     "a periodic record stays periodic only if its period is a multiple of the factor")
+        fs = fs / k
+    return records, fs, notes
 
 
 def _period(record: Record, options: ImportOptions) -> int | None:
@@ -225,6 +333,12 @@ def describe_overrides(options: ImportOptions) -> dict:
         out["split_realizations"] = False
     if options.layout != "realizations":
         out["matrix"] = options.layout
+    if options.units:
+        out["units"] = dict(options.units)
+    if options.crop is not None:
+        out["range"] = options.crop.text
+    if options.decimate > 1:
+        out["decimate"] = options.decimate
     return out
 
 
@@ -233,10 +347,15 @@ def provenance_record(imported: Imported, options: ImportOptions) -> dict:
     from nlsid.io.provenance import file_sha256
 
     source = imported.source
-    return {
+    out = {
         "source": source.path, "sha256": file_sha256(source.path), "format": source.format,
         "signals": {name: source.where[name] for name in source.arrays},
         "fs": imported.fs, "fs_from": imported.fs_from, "details": source.details,
-        "overridden": describe_overrides(options), "records": imported.records,
+        "overridden": describe_overrides(options), "records": imported.records, "notes": imported.notes,
+        "units": {name: unit for name, unit in source.units.items()},
     }
+    if len(imported.sources) > 1:
+        out["sources"] = [{"source": s.path, "sha256": file_sha256(s.path), "format": s.format,
+                           "signals": {name: s.where[name] for name in s.arrays}} for s in imported.sources]
+    return out
 
