@@ -68,14 +68,14 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
                                                        on_run=lambda run: (step(), units_seen.append(run.units)),
                                                        source=recording,
                                                        lpm_half_width=lpm_lines // 2, lpm_degree=lpm_degree)
-    across = across_levels(levels) if levels else {"reference_level": None, "levels": []}
+    across = across_levels(levels)
     units = common_units(units_seen)
     figures = {}
     if plot_dir is not None:
         from nlsid.report.bla_plots import render_figures
         from nlsid.report.units import Units
 
-        figures = render_figures(levels, Units(units))
+        figures = render_figures(levels, Units(units), lpm_levels)
         plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)

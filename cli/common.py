@@ -181,8 +181,25 @@ class StageCommand(click.Command):
     """
 
     def invoke(self, ctx: click.Context):
+        check_finite(self, ctx)
         check_outputs(self, ctx.params)
         return super().invoke(ctx)
+
+
+def check_finite(command: click.Command, ctx: click.Context) -> None:
+    """Every number option of ``command`` (``--fs``, ``--confidence``, the ``--fail-if`` thresholds)
+    is finite: click reads ``nan``, ``inf`` and ``1e400`` as floats, and a NaN passes every range
+    check (each comparison is false), so the value would reach the computation and fail there
+    without naming the option."""
+    import math
+
+    for param in command.params:
+        value = ctx.params.get(param.name)
+        if not isinstance(param.type, click.types.FloatParamType) or value is None:
+            continue
+        for item in value if isinstance(value, (tuple, list)) else (value,):
+            if not math.isfinite(item):
+                raise click.BadParameter(f"expected a finite number, got {item}", ctx=ctx, param=param)
 
 
 def check_outputs(command: click.Command, params: dict) -> None:

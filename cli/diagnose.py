@@ -57,16 +57,18 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     from nlsid.diagnose.hypotheses import LIBRARY
     from nlsid.io.config import load_yaml
     from nlsid.io.diagnosis_file import extended_yaml, write_diagnosis
+    from nlsid.io.model_config import validate_simulate_config
     from nlsid.io.provenance import provenance
     from nlsid.io.recording import read_runs
     from nlsid.io.units import common_units
     from nlsid.simulate.threads import default_threads
 
-    data, _ = load_yaml(model_path)
+    data, lines = load_yaml(model_path)
     if not isinstance(data, dict):
         from nlsid.errors import InputError
 
         raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
+    validate_simulate_config(data, model_path, lines)  # here, where a refused key's line is known
     estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping))
     runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
     with progress("diagnose", len(LIBRARY) + 2) as step, default_threads(workers):  # evidence, nuisances, each hypothesis

@@ -127,7 +127,7 @@ class _LevelAccumulator:
         self.probability = probability
         self.run_ids: list[str] = []
         self.rms2 = 0.0
-        self.robust = RobustAccumulator(self.lines.excited, robust_method)
+        self.robust = RobustAccumulator(self.lines.excited, robust_method, self.lines.period)
         self.fast = FastAccumulator()
         self.spectrum = SpectrumAccumulator(self.lines.period // 2 + 1)
 
@@ -272,7 +272,10 @@ def across_levels(levels: list[LevelResult]) -> dict:
     Per level: the rms input, the band-mean |G_BLA|^2 (dB), the band-mean nonlinear and noise
     variances relative to it (dB), and, for levels that excite the same lines as the lowest level,
     the mean and the largest change of |G_BLA| relative to that level (dB, 20 log10 of the ratio).
+    Without multisine levels (a recording of arbitrary runs only) there is no reference level and no row.
     """
+    if not levels:
+        return {"reference_level": None, "levels": []}
     reference = levels[0]
     rows = []
     for level in levels:

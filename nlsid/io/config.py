@@ -201,6 +201,9 @@ def _message(error: dict) -> str:
     if kind in ("too_short", "too_long"):
         return f"expected {'at least' if kind == 'too_short' else 'at most'} " \
                f"{ctx.get('min_length', ctx.get('max_length'))} items, got {ctx.get('actual_length')}"
+    if kind == "finite_number":  # written as YAML spells it
+        spelled = ".nan" if value != value else ".inf" if value > 0 else "-.inf"
+        return f"expected a finite number, got {spelled}"
     if kind == "value_error":
         return str(ctx.get("error", error["msg"]))
     return error["msg"]

@@ -13,19 +13,30 @@ system of the book's Exercise 79, Eq. 5-12) and a cubic stiffness may be negativ
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, ClassVar, Literal, Optional, Union
 
-from pydantic import Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
 from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
+
+
+class FiniteModel(StrictModel):
+    """Base of every block of a model config: each number is finite. YAML's ``.nan``, ``.inf`` and
+    ``-.inf`` are refused at the key that holds them (with its line), wherever the number sits (a
+    coefficient, a root, a matrix entry, a gain, an initial state, a sweep value): past the loader a
+    non-finite coefficient ends in a failed root finding or a diverged simulation that names no key.
+    Only the bounds of a ``free`` parameter may be infinite (an infinite bound is no bound)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
 
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
 Domain = Literal["continuous", "discrete"]
 
 
-class _LTIBase(StrictModel):
+class _LTIBase(FiniteModel):
     domain: Domain = "continuous"
     delay: NonNegative = 0.0  # dead time in seconds, a whole number of samples at the run's fs
 
@@ -38,7 +49,7 @@ class TransferFunctionConfig(_LTIBase):
     den: list[float] = Field(min_length=1)
 
 
-class ModeRoots(StrictModel):
+class ModeRoots(FiniteModel):
     """A pair of roots given as a mode of natural ``frequency`` f (Hz) and ``damping`` ratio zeta:
     the roots of s^2 + 2 zeta w s + w^2, w = 2 pi f (a conjugate pair for zeta < 1, two real
     roots from zeta = 1 on). In a zpk it enters as the factor (s^2 + 2 zeta w s + w^2) / w^2, of
@@ -89,14 +100,14 @@ class StateSpaceConfig(_LTIBase):
 LTIConfig = Annotated[Union[TransferFunctionConfig, ZPKConfig, StateSpaceConfig], Field(discriminator="type")]
 
 
-class PolynomialConfig(StrictModel):
+class PolynomialConfig(FiniteModel):
     """y = sum_p coefficients[p] x^p, p = 0, 1, 2, ... (any degree, odd and even terms)."""
 
     type: Literal["polynomial"]
     coefficients: list[float] = Field(min_length=1)
 
 
-class SaturationConfig(StrictModel):
+class SaturationConfig(FiniteModel):
     type: Literal["saturation"]
     lower: float
     upper: float
@@ -108,13 +119,13 @@ class SaturationConfig(StrictModel):
         return self
 
 
-class DeadzoneConfig(StrictModel):
+class DeadzoneConfig(FiniteModel):
     type: Literal["deadzone"]
     lower: float = Field(le=0)
     upper: float = Field(ge=0)
 
 
-class PiecewiseLinearConfig(StrictModel):
+class PiecewiseLinearConfig(FiniteModel):
     """Straight lines through (x[i], y[i]), extended beyond the ends by the end segments."""
 
     type: Literal["piecewise_linear"]
@@ -130,7 +141,7 @@ class PiecewiseLinearConfig(StrictModel):
         return self
 
 
-class BacklashConfig(StrictModel):
+class BacklashConfig(FiniteModel):
     """Play operator: the output stays until the input is more than width/2 away from it."""
 
     type: Literal["backlash"]
@@ -143,7 +154,7 @@ BlockConfig = Annotated[
 ]
 
 
-class _Offsets(StrictModel):
+class _Offsets(FiniteModel):
     """Converter offsets of every model: the plant gets u + ``input_offset`` (a DAC or actuator
     offset; the recorded u stays the command) and the recorded y is the model output +
     ``output_offset`` (a sensor offset, seen by a controller too). ``input_channels`` adds measured
@@ -195,7 +206,7 @@ def _check_sides(config, name: str, required: bool) -> None:
         raise ValueError(f"give {name}, or {name}_pos and {name}_neg")
 
 
-class _SidedFriction(StrictModel):
+class _SidedFriction(FiniteModel):
     """Friction whose levels may differ by direction (``docs/configs.md``, Nonlinear forces)."""
 
     SIDED: ClassVar[tuple[tuple[str, bool], ...]] = ()  # (quantity, required); not required: 0 if not given
@@ -216,7 +227,7 @@ class _SidedFriction(StrictModel):
         return (0.0, 0.0) if pos is None else (float(pos), float(neg))
 
 
-class _Levels(StrictModel):
+class _Levels(FiniteModel):
     """The Coulomb level, symmetric or per direction."""
 
     fc: Optional[Positive] = None
@@ -224,7 +235,7 @@ class _Levels(StrictModel):
     fc_neg: Optional[Positive] = None
 
 
-class _BreakAway(StrictModel):
+class _BreakAway(FiniteModel):
     """Stribeck's break-away force, symmetric or per direction."""
 
     fs: Optional[Positive] = None
@@ -232,7 +243,7 @@ class _BreakAway(StrictModel):
     fs_neg: Optional[Positive] = None
 
 
-class _Viscous(StrictModel):
+class _Viscous(FiniteModel):
     """The viscous coefficient, symmetric or per direction; 0 when none is given."""
 
     fv: Optional[NonNegative] = None
@@ -275,7 +286,7 @@ class LuGreConfig(_SidedFriction, _Levels, _BreakAway):
     at: Optional[str] = None
 
 
-class CubicStiffnessConfig(StrictModel):
+class CubicStiffnessConfig(FiniteModel):
     """Cubic spring force F = k3 x^3 on the position of mass ``at`` (k3 > 0 hardening, < 0 softening)."""
 
     type: Literal["cubic_stiffness"]
@@ -290,7 +301,7 @@ class CubicStiffnessConfig(StrictModel):
         return value
 
 
-class PolynomialStiffnessConfig(StrictModel):
+class PolynomialStiffnessConfig(FiniteModel):
     """Polynomial spring force F = k2 x^2 + k3 x^3 + ... + k10 x^10 on the position of mass ``at``:
     the terms given (each 0 when not), at least one nonzero. An even term makes the spring
     asymmetric (k2 > 0: stiffer for x > 0), an odd one hardening (> 0) or softening (< 0); the
@@ -326,7 +337,7 @@ ForceConfig = Annotated[
 ]
 
 
-class InitialState(StrictModel):
+class InitialState(FiniteModel):
     position: float = 0.0
     velocity: float = 0.0
 
@@ -397,7 +408,7 @@ class WienerHammersteinConfig(_Offsets):
     second: LTIConfig
 
 
-class BranchConfig(StrictModel):
+class BranchConfig(FiniteModel):
     """One branch G-(.) -> rho -> G+(.) of the parallel LPL structure (seed 002, Definition 1)."""
 
     before: Optional[LTIConfig] = None
@@ -419,7 +430,7 @@ ModelConfig = Annotated[
 ]
 
 
-class PIDConfig(StrictModel):
+class PIDConfig(FiniteModel):
     """C(s) = kp + ki/s + kd s / (tau s + 1): P (ki = kd = 0), PD, PI or PID with derivative filter."""
 
     type: Literal["pid"]
@@ -440,7 +451,7 @@ LinearControllerConfig = Annotated[
 ]
 
 
-class CascadeConfig(StrictModel):
+class CascadeConfig(FiniteModel):
     """A position loop inside a velocity loop, as a drive computes it:
     u = C_v(C_p(e) - v_hat), e = r - y, v_hat a causal difference of the measured y:
     ``backward`` (y[k] - y[k-1]) fs, ``two_tap`` (y[k] - y[k-2]) fs / 2."""
@@ -456,14 +467,14 @@ ControllerConfig = Annotated[
 ]
 
 
-class FeedforwardConfig(StrictModel):
+class FeedforwardConfig(FiniteModel):
     """u_ff = coulomb * sign(r') + velocity * r' (seed 003, Fig. 1: K_fc = coulomb); signed gains."""
 
     coulomb: float = 0.0
     velocity: float = 0.0
 
 
-class ClosedLoopConfig(StrictModel):
+class ClosedLoopConfig(FiniteModel):
     """u[k] = C(e)[k] - M(y)[k] + u_ff[k], e = F(r) - y, applied after ``computation_delay`` samples."""
 
     controller: ControllerConfig               # on the error e
@@ -480,7 +491,7 @@ class ClosedLoopConfig(StrictModel):
         return self
 
 
-class DisturbancesConfig(StrictModel):
+class DisturbancesConfig(FiniteModel):
     """White Gaussian noise, standard deviations in the units of the signal they are added to."""
 
     u_noise: NonNegative = 0.0
@@ -489,13 +500,13 @@ class DisturbancesConfig(StrictModel):
     seed: Optional[Annotated[int, Field(ge=0)]] = None
 
 
-class LinspaceConfig(StrictModel):
+class LinspaceConfig(FiniteModel):
     start: float
     stop: float
     num: Annotated[int, Field(ge=1)]
 
 
-class SweepConfig(StrictModel):
+class SweepConfig(FiniteModel):
     """One run per value of the config key ``parameter`` (a dotted path such as closed_loop.feedforward.coulomb)."""
 
     parameter: str = Field(min_length=1)
@@ -510,17 +521,24 @@ class SweepConfig(StrictModel):
         return self
 
 
-class SimulationConfig(StrictModel):
+class SimulationConfig(FiniteModel):
     substeps: Optional[Annotated[int, Field(ge=1)]] = None
 
 
-class FreeParameterConfig(StrictModel):
+class FreeParameterConfig(FiniteModel):
     """A config value that ``nlsid fit --model`` estimates: start value (default: the value written
     at its key path) and bounds (default: unbounded)."""
 
     start: Optional[float] = None
-    lower: Optional[float] = None
-    upper: Optional[float] = None
+    lower: Optional[Annotated[float, Field(allow_inf_nan=True)]] = None  # -.inf: no bound, as when left out
+    upper: Optional[Annotated[float, Field(allow_inf_nan=True)]] = None  # .inf: no bound
+
+    @field_validator("lower", "upper")
+    @classmethod
+    def _not_nan(cls, value: Optional[float]) -> Optional[float]:
+        if value is not None and math.isnan(value):
+            raise ValueError("expected a number (or .inf / -.inf for no bound), got .nan")
+        return value
 
     @model_validator(mode="after")
     def _bounds(self):
@@ -533,7 +551,7 @@ class FreeParameterConfig(StrictModel):
         return self
 
 
-class SimulateConfig(StrictModel):
+class SimulateConfig(FiniteModel):
     """The whole model / simulation config file."""
 
     model: ModelConfig

@@ -119,11 +119,18 @@ def levels_figure(levels: list[LevelResult], units: Units):
     return figure
 
 
-def render_figures(levels: list[LevelResult], units: Units) -> dict[str, bytes]:
-    """Every figure of the stage as PNG bytes, keyed by file name (render first, write later)."""
+def render_figures(levels: list[LevelResult], units: Units, lpm_levels=()) -> dict[str, bytes]:
+    """Every figure of the stage as PNG bytes, keyed by file name (render first, write later):
+    those of the multisine ``levels`` (``bla_vs_level.png`` when there is one), and
+    ``lpm_level_NN.png`` per level of arbitrary runs (:class:`~nlsid.analysis.arbitrary.LPMLevel`)."""
+    from nlsid.report.lpm_plots import lpm_level_figure
+
     out = {}
     for index, level in enumerate(levels):
         out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level, units))
         out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level, units))
-    out["bla_vs_level.png"] = _png(levels_figure(levels, units))
+    if levels:
+        out["bla_vs_level.png"] = _png(levels_figure(levels, units))
+    for index, level in enumerate(lpm_levels):
+        out[f"lpm_level_{index:02d}.png"] = _png(lpm_level_figure(level, units))
     return out

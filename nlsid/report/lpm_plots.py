@@ -42,3 +42,14 @@ def lpm_figure(stored: dict, probability: float, units: Units):
             plain_log_ticks(axis.xaxis)
         axis.grid(True, which="both", alpha=0.3)
     return figure
+
+
+def lpm_level_figure(level, units: Units):
+    """The figure of an :class:`~nlsid.analysis.arbitrary.LPMLevel` as computed (``nlsid bla
+    --plots``), the same as :func:`lpm_figure` draws of it once stored in ``bla.h5``."""
+    result = level.result
+    stored = {"frequency": level.frequency, "G": level.G, "radius": level.bounds.radius, "var_G": level.var_G,
+              "attrs": {"level": float("nan") if level.level is None else float(level.level),
+                        "n_records": int(result.n_records), "n_samples": int(result.n_samples),
+                        "half_width": int(result.half_width), "degree": int(result.degree), "dof": int(result.dof)}}
+    return lpm_figure(stored, level.probability, units)

@@ -1,0 +1,196 @@
+"""Bad and unusual inputs of an independent battery: each ends in exit 2 with one line naming the
+file, key or option (no traceback, nothing written), or, where the input is valid, in success.
+
+- ``bla --plots`` on a recording of arbitrary runs only (no multisine level to compare);
+- non-finite numbers (YAML ``.nan``, ``.inf``, ``-.inf``) in a model config, refused at load with
+  the key path and the line they are on;
+- non-finite values of the command line's number options, refused naming the option.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from lpm_cases import FS, measured_record  # noqa: E402
+
+from nlsid.analysis.levels import across_levels  # noqa: E402
+from nlsid.io.recording import write_recording  # noqa: E402
+from nlsid.io.run import Run  # noqa: E402
+
+ROOT = Path(__file__).parents[1]
+STAGE = ROOT / "sample_data" / "stage.h5"
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def one_line(result, *fragments: str) -> str:
+    """Exit 2, one line ``nlsid: error: ...`` on stderr holding every fragment, no traceback,
+    nothing on stdout."""
+    assert result.exit_code == 2, (result.exit_code, result.stdout, result.stderr, result.exception)
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert lines[0].startswith("nlsid: error: "), lines[0]
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert result.stdout == ""
+    return lines[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# bla --plots on arbitrary runs
+
+
+def arbitrary_recording(path: Path, records: int = 3) -> Path:
+    rng = np.random.default_rng(11)
+    runs = [Run(run_id=f"noise_{i}", fs=FS, kind="arbitrary", u=u, y=y)
+            for i, (u, y) in enumerate(measured_record(rng, 0.02) for _ in range(records))]
+    write_recording(path, runs, provenance={"test": "bad inputs battery"})
+    return path
+
+
+def test_across_levels_without_multisine_levels_has_no_reference():
+    assert across_levels([]) == {"reference_level": None, "levels": []}
+
+
+def test_bla_plots_of_arbitrary_runs_draw_the_lpm_figure(run_cli, tmp_path):
+    rec = arbitrary_recording(tmp_path / "rec.h5")
+    plots = tmp_path / "figures"
+    result = run_cli("bla", rec, "-o", tmp_path / "bla.h5", "--plots", plots, "--json")
+    assert result.exit_code == 0, (result.stderr, result.exception)
+    assert "Traceback" not in result.stderr
+    summary = result.json()
+    assert summary["across_levels"] == {"reference_level": None, "levels": []}
+    assert summary["figures"] == [str(plots / "lpm_level_00.png")]
+    assert sorted(p.name for p in plots.iterdir()) == ["lpm_level_00.png"]
+    assert (plots / "lpm_level_00.png").read_bytes().startswith(PNG)
+
+
+# ---------------------------------------------------------------------------------------------
+# non-finite numbers in a model config
+
+# (config text with {v} where the number goes, the key path the message must name); the number is
+# on the line that holds "{v}"
+MODELS = [
+    ("model:\n  type: transfer_function\n  num: [1.0]\n  den: [1.0, {v}, 100.0]\n", "model.den[1]"),
+    ("model:\n  type: transfer_function\n  num:\n    - {v}\n  den: [1.0, 2.0, 100.0]\n", "model.num[0]"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  damping: 20.0\n  stiffness: {v}\n", "model.stiffness"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\n  gain: {v}\n", "model.gain"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\n  initial: {{position: {v}}}\n",
+     "model.initial.position"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\n  nonlinearities:\n"
+     "    - {{type: cubic_stiffness, k3: {v}}}\n", "model.nonlinearities[0].k3"),
+    ("model:\n  type: zpk\n  zeros: []\n  poles: [-1.0, {v}]\n  gain: 1.0\n", "model.poles[1]"),
+    ("model:\n  type: zpk\n  poles:\n    - [-2.0, {v}]\n  gain: 1.0\n", "model.poles[0][1]"),
+    ("model:\n  type: state_space\n  A: [[0.0, 1.0],\n      [-100.0, {v}]]\n  B: [0.0, 1.0]\n  C: [1.0, 0.0]\n",
+     "model.A[1][1]"),
+    ("model:\n  type: state_space\n  A: [[0.0, 1.0], [-100.0, -2.0]]\n  B: [0.0, 1.0]\n  C: [1.0, 0.0]\n  D: {v}\n",
+     "model.D"),
+    ("model:\n  type: wiener\n  linear: {{type: transfer_function, num: [1.0], den: [1.0, 1.0]}}\n"
+     "  nonlinear:\n    type: polynomial\n    coefficients: [0.0, 1.0, {v}]\n", "model.nonlinear.coefficients[2]"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\nsweep:\n  parameter: model.gain\n"
+     "  values: [1.0, {v}]\n", "sweep.values[1]"),
+    ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\nfree:\n  model.mass: {{start: {v}}}\n",
+     "free['model.mass'].start"),
+]
+NON_FINITE = [".nan", ".inf", "-.inf", ".NaN", "-.Inf"]
+
+
+@pytest.fixture(scope="module")
+def excitation(tmp_path_factory) -> Path:
+    from click.testing import CliRunner
+
+    from nlsid.cli.main import cli
+
+    out = tmp_path_factory.mktemp("excitation") / "excitation.h5"
+    result = CliRunner().invoke(cli, ["-q", "design", str(ROOT / "configs" / "stage_design.yaml"), "-o", str(out)])
+    assert result.exit_code == 0, result.stderr
+    return out
+
+
+@pytest.mark.parametrize("value", NON_FINITE)
+@pytest.mark.parametrize("text, key", MODELS, ids=[key for _, key in MODELS])
+def test_non_finite_number_in_a_model_is_refused_at_its_key(run_cli, tmp_path, excitation, text, key, value):
+    config = tmp_path / "model.yaml"
+    config.write_text(text.format(v=value))
+    line = 1 + next(i for i, row in enumerate(text.splitlines()) if "{v}" in row)
+    out = tmp_path / "out"
+    out.mkdir()
+    result = run_cli("simulate", config, "--excitation", excitation, "-o", out / "rec.h5")
+    spelled = {"nan": ".nan", "inf": ".inf", "-inf": "-.inf"}[str(float(value.replace(".", "")))]
+    one_line(result, f"model.yaml:{line}: {key}: ", "finite", spelled)
+    assert list(out.iterdir()) == []
+
+
+def test_the_same_models_with_finite_numbers_simulate(run_cli, tmp_path, excitation):
+    """The configs above are valid with a finite number in place (so the refusal is the number's)."""
+    for index, (text, key) in enumerate(MODELS):
+        config = tmp_path / f"model_{index}.yaml"
+        # a stable value for every position: a damping term, a small pole, a small coefficient
+        config.write_text(text.format(v="-3.0" if "poles" in key or "A[" in key else "0.5"))
+        result = run_cli("-q", "simulate", config, "--excitation", excitation, "-o", tmp_path / f"rec_{index}.h5")
+        assert result.exit_code == 0, (key, result.stderr)
+
+
+@pytest.mark.parametrize("command", ["diagnose", "fit"])
+def test_non_finite_model_is_refused_by_diagnose_and_fit(run_cli, tmp_path, command):
+    config = tmp_path / "model.yaml"
+    config.write_text("model:\n  type: mass_spring_damper\n  mass: 2.0\n  damping: .nan\n  stiffness: 2000.0\n"
+                      + ("free:\n  model.stiffness: {}\n" if command == "fit" else ""))
+    out = tmp_path / "out"
+    args = (["diagnose", "--model", config, "--data", STAGE, "-o", out] if command == "diagnose" else
+            ["fit", "--model", config, "--data", STAGE, "-o", out / "fitted.yaml"])
+    if command == "fit":
+        out.mkdir()
+    one_line(run_cli(*args), "model.yaml:4: model.damping: expected a finite number, got .nan")
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_infinite_free_bounds_are_no_bounds_and_a_nan_bound_is_refused(run_cli, tmp_path, excitation):
+    base = "model:\n  type: mass_spring_damper\n  mass: 2.0\n  stiffness: 2000.0\nfree:\n"
+    config = tmp_path / "model.yaml"
+    config.write_text(base + "  model.mass: {lower: -.inf, upper: .inf}\n")
+    assert run_cli("-q", "simulate", config, "--excitation", excitation, "-o", tmp_path / "rec.h5").exit_code == 0
+    config.write_text(base + "  model.mass:\n    lower: .nan\n")
+    one_line(run_cli("simulate", config, "--excitation", excitation, "-o", tmp_path / "rec2.h5"),
+             "model.yaml:7: free['model.mass'].lower: ", ".nan")
+    assert not (tmp_path / "rec2.h5").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# non-finite number options
+
+
+def csv_recording(path: Path) -> Path:
+    n = np.arange(3 * 64)
+    u = np.cos(2 * np.pi * n / 64) + 0.5 * np.cos(2 * np.pi * 3 * n / 64 + 1)
+    path.write_text("u,y\n" + "".join(f"{a:.12g},{0.5 * a:.12g}\n" for a in u))
+    return path
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "1e400", "NaN", "-nan"])
+@pytest.mark.parametrize("stage, option", [("import", "--fs"), ("bla", "--confidence"),
+                                           ("diagnose", "--fail-if-error-above"),
+                                           ("diagnose", "--fail-if-distortion-above")])
+def test_non_finite_number_option_is_named(run_cli, tmp_path, stage, option, value):
+    out = tmp_path / "out"
+    out.mkdir()
+    if stage == "import":
+        args = ["import", csv_recording(tmp_path / "scope.csv"), "-o", out / "rec.h5"]
+    elif stage == "bla":
+        args = ["bla", STAGE, "-o", out / "bla.h5"]
+    else:
+        args = ["diagnose", "--model", ROOT / "configs" / "stage_model.yaml", "--data", STAGE, "-o", out / "d"]
+    line = one_line(run_cli(*args, f"{option}={value}"), f"'{option}'", "finite")
+    assert str(float(value)) in line
+    assert list(out.iterdir()) == []
+
+
+def test_a_finite_fs_option_still_imports(run_cli, tmp_path):
+    result = run_cli("-q", "import", csv_recording(tmp_path / "scope.csv"), "--fs", "64", "-o", tmp_path / "rec.h5",
+                     "--json")
+    assert result.exit_code == 0, result.stderr
+    assert result.json()["fs"] == 64.0 and result.json()["fs_from"] == "--fs"
