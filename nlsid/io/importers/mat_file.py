@@ -1,8 +1,11 @@
 """MATLAB ``.mat`` files: v4/v5/v7 through scipy.io, v7.3 (HDF5 underneath) through h5py.
 
-A signal is named by its variable, or by a dotted path into a struct (``data.u``). v7.3 files store
-arrays column-major, so h5py sees them transposed; they are transposed back to MATLAB's shape.
-Only numeric arrays are read (MATLAB classes double, single and the integer classes).
+A signal is named by its variable, or by a dotted path into a struct (``data.u``), and one record
+of a matrix by its index (``Acceleration[1]``, ``data.acc[2]``; :mod:`nlsid.io.importers.variables`).
+v7.3 files store arrays column-major, so h5py sees them transposed; they are transposed back to
+MATLAB's shape. Only numeric arrays are read (MATLAB classes double, single and the integer classes).
+The other variables are surveyed: sample-rate variables (``fs``, ``Ts``, ...), scalars, and the
+ignored ones (``details["ignored_variables"]``).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
 from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
+from nlsid.io.importers.variables import Leaf, check_pairing, record_of, split_index, survey
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
 
@@ -29,10 +33,22 @@ def read_mat(path: Path, names: dict[str, str], time: str | None, optional: set[
     """Read the selected variables (signal -> variable or struct.field) of a MAT-file."""
     wanted = dict(names, **({"time": time} if time else {}))
     if is_mat73(path):
-        values, version = _read_v73(path, wanted, optional), "7.3"
-    else:
-        values, version = _read_v5(path, wanted, optional), "5"
-    return source_from(path, f"mat v{version}", wanted, values, {"variables": {k: wanted[k] for k in values}})
+        return _read_v73(path, wanted, optional)
+    return _read_v5(path, wanted, optional)
+
+
+def _struct_of(name: str) -> str:
+    """The struct holding ``name`` (``data`` for ``data.u``; "" at the top)."""
+    return name.rpartition(".")[0]
+
+
+def _source(path: Path, version: str, wanted: dict[str, str], values: dict[str, np.ndarray], leaves: list[Leaf]) -> Source:
+    """The Source of the values read, with the file's other variables surveyed."""
+    check_pairing(path, wanted, values)
+    used = {key: wanted[key] for key in values}
+    source = source_from(path, f"mat v{version}", wanted, values, {"variables": used})
+    survey(source, "variable", leaves, used, _struct_of)
+    return source
 
 
 V4_ITEMSIZE = {0: 8, 1: 4, 2: 4, 3: 2, 4: 2, 5: 1}  # precision P of MOPT: double, single, int32, int16, uint16, uint8
@@ -123,7 +139,39 @@ def _read_v5(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[str
         raise InputError(str(path), problem)
     content = _loadmat_isolated(path)
     variables = {k: v for k, v in content.items() if not k.startswith("__")}
-    return pick(wanted, optional, lambda key, name: _lookup(variables, name, f"{path}: {option(key, name)}"))
+
+    def read(key: str, name: str) -> np.ndarray:
+        base, index = split_index(name)
+        where = f"{path}: {option(key, name)}"
+        value = _lookup(variables, base, where)
+        return value if index is None else record_of(value, index, base, where)
+
+    return _source(path, "5", wanted, pick(wanted, optional, read), list(_leaves_v5(variables)))
+
+
+def _leaves_v5(variables: dict, scope: str = ""):
+    """The variables and struct fields of a loaded v4/v5/v7 file (scipy's simplified cells)."""
+    for name, obj in variables.items():
+        full = f"{scope}.{name}" if scope else name
+        if isinstance(obj, dict):
+            if obj:
+                yield from _leaves_v5(obj, full)
+            else:
+                yield Leaf(full, scope, "empty struct")
+            continue
+        if isinstance(obj, str):
+            yield Leaf(full, scope, "text")
+        elif isinstance(obj, list):
+            yield Leaf(full, scope, f"cell or struct array of {len(obj)}")
+        else:
+            arr = np.asarray(obj)
+            if arr.dtype.kind in "biuf":
+                yield Leaf(full, scope, "real", arr.shape, lambda arr=arr: arr)
+            elif arr.dtype.kind == "c":
+                yield Leaf(full, scope, "complex", arr.shape)
+            else:
+                yield Leaf(full, scope, f"{'cell' if arr.dtype.kind == 'O' else arr.dtype.name} array "
+                                        f"{'x'.join(map(str, arr.shape))}")
 
 
 def _loadmat(path: Path) -> dict:
@@ -221,8 +269,48 @@ def _read_v73(path: Path, wanted: dict[str, str], optional: set[str]) -> dict[st
         handle = h5py.File(path, "r")
     except H5PY_ERRORS as exc:
         raise InputError(str(path), f"cannot open MATLAB v7.3 file ({' '.join(str(exc).split())})") from None
+    def read(key: str, name: str) -> np.ndarray:
+        base, index = split_index(name)
+        where = f"{path}: {option(key, name)}"
+        value = _v73_variable(handle, base, where)
+        return value if index is None else record_of(value, index, base, where)
+
     with handle:
-        return pick(wanted, optional, lambda key, name: _v73_variable(handle, name, f"{path}: {option(key, name)}"))
+        values = pick(wanted, optional, read)
+        with hdf5_damage(str(path)):  # the survey reads scalars and rate variables
+            return _source(path, "7.3", wanted, values, list(_leaves_v73(handle)))
+
+
+def _leaves_v73(group: h5py.Group, scope: str = ""):
+    """The variables and struct fields of a v7.3 file (HDF5 groups are structs; names starting
+    with ``#`` are MATLAB's own: references of cells, class data)."""
+    for key in group:
+        name = link_name(key)
+        if name.startswith("#"):
+            continue
+        full = f"{scope}.{name}" if scope else name
+        obj = group.get(key)
+        if isinstance(obj, h5py.Group):
+            members = [m for m in map(link_name, obj) if not m.startswith("#")]
+            if members:
+                yield from _leaves_v73(obj, full)
+            else:
+                yield Leaf(full, scope, "empty struct")
+            continue
+        if not isinstance(obj, h5py.Dataset):
+            yield Leaf(full, scope, "link")
+            continue
+        cls = obj.attrs.get("MATLAB_class", b"double")
+        cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+        dims = tuple(obj.shape[::-1])
+        if obj.attrs.get("MATLAB_empty", 0):
+            yield Leaf(full, scope, f"empty {cls}")
+        elif cls not in NUMERIC_CLASSES:
+            yield Leaf(full, scope, f"MATLAB {cls} {'x'.join(map(str, dims))}")
+        elif obj.dtype.names:
+            yield Leaf(full, scope, "complex", dims)
+        else:
+            yield Leaf(full, scope, "real", dims, lambda obj=obj: np.asarray(obj[()]).T)
 
 
 def _v73_variable(handle: h5py.File, name: str, where: str) -> np.ndarray:

@@ -7,12 +7,14 @@ of 4096 samples, as does a 4 x 4096 one). ``layout="realizations"`` makes each r
 run(s); ``layout="periods"`` says the records are consecutive periods of one experiment, joined in
 order into one record whose period is their length.
 
-The sample rate comes from ``--fs`` or from a time vector (seconds, checked uniform by
-:func:`nlsid.io.timestamps.uniform_sampling`, i.e. every interval within 1e-3 of the median).
+The sample rate comes from ``--fs``, from a time vector (seconds, checked uniform by
+:func:`nlsid.io.timestamps.uniform_sampling`, i.e. every interval within 1e-3 of the median), or
+from a sample-rate variable of a MAT or HDF5 file (:data:`RATE_NAME`, :data:`INTERVAL_NAME`).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -21,12 +23,21 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.run import CHANNEL_KEY
-from nlsid.io.timestamps import NS, uniform_sampling
+from nlsid.io.timestamps import NS, REL_TOL, uniform_sampling
 
 LAYOUTS = ("realizations", "periods")
 # Larger samples are refused: no measurement is that large, and their squares summed over a record
 # (the powers and variances of the inference) would overflow float64.
 MAX_MAGNITUDE = 1e100
+# Names of a variable or dataset (its last path component; ignoring case) that holds the sample rate
+# in Hz (a unit suffix _kHz or _MHz scales it), or the sample interval in seconds (_ms, _us scale it).
+RATE_NAME = re.compile(r"^(?:fs|fsamp|fsample|sample_?rate|sampling_?rate|sampl(?:e|ing)_?freq(?:uency)?)"
+                       r"(?:_(?P<unit>hz|khz|mhz))?$", re.IGNORECASE)
+INTERVAL_NAME = re.compile(r"^(?:ts|dt|tsamp|tsample|sampl(?:e|ing)_?(?:time|interval|period))"
+                           r"(?:_(?P<unit>s|ms|us))?$", re.IGNORECASE)
+RATE_SCALE = {None: 1.0, "hz": 1.0, "khz": 1e3, "mhz": 1e6}
+INTERVAL_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
+LISTED_SCALARS = 10
 
 
 class NotFound(InputError):
@@ -52,10 +63,23 @@ def pick(wanted: dict[str, str], optional: set[str], read: Callable[[str, str], 
     return out
 
 
+@dataclass(frozen=True)
+class RateVariable:
+    """A variable of the file whose name says it holds the sample rate or interval (``RATE_NAME``,
+    ``INTERVAL_NAME``): ``name`` in the file, ``label`` for messages (``variable Fs of FILE``)."""
+
+    name: str
+    label: str
+    value: np.ndarray
+
+
 @dataclass
 class Source:
     """Arrays read from a foreign file: ``arrays`` by signal name, ``where`` names each one's origin,
-    ``units`` the unit of a signal where the file or the user gives one (signal key -> unit text)."""
+    ``units`` the unit of a signal where the file or the user gives one (signal key -> unit text).
+    ``rate_variables``: the file's sample-rate variables, used when neither ``fs`` nor a time vector
+    is given (checked against the time vector when there is one); ``scalars``: its numeric scalars
+    by name, listed when no sample rate is found."""
 
     path: str
     format: str
@@ -67,6 +91,8 @@ class Source:
     time_where: str | None = None
     details: dict = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    rate_variables: list[RateVariable] = field(default_factory=list)
+    scalars: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -99,7 +125,7 @@ def as_matrix(value: np.ndarray, where: str) -> np.ndarray:
     if arr.ndim > 2:
         raise InputError(where, f"expected a vector or a 2-D matrix, got shape {'x'.join(map(str, arr.shape))}")
     arr = np.atleast_2d(arr.astype(np.float64))
-    if arr.shape[0] > arr.shape[1]:
+    if time_axis(arr.shape) == 0:
         arr = arr.T
     bad = ~np.isfinite(arr)
     if bad.any():
@@ -109,6 +135,49 @@ def as_matrix(value: np.ndarray, where: str) -> np.ndarray:
         raise InputError(where, f"{int(huge.sum())} samples of magnitude above {MAX_MAGNITUDE:g} (largest "
                                 f"{float(np.abs(arr).max()):.3g}): not measured values (a damaged file?)")
     return np.ascontiguousarray(arr)
+
+
+def time_axis(shape: tuple[int, ...]) -> int:
+    """The axis of a 2-D matrix along which time runs: the longer one (the second when they are equal)."""
+    return 0 if shape[0] > shape[1] else 1
+
+
+def rate_of(variable: RateVariable) -> float:
+    """The sample rate in Hz that a sample-rate or sample-interval variable gives: one value, or a
+    vector of equal values (a rate logged on every row), finite and > 0."""
+    leaf = re.split(r"[./]", variable.name)[-1]
+    rate, interval = RATE_NAME.match(leaf), INTERVAL_NAME.match(leaf)
+    arr = np.asarray(variable.value)
+    if arr.dtype.kind not in "biuf":
+        raise InputError(variable.label, f"is named as a sample {'rate' if rate else 'interval'} but holds no real "
+                                         "number; pass --fs HZ")
+    values = np.unique(arr.astype(np.float64).ravel())
+    if values.size != 1:
+        raise InputError(variable.label, f"is named as a sample {'rate' if rate else 'interval'} but holds "
+                                         f"{values.size} different values: not one rate (a time vector? pass "
+                                         "--time NAME; else --fs HZ)")
+    value = float(values[0])
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(variable.label, f"sample {'rate' if rate else 'interval'} {value:g}: expected a finite "
+                                         "number > 0; pass --fs HZ")
+    if rate:
+        return value * RATE_SCALE[(rate.group("unit") or "hz").lower()]
+    return 1.0 / (value * INTERVAL_SCALE[(interval.group("unit") or "s").lower()])
+
+
+def file_rate(source: Source) -> tuple[float, str] | None:
+    """The sample rate of the file's rate variables and where it came from (None: there are none).
+    Rates come before intervals (a rate is stored exactly, 1/Ts is rounded); all must agree within REL_TOL."""
+    if not source.rate_variables:
+        return None
+    found = sorted(((rate_of(v), v) for v in source.rate_variables),
+                   key=lambda item: RATE_NAME.match(re.split(r"[./]", item[1].name)[-1]) is None)
+    fs, first = found[0]
+    for other_fs, other in found[1:]:
+        if abs(other_fs / fs - 1) > REL_TOL:
+            raise InputError(source.path, f"the {first.label} says {fs:.9g} Hz but the {other.label} gives "
+                                          f"{other_fs:.9g} Hz (they must agree within {REL_TOL:g}); pass --fs HZ")
+    return fs, first.label
 
 
 def sample_rate(time: np.ndarray, where: str) -> float:
@@ -142,15 +211,54 @@ def records_of(source: Source, layout: str) -> tuple[list[Record], float, str]:
 
 
 def _rate(source: Source, n_samples: int, n_records: int, layout: str) -> tuple[float, str]:
-    if source.fs is not None:
-        return source.fs, source.fs_from or "--fs"
-    if source.time is None:
-        raise InputError(source.path, "no sample rate: pass --fs HZ or --time NAME (a time vector in seconds)")
     lengths = (n_samples, n_samples * n_records) if layout == "periods" else (n_samples,)
-    if np.squeeze(source.time).size not in lengths:
+    if source.fs is None and source.time is not None and np.squeeze(source.time).size not in lengths:
         raise InputError(source.time_where, f"time vector has {np.squeeze(source.time).size} values, "
                                             f"the signals {n_samples} samples per record")
-    return sample_rate(source.time, source.time_where), f"time vector {source.time_where}"
+    return source_rate(source)
+
+
+def source_rate(source: Source) -> tuple[float, str]:
+    """The sample rate of a source and where it came from: ``source.fs`` when set (``--fs``, a CSV
+    sample-rate column, MCAP log times), else the time vector (whose length the caller has checked),
+    which must agree with the file's rate variables, else the rate variables."""
+    if source.fs is not None:
+        _note_overridden_rate(source)
+        return source.fs, source.fs_from or "--fs"
+    from_file = file_rate(source)
+    if source.time is None:
+        if from_file is not None:
+            return from_file
+        raise InputError(source.path, "no sample rate: pass --fs HZ or --time NAME (a time vector in seconds)"
+                                      + _scalars_hint(source.scalars))
+    fs = sample_rate(source.time, source.time_where)
+    if from_file is not None:
+        if abs(from_file[0] / fs - 1) > REL_TOL:
+            raise InputError(source.path, f"the {from_file[1]} says {from_file[0]:.9g} Hz but the time vector "
+                                          f"{source.time_where} gives {fs:.9g} Hz (they must agree within "
+                                          f"{REL_TOL:g}); pass --fs HZ to choose")
+        source.details["rate_variable_fs"] = from_file[0]
+    return fs, f"time vector {source.time_where}"
+
+
+def _note_overridden_rate(source: Source) -> None:
+    """Keep the rate of the file's rate variables, overridden by --fs, in provenance (when they give one)."""
+    if source.fs_from != "--fs" or "overridden_fs" in source.details:
+        return
+    try:
+        from_file = file_rate(source)
+    except InputError:  # --fs replaces a rate variable the file gets wrong
+        return
+    if from_file is not None:
+        source.details["overridden_fs"] = {"value": from_file[0], "from": from_file[1]}
+
+
+def _scalars_hint(scalars: dict[str, float]) -> str:
+    if not scalars:
+        return ""
+    listed = ", ".join(f"{name} = {value:.6g}" for name, value in list(scalars.items())[:LISTED_SCALARS])
+    more = f" ... ({len(scalars)} in all)" if len(scalars) > LISTED_SCALARS else ""
+    return f"; scalar variables in the file: {listed}{more} (none is named as a sample rate: fs, Fs, SampleRate, Ts, dt, ...)"
 
 
 def _stem(path: str) -> str:

@@ -1,0 +1,177 @@
+"""The variables of a MAT or HDF5 file around the imported ones.
+
+- ``NAME[i]`` names record ``i`` (from 0) of a matrix variable: the slice across the axis along
+  which time runs (the longer one, as :func:`nlsid.io.importers.source.as_matrix` decides), so row
+  1 of a 3 x N ``Acceleration`` is ``Acceleration[1]``, and column 1 of an N x 3 one too.
+- Signals whose matrices differ in shape do not pair into records: they are refused with the
+  ``NAME[i]`` options that pick one record (:func:`check_pairing`).
+- Every other variable of the file is surveyed (:func:`survey`): one named as a sample rate or
+  interval (:data:`nlsid.io.importers.source.RATE_NAME`, ``INTERVAL_NAME``) is a rate variable of
+  the source; numeric scalars are kept to be listed when no sample rate is found; the rest, and the
+  records of an indexed matrix that were not picked, go to ``details["ignored_variables"]``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.importers.source import INTERVAL_NAME, RATE_NAME, RateVariable, Source, option, time_axis
+
+INDEXED = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
+LISTED_IGNORED = 500  # a logger file can hold thousands of datasets: the rest are counted
+LISTED_RECORDS = 3  # records named in the hint of a refused matrix
+
+
+def split_index(name: str) -> tuple[str, int | None]:
+    """``Acceleration[1]`` -> (``Acceleration``, 1); a name without an index -> (name, None)."""
+    match = INDEXED.match(name)
+    if match is None:
+        return name, None
+    return match.group("base"), int(match.group("index"))
+
+
+def shape_text(dims: tuple[int, ...]) -> str:
+    """``3x1000``; ``scalar`` for a single value."""
+    return "scalar" if int(np.prod(dims)) == 1 else "x".join(map(str, dims))
+
+
+def record_of(value: np.ndarray, index: int, name: str, where: str) -> np.ndarray:
+    """Record ``index`` of the vector or matrix ``value`` of variable ``name`` (a vector is record 0)."""
+    arr = np.asarray(value)
+    squeezed = np.squeeze(arr)
+    if squeezed.ndim > 2:
+        raise InputError(where, f"{name} has shape {shape_text(arr.shape)}; NAME[i] picks a record of a vector or "
+                                "a 2-D matrix")
+    matrix = squeezed.reshape(1, -1) if squeezed.ndim < 2 else squeezed
+    axis = time_axis(matrix.shape)
+    records, samples = matrix.shape[1 - axis], matrix.shape[axis]
+    if index >= records:
+        raise InputError(where, f"{name} is {shape_text(arr.shape)} ({records} record(s) of {samples} samples; time "
+                                f"runs along the longer axis): index {index} is out of range, valid 0..{records - 1}")
+    return np.take(matrix, index, axis=1 - axis)
+
+
+def _records_samples(dims: tuple[int, ...]) -> tuple[int, int] | None:
+    """(records, samples) of an array of shape ``dims`` as as_matrix cuts it (None: not 1-D or 2-D)."""
+    kept = tuple(d for d in dims if d != 1)
+    if len(kept) <= 1:
+        return 1, int(np.prod(dims))
+    if len(kept) == 2:
+        axis = time_axis(kept)
+        return kept[1 - axis], kept[axis]
+    return None  # as_matrix says what is wrong with it
+
+
+def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarray]) -> None:
+    """Refuse signals that are matrices of several records unless every signal has the same shape
+    (records side by side); say how to pick one record of each matrix with ``NAME[i]``."""
+    shapes = {}
+    for key, value in values.items():
+        if key == "time":
+            continue
+        shape = _records_samples(np.shape(value))
+        if shape is None:
+            return
+        shapes[key] = shape
+    if len(set(shapes.values())) <= 1 or all(records == 1 for records, _ in shapes.values()):
+        return
+    detail = ", ".join(f"{path}:{names[key]} is {samples} samples x {records} record(s)"
+                       for key, (records, samples) in shapes.items())
+    hints = [_pick_hint(key, names[key], records) for key, (records, _) in shapes.items() if records > 1]
+    raise InputError(str(path), f"matrices of inconsistent size: {detail}; name one record (from 0, across the "
+                                f"shorter axis) of a matrix: {'; '.join(hints)}")
+
+
+def _pick_hint(key: str, name: str, records: int) -> str:
+    leaf = re.sub(r"\W", "_", re.split(r"[./]", name)[-1]) or "c"
+    leaf = leaf if not leaf[0].isdigit() else f"c{leaf}"
+    others = " ".join(f"--channel {leaf}_{i}={name}[{i}]" for i in range(1, min(records, LISTED_RECORDS + 1)))
+    more = " ..." if records > LISTED_RECORDS + 1 else ""
+    return f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more})"
+
+
+@dataclass(frozen=True)
+class Leaf:
+    """A variable (or struct field, or dataset) of the file: ``name`` as the user names it, ``scope``
+    the struct or group holding it ("" at the top), ``dims`` its shape when it holds numbers (else
+    None, and ``kind`` says what it is), ``values`` reads them."""
+
+    name: str
+    scope: str
+    kind: str
+    dims: tuple[int, ...] | None = None
+    values: Callable[[], np.ndarray] | None = None
+
+    @property
+    def description(self) -> str:
+        if self.dims is None:
+            return self.kind
+        return shape_text(self.dims) if self.kind == "real" else f"{shape_text(self.dims)} {self.kind}"
+
+
+def survey(source: Source, noun: str, leaves: list[Leaf], used: dict[str, str], scope_of: Callable[[str], str]) -> None:
+    """Fill the source's rate variables, scalars and ``details["ignored_variables"]`` from the file's
+    ``leaves``, given the ``used`` names (signal or ``time`` -> name, with ``[i]`` when indexed).
+    ``noun`` names a leaf in messages (``variable``, ``dataset``); ``scope_of(name)`` is its struct or group.
+
+    Rate variables are looked for next to the imported signals (their struct or group) and at the
+    top; only when there are none there, anywhere in the file.
+    """
+    by_name = {leaf.name: leaf for leaf in leaves}
+    bases: dict[str, set[int]] = {}
+    for name in used.values():
+        base, index = (name, None) if name in by_name else split_index(name)
+        bases.setdefault(base, set())
+        if index is not None:
+            bases[base].add(index)
+    scopes = {scope_of(base) for base in bases} | {""}
+    rated = [leaf for leaf in leaves if leaf.name not in bases and _is_rate_name(leaf.name)]
+    chosen = [leaf for leaf in rated if leaf.scope in scopes] or rated
+    rate_names = {leaf.name for leaf in chosen}
+    source.rate_variables = [RateVariable(leaf.name, f"{noun} {leaf.name} of {source.path}",
+                                          leaf.values() if leaf.values else np.asarray(leaf.kind)) for leaf in chosen]
+    if chosen:
+        source.details["rate_variables"] = {leaf.name: _stored(leaf) for leaf in chosen}
+    ignored: dict[str, str] = {}
+    for leaf in leaves:
+        if leaf.name in bases or leaf.name in rate_names:
+            continue
+        ignored[leaf.name] = leaf.description
+        if leaf.values is not None and leaf.dims is not None and int(np.prod(leaf.dims)) == 1 and leaf.kind == "real":
+            source.scalars[leaf.name] = float(np.asarray(leaf.values()).ravel()[0])
+            ignored[leaf.name] = f"scalar {source.scalars[leaf.name]:.9g}"
+    for base, indices in bases.items():
+        leaf = by_name.get(base)
+        if not indices or leaf is None or leaf.dims is None:
+            continue
+        shape = _records_samples(leaf.dims)
+        if shape is None:
+            continue
+        for i in range(shape[0]):
+            if i not in indices:
+                ignored[f"{base}[{i}]"] = f"{shape[1]} samples (record {i} of {base}, {shape_text(leaf.dims)})"
+    if ignored:
+        names = list(ignored)
+        source.details["ignored_variables"] = {name: ignored[name] for name in names[:LISTED_IGNORED]}
+        if len(names) > LISTED_IGNORED:
+            source.details["ignored_variables_not_listed"] = len(names) - LISTED_IGNORED
+
+
+def _is_rate_name(name: str) -> bool:
+    leaf = re.split(r"[./]", name)[-1]
+    return bool(RATE_NAME.match(leaf) or INTERVAL_NAME.match(leaf))
+
+
+def _stored(leaf: Leaf) -> float | str:
+    """A rate variable as provenance keeps it: its value when it is one real number, else what it is."""
+    if leaf.values is not None and leaf.kind == "real" and leaf.dims is not None and int(np.prod(leaf.dims)) == 1:
+        value = float(np.asarray(leaf.values()).ravel()[0])
+        if np.isfinite(value):
+            return value
+    return leaf.description
