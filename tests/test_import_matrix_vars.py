@@ -13,6 +13,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
+from scipy import sparse
 from scipy.io import savemat
 
 from nlsid.io.hdf5_recording import HDF5Recording
@@ -64,7 +65,8 @@ def assert_refused(result, tmp_path, source, *fragments) -> None:
 def test_mat_v5_row_of_a_matrix_with_fs_from_the_file(run_cli, tmp_path):
     force, acc = noise(1), noise(2, 3, N)
     source = tmp_path / "bench.mat"
-    savemat(source, {"Force": force, "Acceleration": acc, "Fs": 750.0, "gain": 2.5, "note": "rig B"})
+    savemat(source, {"Force": force, "Acceleration": acc, "Fs": 750.0, "gain": 2.5, "note": "rig B",
+                     "mask": sparse.eye(4, format="csc")})
     out = tmp_path / "rec.h5"
     summary, runs, prov = imported(run_cli("import", source, "--u", "Force", "--y", "Acceleration[1]",
                                            "--channel", "a2=Acceleration[2]", "-o", out, "--json"), out)
@@ -76,7 +78,8 @@ def test_mat_v5_row_of_a_matrix_with_fs_from_the_file(run_cli, tmp_path):
     assert prov["signals"]["y"] == f"{source}:Acceleration[1]"
     assert prov["details"]["rate_variables"] == {"Fs": 750.0}
     assert prov["details"]["ignored_variables"] == {
-        "Acceleration[0]": f"{N} samples (record 0 of Acceleration, 3x{N})", "gain": "scalar 2.5", "note": "text"}
+        "Acceleration[0]": f"{N} samples (record 0 of Acceleration, 3x{N})", "gain": "scalar 2.5", "note": "text",
+        "mask": "sparse 4x4"}
 
 
 def test_mat_v73_struct_field_column_picked_along_matlabs_shape(run_cli, tmp_path):
@@ -283,3 +286,12 @@ def test_time_and_signal_as_rows_of_one_matrix(run_cli, tmp_path):
     # fs from the ends of the time row: 599 intervals of 2 ms as rounded in float64, well within 1e-12
     assert summary["fs"] == pytest.approx(500.0, rel=1e-12) and summary["fs_from"] == f"time vector {source}:TY[0]"
     assert "ignored_variables" not in prov["details"]
+
+
+def test_rate_in_the_signals_struct_comes_before_the_top_level(run_cli, tmp_path):
+    source = tmp_path / "nested.mat"
+    savemat(source, {"fs": 1000.0, "slow": {"u": noise(41), "y": noise(42), "Ts": 0.01}})
+    out = tmp_path / "rec.h5"
+    summary, _, prov = imported(run_cli("import", source, "--u", "slow.u", "--y", "slow.y", "-o", out, "--json"), out)
+    assert summary["fs"] == pytest.approx(100.0, rel=4e-16) and summary["fs_from"] == f"variable slow.Ts of {source}"
+    assert prov["details"]["ignored_variables"] == {"fs": "scalar 1000"}

@@ -161,6 +161,8 @@ def _leaves_v5(variables: dict, scope: str = ""):
             continue
         if isinstance(obj, str):
             yield Leaf(full, scope, "text")
+        elif hasattr(obj, "toarray"):  # scipy.sparse: MATLAB's sparse matrices
+            yield Leaf(full, scope, f"sparse {'x'.join(map(str, obj.shape))}")
         elif isinstance(obj, list):
             yield Leaf(full, scope, f"cell or struct array of {len(obj)}")
         else:

@@ -120,8 +120,8 @@ def survey(source: Source, noun: str, leaves: list[Leaf], used: dict[str, str], 
     ``leaves``, given the ``used`` names (signal or ``time`` -> name, with ``[i]`` when indexed).
     ``noun`` names a leaf in messages (``variable``, ``dataset``); ``scope_of(name)`` is its struct or group.
 
-    Rate variables are looked for next to the imported signals (their struct or group) and at the
-    top; only when there are none there, anywhere in the file.
+    Rate variables are looked for next to the imported signals (in their structs or groups), then
+    at the top level, then anywhere in the file: the first place that has any gives them all.
     """
     by_name = {leaf.name: leaf for leaf in leaves}
     bases: dict[str, set[int]] = {}
@@ -130,9 +130,9 @@ def survey(source: Source, noun: str, leaves: list[Leaf], used: dict[str, str], 
         bases.setdefault(base, set())
         if index is not None:
             bases[base].add(index)
-    scopes = {scope_of(base) for base in bases} | {""}
+    scopes = {scope_of(base) for base in bases}
     rated = [leaf for leaf in leaves if leaf.name not in bases and _is_rate_name(leaf.name)]
-    chosen = [leaf for leaf in rated if leaf.scope in scopes] or rated
+    chosen = [leaf for leaf in rated if leaf.scope in scopes] or [leaf for leaf in rated if not leaf.scope] or rated
     rate_names = {leaf.name for leaf in chosen}
     source.rate_variables = [RateVariable(leaf.name, f"{noun} {leaf.name} of {source.path}",
                                           leaf.values() if leaf.values else np.asarray(leaf.kind)) for leaf in chosen]
