@@ -33,13 +33,16 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @click.option("--range", "crop", metavar="A:B", help="Keep samples A..B-1 of each record (a Python slice; either end may be left out).")
 @click.option("--decimate", type=click.IntRange(min=1), default=1, show_default=True,
               help="Keep every K-th sample, after an anti-alias low-pass (stated in the output).")
+@click.option("--skip-rows", type=click.IntRange(min=0), metavar="N",
+              help="CSV/TSV: skip the first N lines of the file (a preamble above the header); by default such "
+                   "lines are found and skipped (and named in the summary).")
 @click.option("--format", "fmt", type=click.Choice(["csv", "mat", "hdf5", "mcap"]), help="Source format (default: from the file).")
 @force_option
 @json_option
 def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None, r: str | None, channels: tuple[str, ...],
             time: str | None, fs: float | None,
             period: int | None, transient_periods: int, split: bool, layout: str, units: tuple[str, ...],
-            crop: str | None, decimate: int, fmt: str | None, force: bool, as_json: bool) -> None:
+            crop: str | None, decimate: int, skip_rows: int | None, fmt: str | None, force: bool, as_json: bool) -> None:
     """Import measured data from CSV/TSV, MATLAB .mat, plain HDF5 or foreign MCAP files.
 
     Several SOURCES: one experiment per file when every file holds every signal (levels, repeats),
@@ -71,7 +74,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
     names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
     options = ImportOptions(names=names, channels=_channels(channels), time=time, fs=fs, period=period, transient_periods=transient_periods,
                             split=split, layout=layout, format=fmt, units=_pairs(units, "--unit", "UNIT", "u=N"),
-                            crop=parse_range(crop, "--range"), decimate=decimate)
+                            crop=parse_range(crop, "--range"), decimate=decimate, skip_rows=skip_rows)
     imported = import_file(list(sources), options)
     record = provenance(input_paths=list(sources))
     record["import"] = provenance_record(imported, options)
@@ -82,6 +85,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
         "channels": sorted(options.channels), "records": imported.records,
         "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
         "notes": imported.notes, "units": _run_units(imported.runs),
+        **_csv_layout(imported.sources or [imported.source]),
     }
     if as_json:
         emit_json(summary)
@@ -113,6 +117,12 @@ def _run_units(runs) -> dict[str, str]:
     return common_units(run.units for run in runs)
 
 
+def _csv_layout(sources) -> dict:
+    """Per CSV source file: the columns not imported, and the preamble lines skipped above its header."""
+    return {"ignored_columns": {s.path: s.details["ignored_columns"] for s in sources if "ignored_columns" in s.details},
+            "preamble_lines": {s.path: s.details["preamble_lines"] for s in sources if "preamble_lines" in s.details}}
+
+
 def _print(summary: dict) -> None:
     console = settings().console
     channels = f", channels {', '.join(summary['channels'])}" if summary["channels"] else ""
@@ -120,6 +130,12 @@ def _print(summary: dict) -> None:
                   f"signals {', '.join(summary['signals'])}{channels}) -> {summary['output']}: {summary['runs']} run(s)")
     for note in summary["notes"]:
         console.print(f"  - {note}")
+    for path, lines in summary["preamble_lines"].items():
+        console.print(f"  - {path}: {len(lines)} line(s) above the header skipped: "
+                      + ", ".join(f"line {line['line']} {line['text']!r}" for line in lines))
+    for path, columns in summary["ignored_columns"].items():
+        if columns:
+            console.print(f"  - {path}: columns not imported: {', '.join(repr(c) for c in columns)}")
     for record in summary["records"]:
         inf = record["inference"]
         console.print(f"  {record['record']}: {_headline(inf)} (inferred from {record['inferred_from']})")

@@ -38,7 +38,7 @@ class ImportOptions:
     name in the file (like ``names`` of u, y, r); ``units``: signal or channel name -> its unit
     (overrides a unit the file gives); ``crop``: the samples of each source record kept (before
     decimation); ``decimate``: keep every K-th sample after an anti-alias filter
-    (:mod:`nlsid.io.importers.resample`)."""
+    (:mod:`nlsid.io.importers.resample`); ``skip_rows``: lines above a CSV header (None: found)."""
 
     names: dict[str, str]
     channels: dict[str, str] = field(default_factory=dict)
@@ -52,6 +52,7 @@ class ImportOptions:
     units: dict[str, str] = field(default_factory=dict)
     crop: SampleRange | None = None
     decimate: int = 1
+    skip_rows: int | None = None
 
 
 @dataclass
@@ -110,10 +111,13 @@ def read_source(path: Path, options: ImportOptions, every_signal_optional: bool 
                     optional.add(key)
     if every_signal_optional:
         optional |= set(names)
+    if options.skip_rows is not None and fmt != "csv":
+        raise InputError(f"--skip-rows {options.skip_rows}", f"applies to CSV/TSV files; {path} is {fmt}")
     if fmt == "csv":
         from nlsid.io.importers.csv_file import read_csv
 
-        source = read_csv(path, names, options.time, optional, fs_given=options.fs is not None, defaulted=defaulted)
+        source = read_csv(path, names, options.time, optional, fs_given=options.fs is not None, defaulted=defaulted,
+                          skip_rows=options.skip_rows)
     elif fmt == "mat":
         from nlsid.io.importers.mat_file import read_mat
 
@@ -339,6 +343,8 @@ def describe_overrides(options: ImportOptions) -> dict:
         out["range"] = options.crop.text
     if options.decimate > 1:
         out["decimate"] = options.decimate
+    if options.skip_rows is not None:
+        out["skip_rows"] = options.skip_rows
     return out
 
 

@@ -1,19 +1,30 @@
 """CSV and TSV tables (oscilloscope and logger exports): columns by header name or number.
 
-Rules (``docs/drafts/import.md``):
+Rules (``docs/commands.md``, "nlsid import"):
 
 - Lines that are empty or start with ``#`` are skipped.
-- The delimiter is a tab for ``.tsv`` files; otherwise the first of tab, ``;`` and ``,`` found in the
-  first row, else runs of whitespace.
-- The first row is a header when any of its cells is not a number. A column is named by its header
-  cell (exact text, else ignoring case) or by its number, counting from 1.
-- Every row has as many cells as the first row; every selected cell is a number.
+- The delimiter is a tab for ``.tsv`` files; otherwise the first of tab, ``;`` and ``,`` found on
+  more than half of the lines, else runs of whitespace.
+- Preamble: lines above the header that are not part of the table (``Axis1``, ``Date: ...``) are
+  found and skipped when the first row of numbers has the width of most rows and the line above it
+  is a header of that width without numbers; ``skip_rows`` (``--skip-rows N``) skips the first N
+  lines of the file instead, and the next line is the header or the first row.
+- The first row is a header when any of its non-empty cells is not a number. A header cell is a
+  name with an optional unit: ``u (N)``, ``y [m/s^2]``. A column is named by its header cell
+  (exact, else ignoring case), by the name without its unit (exact, else ignoring case), or by its
+  number, counting from 1.
+- Group labels: a header cell followed by empty header cells labels all those columns (as long as
+  they hold data): ``u`` over 10 columns names 10 realizations of u, like ``u1..u10``. Columns with
+  an empty header cell and no label to their left are not read (and listed as ignored).
+- Every row below the header has as many cells as the header; every selected cell is a number.
 - Without ``--fs`` and ``--time``, a header column called ``t``, ``time`` or ``timestamp`` (ignoring
-  case and a trailing unit such as ``time (s)``, ``Time [s]``) is the time vector, in seconds.
+  case) is the time vector, in seconds unless its unit says ``ms``, ``us``/``µs``, ``ns`` or ``min``.
 - Without ``--fs``, a header column called ``fs``, ``sample rate``, ``sampling rate`` or ``sampling
   frequency`` (ignoring case, ``_`` or ``-`` for the space, an optional unit ``(Hz)``, ``[kHz]``, ``(MHz)``)
-  gives the sample rate: one value, repeated on every row or on some rows with the others empty. A
-  rate that varies is refused; with a time vector as well, both rates must agree within 1e-3.
+  gives the sample rate, and a column ``Ts``, ``dt``, ``sample interval`` or ``sampling interval``
+  (unit as a time column's) the sampling interval: one value, repeated on every row or on some rows
+  with the others empty. A value that varies is refused; several such columns and a time vector
+  must agree within 1e-3.
 - Realizations side by side: when a signal's name (``u`` by default) is not a header cell, the
   numbered columns ``u1, u2, ...`` (also ``u_1``, ``u-1``, ``u.1``, ``u 1``, ``u(1)``, ``u[1]``) are its
   realizations, in the order of their numbers; a header cell repeated (``u, y, u, y``) gives one
@@ -21,12 +32,15 @@ Rules (``docs/drafts/import.md``):
   (the same numbers), else the file is refused with the columns listed. A default name (``u``, ``y``,
   ``r`` without ``--u/--y/--r``) that is a header cell *and* has numbered columns is ambiguous, and
   refused, when u is that name or has numbered columns; an explicit ``--u u`` takes the single column.
+- No column is dropped silently: the columns not read are listed in ``details["ignored_columns"]``.
 """
 
 from __future__ import annotations
 
 import csv
 import re
+from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,11 +49,26 @@ from nlsid.errors import InputError
 from nlsid.io.importers.source import NotFound, Source, option, sample_rate, source_from
 from nlsid.io.timestamps import REL_TOL
 
-TIME_HEADER = re.compile(r"^\s*(t|time|timestamp)\s*([\[(].*[\])])?\s*$", re.IGNORECASE)
-RATE_HEADER = re.compile(r"^\s*(?:fs|sampl(?:e|ing)[ _-]?rate|sampling[ _-]?frequency)\s*"
-                         r"(?:[\[(]\s*(?P<unit>hz|khz|mhz)\s*[\])])?\s*$", re.IGNORECASE)
+TIME_NAMES = ("t", "time", "timestamp")
+RATE_NAME = re.compile(r"^(?:fs|sampl(?:e|ing)[ _-]?rate|sampling[ _-]?frequency)$", re.IGNORECASE)
+INTERVAL_NAME = re.compile(r"^(?:ts|dt|sampl(?:e|ing)[ _-]?interval)$", re.IGNORECASE)
 RATE_UNITS = {"hz": 1.0, "khz": 1e3, "mhz": 1e6}
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "\u00b5s": 1e-6, "\u03bcs": 1e-6, "ns": 1e-9, "min": 60.0}
+TIME_UNITS_TEXT = "s, ms, us (µs), ns, min"
+# A name followed by a unit in brackets: "u (N)", "y [m/s^2]". A bracketed whole number is not a
+# unit but a realization number ("u(1)"), so it stays part of the name.
+UNIT_CELL = re.compile(r"^(?P<name>.*?\S)\s*[\[(]\s*(?P<unit>[^\[\]()]*?)\s*[\])]$")
 UNIT_SUFFIX = r"(?:\s*[\[(][^\])]*[\])])?"  # a trailing unit, as in "u1 (V)"
+DELIMITERS = ("\t", ";", ",")
+PREVIEW = 80  # characters of a preamble line kept in the details
+
+
+def split_unit(cell: str) -> tuple[str, str | None]:
+    """``"u (N)"`` -> ``("u", "N")``; a cell without a unit -> ``(cell, None)``."""
+    match = UNIT_CELL.match(cell.strip())
+    if match is None or not match.group("unit") or match.group("unit").isdigit():
+        return cell.strip(), None
+    return match.group("name"), match.group("unit")
 
 
 def _number(cell: str) -> float | None:
@@ -49,164 +78,343 @@ def _number(cell: str) -> float | None:
         return None
 
 
-def _delimiter(path: Path, first: str) -> str | None:
-    if path.suffix.lower() == ".tsv":
-        return "\t"
-    return next((d for d in ("\t", ";", ",") if d in first), None)
+def _delimiter_text(delimiter: str | None) -> str:
+    return {"\t": "tab", None: "whitespace", "": "nothing (one column)"}.get(delimiter, repr(delimiter))
 
 
-def _rows(path: Path) -> list[tuple[int, list[str]]]:
+@dataclass
+class Table:
+    """The rows of a CSV/TSV file: its header (cells, or None), the rows below it (line number,
+    cells), the delimiter (None: whitespace) and the lines above the header that were skipped."""
+
+    header: list[str] | None
+    header_line: int
+    body: list[tuple[int, list[str]]]
+    delimiter: str | None
+    preamble: list[tuple[int, str]]
+
+    @property
+    def width(self) -> int:
+        return len(self.header) if self.header is not None else len(self.body[0][1])
+
+
+def _lines(path: Path) -> list[str]:
     try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
+        return path.read_text(encoding="utf-8-sig").splitlines()
     except UnicodeDecodeError as exc:
         raise InputError(str(path), f"not a text file ({exc.reason} at byte {exc.start})") from None
-    numbered = [(i + 1, line) for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
-    if not numbered:
-        raise InputError(str(path), "holds no rows")
-    delimiter = _delimiter(path, numbered[0][1])
+
+
+def _choose_delimiter(path: Path, lines: list[str]) -> str | None:
+    """Tab for ``.tsv``; else the first of tab, ``;``, ``,`` on more than half of the lines (the rows
+    of the table, not a preamble line), else None (whitespace) when more than half of the lines
+    hold whitespace between cells, else ``""``: one column, a line is a cell (``Voltage (V)``)."""
+    if path.suffix.lower() == ".tsv":
+        return "\t"
+    found = next((d for d in DELIMITERS if 2 * sum(d in line for line in lines) > len(lines)), None)
+    if found is None and 2 * sum(len(line.split(None, 1)) > 1 for line in lines) <= len(lines):
+        return ""
+    return found
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
     if delimiter is None:
-        return [(n, line.split()) for n, line in numbered]
-    parsed = csv.reader((line for _, line in numbered), delimiter=delimiter)
-    return [(n, [c.strip() for c in cells]) for (n, _), cells in zip(numbered, parsed)]
+        return line.split()
+    if not delimiter:
+        return [line.strip()]
+    if '"' in line:  # quoted cells: one line is one row, a quote never joins lines
+        return [c.strip() for c in next(csv.reader([line], delimiter=delimiter))]
+    return [c.strip() for c in line.split(delimiter)]
 
 
-def _column(header: list[str] | None, width: int, name: str, where: str) -> int:
-    if header is not None:
-        if name in header:
-            return header.index(name)
-        folded = [h.casefold() for h in header]
-        if name.casefold() in folded:
-            return folded.index(name.casefold())
-    if name.isdigit() and 1 <= int(name) <= width:
-        return int(name) - 1
-    columns = f"columns are {', '.join(repr(h) for h in header)} or " if header else "columns are "
-    raise NotFound(where, f"no column {name!r}; {columns}numbers 1..{width}")
+def _is_numbers(cells: list[str]) -> bool:
+    """A row of data: every non-empty cell a number, and at least one."""
+    filled = [c for c in cells if c]
+    return bool(filled) and all(_number(c) is not None for c in filled)
 
 
-def _numbered(header: list[str], name: str) -> list[tuple[int, int]]:
-    """(number, column index) of the header cells that are ``name`` and a number (``u1``, ``u_1``,
+def _header_index(path: Path, rows: list[tuple[int, list[str]]], delimiter: str | None) -> int:
+    """Where the table starts: the line above the first row of data of the common width, when that
+    line is a header of the same width without numbers; else 0 (the first line). A row of data is
+    one of numbers (empty cells allowed), or, when no row is, one with a number (a text column
+    beside the numbers). Two header-like lines above the data are refused as ambiguous."""
+    widths = Counter(len(cells) for _, cells in rows)
+    width = widths.most_common(1)[0][0]
+    same = [k for k, (_, cells) in enumerate(rows) if len(cells) == width]
+    first = next((k for k in same if _is_numbers(rows[k][1])), None)
+    if first is None:
+        first = next((k for k in same if any(_number(c) is not None for c in rows[k][1])), None)
+    if first is None or first < 2:
+        return 0
+    above = rows[first - 1][1]
+    if len(above) != width or any(_number(c) is not None for c in above):
+        return 0
+    higher = rows[first - 2][1]
+    if len(higher) == width and not any(_number(c) is not None for c in higher):
+        raise InputError(f"{path}:{rows[first - 2][0]}", f"lines {rows[first - 2][0]} and {rows[first - 1][0]} both look "
+                                                         f"like the header ({width} cells split at "
+                                                         f"{_delimiter_text(delimiter)}, no numbers); pass --skip-rows N "
+                                                         "so that the header is the first line read")
+    return first - 1
+
+
+def read_table(path: Path, skip_rows: int | None = None) -> Table:
+    """Split ``path`` into header, rows and preamble; check that every row has the header's width."""
+    lines = _lines(path)
+    if skip_rows is not None and skip_rows >= len(lines):
+        raise InputError(f"--skip-rows {skip_rows}", f"{path} has only {len(lines)} line(s)")
+    start = skip_rows or 0
+    numbered = [(i + 1, line) for i, line in enumerate(lines[start:], start=start)
+                if line.strip() and not line.lstrip().startswith("#")]
+    if not numbered:
+        raise InputError(str(path), "holds no rows" + (f" below the {skip_rows} line(s) skipped" if skip_rows else ""))
+    delimiter = _choose_delimiter(path, [line for _, line in numbered])
+    rows = [(n, _split(line, delimiter)) for n, line in numbered]
+    top = 0 if skip_rows is not None else _header_index(path, rows, delimiter)
+    preamble = [(n, line.strip()[:PREVIEW]) for n, line in numbered[:top]]
+    first_line, first = rows[top]
+    header = None if _is_numbers(first) else first
+    body = rows[top + 1:] if header is not None else rows[top:]
+    if not body:
+        raise InputError(str(path), "holds a header but no data rows")
+    width = len(first)
+    for line, cells in body:
+        if len(cells) != width:
+            hint = ("; if lines above the header are not part of the table, pass --skip-rows N"
+                    if line == body[0][0] else "")
+            raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the {'header' if header else 'first row'} "
+                                               f"(line {first_line}) has {width} (split at "
+                                               f"{_delimiter_text(delimiter)}){hint}")
+    return Table(header=header, header_line=first_line, body=body, delimiter=delimiter, preamble=preamble)
+
+
+@dataclass(frozen=True)
+class Group:
+    """The columns one header cell labels: itself and the empty-headed columns holding data to its
+    right (a label over several columns), with the cell's name and unit."""
+
+    columns: tuple[int, ...]
+    cell: str
+    name: str
+    unit: str | None
+
+
+def groups_of(table: Table) -> tuple[list[Group], list[str | int]]:
+    """The labelled groups of columns, and the title of every column: its header cell, ``label #k``
+    for the k-th column under a label over several, or its number (from 1) when it has no title."""
+    width = table.width
+    if table.header is None:
+        return [], list(range(1, width + 1))
+    holds_data = [any(cells[i] for _, cells in table.body) for i in range(width)]
+    spans: list[list[int]] = []
+    current: list[int] | None = None
+    for i, cell in enumerate(table.header):
+        if cell:
+            current = [i]
+            spans.append(current)
+        elif current is not None and holds_data[i]:
+            current.append(i)
+        else:  # an empty column ends a label's span; unlabelled columns are nobody's
+            current = None
+    groups = [Group(tuple(span), table.header[span[0]], *split_unit(table.header[span[0]])) for span in spans]
+    titles: list[str | int] = list(range(1, width + 1))
+    for group in groups:
+        several = len(group.columns) > 1
+        for k, i in enumerate(group.columns, start=1):
+            titles[i] = f"{group.cell} #{k}" if several else group.cell
+    return groups, titles
+
+
+def _matching(groups: list[Group], name: str) -> list[Group]:
+    """The groups labelled ``name``: the header cell exactly, else ignoring case, else its name
+    without the unit exactly, else ignoring case."""
+    folded = name.casefold()
+    for test in (lambda g: g.cell == name, lambda g: g.cell.casefold() == folded,
+                 lambda g: g.name == name, lambda g: g.name.casefold() == folded):
+        found = [g for g in groups if test(g)]
+        if found:
+            return found
+    return []
+
+
+def _numbered(groups: list[Group], name: str, where: str) -> list[tuple[int, Group]]:
+    """(number, group) of the header cells that are ``name`` and a number (``u1``, ``u_1``,
     ``u(1)``, ...; ignoring case and a trailing unit). After a name ending in a digit the number
     needs a separator, so ``u1`` does not number ``u10``."""
     separator = r"[ _.\-]" if name[-1:].isdigit() else r"[ _.\-]?"
     pattern = re.compile(rf"^\s*{re.escape(name)}(?:{separator}(\d+)|\s*[\[(]\s*(\d+)\s*[\])]){UNIT_SUFFIX}\s*$",
                          re.IGNORECASE)
     found = []
-    for index, cell in enumerate(header):
-        match = pattern.match(cell)
+    for group in groups:
+        match = pattern.match(group.cell)
         if match:
-            found.append((int(match.group(1) or match.group(2)), index))
-    return sorted(found)
+            if len(group.columns) > 1:
+                raise InputError(where, f"the numbered column {group.cell!r} labels {len(group.columns)} columns; "
+                                        "a label over several columns names the realizations of one signal: "
+                                        f"call it {name!r}, or number every column")
+            found.append((int(match.group(1) or match.group(2)), group))
+    return sorted(found, key=lambda item: (item[0], item[1].columns))
 
 
-def _columns(header: list[str] | None, width: int, name: str, where: str) -> tuple[list[int], list[int] | None, list[int]]:
-    """The column(s) of one signal, for numbered columns their numbers, and the numbered columns
-    passed over for a column named exactly ``name`` (whether that is ambiguous is decided by the caller).
+@dataclass(frozen=True)
+class Chosen:
+    """The columns of one signal, their realization numbers (None: one column, or repeated cells),
+    the numbered columns passed over for a column named exactly, and the groups read."""
 
-    One column: the header cell ``name`` (exact, else ignoring case), else column number ``name``.
-    Several (realizations side by side): ``name`` repeated in the header, or, when it is not a header
-    cell, the numbered columns ``name1, name2, ...``.
+    indices: list[int]
+    numbers: list[int] | None
+    passed_over: list[int]
+    groups: list[Group]
+
+
+def _columns(groups: list[Group], titles: list[str | int], header: bool, width: int, name: str, where: str) -> Chosen:
+    """The column(s) of one signal (whether passed-over numbered columns are ambiguous is decided by
+    the caller).
+
+    One column: the header cell ``name`` (exact, else ignoring case, else without its unit), else
+    column number ``name``. Several (realizations side by side): a label over several columns,
+    ``name`` repeated in the header, or, when it is not a header cell, the numbered columns
+    ``name1, name2, ...``.
     """
-    if header is not None:
-        exact = [i for i, h in enumerate(header) if h == name] or \
-                [i for i, h in enumerate(header) if h.casefold() == name.casefold()]
-        numbered = [] if name.isdigit() else _numbered(header, name)
+    if header:
+        exact = _matching(groups, name)
+        numbered = [] if name.isdigit() else _numbered(groups, name, where)
+        if len(exact) == 1 and len(exact[0].columns) > 1:
+            columns = list(exact[0].columns)
+            return Chosen(columns, list(range(1, len(columns) + 1)), [], exact)
         if exact:
-            return exact, None, [i for _, i in numbered] if len(exact) == 1 else []
+            passed = [g.columns[0] for _, g in numbered] if len(exact) == 1 else []
+            return Chosen([i for g in exact for i in g.columns], None, passed, exact)
         if numbered:
-            numbers = [n for n, _ in numbered]
-            for (n, i), (m, j) in zip(numbered, numbered[1:]):
+            for (n, a), (m, b) in zip(numbered, numbered[1:]):
                 if n == m:
-                    raise InputError(where, f"columns {header[i]!r} and {header[j]!r} both have number {n}")
-            return [i for _, i in numbered], numbers, []
+                    raise InputError(where, f"columns {a.cell!r} and {b.cell!r} both have number {n}")
+            return Chosen([g.columns[0] for _, g in numbered], [n for n, _ in numbered], [], [g for _, g in numbered])
     if name.isdigit() and 1 <= int(name) <= width:
-        return [int(name) - 1], None, []
-    columns = f"columns are {', '.join(repr(h) for h in header)} or " if header else "columns are "
+        index = int(name) - 1
+        return Chosen([index], None, [], [g for g in groups if index in g.columns])
+    named = ", ".join(repr(t) for t in titles if isinstance(t, str))
+    columns = f"columns are {named} or " if named else "columns are "
     raise NotFound(where, f"no column {name!r}; {columns}numbers 1..{width}")
 
 
-def _check_ambiguous(path: Path, header: list[str] | None, names: dict[str, str], chosen: dict, passed_over: dict,
+def _check_ambiguous(path: Path, titles: list[str | int], names: dict[str, str], chosen: dict[str, Chosen],
                      defaulted: frozenset[str]) -> None:
     """Refuse a default name that is a column *and* has numbered columns (``u, u2, u3``) when the
     numbered reading would give realizations: the input u has numbered columns, or is that name. An
     explicit ``--u u`` takes the one column; ``t, u, y, y2`` (one input, a second sensor) is no
     question: y is the column y."""
-    u_numbered = passed_over.get("u") or ("u" in chosen and chosen["u"][1] is not None)
-    for key, others in passed_over.items():
-        if others and key in defaulted and (key == "u" or u_numbered):
-            column = header[chosen[key][0][0]]
-            listed = ", ".join(repr(header[i]) for i in others)
+    u_numbered = "u" in chosen and (chosen["u"].passed_over or chosen["u"].numbers is not None)
+    for key, picked in chosen.items():
+        if picked.passed_over and key in defaulted and (key == "u" or u_numbered):
+            column = titles[picked.indices[0]]
+            listed = ", ".join(repr(titles[i]) for i in picked.passed_over)
             raise InputError(f"{path}: --{key} {names[key]}", f"ambiguous: a column {column!r} and the numbered columns "
                                                               f"{listed}; pass --{key} {column} for the one column, or "
                                                               "rename it to import the numbered ones as realizations")
 
 
-def _paired(path: Path, header: list[str] | None, chosen: dict[str, tuple[list[int], list[int] | None]]) -> int:
+def _paired(path: Path, titles: list[str | int], chosen: dict[str, Chosen]) -> int:
     """The number of realizations the chosen columns hold; refuse columns that do not pair up."""
-    counts = {len(indices) for indices, _ in chosen.values()}
-    numbers = {tuple(numbered) for _, numbered in chosen.values() if numbered is not None}
-    kinds = {numbered is None for _, numbered in chosen.values()}  # repeated (or single) / numbered
+    counts = {len(c.indices) for c in chosen.values()}
+    numbers = {tuple(c.numbers) for c in chosen.values() if c.numbers is not None}
+    kinds = {c.numbers is None for c in chosen.values()}  # repeated (or single) / numbered
     if len(counts) == 1 and len(numbers) <= 1 and (counts == {1} or len(kinds) == 1):
         return counts.pop()
-    listed = "; ".join(f"{key}: {', '.join(repr(header[i]) for i in indices)}" for key, (indices, _) in chosen.items())
+    listed = "; ".join(f"{key}: {', '.join(repr(titles[i]) for i in c.indices)}" for key, c in chosen.items())
     raise InputError(str(path), f"the signal columns do not pair into realizations ({listed}): each realization "
                                 "needs one column of every signal, numbered alike (u1, y1, u2, y2, ...); "
                                 "name the columns with --u/--y/--r")
 
 
+def _unit(path: Path, key: str, picked: Chosen, titles: list[str | int]) -> str | None:
+    """The unit the header gives a signal: the one unit of all its columns; None when some have
+    none; refused when its columns state different units."""
+    units = {g.unit for g in picked.groups}
+    if None in units or not units:
+        return None
+    if len(units) > 1:
+        listed = ", ".join(repr(titles[g.columns[0]]) for g in picked.groups)
+        raise InputError(str(path), f"the columns of {key} state different units ({listed}); the realizations of "
+                                    "a signal share one unit")
+    return units.pop()
+
+
+def _time_scale(path: Path, group: Group | None, title: str | int) -> tuple[float, str | None]:
+    """Seconds per unit of a time column's header (``time (ms)``: 1e-3), and the unit."""
+    if group is None or group.unit is None:
+        return 1.0, None
+    scale = TIME_UNITS.get(group.unit.casefold())
+    if scale is None:
+        raise InputError(f"{path}:{title}", f"unknown time unit {group.unit!r}; units understood: {TIME_UNITS_TEXT}")
+    return scale, group.unit
+
+
 def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[str], fs_given: bool,
-             defaulted: frozenset[str] = frozenset()) -> Source:
-    """Read the selected columns (signal -> column), the time column and the sample-rate column of a
-    CSV/TSV table. ``defaulted``: the signals whose names were not given (``u``, ``y``, ``r``).
+             defaulted: frozenset[str] = frozenset(), skip_rows: int | None = None) -> Source:
+    """Read the selected columns (signal -> column), the time column and the sample-rate and
+    sampling-interval columns of a CSV/TSV table. ``defaulted``: the signals whose names were not
+    given (``u``, ``y``, ``r``); ``skip_rows``: lines above the header (None: found).
 
     Several columns of one signal (realizations side by side) give a (realizations, samples) matrix,
     which :func:`nlsid.io.importers.source.records_of` cuts into one record per realization.
     """
-    rows = _rows(path)
-    first_line, first = rows[0]
-    header = first if any(_number(c) is None for c in first) else None
-    body = rows[1:] if header is not None else rows
-    width = len(first)
-    for line, cells in body:
-        if len(cells) != width:
-            raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the {'header' if header else 'first row'} "
-                                               f"(line {first_line}) has {width}")
-    if not body:
-        raise InputError(str(path), "holds a header but no data rows")
-    if time is None and not fs_given and header is not None:
-        time = next((h for h in header if TIME_HEADER.match(h)), None)
-    rate_index = None if fs_given or header is None else next((i for i, h in enumerate(header) if RATE_HEADER.match(h)), None)
-    chosen: dict[str, tuple[list[int], list[int] | None]] = {}
-    passed_over: dict[str, list[int]] = {}
+    table = read_table(path, skip_rows)
+    header, body, width = table.header, table.body, table.width
+    groups, titles = groups_of(table)
+    if time is None and not fs_given:
+        time = next((g.cell for g in groups if g.name.casefold() in TIME_NAMES), None)
+    chosen: dict[str, Chosen] = {}
     for key, name in names.items():
         try:
-            indices, numbers, passed_over[key] = _columns(header, width, name, f"{path}: {option(key, name)}")
+            chosen[key] = _columns(groups, titles, header is not None, width, name, f"{path}: {option(key, name)}")
         except NotFound:
             if key not in optional:
                 raise
-            continue
-        chosen[key] = indices, numbers
-    _check_ambiguous(path, header, names, chosen, passed_over, defaulted)
-    realizations = _paired(path, header, chosen)
+    _check_ambiguous(path, titles, names, chosen, defaulted)
+    realizations = _paired(path, titles, chosen)
     if realizations > len(body):
         raise InputError(str(path), f"{realizations} realizations side by side but only {len(body)} row(s) of samples")
 
     def title(index: int) -> str:
-        return header[index] if header else str(index + 1)
+        return str(titles[index])
 
-    values = {key: _parse(path, body, indices[0], title(indices[0])) if realizations == 1 else
-              np.vstack([_parse(path, body, i, title(i)) for i in indices]) for key, (indices, _) in chosen.items()}
-    labels = {key: names[key] if realizations == 1 else _label([title(i) for i in indices], name=names[key])
-              for key, (indices, _) in chosen.items()}
-    columns = {key: names[key] if realizations == 1 else [title(i) for i in indices] for key, (indices, _) in chosen.items()}
-    if time:
-        index = _column(header, width, time, f"{path}: --time {time}")
-        values["time"], labels["time"], columns["time"] = _parse(path, body, index, title(index)), time, time
+    values = {key: _parse(path, body, c.indices[0], titles[c.indices[0]]) if realizations == 1 else
+              np.vstack([_parse(path, body, i, titles[i]) for i in c.indices]) for key, c in chosen.items()}
+    columns = {key: (title(c.indices[0]) if header else names[key]) if realizations == 1 else
+               [title(i) for i in c.indices] for key, c in chosen.items()}
+    labels = {key: columns[key] if realizations == 1 else _label(columns[key], name=names[key])
+              for key in chosen}
+    used = {i for c in chosen.values() for i in c.indices}
     details: dict = {"columns": columns, "header": header is not None}
+    if time:
+        picked = _columns(groups, titles, header is not None, width, time, f"{path}: --time {time}")
+        index = picked.indices[0]
+        if len(picked.indices) > 1:
+            raise InputError(f"{path}: --time {time}", f"{len(picked.indices)} columns "
+                                                       f"({', '.join(repr(titles[i]) for i in picked.indices)}); "
+                                                       "a time vector is one column")
+        scale, unit = _time_scale(path, picked.groups[0] if picked.groups else None, titles[index])
+        values["time"] = _parse(path, body, index, titles[index]) * scale
+        labels["time"] = columns["time"] = title(index) if header else time
+        used.add(index)
+        if unit is not None:
+            details["time_unit"] = unit
     if realizations > 1:
         details["realizations"] = realizations
     source = source_from(path, "csv", labels, values, details)
-    if rate_index is not None:
-        _apply_rate_column(source, path, body, rate_index, header[rate_index])
+    source.units = {key: unit for key, c in chosen.items() if (unit := _unit(path, key, c, titles)) is not None}
+    if not fs_given:
+        rate_groups = [g for g in groups if (RATE_NAME.match(g.name) or INTERVAL_NAME.match(g.name))
+                       and not used.intersection(g.columns)]
+        if rate_groups:
+            _apply_rate_columns(source, path, body, rate_groups, titles)
+            used.update(i for g in rate_groups for i in g.columns)
+    details["ignored_columns"] = [titles[i] for i in range(width) if i not in used]
+    if table.preamble:
+        details["preamble_lines"] = [{"line": n, "text": text} for n, text in table.preamble]
+    if skip_rows is not None:
+        details["skipped_rows"] = skip_rows
     return source
 
 
@@ -217,40 +425,78 @@ def _label(titles: list[str], name: str) -> str:
     return f"{name} (columns {len(titles)})"
 
 
-def _apply_rate_column(source: Source, path: Path, body: list[tuple[int, list[str]]], index: int, title: str) -> None:
-    """Set the source's sample rate from a sample-rate column (one value; empty cells allowed)."""
-    unit = RATE_HEADER.match(title).group("unit")
-    scale = RATE_UNITS[unit.lower()] if unit else 1.0
+@dataclass(frozen=True)
+class Rate:
+    """The sample rate one column gives, and how to name it."""
+
+    fs: float
+    title: str
+    kind: str  # "sample-rate" or "sampling-interval"
+
+
+def _rate_of(path: Path, body: list[tuple[int, list[str]]], group: Group, titles: list[str | int]) -> Rate:
+    """The sample rate of a sample-rate (``fs``) or sampling-interval (``Ts``, ``dt``) column: one
+    value over all its cells (empty cells allowed)."""
+    title = str(titles[group.columns[0]]) if len(group.columns) == 1 else group.cell
+    interval = INTERVAL_NAME.match(group.name) is not None
+    units = TIME_UNITS if interval else RATE_UNITS
+    default = "s" if interval else "Hz"
+    scale = units.get(group.unit.casefold()) if group.unit else 1.0
+    if scale is None:
+        understood = TIME_UNITS_TEXT if interval else "Hz, kHz, MHz"
+        raise InputError(f"{path}:{title}", f"unknown unit {group.unit!r} of a {'sampling interval' if interval else 'sample rate'}; "
+                                            f"units understood: {understood}")
+    what = "sampling interval" if interval else "sample rate"
     first: tuple[float, int] | None = None
     for line, cells in body:
-        cell = cells[index]
-        if not cell:
-            continue
-        value = _number(cell)
-        if value is None or not np.isfinite(value) or value <= 0:
-            raise InputError(f"{path}:{line}", f"column {title!r}: cell {cell[:40]!r} is not a sample rate "
-                                               f"(a number > 0, in {unit or 'Hz'})")
-        if first is None:
-            first = (value, line)
-        elif value != first[0]:
-            raise InputError(f"{path}:{title}", f"the sample rate varies: {first[0]:.9g} on line {first[1]}, "
-                                                f"{value:.9g} on line {line}; a file holds one rate (split the file, "
-                                                "or pass --fs HZ)")
+        for index in group.columns:
+            cell = cells[index]
+            if not cell:
+                continue
+            value = _number(cell)
+            if value is None or not np.isfinite(value) or value <= 0:
+                raise InputError(f"{path}:{line}", f"column {titles[index]!r}: cell {cell[:40]!r} is not a {what} "
+                                                   f"(a number > 0, in {group.unit or default})")
+            if first is None:
+                first = (value, line)
+            elif value != first[0]:
+                raise InputError(f"{path}:{title}", f"the {what} varies: {first[0]:.9g} on line {first[1]}, "
+                                                    f"{value:.9g} on line {line}; a file holds one rate (split the "
+                                                    "file, or pass --fs HZ" + (f", or --time {title} if it is a time "
+                                                                               "vector)" if interval else ")"))
     if first is None:
-        raise InputError(f"{path}:{title}", "the sample-rate column holds no value")
-    fs = first[0] * scale
-    source.fs, source.fs_from = fs, f"sample-rate column {path}:{title}"
-    source.details["sample_rate_column"] = title
+        raise InputError(f"{path}:{title}", f"the {what.replace(' ', '-')} column holds no value")
+    value = first[0] * scale
+    fs = 1.0 / value if interval else value
+    return Rate(fs, title, "sampling-interval" if interval else "sample-rate")
+
+
+def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[str]]], groups: list[Group],
+                        titles: list[str | int]) -> None:
+    """Set the source's sample rate from its sample-rate and sampling-interval columns, which must
+    agree with each other and with the time vector."""
+    rates = [_rate_of(path, body, group, titles) for group in groups]
+    first = rates[0]
+    for other in rates[1:]:
+        if abs(other.fs / first.fs - 1) > REL_TOL:
+            raise InputError(str(path), f"the {first.kind} column {first.title!r} gives {first.fs:.9g} Hz but the "
+                                        f"{other.kind} column {other.title!r} {other.fs:.9g} Hz (they must agree "
+                                        f"within {REL_TOL:g}); pass --fs HZ to choose")
+    source.fs = first.fs
+    source.fs_from = f"{first.kind} column {path}:{first.title}" + (" (fs = 1/Ts)" if first.kind == "sampling-interval" else "")
+    source.details["sample_rate_column"] = first.title
+    source.details["rate_columns"] = [rate.title for rate in rates]
     if source.time is not None:
         from_time = sample_rate(source.time, source.time_where)
-        if abs(from_time / fs - 1) > REL_TOL:
-            raise InputError(str(path), f"the sample-rate column {title!r} says {fs:.9g} Hz but the time vector "
-                                        f"{source.time_where} gives {from_time:.9g} Hz "
-                                        f"(they must agree within {REL_TOL:g}); pass --fs HZ to choose")
+        for rate in rates:
+            if abs(from_time / rate.fs - 1) > REL_TOL:
+                raise InputError(str(path), f"the {rate.kind} column {rate.title!r} says {rate.fs:.9g} Hz but the time "
+                                            f"vector {source.time_where} gives {from_time:.9g} Hz "
+                                            f"(they must agree within {REL_TOL:g}); pass --fs HZ to choose")
         source.details["time_vector_fs"] = from_time
 
 
-def _parse(path: Path, body: list[tuple[int, list[str]]], index: int, title: str) -> np.ndarray:
+def _parse(path: Path, body: list[tuple[int, list[str]]], index: int, title: str | int) -> np.ndarray:
     out = np.empty(len(body))
     for i, (line, cells) in enumerate(body):
         value = _number(cells[index])
