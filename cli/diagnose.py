@@ -9,7 +9,7 @@ import click
 from nlsid.errors import CheckFailed
 
 from .common import StageCommand, emit_json, force_option, json_option, progress, settings
-from .options import map_option, parse_map, read_split, split_options
+from .options import map_option, overlap_provenance, parse_map, read_split, split_options
 
 
 @click.command(cls=StageCommand)
@@ -33,8 +33,8 @@ from .options import map_option, parse_map, read_split, split_options
 @json_option
 def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
              fail_if_distortion_above: float | None, validate_on: tuple[str, ...], estimation_range: str | None,
-             validation_range: str | None, workers: int | None, mapping: tuple[str, ...], force: bool,
-             as_json: bool) -> None:
+             validation_range: str | None, allow_overlap: bool, workers: int | None, mapping: tuple[str, ...],
+             force: bool, as_json: bool) -> None:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -69,16 +69,19 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
 
         raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
     validate_simulate_config(data, model_path, lines)  # here, where a refused key's line is known
-    estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping))
+    estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping),
+                                               data_path, allow_overlap)
     runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
     with progress("diagnose", len(LIBRARY) + 2) as step, default_threads(workers):  # evidence, nuisances, each hypothesis
         result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step(), validate_on=extra,
                                estimation_range=estimation, validation_range=validation)
     final = result.final
     extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
-    summary = {**result.summary(), "units": common_units(run.units for run in [*runs, *extra])}
+    summary = {**result.summary(), "units": common_units(run.units for run in [*runs, *extra]),
+               "allow_overlap": allow_overlap}
     write_diagnosis(output, summary, result.arrays(), extended,
-                    provenance(config_paths=[model_path], input_paths=[data_path, *validate_on]), force=force)
+                    overlap_provenance(provenance(config_paths=[model_path], input_paths=[data_path, *validate_on]),
+                                       allow_overlap), force=force)
     if as_json:
         emit_json({"output": output, **summary})
     else:

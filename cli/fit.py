@@ -9,7 +9,7 @@ import click
 from nlsid.errors import InputError
 
 from .common import StageCommand, emit_json, force_option, json_option, settings
-from .options import map_option, parse_map, read_split, split_options
+from .options import map_option, overlap_provenance, parse_map, read_split, split_options
 
 
 @click.command(cls=StageCommand)
@@ -47,8 +47,8 @@ from .options import map_option, parse_map, read_split, split_options
 @force_option
 @json_option
 def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, validate_on,
-        estimation_range, validation_range, fit_on, jacobian, start_estimate, workers, mapping, output, force,
-        as_json) -> None:
+        estimation_range, validation_range, allow_overlap, fit_on, jacobian, start_estimate, workers, mapping, output,
+        force, as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
@@ -74,11 +74,13 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
         if model_config is None or data is None:
             raise InputError("nlsid fit", "--model and --data go together")
         _fit_extension(model_config, data, list(validation), validate_on, estimation_range, validation_range, fit_on,
-                       jacobian, start_estimate, workers, parse_map(mapping), output, force, as_json)
+                       jacobian, start_estimate, workers, parse_map(mapping), output, force, as_json, allow_overlap)
         return
     if validate_on or estimation_range or validation_range or fit_on != "y" or jacobian != "differences":
         raise InputError("nlsid fit", "--validate-on, --estimation-range, --validation-range, --fit-on and --jacobian "
                                       "go with --model and --data")
+    if allow_overlap:
+        raise InputError("nlsid fit", "--allow-overlap goes with --model, --data and --validate-on")
     if bla_file is None or order is None:
         raise InputError("nlsid fit", "give BLA_FILE and --order NB/NA (or auto), or --model with --data")
     _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
@@ -141,7 +143,7 @@ def _cost_check(fit_) -> str:
 
 
 def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on, jacobian,
-                   start_estimate, workers, mapping, output, force, as_json) -> None:
+                   start_estimate, workers, mapping, output, force, as_json, allow_overlap=False) -> None:
     from nlsid.fit.extension import fit_config_file
     from nlsid.io.fit_file import report_path, write_fit
     from nlsid.io.provenance import provenance
@@ -150,18 +152,20 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
 
     check_writable(output, force)
     check_writable(report_path(output), force)
-    estimation, validation_part, extra = read_split(validate_on, estimation_range, validation_range, mapping)
+    estimation, validation_part, extra = read_split(validate_on, estimation_range, validation_range, mapping, data,
+                                                    allow_overlap)
     runs = read_runs(data, require_y=True, mapping=mapping)
     result = fit_config_file(model_config, runs, validation or None, workers, start_estimate, validate_on=extra,
                              estimation_range=estimation, validation_range=validation_part, fit_on=fit_on, where=data,
                              jacobian=jacobian)
-    summary = result.summary()
+    summary = {**result.summary(), "allow_overlap": allow_overlap}
     header = [f"nlsid fit --model {model_config} --data {data}",
               "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),
               f"validation rms error of {fit_on} {result.validation_rms:.4g} (noise {result.noise_rms_validation:.4g}); "
               f"report: {report_path(output).name}"]
     write_fit(output, result.config, header, {"kind": "extension", **summary},
-              provenance(config_paths=[model_config], input_paths=[data, *validate_on]), force=force)
+              overlap_provenance(provenance(config_paths=[model_config], input_paths=[data, *validate_on]),
+                                 allow_overlap), force=force)
     for warning in result.warnings:
         settings().console.print(f"warning: {warning}")
     if as_json:

@@ -60,20 +60,63 @@ def split_options(command):
         click.option("--validation-range", default=None, metavar="C:D",
                      help="Validate on samples [C, D) of every run of --data (with --estimation-range; must not "
                           "overlap it)."),
+        click.option("--allow-overlap", is_flag=True,
+                     help="Accept a --validate-on recording that is the --data recording (the same file, or a "
+                          "copy): its validation error is then measured on fitted samples. Recorded in the "
+                          "--json summary and the provenance."),
     )):
         command = option(command)
     return command
 
 
 def read_split(validate_on: tuple[str, ...], estimation_range: str | None, validation_range: str | None,
-               mapping: dict[str, str] | None):
+               mapping: dict[str, str] | None, data: str | None = None, allow_overlap: bool = False):
     """The parsed ranges and the runs of the ``--validate-on`` recordings (ids ``FILE:ID``),
-    checked before anything is simulated."""
+    checked before anything is simulated; a ``--validate-on`` recording that is ``data`` (the
+    ``--data`` recording) is refused unless ``allow_overlap`` (:func:`check_no_overlap`)."""
     from nlsid.io.ranges import check_sources, parse_range, qualify
     from nlsid.io.recording import read_runs
 
     estimation = parse_range(estimation_range, "--estimation-range")
     validation = parse_range(validation_range, "--validation-range")
     check_sources(estimation, validation, bool(validate_on))
+    if data is not None and not allow_overlap:
+        check_no_overlap(data, validate_on)
     runs = [run for path in validate_on for run in qualify(read_runs(path, require_y=True, mapping=mapping), path)]
     return estimation, validation, runs
+
+
+def same_recording(first: str, second: str) -> str | None:
+    """How ``second`` is the recording ``first``: ``"the same file"`` (one resolved path, a link to
+    it, or a hard link), ``"a copy of it"`` (other bytes on disk, the same SHA-256), else None. A
+    file that does not exist is no recording yet (its reader says so)."""
+    import os
+
+    from nlsid.io.provenance import file_sha256
+
+    a, b = Path(first), Path(second)
+    if not (a.is_file() and b.is_file()):
+        return None
+    if os.path.samefile(a, b):
+        return "the same file"
+    if a.stat().st_size == b.stat().st_size and file_sha256(a) == file_sha256(b):
+        return "a copy of it: the same SHA-256"
+    return None
+
+
+def check_no_overlap(data: str, validate_on: tuple[str, ...]) -> None:
+    """Refuse a ``--validate-on`` recording that is the ``--data`` recording: its runs are fitted,
+    so the error measured on them says nothing of the model on data it has not seen."""
+    for path in validate_on:
+        how = same_recording(data, path)
+        if how is not None:
+            raise InputError("--validate-on", f"{path} is the --data recording {data} ({how}): its runs are "
+                                              "fitted, so validating on them measures the fit, not the model on "
+                                              "unseen data; give another recording, or pass --allow-overlap")
+
+
+def overlap_provenance(record: dict, allow_overlap: bool) -> dict:
+    """A provenance record (:func:`nlsid.io.provenance.provenance`) with ``allow_overlap: true``
+    when ``--allow-overlap`` was given: whoever reads the output learns that its validation may
+    have been measured on fitted samples without parsing the command line."""
+    return {**record, "allow_overlap": True} if allow_overlap else record

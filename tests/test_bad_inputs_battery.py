@@ -194,3 +194,88 @@ def test_a_finite_fs_option_still_imports(run_cli, tmp_path):
                      "--json")
     assert result.exit_code == 0, result.stderr
     assert result.json()["fs"] == 64.0 and result.json()["fs_from"] == "--fs"
+
+
+# ---------------------------------------------------------------------------------------------
+# --validate-on the --data recording
+
+FREE_MODEL = ("model:\n  type: mass_spring_damper\n  mass: 2.0\n  damping: 20.0\n  stiffness: 2000.0\n"
+              "free:\n  model.damping: {}\n")
+
+
+def overlap_args(command: str, tmp_path: Path, validate_on: Path, *extra) -> list:
+    out = tmp_path / "out"
+    if command == "fit":
+        out.mkdir(exist_ok=True)
+        config = tmp_path / "model.yaml"
+        config.write_text(FREE_MODEL)
+        return ["fit", "--model", config, "--data", STAGE, "--validate-on", validate_on, "-o", out / "fitted.yaml",
+                *extra]
+    return ["diagnose", "--model", ROOT / "configs" / "stage_model.yaml", "--data", STAGE, "--validate-on",
+            validate_on, "-o", out, *extra]
+
+
+@pytest.mark.parametrize("command", ["fit", "diagnose"])
+@pytest.mark.parametrize("how", ["same path", "link", "other spelling", "copy"])
+def test_validate_on_the_data_recording_is_refused(run_cli, tmp_path, monkeypatch, command, how):
+    if how == "same path":
+        validate_on = STAGE
+    elif how == "link":
+        validate_on = tmp_path / "link.h5"
+        validate_on.symlink_to(STAGE)
+    elif how == "other spelling":
+        monkeypatch.chdir(ROOT / "configs")
+        validate_on = Path("..") / "sample_data" / "." / "stage.h5"
+    else:
+        validate_on = tmp_path / "copy.h5"
+        validate_on.write_bytes(STAGE.read_bytes())
+    line = one_line(run_cli(*overlap_args(command, tmp_path, validate_on)), "--validate-on: ", "--data recording",
+                    "--allow-overlap")
+    assert ("a copy of it" if how == "copy" else "the same file") in line
+    out = tmp_path / "out"
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_a_different_recording_of_the_same_size_is_no_overlap(tmp_path):
+    """Only equal content counts: one changed byte (same size) makes another recording."""
+    from nlsid.cli.options import same_recording
+
+    data = STAGE.read_bytes()
+    other = tmp_path / "other.h5"
+    other.write_bytes(data[:-1] + bytes([data[-1] ^ 1]))
+    assert same_recording(str(STAGE), str(other)) is None
+    copy = tmp_path / "copy.h5"
+    copy.write_bytes(data)
+    assert same_recording(str(STAGE), str(copy)) == "a copy of it: the same SHA-256"
+    assert same_recording(str(STAGE), str(tmp_path / "missing.h5")) is None
+
+
+def test_allow_overlap_is_recorded_in_the_summary_and_provenance(run_cli, tmp_path):
+    copy = tmp_path / "copy.h5"
+    copy.write_bytes(STAGE.read_bytes())
+    result = run_cli("-q", *overlap_args("fit", tmp_path, copy, "--allow-overlap", "--json"))
+    assert result.exit_code == 0, result.stderr
+    assert result.json()["allow_overlap"] is True
+    import json
+
+    report = json.loads((tmp_path / "out" / "fitted.fit.json").read_text())
+    assert report["allow_overlap"] is True and report["provenance"]["allow_overlap"] is True
+    # validated on the fitted runs themselves: the validation error is the estimation error
+    assert abs(report["validation_rms"] - report["estimation_rms"]) <= 1e-12 * report["estimation_rms"]
+
+
+def test_without_overlap_the_summary_says_so(run_cli, tmp_path):
+    config = tmp_path / "model.yaml"
+    config.write_text(FREE_MODEL)
+    result = run_cli("-q", "fit", "--model", config, "--data", STAGE, "-o", tmp_path / "fitted.yaml", "--json")
+    assert result.exit_code == 0, result.stderr
+    assert result.json()["allow_overlap"] is False
+    import json
+
+    assert "allow_overlap" not in json.loads((tmp_path / "fitted.fit.json").read_text())["provenance"]
+
+
+def test_allow_overlap_without_model_fit_is_refused(run_cli, tmp_path):
+    one_line(run_cli("fit", "bla.h5", "--order", "2/2", "--allow-overlap", "-o", tmp_path / "m.yaml"),
+             "--allow-overlap goes with --model")
+    assert list(tmp_path.iterdir()) == []
