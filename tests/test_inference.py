@@ -150,7 +150,7 @@ def test_realizations_kept_whole_become_arbitrary():
     rng = np.random.default_rng(10)
     x = concatenated(256, np.arange(1, 40), rng, realizations=2, periods=3, lead=0, noise=1e-3)
     inf = infer_excitation(x, FS, split=False)
-    assert inf.kind == "arbitrary" and "2 realizations" in inf.notes[0]
+    assert inf.kind == "arbitrary" and "2 segments" in inf.notes[0] and "2 realizations" not in inf.notes[0]
 
 
 def test_squared_differences_match_the_definition():

@@ -68,6 +68,11 @@ LINE_FALSE_ALARM = 1e-3
 SMOOTH_BINS = 8
 NUMERIC_FLOOR = 1e-10
 CHI2_1_999 = 10.83
+MEASURED_LINE_SNR = 100.0  # 20 dB: how far a line of a measured input must stand above the noise of its estimate
+MAINS_HZ = (50.0, 60.0)
+DRIFT_DEGREE = 2
+SWEEP_ENVELOPE_CV = 0.2
+SWEEP_SEGMENTS = 20
 
 
 @dataclass(frozen=True)
@@ -108,6 +113,17 @@ class Inference:
     level: float | None = None
     measures: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+
+    def demote(self, reason: str) -> None:
+        """Make this an ``arbitrary`` record because its periodic claim failed (``reason``): the notes
+        then say what was inferred and why it was not kept, and nothing else (they describe what is
+        written)."""
+        claim = f"{self.kind} ({self.grid})" if self.kind == "multisine" else self.kind
+        count = len(self.realizations)
+        self.notes = [f"inferred {claim} with period {self.period} samples in {count} realization(s), but {reason}: "
+                      "imported as one arbitrary record"]
+        self.kind, self.period, self.grid, self.frequency, self.level = "arbitrary", None, None, None, None
+        self.realizations = []
 
     def report(self) -> dict:
         """A JSON-ready summary (``docs/drafts/import.md``)."""
@@ -156,14 +172,23 @@ def candidate_lags(x: np.ndarray, count: int = CANDIDATE_LAGS) -> np.ndarray:
     return minima[np.argsort(norm[minima], kind="stable")[:count]]
 
 
-def repeat_residual(x: np.ndarray, lag: int) -> float:
-    """``mean_n min((x(n+lag) - x(n))^2, (x(n) - x(n-lag))^2)`` (one-sided at the ends)."""
+def repeat_residual(x: np.ndarray, lag: int, start: int = 0) -> float:
+    """``mean_n min((x(n+lag) - x(n))^2, (x(n) - x(n-lag))^2)`` over ``n >= start`` (one-sided at the ends;
+    ``lag < L - start``)."""
     sq = (x[lag:] - x[:-lag]) ** 2
     best = np.empty(x.size)
     best[: x.size - lag] = sq
     best[x.size - lag:] = np.inf
     best[lag:] = np.minimum(best[lag:], sq)
-    return float(best.mean())
+    best = best[start:]
+    return float(best[np.isfinite(best)].mean())  # past L/2 the middle samples have no neighbour
+
+
+def steady_residual(x: np.ndarray, lag: int) -> float:
+    """The repeat residual of the samples after the first ``lag``: a first period that differs (a
+    generator's start-up transient) has a later period to repeat, but the samples of that first
+    period themselves would only compare against the steady ones, so they are left out."""
+    return repeat_residual(x, lag, start=lag if 2 * lag < x.size else 0)
 
 
 def divisors(n: int) -> list[int]:
@@ -172,16 +197,43 @@ def divisors(n: int) -> list[int]:
     return sorted({d for d in small + [n // d for d in small] if d >= 2})
 
 
+def repeats_best_at(x: np.ndarray, lag: int, residual=None) -> bool:
+    """Whether ``x`` repeats strictly better at ``lag`` than at ``lag - 1`` and ``lag + 1``
+    (``residual``, by default :func:`steady_residual`).
+
+    A periodic record repeats at its period up to noise, and one sample off by the power of its
+    one-sample differences; a smooth record (a slow chirp, a held staircase, an oversampled
+    multisine) repeats ever better as the lag shrinks, with no minimum at any small lag. So this
+    tells periodicity from smoothness.
+    """
+    residual = residual or (lambda lag: steady_residual(x, lag))
+    here = residual(lag)
+    return all(here < residual(other) for other in (lag - 1, lag + 1) if 1 <= other < x.size)
+
+
 def lag_period(x: np.ndarray) -> int | None:
-    """The smallest lag at which ``x`` repeats up to noise (step 1, candidates and repeat residual)."""
-    lags = candidate_lags(x)
-    if lags.size == 0:
+    """The smallest lag at which ``x`` repeats up to noise (step 1, candidates and repeat residual).
+
+    Each candidate lag and its neighbours +-1 (a transient in the first period can move the minimum
+    of ``d'`` by a sample) are scored by :func:`steady_residual`, which leaves out the first period;
+    only lags at which the record repeats strictly better than one sample off count
+    (:func:`repeats_best_at`).
+    """
+    cache: dict[int, float] = {}
+
+    def residual(lag: int) -> float:
+        if lag not in cache:
+            cache[lag] = steady_residual(x, lag)
+        return cache[lag]
+
+    around = {int(lag) + step for lag in candidate_lags(x) for step in (-1, 0, 1)}
+    lags = sorted(lag for lag in around if 2 <= lag <= x.size // 2 and repeats_best_at(x, lag, residual))
+    if not lags:
         return None
-    residual = {int(lag): repeat_residual(x, int(lag)) for lag in lags}
-    best = min(residual, key=residual.get)
-    limit = DIVISOR_TOLERANCE * residual[best] + NUMERIC_FLOOR**2 * float(np.mean(x * x))
+    best = min(lags, key=residual)
+    limit = DIVISOR_TOLERANCE * residual(best) + NUMERIC_FLOOR**2 * float(np.mean(x * x))
     for q in divisors(best):
-        if q == best or repeat_residual(x, q) <= limit:
+        if q == best or (residual(q) <= limit and repeats_best_at(x, q, residual)):
             return q
     return best
 
@@ -286,12 +338,15 @@ def compare_slots(x: np.ndarray, period: int) -> Slots | None:
     neighbours[:, 1:] = np.fmin(neighbours[:, 1:], diffs[:, :-1])
     neighbours[:, :-1] = np.fmin(neighbours[:, :-1], diffs[:, 1:])
     signal = 2 * period * float(np.var(x))
-    noise = max(float(np.nanmin(np.nanmedian(neighbours, axis=1))), 2 * period * NUMERIC_FLOOR**2 * signal)
+    compared = ~np.all(np.isnan(neighbours), axis=1)  # phases whose second slot fits in the record
+    noise = max(float(np.min(np.nanmedian(neighbours[compared], axis=1))), 2 * period * NUMERIC_FLOOR**2 * signal)
     if signal < PERIODIC_SNR * noise:
         return None
     cap = math.sqrt(noise * signal)
     valid0 = ~np.isnan(diffs[0])
-    cost = np.nansum(np.minimum(diffs, cap), axis=1)
+    # A phase whose last slot runs past the end leaves a comparison out; it is charged as a change,
+    # else dropping the samples of a transient at the start would always look cheapest.
+    cost = np.nansum(np.minimum(diffs, cap), axis=1) + cap * np.isnan(diffs).sum(axis=1)
     order = np.argsort(cost, kind="stable")
     phase = 0 if np.all(diffs[0][valid0] <= cap) else int(order[0])
     margin = float(cost[order[1]] - cost[order[0]]) if phase and cost.size > 1 else math.inf
@@ -379,11 +434,15 @@ def grid_of(bins: np.ndarray) -> tuple[str, np.ndarray]:
 # The whole inference
 
 
-def infer_excitation(x: np.ndarray, fs: float, period: int | None = None, split: bool = True) -> Inference:
+def infer_excitation(x: np.ndarray, fs: float, period: int | None = None, split: bool = True,
+                     measured: bool = False) -> Inference:
     """Infer period, lead-in, realizations, excited lines and grid of the excitation record ``x``.
 
     ``period`` (samples) skips the period search; the record must then be periodic with it.
     ``split=False`` keeps the record whole: several realizations then make it ``arbitrary``.
+    ``measured=True``: ``x`` is a measured input (u, no reference r recorded), not the designed
+    signal: its excited lines must stand ``MEASURED_LINE_SNR`` above the noise of their estimate,
+    and mains lines (50/60 Hz and harmonics) are not counted as excited.
     """
     x = np.asarray(x, dtype=np.float64)
     result = Inference(kind="arbitrary", n_samples=x.size, fs=fs)
@@ -402,13 +461,14 @@ def infer_excitation(x: np.ndarray, fs: float, period: int | None = None, split:
         else:
             found = lag_period(x)
     if found is None:
-        result.notes.append(f"no lag up to {x.size // 2} samples repeats the input (at least two periods are needed)")
+        result.notes.append(_sweep_note(x, fs) or f"no lag up to {x.size // 2} samples repeats the input better than "
+                                                   "one sample off (at least two periods are needed)")
         return result
     slots = compare_slots(x, found)
     if slots is None:
         _not_periodic(x, found, result, given=period is not None)
         return result
-    _periodic(x, found, slots, split, result)
+    _periodic(x, found, slots, split, measured, result)
     return result
 
 
@@ -430,29 +490,93 @@ def _sine_on_bin(x: np.ndarray, fit: SineFit, fs: float, result: Inference) -> i
 
 
 def _local_best(x: np.ndarray, period: int, result: Inference) -> bool:
-    """A given period must repeat the input at least as well as its neighbours ``period +- 1``."""
+    """A given period must repeat the steady periods at least as well as its neighbours ``period +- 1``.
+
+    The steady periods are those after the lead-in found at ``period`` (step 2): a start-up transient
+    in the first period adds to the residual at every lag alike and would let a smooth input repeat
+    better one sample off.
+    """
     if 2 * period > x.size:
         result.notes.append(f"the record of {x.size} samples holds fewer than two periods of {period} samples")
         return False
-    residual = repeat_residual(x, period)
-    better = [lag for lag in (period - 1, period + 1) if 2 <= lag and 2 * lag <= x.size
-              and repeat_residual(x, lag) < residual]
+    start = _steady_start(x, period)
+    steady = x[start:] if x.size - start >= 2 * period else x
+    residual = repeat_residual(steady, period)
+    better = [lag for lag in (period - 1, period + 1) if 2 <= lag < steady.size
+              and repeat_residual(steady, lag) < residual]
     if better:
         result.notes.append(f"not periodic with the given period of {period} samples: a lag of {better[0]} "
                             "samples repeats the input better")
     return not better
 
 
+def _steady_start(x: np.ndarray, period: int) -> int:
+    """The first sample of the first realization's steady periods at ``period`` (0 if none)."""
+    slots = compare_slots(x, period)
+    groups = realizations_of(slots) if slots is not None else []
+    if not groups:
+        return 0
+    first, transient, _ = groups[0]
+    return slots.phase + (first + transient) * period
+
+
 def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> None:
     residual = db(repeat_residual(x, lag) / (2 * float(np.var(x))))
-    how = "the given period" if given else "the best lag"
     result.measures["repeat_residual_db"] = residual
+    sweep = None if given else _sweep_note(x, result.fs)
+    if sweep is not None:
+        result.notes.append(sweep)
+        return
+    how = "the given period" if given else "the best lag"
     result.notes.append(
         f"not periodic: at {how} of {lag} samples the period-to-period difference keeps {residual:.1f} dB "
         f"of the input power (periodic needs below {-db(PERIODIC_SNR):.0f} dB)")
 
 
-def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inference) -> None:
+def swept_sine(x: np.ndarray, fs: float) -> tuple[float, float] | None:
+    """``(f_start, f_end)`` in Hz if ``x`` is one swept sine (a chirp), else None.
+
+    From the analytic signal (Hilbert transform) of the record without its first and last 5 %
+    (edge effects): a swept sine has a nearly constant envelope (coefficient of variation below
+    ``SWEEP_ENVELOPE_CV``) and an instantaneous frequency whose medians over ``SWEEP_SEGMENTS``
+    segments change monotonically. The end frequencies are those of a straight line fitted to
+    the segment medians against time, or to their logarithms (an exponential sweep), whichever
+    fits better, at the first and last sample.
+    """
+    from scipy.signal import hilbert
+
+    n = x.size
+    if n < 20 * SWEEP_SEGMENTS:
+        return None
+    edge = n // 20
+    z = hilbert(x - x.mean())[edge:n - edge]
+    envelope = np.abs(z)
+    if envelope.std() > SWEEP_ENVELOPE_CV * envelope.mean():
+        return None
+    instantaneous = np.diff(np.unwrap(np.angle(z))) * fs / (2 * np.pi)
+    pieces = np.array_split(instantaneous, SWEEP_SEGMENTS)
+    medians = np.array([np.median(p) for p in pieces])
+    steps = np.diff(medians)
+    if medians.min() <= 0 or not (np.all(steps > 0) or np.all(steps < 0)):
+        return None
+    centres = edge + 0.5 + np.cumsum([0] + [p.size for p in pieces[:-1]]) + np.array([p.size for p in pieces]) / 2
+    ends = np.array([0.0, n - 1.0])
+    linear = np.polyfit(centres, medians, 1)
+    logarithmic = np.polyfit(centres, np.log(medians), 1)
+    linear_error = np.sum((np.polyval(linear, centres) - medians) ** 2)
+    log_error = np.sum((np.exp(np.polyval(logarithmic, centres)) - medians) ** 2)
+    f = np.polyval(linear, ends) if linear_error <= log_error else np.exp(np.polyval(logarithmic, ends))
+    return float(f[0]), float(f[1])
+
+
+def _sweep_note(x: np.ndarray, fs: float) -> str | None:
+    sweep = swept_sine(x, fs)
+    if sweep is None:
+        return None
+    return f"a swept sine from {sweep[0]:.3g} to {sweep[1]:.3g} Hz, not periodic"
+
+
+def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, measured: bool, result: Inference) -> None:
     if period < 3:  # lines 1 .. (N - 1) // 2 lie strictly between DC and Nyquist: none for N <= 2
         result.notes.append(f"repeats every {period} sample(s): too short a period for any line between DC and "
                             "Nyquist, not an excitation")
@@ -462,15 +586,20 @@ def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inf
         result.notes.append(f"no two consecutive periods of {period} samples repeat: not periodic")
         return
     if len(groups) > 1 and not split:
-        result.notes.append(f"{len(groups)} realizations of period {period} back to back; kept whole as asked "
-                            "(import with realization splitting to analyse them)")
+        result.notes.append(f"the input repeats every {period} samples but changes content {len(groups) - 1} time(s) "
+                            f"({len(groups)} segments of repeated periods); kept whole as asked "
+                            "(--no-split-realizations), so it is one arbitrary record")
         return
-    blocks = [x[slots.phase + (first + transient) * period:][: steady * period].reshape(steady, period)
+    groups = _same_periods(groups, result)
+    blocks = [without_drift(x[slots.phase + (first + transient) * period:][: steady * period].reshape(steady, period))
               for first, transient, steady in groups]
     tests, threshold, amplitudes = line_tests(blocks)
     excited = [np.flatnonzero(t > threshold) + 1 for t in tests]
+    if measured:
+        excited = _measured_lines(excited, tests, amplitudes, period, result)
     if any(b.size == 0 for b in excited):
-        result.notes.append(f"periodic with {period} samples, but no line stands above the noise floor")
+        result.notes.append(f"periodic with {period} samples, but no line stands above the noise floor"
+                            + (f" by {db(MEASURED_LINE_SNR):.0f} dB (a measured input)" if measured else ""))
         return
     result.period = period
     result.realizations = [Realization(start=slots.phase + first * period, transient_periods=transient,
@@ -478,6 +607,92 @@ def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, result: Inf
                            for (first, transient, steady), bins in zip(groups, excited)]
     _measure(x, blocks, slots, tests, threshold, excited, result)
     _classify(excited, amplitudes, result)
+
+
+def _same_periods(groups: list[tuple[int, int, int]], result: Inference) -> list[tuple[int, int, int]]:
+    """Realizations with more steady periods than the shortest keep their first extra periods as
+    transient: the realizations of one level of the BLA must hold the same number of periods."""
+    fewest = min(steady for _, _, steady in groups)
+    if all(steady == fewest for _, _, steady in groups):
+        return groups
+    result.notes.append(f"the realizations hold {', '.join(str(steady) for _, _, steady in groups)} repeated periods; "
+                        f"the first periods of the longer ones are kept as transient, so that each has {fewest} "
+                        "steady periods (one number of periods per level, as bla needs)")
+    return [(first, transient + steady - fewest, fewest) for first, transient, steady in groups]
+
+
+def without_drift(block: np.ndarray) -> np.ndarray:
+    """The ``(P, N)`` periods ``block`` less the polynomial drift of degree ``min(P - 1, DRIFT_DEGREE)``
+    in time that the changes from period to period show.
+
+    The record is modelled as a periodic part plus ``sum_d a_d n^d``; the periodic part is unknown,
+    so the ``a_d`` are the least-squares fit of the polynomial to the non-periodic part of the
+    record (each sample less its mean over the periods), which a periodic excitation does not
+    touch. Within each period a drift looks the same every period (a linear drift is a sawtooth on
+    every line with amplitude ~1/k), so it would pass as excited lines; subtracting the fitted
+    drift removes it.
+    """
+    periods, period = block.shape
+    degree = min(periods - 1, DRIFT_DEGREE)
+    if degree < 1:
+        return block
+    n = np.arange(block.size, dtype=np.float64) / block.size - 0.5
+    basis = np.column_stack([n**d for d in range(1, degree + 1)])
+
+    def aperiodic(v: np.ndarray) -> np.ndarray:
+        v = v.reshape(periods, period, -1)
+        return (v - v.mean(axis=0)).reshape(block.size, -1)
+
+    coef, *_ = np.linalg.lstsq(aperiodic(basis), aperiodic(block.ravel())[:, 0], rcond=None)
+    return block - (basis @ coef).reshape(periods, period)
+
+
+def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitudes: list[np.ndarray], period: int,
+                    result: Inference) -> list[np.ndarray]:
+    """The excited lines of a measured input: ``MEASURED_LINE_SNR`` above the noise of their estimate,
+    and not a mains line (:func:`mains_lines`)."""
+    strong = [bins[t[bins - 1] >= MEASURED_LINE_SNR] for bins, t in zip(excited, tests)]
+    weak = sum(b.size - s.size for b, s in zip(excited, strong))
+    if weak:
+        result.measures["weak_lines_not_counted"] = weak
+        result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB above it "
+                            "not counted as excited (a measured input: drift, leakage or correlated noise look like that)")
+    resolution = result.fs / period
+    mains = sorted({int(k) for bins, a in zip(strong, amplitudes) for k in mains_lines(bins, a, resolution)})
+    if not mains:
+        return strong
+    result.measures["mains_bins"] = mains
+    more = " ..." if len(mains) > 8 else ""
+    result.notes.append(f"mains line(s) seen in the measured input at {', '.join(f'{k * resolution:.4g}' for k in mains[:8])}"
+                        f"{more} Hz (bins {', '.join(map(str, mains[:8]))}{more}), weaker than the excited lines "
+                        "around them: not counted as excited (record the reference r to have them counted)")
+    return [np.setdiff1d(bins, mains) for bins in strong]
+
+
+def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> np.ndarray:
+    """The lines of ``bins`` that are mains hum, not excitation.
+
+    A candidate lies within one bin (``resolution`` Hz) of a multiple of 50 or 60 Hz. Hum adds a
+    line there, usually weaker than the excitation; a designed line on the same bin has the level of
+    the excited lines around it. So a candidate is mains when its amplitude (``amplitudes`` of lines
+    ``1 ..``) is below half the median amplitude of the 8 nearest excited lines that are not
+    candidates.
+    """
+    freqs = bins * resolution
+    candidate = np.zeros(bins.size, dtype=bool)
+    for f0 in MAINS_HZ:
+        harmonic = np.maximum(np.round(freqs / f0), 1)
+        candidate |= np.abs(freqs - harmonic * f0) < resolution
+    others = bins[~candidate]
+    if others.size == 0:
+        return np.array([], dtype=np.int64)
+    level = amplitudes[bins - 1]
+    mains = []
+    for k, a in zip(bins[candidate], level[candidate]):
+        nearest = others[np.argsort(np.abs(others - k), kind="stable")[:8]]
+        if a < 0.5 * np.median(amplitudes[nearest - 1]):
+            mains.append(int(k))
+    return np.array(mains, dtype=np.int64)
 
 
 def db(value: float) -> float:

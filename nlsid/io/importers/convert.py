@@ -18,6 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.io.feeds import BlaRuns, sine_bin
 from nlsid.io.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
 from nlsid.io.importers.source import LAYOUTS, Record, Source, records_of
 from nlsid.io.ranges import SampleRange
@@ -167,7 +168,9 @@ def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions)
     for record in records:
         period = _period(record, options)
         driver = "r" if "r" in record.signals else "u"
-        inference = infer_excitation(record.signals[driver], fs, period=period, split=options.split)
+        inference = infer_excitation(record.signals[driver], fs, period=period, split=options.split,
+                                     measured=driver == "u")
+        _runs(record, inference, options.transient_periods, f"{origin[record.name]}:{record.name}")  # checks the claim
         if period is not None and inference.period is None:
             raise InputError(f"{source.where[driver]}", f"not periodic with the given period of {period} samples: "
                                                         + "; ".join(inference.notes))
@@ -311,6 +314,19 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
         run_id = f"{record.name}_m{index:02d}" if several else record.name
         cut = {name: x[real.start:real.stop(period)] for name, x in signals.items()}
         runs.append(_make_run(run_id, attrs, cut, f"{where}/{run_id}", units))
+    # The runs must be what they claim for the stages that read them: bla's checks of multisine
+    # runs, the on-a-bin check of sine runs. A claim that fails makes the record arbitrary.
+    checks = BlaRuns()
+    try:
+        for run in runs:
+            if run.kind == "sine":
+                sine_bin(run, f"{where}/{run.run_id}")
+            else:
+                checks.add(run, f"{where}/{run.run_id}")
+    except InputError as error:
+        inference.demote(f"its runs fail the check of `nlsid {'hosidf' if inference.kind == 'sine' else 'bla'}` "
+                         f"({error.what})")
+        return [_make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where, units)]
     return runs
 
 
