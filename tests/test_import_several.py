@@ -165,3 +165,29 @@ def test_several_files_refused_with_one_line(run_cli, tmp_path):
     refused(run_cli("import", tmp_path / "a.csv", "--fs", FS, "--decimate", 50, "-o", out), "--decimate 50")
     refused(run_cli("import", tmp_path / "a.csv", "--fs", FS, "--range", "10:5", "-o", out), "--range")
     assert not out.exists()
+
+
+def test_one_file_per_level_with_grouped_realization_columns_feeds_bla(run_cli, tmp_path):
+    """A benchmark layout: per level a CSV whose header labels groups of 10 columns ("r",,,...,"u",,,...),
+    two steady periods per column, and a sample-rate column; bla must see 2 levels of M = 10, P = 2."""
+    period, periods, m_real, fs = 256, 2, 10, 78125.0
+    bins = np.arange(1, 60)
+    files = []
+    for level, rms in enumerate((0.5, 1.0)):
+        rng = np.random.default_rng(10 + level)
+        r = np.column_stack([multisine(rng, bins, period, periods, rms=rms) for _ in range(m_real)])
+        u = r + rng.normal(0, 1e-3, r.shape)
+        y = np.vstack([np.convolve(col, [0.6, 0.3])[:col.size] for col in u.T]).T + 0.1 * u ** 2
+        header = [f'"{name}"' + "," * (m_real - 1) for name in ("r", "u", "y")] + ['"fs"']
+        rows = [",".join(f"{v:.12g}" for v in row) + ("," + f"{fs:g}" if i == 0 else ",")
+                for i, row in enumerate(np.hstack([r, u, y]))]
+        files.append(tmp_path / f"Level{level + 1}.csv")
+        files[-1].write_text(",".join(header) + "\n" + "\n".join(rows) + "\n")
+    out = tmp_path / "rec.h5"
+    summary = ok(run_cli("import", *files, "-o", out, "--json"))
+    assert summary["runs"] == 2 * m_real and summary["fs"] == fs
+    runs = read_runs(out)
+    assert sorted({run.level for run in runs}) == pytest.approx([0.5, 1.0], rel=1e-9)
+    assert sorted(run.realization for run in runs) == list(range(2 * m_real))
+    bla = ok(run_cli("bla", out, "-o", tmp_path / "bla.h5", "--json"))
+    assert [(level["realizations"], level["periods"]) for level in bla["levels"]] == [(m_real, periods)] * 2

@@ -175,15 +175,15 @@ def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions)
             raise InputError(f"{source.where[driver]}", f"not periodic with the given period of {period} samples: "
                                                         + "; ".join(inference.notes))
         inferred.append((record, driver, inference))
-    level = _shared_level([inference for _, _, inference in inferred])
+    shared = _shared_levels([inference for _, _, inference in inferred])
     realization = 0
-    for record, driver, inference in inferred:
+    for (record, driver, inference), (level, group) in zip(inferred, shared):
         runs = _runs(record, inference, options.transient_periods, f"{origin[record.name]}:{record.name}", realization,
                      level, source.units)
         realization += len(runs)
         if level is not None:
             numbers = ", ".join(str(run.realization) for run in runs)
-            inference.notes.append(f"realization {numbers} of one excitation over {len(inferred)} records (same period "
+            inference.notes.append(f"realization {numbers} of one excitation over {group} records (same period "
                                    f"and lines, levels within {SHARED_LEVEL_TOL:.0%}): level set to their mean {level:.6g}")
         out.runs.extend(runs)
         out.records.append({"record": record.name, "inferred_from": driver, "inference": inference.report(),
@@ -272,21 +272,37 @@ def _period(record: Record, options: ImportOptions) -> int | None:
     return options.period if options.period is not None else record.period
 
 
-def _shared_level(inferences: list[Inference]) -> float | None:
-    """The common level of several records that are realizations of one multisine excitation: the
-    same period and excited lines, and levels within SHARED_LEVEL_TOL of each other (the mean level);
-    else None (each record keeps its own level, and ``bla`` treats differing levels separately)."""
-    if len(inferences) < 2 or any(inf.kind != "multisine" or inf.level is None for inf in inferences):
-        return None
-    first = inferences[0]
-    bins = first.realizations[0].excited_bins
-    if any(inf.period != first.period or any(not np.array_equal(r.excited_bins, bins) for r in inf.realizations)
-           for inf in inferences):
-        return None
-    levels = np.array([inf.level for inf in inferences])
-    if levels.max() > levels.min() * (1 + SHARED_LEVEL_TOL):
-        return None
-    return float(levels.mean())
+def _shared_levels(inferences: list[Inference]) -> list[tuple[float | None, int]]:
+    """Per record, the common level of the records that are realizations of one multisine excitation
+    with it, and how many they are; (None, 1) for a record that is no realization of a shared one.
+
+    Realizations of one excitation have the same period and excited lines, and levels within
+    SHARED_LEVEL_TOL of each other: the records of one period and lines are sorted by level and cut
+    where a level exceeds the smallest of its group by more than that (one file per excitation
+    level, each with several realizations, gives one group per level). A group of two or more
+    records gets its mean level, so ``bla`` takes it as M realizations of one level; other records
+    keep their own level, and ``bla`` treats differing levels separately.
+    """
+    out: list[tuple[float | None, int]] = [(None, 1)] * len(inferences)
+    by_grid: dict[tuple, list[int]] = {}
+    for index, inf in enumerate(inferences):
+        if inf.kind == "multisine" and inf.level is not None:
+            grids = {tuple(r.excited_bins) for r in inf.realizations}
+            if len(grids) == 1:
+                by_grid.setdefault((inf.period, grids.pop()), []).append(index)
+    for members in by_grid.values():
+        members = sorted(members, key=lambda i: inferences[i].level)
+        group: list[int] = []
+        for index in members + [None]:
+            if index is not None and (not group or inferences[index].level <= inferences[group[0]].level * (1 + SHARED_LEVEL_TOL)):
+                group.append(index)
+                continue
+            if len(group) > 1:
+                mean = float(np.mean([inferences[i].level for i in group]))
+                for i in group:
+                    out[i] = (mean, len(group))
+            group = [] if index is None else [index]
+    return out
 
 
 def _runs(record: Record, inference: Inference, extra_transient: int, where: str, first_realization: int = 0,

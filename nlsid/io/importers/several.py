@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import Source, as_matrix, sample_rate
+from nlsid.io.importers.source import Source, as_matrix, source_rate
 
 # Two clocks are one when their rates agree this closely and their starts within half a sample.
 SAME_RATE_TOL = 1e-6
@@ -107,12 +107,7 @@ class _Clocked:
             n = next(iter(shapes))[1]
             if time.ndim != 1 or time.size != n:
                 raise InputError(source.time_where, f"time vector has {time.size} values, the signals {n} samples")
-        if source.fs is not None:
-            fs, fs_from = source.fs, source.fs_from or "--fs"
-        elif time is not None:
-            fs, fs_from = sample_rate(time, source.time_where), f"time vector {source.time_where}"
-        else:
-            raise InputError(source.path, "no sample rate: pass --fs HZ or --time NAME (a time vector in seconds)")
+        fs, fs_from = source_rate(source)
         return cls(source, matrices, fs, fs_from, time)
 
     def same_clock(self, other: "_Clocked") -> bool:
