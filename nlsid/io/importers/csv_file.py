@@ -124,7 +124,8 @@ def _split(line: str, delimiter: str | None) -> list[str]:
         return [line.strip()]
     if '"' in line:  # quoted cells: one line is one row, a quote never joins lines
         return [c.strip() for c in next(csv.reader([line], delimiter=delimiter))]
-    return [c.strip() for c in line.split(delimiter)]
+    cells = line.split(delimiter)
+    return [c.strip() for c in cells] if " " in line or "\t" in line else cells
 
 
 def _is_numbers(cells: list[str]) -> bool:
@@ -497,6 +498,10 @@ def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[s
 
 
 def _parse(path: Path, body: list[tuple[int, list[str]]], index: int, title: str | int) -> np.ndarray:
+    try:  # the fast path; a cell that is not a number is found and named below
+        return np.fromiter(map(float, [cells[index] for _, cells in body]), dtype=np.float64, count=len(body))
+    except ValueError:
+        pass
     out = np.empty(len(body))
     for i, (line, cells) in enumerate(body):
         value = _number(cells[index])
