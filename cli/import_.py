@@ -136,11 +136,31 @@ def _print(summary: dict) -> None:
     for path, columns in summary["ignored_columns"].items():
         if columns:
             console.print(f"  - {path}: columns not imported: {', '.join(repr(c) for c in columns)}")
-    for record in summary["records"]:
+    for names, record in _alike(summary["records"]):
         inf = record["inference"]
-        console.print(f"  {record['record']}: {_headline(inf)} (inferred from {record['inferred_from']})")
-        for note in inf["notes"]:
+        label = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]} ({len(names)} records, each)"
+        console.print(f"  {label}: {_headline(inf)} (inferred from {record['inferred_from']})")
+        for note in (inf["notes"] if len(names) == 1 else _generic(inf["notes"])):
             console.print(f"    - {note}")
+
+
+def _alike(records: list[dict]) -> list[tuple[list[str], dict]]:
+    """Consecutive records that would print the same lines, as one group: (their names, the first)."""
+    groups: list[tuple[list[str], dict]] = []
+    for record in records:
+        said = (_headline(record["inference"]), record["inferred_from"], _generic(record["inference"]["notes"]))
+        if groups and groups[-1][2] == said:
+            groups[-1][0].append(record["record"])
+        else:
+            groups.append(([record["record"]], record, said))
+    return [(names, record) for names, record, _ in groups]
+
+
+def _generic(notes: list[str]) -> tuple[str, ...]:
+    """Notes without the numbers that differ from record to record (realization indices)."""
+    import re
+
+    return tuple(re.sub(r"realization [0-9, ]+ of", "realizations of", note) for note in notes)
 
 
 def _headline(inf: dict) -> str:
