@@ -270,6 +270,15 @@ def test_row_of_another_width_names_the_delimiter(run_cli, tmp_path, delimiter, 
         "bad.txt:8", f"row has 4 cells, the header (line 1) has 3 (split at {named})")
 
 
+def test_decimal_commas_are_named_with_the_delimiter(run_cli, tmp_path):
+    """``1,5;2,25`` split at ';' leaves cells with decimal commas: the message says so."""
+    u = multisine(np.random.default_rng(13))
+    source = write_table(tmp_path / "eu.csv", ["u", "y"], [u, u], delimiter=";")
+    source.write_text(source.read_text().replace(".", ","))
+    run_cli("import", source, "--fs", "1000", "-o", tmp_path / "rec.h5").assert_one_line_error(
+        "eu.csv:2", "column 'u': cell", "is not a number (cells split at ';'); decimal commas are not read")
+
+
 # --- every column accounted for, over random header layouts -------------------------------------
 
 ROWS = 7

@@ -380,8 +380,11 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
     def title(index: int) -> str:
         return str(titles[index])
 
-    values = {key: _parse(path, body, c.indices[0], titles[c.indices[0]]) if realizations == 1 else
-              np.vstack([_parse(path, body, i, titles[i]) for i in c.indices]) for key, c in chosen.items()}
+    def parse(index: int) -> np.ndarray:
+        return _parse(path, table, index, titles[index])
+
+    values = {key: parse(c.indices[0]) if realizations == 1 else np.vstack([parse(i) for i in c.indices])
+              for key, c in chosen.items()}
     columns = {key: (title(c.indices[0]) if header else names[key]) if realizations == 1 else
                [title(i) for i in c.indices] for key, c in chosen.items()}
     labels = {key: columns[key] if realizations == 1 else _label(columns[key], name=names[key])
@@ -396,7 +399,7 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
                                                        f"({', '.join(repr(titles[i]) for i in picked.indices)}); "
                                                        "a time vector is one column")
         scale, unit = _time_scale(path, picked.groups[0] if picked.groups else None, titles[index])
-        values["time"] = _parse(path, body, index, titles[index]) * scale
+        values["time"] = parse(index) * scale
         labels["time"] = columns["time"] = title(index) if header else time
         used.add(index)
         if unit is not None:
@@ -497,7 +500,10 @@ def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[s
         source.details["time_vector_fs"] = from_time
 
 
-def _parse(path: Path, body: list[tuple[int, list[str]]], index: int, title: str | int) -> np.ndarray:
+def _parse(path: Path, table: Table, index: int, title: str | int) -> np.ndarray:
+    """The numbers of one column; a cell that is not a number is refused naming its line and the
+    delimiter (a wrong delimiter, or decimal commas, show there)."""
+    body = table.body
     try:  # the fast path; a cell that is not a number is found and named below
         return np.fromiter(map(float, [cells[index] for _, cells in body]), dtype=np.float64, count=len(body))
     except ValueError:
@@ -506,6 +512,10 @@ def _parse(path: Path, body: list[tuple[int, list[str]]], index: int, title: str
     for i, (line, cells) in enumerate(body):
         value = _number(cells[index])
         if value is None:
-            raise InputError(f"{path}:{line}", f"column {title!r}: cell {cells[index][:40]!r} is not a number")
+            cell = cells[index]
+            hint = ("; decimal commas are not read: write numbers with a point"
+                    if "," in cell and _number(cell.replace(",", ".", 1)) is not None else "")
+            raise InputError(f"{path}:{line}", f"column {title!r}: cell {cell[:40]!r} is not a number (cells split at "
+                                               f"{_delimiter_text(table.delimiter)}){hint}")
         out[i] = value
     return out
