@@ -118,9 +118,10 @@ def _run_units(runs) -> dict[str, str]:
 
 
 def _csv_layout(sources) -> dict:
-    """Per CSV source file: the columns not imported, and the preamble lines skipped above its header."""
-    return {"ignored_columns": {s.path: s.details["ignored_columns"] for s in sources if "ignored_columns" in s.details},
-            "preamble_lines": {s.path: s.details["preamble_lines"] for s in sources if "preamble_lines" in s.details}}
+    """Per source file: the CSV columns and the MAT/HDF5 variables not imported, and the preamble
+    lines skipped above a CSV header."""
+    return {key: {s.path: s.details[key] for s in sources if key in s.details}
+            for key in ("ignored_columns", "ignored_variables", "preamble_lines")}
 
 
 def _print(summary: dict) -> None:
@@ -136,6 +137,10 @@ def _print(summary: dict) -> None:
     for path, columns in summary["ignored_columns"].items():
         if columns:
             console.print(f"  - {path}: columns not imported: {', '.join(repr(c) for c in columns)}")
+    for path, variables in summary["ignored_variables"].items():
+        if variables:
+            console.print(f"  - {path}: variables not imported: "
+                          + ", ".join(f"{name} ({shape})" for name, shape in variables.items()))
     for names, record in _alike(summary["records"]):
         inf = record["inference"]
         label = names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]} ({len(names)} records, each)"
