@@ -191,3 +191,17 @@ def test_one_file_per_level_with_grouped_realization_columns_feeds_bla(run_cli, 
     assert sorted(run.realization for run in runs) == list(range(2 * m_real))
     bla = ok(run_cli("bla", out, "-o", tmp_path / "bla.h5", "--json"))
     assert [(level["realizations"], level["periods"]) for level in bla["levels"]] == [(m_real, periods)] * 2
+
+
+def test_a_matrix_variables_rows_picked_and_the_rest_listed(run_cli, tmp_path):
+    rng = np.random.default_rng(7)
+    force, acc, volt = rng.normal(size=(512, 1)), rng.normal(size=(3, 512)), rng.normal(size=(1, 512))
+    savemat(tmp_path / "gvt.mat", {"Force": force, "Voltage": volt, "Acceleration": acc, "Fs": 400.0})
+    out = tmp_path / "rec.h5"
+    summary = ok(run_cli("import", tmp_path / "gvt.mat", "--u", "Force", "--y", "Acceleration[0]",
+                         "--channel", "a2=Acceleration[2]", "-o", out, "--json"))
+    assert summary["fs"] == 400.0
+    assert set(summary["ignored_variables"][str(tmp_path / "gvt.mat")]) == {"Voltage", "Acceleration[1]"}
+    (run,) = read_runs(out)
+    np.testing.assert_array_equal(run.y, acc[0])
+    np.testing.assert_array_equal(run.channels["a2"], acc[2])
