@@ -215,11 +215,16 @@ def test_time_column_unit(run_cli, tmp_path, unit, per_second):
     assert provenance_details(out).get("time_unit") == unit
 
 
-def test_unknown_time_unit_is_refused(run_cli, tmp_path):
+@pytest.mark.parametrize("title, fragments", [
+    ("Time [fortnights]", ["t.csv:Time [fortnights]", "unknown time unit 'fortnights'", "s, ms, us (µs), ns, min"]),
+    ("Ts (fortnights)", ["t.csv:Ts (fortnights)", "unknown unit 'fortnights' of a sampling interval",
+                         "s, ms, us (µs), ns, min"]),
+    ("fs (rpm)", ["t.csv:fs (rpm)", "unknown unit 'rpm' of a sample rate; units understood: Hz, kHz, MHz"]),
+])
+def test_unknown_unit_of_a_time_or_rate_column_is_refused(run_cli, tmp_path, title, fragments):
     u = multisine(np.random.default_rng(9))
-    source = write_table(tmp_path / "t.csv", ["Time [fortnights]", "u"], [np.arange(u.size), u])
-    run_cli("import", source, "-o", tmp_path / "rec.h5").assert_one_line_error(
-        "t.csv:Time [fortnights]", "unknown time unit 'fortnights'", "s, ms, us (µs), ns, min")
+    source = write_table(tmp_path / "t.csv", [title, "u"], [np.arange(1, u.size + 1), u])
+    run_cli("import", source, "-o", tmp_path / "rec.h5").assert_one_line_error(*fragments)
 
 
 @pytest.mark.parametrize("title, value, fs", [("Ts", 1e-3, 1000.0), ("Ts (s)", 5e-4, 2000.0), ("dt [ms]", 0.25, 4000.0),

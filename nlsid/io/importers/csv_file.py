@@ -351,6 +351,19 @@ def _time_scale(path: Path, group: Group | None, title: str | int) -> tuple[floa
     return scale, group.unit
 
 
+def _time_column(path: Path, groups: list[Group], titles: list[str | int], header: bool, width: int,
+                 time: str) -> tuple[int, float, str | None]:
+    """The index of the time column ``time``, its seconds per unit, and its unit (None: seconds)."""
+    where = f"{path}: --time {time}"
+    picked = _columns(groups, titles, header, width, time, where)
+    if len(picked.indices) > 1:
+        raise InputError(where, f"{len(picked.indices)} columns ({', '.join(repr(titles[i]) for i in picked.indices)}); "
+                                "a time vector is one column")
+    index = picked.indices[0]
+    scale, unit = _time_scale(path, picked.groups[0] if picked.groups else None, titles[index])
+    return index, scale, unit
+
+
 def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[str], fs_given: bool,
              defaulted: frozenset[str] = frozenset(), skip_rows: int | None = None) -> Source:
     """Read the selected columns (signal -> column), the time column and the sample-rate and
@@ -392,13 +405,7 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
     used = {i for c in chosen.values() for i in c.indices}
     details: dict = {"columns": columns, "header": header is not None}
     if time:
-        picked = _columns(groups, titles, header is not None, width, time, f"{path}: --time {time}")
-        index = picked.indices[0]
-        if len(picked.indices) > 1:
-            raise InputError(f"{path}: --time {time}", f"{len(picked.indices)} columns "
-                                                       f"({', '.join(repr(titles[i]) for i in picked.indices)}); "
-                                                       "a time vector is one column")
-        scale, unit = _time_scale(path, picked.groups[0] if picked.groups else None, titles[index])
+        index, scale, unit = _time_column(path, groups, titles, header is not None, width, time)
         values["time"] = parse(index) * scale
         labels["time"] = columns["time"] = title(index) if header else time
         used.add(index)
@@ -445,12 +452,11 @@ def _rate_of(path: Path, body: list[tuple[int, list[str]]], group: Group, titles
     interval = INTERVAL_NAME.match(group.name) is not None
     units = TIME_UNITS if interval else RATE_UNITS
     default = "s" if interval else "Hz"
+    what = "sampling interval" if interval else "sample rate"
     scale = units.get(group.unit.casefold()) if group.unit else 1.0
     if scale is None:
         understood = TIME_UNITS_TEXT if interval else "Hz, kHz, MHz"
-        raise InputError(f"{path}:{title}", f"unknown unit {group.unit!r} of a {'sampling interval' if interval else 'sample rate'}; "
-                                            f"units understood: {understood}")
-    what = "sampling interval" if interval else "sample rate"
+        raise InputError(f"{path}:{title}", f"unknown unit {group.unit!r} of a {what}; units understood: {understood}")
     first: tuple[float, int] | None = None
     for line, cells in body:
         for index in group.columns:
@@ -487,7 +493,9 @@ def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[s
                                         f"{other.kind} column {other.title!r} {other.fs:.9g} Hz (they must agree "
                                         f"within {REL_TOL:g}); pass --fs HZ to choose")
     source.fs = first.fs
-    source.fs_from = f"{first.kind} column {path}:{first.title}" + (" (fs = 1/Ts)" if first.kind == "sampling-interval" else "")
+    source.fs_from = f"{first.kind} column {path}:{first.title}"
+    if first.kind == "sampling-interval":
+        source.fs_from += " (fs = 1/Ts)"
     source.details["sample_rate_column"] = first.title
     source.details["rate_columns"] = [rate.title for rate in rates]
     if source.time is not None:
