@@ -231,7 +231,12 @@ def lag_period(x: np.ndarray) -> int | None:
     if not lags:
         return None
     best = min(lags, key=residual)
-    limit = DIVISOR_TOLERANCE * residual(best) + NUMERIC_FLOOR**2 * float(np.mean(x * x))
+    # A divisor repeats as well as the best lag when its residual is within the spread of a noise
+    # residual (DIVISOR_TOLERANCE, white noise), or nearer the noise level than a change of content
+    # (2 var x): below their geometric mean, as slots are compared in step 2. Noise with a long
+    # correlation time has few degrees of freedom, and its residual varies far more than 25 %.
+    noise = residual(best)
+    limit = max(DIVISOR_TOLERANCE * noise, math.sqrt(noise * 2 * float(np.var(x)))) + NUMERIC_FLOOR**2 * float(np.mean(x * x))
     for q in divisors(best):
         if q == best or (residual(q) <= limit and repeats_best_at(x, q, residual)):
             return q
@@ -577,13 +582,15 @@ def _sweep_note(x: np.ndarray, fs: float) -> str | None:
 
 
 def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, measured: bool, result: Inference) -> None:
-    if period < 3:  # lines 1 .. (N - 1) // 2 lie strictly between DC and Nyquist: none for N <= 2
-        result.notes.append(f"repeats every {period} sample(s): too short a period for any line between DC and "
-                            "Nyquist, not an excitation")
-        return
     groups = realizations_of(slots)
     if not groups:
         result.notes.append(f"no two consecutive periods of {period} samples repeat: not periodic")
+        return
+    if _held(x, period, slots, groups, result):
+        return
+    if period < 3:  # lines 1 .. (N - 1) // 2 lie strictly between DC and Nyquist: none for N <= 2
+        result.notes.append(f"repeats every {period} sample(s): too short a period for any line between DC and "
+                            "Nyquist, not an excitation")
         return
     if len(groups) > 1 and not split:
         result.notes.append(f"the input repeats every {period} samples but changes content {len(groups) - 1} time(s) "
@@ -607,6 +614,27 @@ def _periodic(x: np.ndarray, period: int, slots: Slots, split: bool, measured: b
                            for (first, transient, steady), bins in zip(groups, excited)]
     _measure(x, blocks, slots, tests, threshold, excited, result)
     _classify(excited, amplitudes, result)
+
+
+def _held(x: np.ndarray, period: int, slots: Slots, groups: list[tuple[int, int, int]], result: Inference) -> bool:
+    """Whether the "realizations" are only stretches of a held input (a staircase, a slow signal).
+
+    A piecewise constant record repeats at every lag shorter than half a step, so its steps pass
+    for realizations of any short period; but their repeated period is flat. Periodic needs the
+    mean period of at least one realization to carry ``1 / PERIODIC_SNR`` of the record's AC power
+    (the strongest one, so that realizations at several levels back to back still count).
+    """
+    strongest = max(float(np.var(x[slots.phase + (first + transient) * period:][: steady * period]
+                                  .reshape(steady, period).mean(axis=0)))
+                    for first, transient, steady in groups)
+    total = float(np.var(x))
+    if strongest >= total / PERIODIC_SNR:
+        return False
+    result.measures["periodic_power_db"] = db(strongest / total)
+    result.notes.append(f"not periodic: the input repeats at lags of {period} samples only within {len(groups)} stretches "
+                        f"whose repeated period is nearly constant ({db(strongest / total):.1f} dB of the input's AC "
+                        "power at most): a held or slowly varying input")
+    return True
 
 
 def _same_periods(groups: list[tuple[int, int, int]], result: Inference) -> list[tuple[int, int, int]]:
@@ -651,12 +679,13 @@ def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitud
                     result: Inference) -> list[np.ndarray]:
     """The excited lines of a measured input: ``MEASURED_LINE_SNR`` above the noise of their estimate,
     and not a mains line (:func:`mains_lines`)."""
-    strong = [bins[t[bins - 1] >= MEASURED_LINE_SNR] for bins, t in zip(excited, tests)]
+    strong = [consistent_lines(bins, t, a) for bins, t, a in zip(excited, tests, amplitudes)]
     weak = sum(b.size - s.size for b, s in zip(excited, strong))
     if weak:
         result.measures["weak_lines_not_counted"] = weak
-        result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB above it "
-                            "not counted as excited (a measured input: drift, leakage or correlated noise look like that)")
+        result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB above it, "
+                            "and off the grid or weaker than the excited lines around them, not counted as excited "
+                            "(a measured input: leakage, distortion or correlated noise look like that)")
     resolution = result.fs / period
     mains = sorted({int(k) for bins, a in zip(strong, amplitudes) for k in mains_lines(bins, a, resolution)})
     if not mains:
@@ -667,6 +696,29 @@ def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitud
                         f"{more} Hz (bins {', '.join(map(str, mains[:8]))}{more}), weaker than the excited lines "
                         "around them: not counted as excited (record the reference r to have them counted)")
     return [np.setdiff1d(bins, mains) for bins in strong]
+
+
+def consistent_lines(bins: np.ndarray, tests: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
+    """The lines of ``bins`` (all above the F threshold) that count as excited in a measured input.
+
+    A line ``MEASURED_LINE_SNR`` (20 dB) above the noise of its estimate counts. A weaker one counts
+    only if it fits the design the strong lines show: on their grid (odd multiples of their common
+    base when they are all odd, else multiples of it) and at least half the median amplitude of the
+    8 nearest strong lines (a designed line in a noisy band keeps the level of its neighbours;
+    leakage, distortion and noise shaped by a filter are weaker than the excitation).
+    """
+    strong = bins[tests[bins - 1] >= MEASURED_LINE_SNR]
+    if strong.size == 0:
+        return strong
+    base = int(np.gcd.reduce(strong))
+    odd = bool(np.all((strong // base) % 2 == 1))
+    kept = [int(k) for k in strong]
+    for k in np.setdiff1d(bins, strong):
+        on_grid = k % base == 0 and (not odd or (k // base) % 2 == 1)
+        nearest = strong[np.argsort(np.abs(strong - k), kind="stable")[:8]]
+        if on_grid and amplitudes[k - 1] >= 0.5 * np.median(amplitudes[nearest - 1]):
+            kept.append(int(k))
+    return np.array(sorted(kept), dtype=np.int64)
 
 
 def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> np.ndarray:
