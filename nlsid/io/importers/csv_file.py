@@ -85,10 +85,10 @@ def _delimiter_text(delimiter: str | None) -> str:
 @dataclass
 class Table:
     """The rows of a CSV/TSV file: its header (cells, or None), the rows below it (line number,
-    cells), the delimiter (None: whitespace) and the lines above the header that were skipped."""
+    cells), the delimiter (None: whitespace, "": none, one column) and the lines above the header
+    that were skipped (line number, text)."""
 
     header: list[str] | None
-    header_line: int
     body: list[tuple[int, list[str]]]
     delimiter: str | None
     preamble: list[tuple[int, str]]
@@ -186,7 +186,7 @@ def read_table(path: Path, skip_rows: int | None = None) -> Table:
             raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the {'header' if header else 'first row'} "
                                                f"(line {first_line}) has {width} (split at "
                                                f"{_delimiter_text(delimiter)}){hint}")
-    return Table(header=header, header_line=first_line, body=body, delimiter=delimiter, preamble=preamble)
+    return Table(header=header, body=body, delimiter=delimiter, preamble=preamble)
 
 
 @dataclass(frozen=True)
