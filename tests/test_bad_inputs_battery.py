@@ -279,3 +279,62 @@ def test_allow_overlap_without_model_fit_is_refused(run_cli, tmp_path):
     one_line(run_cli("fit", "bla.h5", "--order", "2/2", "--allow-overlap", "-o", tmp_path / "m.yaml"),
              "--allow-overlap goes with --model")
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# a constant measured output in diagnose
+
+
+def constant_recording(path: Path, constant=lambda run_id: True) -> Path:
+    """The sample recording with y replaced by a constant (1 mm) in the runs ``constant`` picks."""
+    import dataclasses
+
+    from nlsid.io.recording import read_runs
+
+    runs = [dataclasses.replace(run, y=np.full_like(run.y, 1e-3)) if constant(run.run_id) else run
+            for run in read_runs(STAGE)]
+    write_recording(path, runs, provenance={"test": "constant output"})
+    return path
+
+
+def test_diagnose_says_a_constant_output_has_nothing_to_explain(run_cli, tmp_path):
+    import json
+
+    rec = constant_recording(tmp_path / "stuck.h5")
+    result = run_cli("--json", "diagnose", "--model", ROOT / "configs" / "stage_model.yaml", "--data", rec,
+                     "-o", tmp_path / "out")
+    assert result.exit_code == 0, (result.stderr, result.exception)
+    summary = json.loads(result.stdout)  # stdout holds the summary and nothing else (no LAPACK text)
+    assert "Warning" not in result.stderr and "Traceback" not in result.stderr, result.stderr
+    assert summary["headline"].startswith("The measured output is constant in every run")
+    assert summary["verdict"]["status"] == "unexplained" and summary["verdict"]["winner"] is None
+    assert len(summary["evidence"]["constant_output_runs"]) == 36
+    fitted = [h for h in summary["hypotheses"] if h.get("score") is not None]
+    assert fitted == []
+    # the model's error is its whole response: the AC power of the model's mean steady-state period,
+    # from an exact zero-order-hold discretisation of 2 x'' + 20 x' + 2000 x = u (stage_model.yaml)
+    expected = model_ac_power(read_runs_of(rec))
+    assert summary["evidence"]["error_rms"] == pytest.approx(np.sqrt(expected), rel=0.01)
+
+
+def read_runs_of(path: Path) -> list:
+    from nlsid.io.recording import read_runs
+
+    return read_runs(path)
+
+
+def model_ac_power(runs: list) -> float:
+    """Mean over the runs of the variance of the simulated output's mean steady-state period."""
+    from scipy import signal
+
+    powers = []
+    for run in runs:
+        # x = (position, velocity): x' = [[0, 1], [-k/m, -c/m]] x + [0, 1/m] u
+        A, B, C, D = [[0.0, 1.0], [-1000.0, -10.0]], [[0.0], [0.5]], [[1.0, 0.0]], [[0.0]]
+        Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), 1 / run.fs, method="zoh")
+        _, y, _ = signal.dlsim((Ad, Bd, Cd, Dd, 1 / run.fs), run.u)
+        y = np.squeeze(y)
+        P, N = run.n_periods, run.period
+        mean_period = y[y.size - P * N:].reshape(P, N).mean(axis=0)
+        powers.append(np.var(mean_period))
+    return float(np.mean(powers))

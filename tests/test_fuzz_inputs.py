@@ -355,3 +355,104 @@ def test_pipeline_config_bytes(run_cli):
     beside = {"design.yaml": yaml.safe_dump(DESIGN).encode(), "model.yaml": yaml.safe_dump(MODEL).encode()}
     fuzz(run_cli, "pipeline.yaml", yaml.safe_dump(PIPELINE).encode(), pipeline_args, beside=beside,
          examples=max(EXAMPLES // 2, 1))
+
+
+# ---------------------------------------------------------------------------------------------
+# non-finite numbers in the sample model configs
+
+CONFIGS = Path(__file__).parents[1] / "configs"
+
+
+def _sample_models() -> dict[str, dict]:
+    """The shipped model configs (those with a ``model`` key), parsed as nlsid parses them (YAML 1.2)."""
+    from nlsid.io.config import load_yaml
+
+    out = {}
+    for path in sorted(CONFIGS.glob("*.yaml")):
+        doc, _ = load_yaml(path)
+        if isinstance(doc, dict) and "model" in doc:
+            out[path.name] = doc
+    return out
+
+
+SAMPLE_MODELS = _sample_models()
+
+
+def _key_text(path: tuple) -> str:
+    """A key path as an error message writes it: ``model.nonlinearities[0].fc``, ``free['model.mass']``."""
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif "." in part:
+            out += f"[{part!r}]"
+        else:
+            out += f".{part}" if out else part
+    return out
+
+
+def _numeric_positions() -> list[tuple[str, tuple, float]]:
+    """(config, key path, non-finite value) for every number of every sample model config; a free
+    parameter's bound takes only NaN (an infinite bound is no bound, and valid)."""
+    out = []
+    for name, doc in SAMPLE_MODELS.items():
+        for path in _paths(doc):
+            value = doc
+            for part in path:
+                value = value[part]
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                continue
+            bound = path[0] == "free" and path[-1] in ("lower", "upper")
+            out += [(name, path, bad) for bad in ((math.nan,) if bound else (math.nan, math.inf, -math.inf))]
+    return out
+
+
+NUMERIC_POSITIONS = _numeric_positions()
+
+
+def _with_value(doc: dict, path: tuple, value: float) -> str:
+    doc = copy.deepcopy(doc)
+    parent = doc
+    for part in path[:-1]:
+        parent = parent[part]
+    parent[path[-1]] = value
+    return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+
+
+def _refused_at_key(run_cli, folder: Path, name: str, path: tuple, value: float) -> None:
+    source, out = folder / name, folder / "out"
+    out.mkdir(exist_ok=True)
+    source.write_text(_with_value(SAMPLE_MODELS[name], path, value))
+    result = run_cli("simulate", source, "--excitation", folder / "no_excitation.h5", "-o", out / "rec.h5")
+    lines = result.stderr.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1, (name, path, value, result.stderr, result.exception)
+    assert lines[0].startswith(f"nlsid: error: {source}:") and f": {_key_text(path)}: " in lines[0], \
+        (name, path, value, lines[0])
+    assert "Traceback" not in result.stderr and list(out.iterdir()) == []
+
+
+def test_the_sample_models_have_numbers_everywhere():
+    """The sweep below reaches the models' numbers: every shipped model config, many positions."""
+    assert len(SAMPLE_MODELS) >= 8 and len({name for name, _, _ in NUMERIC_POSITIONS}) == len(SAMPLE_MODELS)
+    assert len(NUMERIC_POSITIONS) > 100
+
+
+def test_non_finite_number_anywhere_in_a_sample_model(run_cli):
+    """Hypothesis picks a sample model config, a number in it and a non-finite value for it (YAML
+    ``.nan``, ``.inf``, ``-.inf``): refused with exit 2, naming the file and the key path."""
+
+    @settings(FUZZ)
+    @given(case=st.sampled_from(NUMERIC_POSITIONS))
+    def run_examples(case) -> None:
+        with tempfile.TemporaryDirectory() as folder:
+            _refused_at_key(run_cli, Path(folder), *case)
+
+    (seed(int(SEED))(run_examples) if SEED is not None else run_examples)()
+
+
+def test_non_finite_number_in_every_position_of_the_sample_models(run_cli, tmp_path):
+    """The same, exhaustively: every number of every sample model config, each non-finite value."""
+    for index, case in enumerate(NUMERIC_POSITIONS):
+        folder = tmp_path / str(index)
+        folder.mkdir()
+        _refused_at_key(run_cli, folder, *case)

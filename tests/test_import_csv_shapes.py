@@ -172,6 +172,24 @@ def test_two_header_like_lines_above_the_data_are_refused(run_cli, tmp_path):
     assert not (tmp_path / "rec.h5").exists()
 
 
+@pytest.mark.parametrize("above", [[], ["Axis1"]])
+def test_units_row_under_the_header(run_cli, tmp_path, above):
+    """An oscilloscope export: ``Time,Channel A,Channel B`` over ``(ms),(V),(mV)``, then an empty line."""
+    rng = np.random.default_rng(14)
+    u = multisine(rng)
+    y = fir(u)
+    source = write_table(tmp_path / "pico.csv", None, [np.arange(u.size) * 0.25, u, y],
+                         above=above + ["Time,Channel A,Channel B", "(ms),(V),(mV)", ""])
+    out = tmp_path / "rec.h5"
+    summary = summary_of(run_cli("import", source, "--u", "Channel A", "--y", "channel b", "-o", out, "--json"))
+    assert summary["fs"] == pytest.approx(4000.0, rel=1e-8) and summary["units"] == {"u": "V", "y": "mV"}
+    assert summary["fs_from"] == f"time vector {source}:Time (ms)"
+    (run,) = read_runs(out)
+    np.testing.assert_array_equal(run.periods("y").ravel(), y)
+    details = provenance_details(out)
+    assert details["units_row"] == len(above) + 2 and details["ignored_columns"] == []
+
+
 def test_units_in_header_cells(run_cli, tmp_path):
     """``u (N)`` and ``y [m/s^2]`` are found as u and y by default; their units are recorded."""
     rng = np.random.default_rng(6)

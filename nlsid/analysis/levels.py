@@ -282,7 +282,8 @@ def across_levels(levels: list[LevelResult]) -> dict:
         row = {key: value for key, value in level.summary().items() if key not in ("spectrum", "warnings")}
         same_lines = level.lines.period == reference.lines.period
         if same_lines and np.array_equal(level.lines.excited, reference.lines.excited):
-            change = 20 * np.log10(np.abs(level.robust.G) / np.abs(reference.robust.G))
+            with np.errstate(divide="ignore", invalid="ignore"):  # a level that did not respond: G = 0
+                change = 20 * np.log10(np.abs(level.robust.G) / np.abs(reference.robust.G))
             row["bla_change_mean_db"] = float(np.mean(change))
             row["bla_change_max_db"] = float(change[np.argmax(np.abs(change))])
         rows.append(row)

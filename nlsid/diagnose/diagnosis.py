@@ -188,6 +188,10 @@ class Diagnosis:
             seen = f"the simulation error is {ev.overall.above_noise_db:.1f} dB above the noise"
         if status == rules.AMBIGUOUS:
             return f"Discrepancy ({seen}); equally good explanations: {', '.join(self.verdict.tied)}"
+        if ev.constant_output:
+            return (f"The measured output is constant in every run: nothing responded to the input, so no extension "
+                    f"of the model can explain anything; the model's simulation error is its whole response "
+                    f"({ev.error_rms:.3g} rms)")
         return f"Discrepancy ({seen}); no hypothesis of the library explains it"
 
     def _chain_summary(self) -> list[dict]:
@@ -691,6 +695,10 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             continue
         if evidence.exact:
             outcome.reason = "not fitted: the model reproduces the noise-free data exactly (no residual to explain)"
+            continue
+        if evidence.constant_output:
+            outcome.reason = ("not fitted: the measured output is constant in every run (no response to the input "
+                              "to explain)")
             continue
         if hypothesis.distorts and evidence.distortion_testable and not (evidence.odd_seen or evidence.even_seen):
             outcome.reason = ("not fitted: the detection lines show no nonlinear distortion (odd or even), "

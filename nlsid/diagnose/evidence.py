@@ -279,7 +279,8 @@ def compare_bla(measured, model) -> dict:
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.abs(G - Gm) ** 2 / variance
     outside = z > threshold
-    gain_db = 20 * np.log10(np.abs(G) / np.abs(Gm))
+    with np.errstate(divide="ignore"):  # a measured G of exactly 0 (a constant output): -inf dB, said in words
+        gain_db = 20 * np.log10(np.abs(G) / np.abs(Gm))
     phase_deg = np.degrees(np.angle(G / Gm))
     freq = measured.lines.frequency(measured.lines.excited)
     worst = int(np.argmax(np.where(outside, np.abs(gain_db), -1))) if outside.any() else None
@@ -318,6 +319,13 @@ class Evidence:
     bla_levels: tuple = ()
     harmonics: list[dict] = field(default_factory=list)
     output_rms: float = float("nan")  # of the measured mean periods (AC lines), as error_rms
+    constant_runs: list[str] = field(default_factory=list)  # runs whose measured y never changes
+
+    @property
+    def constant_output(self) -> bool:
+        """The measured output is constant in every run: nothing responded to the input, so no
+        extension of the model can explain anything (its error is its whole response)."""
+        return bool(self.residuals) and len(self.constant_runs) == len(self.residuals)
 
     @property
     def noise_zero(self) -> bool:
@@ -359,7 +367,7 @@ class Evidence:
             "levels": self.levels,
             "harmonics": self.harmonics,
             "odd_distortion_unexplained": self.odd_seen, "even_distortion_unexplained": self.even_seen,
-            "linear_mismatch": self.linear_seen,
+            "linear_mismatch": self.linear_seen, "constant_output_runs": self.constant_runs,
         }
 
     def findings(self) -> list[str]:
@@ -376,10 +384,13 @@ class Evidence:
         else:
             out = [f"simulation error {self.error_rms:.3g} rms against the noise in it of {self.noise_rms:.3g} "
                    f"({self.overall.above_noise_db:+.1f} dB, {_p_text(self.overall.p_value)})"]
+        out += self._constant_findings()
         for row in self.bla:
             if row["significant"]:
+                worst = (f"up to {row['gain_error_max_db']:+.1f} dB" if math.isfinite(row["gain_error_max_db"])
+                         else "the measured BLA is zero at some lines (no response there)")
                 out.append(f"level {_name(row['level'])}: model FRF outside the BLA's 95% bounds at "
-                           f"{row['outside_bounds']} of {row['lines']} lines; up to {row['gain_error_max_db']:+.1f} dB "
+                           f"{row['outside_bounds']} of {row['lines']} lines; {worst} "
                            f"(worst near {row['worst_frequency_hz']:.3g} Hz) and {row['phase_error_max_deg']:+.0f} deg")
         for row in self.lines:
             for name in ("odd", "even"):
@@ -395,6 +406,19 @@ class Evidence:
                        f"{last['model_bla_change_max_db']:+.1f} dB")
         return out
 
+
+    def _constant_findings(self) -> list[str]:
+        """The runs whose measured output is constant, said (they are kept, not dropped)."""
+        if not self.constant_runs:
+            return []
+        if self.constant_output:
+            return [f"the measured output y is constant in every run ({len(self.constant_runs)}): the system did not "
+                    "respond to the input, or y is not the sensor's signal; there is nothing a model extension could "
+                    f"explain, and the model's error is its whole response ({self.error_rms:.3g} rms)"]
+        shown = ", ".join(self.constant_runs[:5]) + (", ..." if len(self.constant_runs) > 5 else "")
+        return [f"the measured output y is constant in {len(self.constant_runs)} of {len(self.residuals)} runs "
+                f"({shown}): no response there (a mass held by friction below its break-away force, or a sensor "
+                "below its resolution?)"]
 
     def _harmonic_findings(self) -> list[str]:
         """One line per harmonic class over all sine cells (the per-cell numbers are in the summary)."""
@@ -471,6 +495,7 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
         time=_time_signals(runner, used, residuals), noise_rms=math.sqrt(noise), error_rms=math.sqrt(error),
         spectra=spectra_, bla_levels=(measured_levels, model_levels), harmonics=harmonic_tests(residuals, used),
         output_rms=math.sqrt(output),
+        constant_runs=[run.run_id for run in used if run.y.size and np.ptp(run.y) == 0],
     ), simulated
 
 

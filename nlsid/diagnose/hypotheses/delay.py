@@ -27,6 +27,8 @@ def _estimate_delay(ctx: Context) -> Estimate | str:
         weight = 2 * np.abs(R) ** 2 / var
         num += float(np.sum(weight * w * phase))
         den += float(np.sum(weight * w * w))
+    if den == 0:  # every R is 0: the measured output shows no response at the excited lines, so no phase
+        return "the measured BLA is zero at every excited line (the output does not respond): no phase to read"
     tau = -num / den
     fs = ctx.runs[0].fs
     samples = tau * fs

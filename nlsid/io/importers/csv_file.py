@@ -59,6 +59,7 @@ TIME_UNITS_TEXT = "s, ms, us (µs), ns, min"
 # unit but a realization number ("u(1)"), so it stays part of the name.
 UNIT_CELL = re.compile(r"^(?P<name>.*?\S)\s*[\[(]\s*(?P<unit>[^\[\]()]*?)\s*[\])]$")
 UNIT_SUFFIX = r"(?:\s*[\[(][^\])]*[\])])?"  # a trailing unit, as in "u1 (V)"
+UNITS_ROW_CELL = re.compile(r"^[\[(][^\[\]()]*[^\[\]()\d\s][^\[\]()]*[\])]$")  # "(ms)", "[V]"; not "(1)"
 DELIMITERS = ("\t", ";", ",")
 PREVIEW = 80  # characters of a preamble line kept in the details
 
@@ -85,13 +86,14 @@ def _delimiter_text(delimiter: str | None) -> str:
 @dataclass
 class Table:
     """The rows of a CSV/TSV file: its header (cells, or None), the rows below it (line number,
-    cells), the delimiter (None: whitespace, "": none, one column) and the lines above the header
-    that were skipped (line number, text)."""
+    cells), the delimiter (None: whitespace, "": none, one column), the lines above the header
+    that were skipped (line number, text), and the line of the units row read into the header."""
 
     header: list[str] | None
     body: list[tuple[int, list[str]]]
     delimiter: str | None
     preamble: list[tuple[int, str]]
+    units_line: int | None = None
 
     @property
     def width(self) -> int:
@@ -134,29 +136,48 @@ def _is_numbers(cells: list[str]) -> bool:
     return bool(filled) and all(_number(c) is not None for c in filled)
 
 
+def _is_units_row(cells: list[str]) -> bool:
+    """A row of units under the header: every non-empty cell a bracketed unit, ``(ms)``, ``[V]``."""
+    filled = [c for c in cells if c]
+    return bool(filled) and all(UNITS_ROW_CELL.match(c) for c in filled)
+
+
 def _header_index(path: Path, rows: list[tuple[int, list[str]]], delimiter: str | None) -> int:
-    """Where the table starts: the line above the first row of data of the common width, when that
-    line is a header of the same width without numbers; else 0 (the first line). A row of data is
-    one of numbers (empty cells allowed), or, when no row is, one with a number (a text column
-    beside the numbers). Two header-like lines above the data are refused as ambiguous."""
+    """Where the table starts: the line above the first row of data of the common width (above its
+    units row, if it has one), when that line is a header of the same width without numbers; else 0
+    (the first line). A row of data is one of numbers (empty cells allowed), or, when no row is,
+    one with a number (a text column beside the numbers). Two header-like lines above the data are
+    refused as ambiguous."""
     widths = Counter(len(cells) for _, cells in rows)
     width = widths.most_common(1)[0][0]
     same = [k for k, (_, cells) in enumerate(rows) if len(cells) == width]
     first = next((k for k in same if _is_numbers(rows[k][1])), None)
     if first is None:
         first = next((k for k in same if any(_number(c) is not None for c in rows[k][1])), None)
-    if first is None or first < 2:
+    if first is None:
         return 0
-    above = rows[first - 1][1]
+    top = first - 1
+    if top >= 1 and len(rows[top][1]) == width and _is_units_row(rows[top][1]):
+        top -= 1
+    if top < 1:
+        return 0
+    above = rows[top][1]
     if len(above) != width or any(_number(c) is not None for c in above):
         return 0
-    higher = rows[first - 2][1]
+    higher = rows[top - 1][1]
     if len(higher) == width and not any(_number(c) is not None for c in higher):
-        raise InputError(f"{path}:{rows[first - 2][0]}", f"lines {rows[first - 2][0]} and {rows[first - 1][0]} both look "
-                                                         f"like the header ({width} cells split at "
-                                                         f"{_delimiter_text(delimiter)}, no numbers); pass --skip-rows N "
-                                                         "so that the header is the first line read")
-    return first - 1
+        raise InputError(f"{path}:{rows[top - 1][0]}", f"lines {rows[top - 1][0]} and {rows[top][0]} both look like the "
+                                                       f"header ({width} cells split at {_delimiter_text(delimiter)}, no "
+                                                       "numbers); pass --skip-rows N so that the header is the first "
+                                                       "line read")
+    return top
+
+
+def _with_units(header: list[str], units: list[str]) -> list[str]:
+    """Header cells with the units of the row below them: ``Time`` over ``(ms)`` is ``Time (ms)``
+    (a cell that states its own unit keeps it)."""
+    return [f"{cell} {unit}" if cell and unit and split_unit(cell)[1] is None else cell
+            for cell, unit in zip(header, units)]
 
 
 def read_table(path: Path, skip_rows: int | None = None) -> Table:
@@ -176,6 +197,10 @@ def read_table(path: Path, skip_rows: int | None = None) -> Table:
     first_line, first = rows[top]
     header = None if _is_numbers(first) else first
     body = rows[top + 1:] if header is not None else rows[top:]
+    units_line = None
+    if header is not None and body and len(body[0][1]) == len(header) and _is_units_row(body[0][1]):
+        units_line, header = body[0][0], _with_units(header, body[0][1])
+        body = body[1:]
     if not body:
         raise InputError(str(path), "holds a header but no data rows")
     width = len(first)
@@ -186,7 +211,7 @@ def read_table(path: Path, skip_rows: int | None = None) -> Table:
             raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the {'header' if header else 'first row'} "
                                                f"(line {first_line}) has {width} (split at "
                                                f"{_delimiter_text(delimiter)}){hint}")
-    return Table(header=header, body=body, delimiter=delimiter, preamble=preamble)
+    return Table(header=header, body=body, delimiter=delimiter, preamble=preamble, units_line=units_line)
 
 
 @dataclass(frozen=True)
@@ -426,6 +451,8 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
         details["preamble_lines"] = [{"line": n, "text": text} for n, text in table.preamble]
     if skip_rows is not None:
         details["skipped_rows"] = skip_rows
+    if table.units_line is not None:
+        details["units_row"] = table.units_line
     return source
 
 
