@@ -330,7 +330,7 @@ def model_ac_power(runs: list) -> float:
     powers = []
     for run in runs:
         # x = (position, velocity): x' = [[0, 1], [-k/m, -c/m]] x + [0, 1/m] u
-        A, B, C, D = [[0.0, 1.0], [-1000.0, -10.0]], [[0.0], [0.5]], [[1.0, 0.0]], [[0.0]]
+        A, B, C, D = map(np.array, ([[0.0, 1.0], [-1000.0, -10.0]], [[0.0], [0.5]], [[1.0, 0.0]], [[0.0]]))
         Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), 1 / run.fs, method="zoh")
         _, y, _ = signal.dlsim((Ad, Bd, Cd, Dd, 1 / run.fs), run.u)
         y = np.squeeze(y)
