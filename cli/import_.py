@@ -19,7 +19,8 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @click.option("--channel", "channels", metavar="NAME=SOURCE", multiple=True,
               help="A further measured channel NAME (e.g. d, a force the rig injects), from SOURCE named like --u "
                    "(column, variable, dataset or /topic:field). Repeat per channel.")
-@click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5); fs is derived and checked uniform.")
+@click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5; a CSV header may say ms, us, ns or min: `time (ms)`); "
+                                                          "fs is derived and checked uniform.")
 @click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors, CSV sample-rate columns and MCAP log times).")
 @click.option("--period", type=click.IntRange(min=2), help="Samples per period (skips the period search; must fit the data).")
 @click.option("--transient-periods", type=click.IntRange(min=0), default=0, show_default=True,
