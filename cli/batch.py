@@ -7,6 +7,7 @@ CLI loads click alone; tests/test_cli_startup.py).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import time
@@ -91,32 +92,37 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
                                      fleet=str(fleet), argv=argv, version=__version__))
         return stored, todo
 
-    if scheduler is None and split()[1]:
-        from nlsid.batch.pool import LocalPool  # work ahead: the fork server imports while the pipeline is checked
-
-        LocalPool.start_server(batch_pipeline.stages, _local_workers(workers, len(recordings)))
-    first = recordings[0]
-    check_first(batch_pipeline, first.path, fleet / first.name, first.name)
-    fleet.mkdir(exist_ok=True)
-
-    lock = _lock(fleet)
-    try:
-        removed = _remove_work_folders(fleet)
-        stored, todo = split()  # again, under the lock
-        executor, notes = _executor(todo, workers, scheduler, source, fleet, __version__, batch_pipeline.stages)
-        try:
-            records = _run(executor, todo, len(recordings), len(stored))
-        except BaseException:
+    cluster = None
+    if split()[1]:  # work ahead, before anything is written
+        if scheduler is not None:  # an unreachable scheduler is one line, the batch folder untouched
+            cluster = _connect(scheduler, source, __version__)
+        else:  # the fork server imports while the pipeline is checked
             from nlsid.batch.pool import LocalPool
 
-            if isinstance(executor, LocalPool):  # its workers are ended: their work folders go (a cluster's finish)
-                _remove_work_folders(fleet)
-            raise
-        removed += _remove_work_folders(fleet)
-        summary = _finish(batch_pipeline, recordings, fleet, stored, records, executor, notes, removed, parameter,
-                          fail_if_drift, time.perf_counter() - started, __version__)
+            LocalPool.start_server(batch_pipeline.stages, _local_workers(workers, len(recordings)))
+    try:
+        first = recordings[0]
+        check_first(batch_pipeline, first.path, fleet / first.name, first.name)
+        with _batch_folder(fleet):
+            removed = _remove_work_folders(fleet)
+            stored, todo = split()  # again, under the lock
+            if todo and scheduler is not None and cluster is None:
+                cluster = _connect(scheduler, source, __version__)
+            executor, notes = _executor(todo, workers, cluster, fleet, batch_pipeline.stages)
+            try:
+                records = _run(executor, todo, len(recordings), len(stored))
+            except BaseException:
+                from nlsid.batch.pool import LocalPool
+
+                if isinstance(executor, LocalPool):  # its workers are ended: their work folders go (a cluster's finish)
+                    _remove_work_folders(fleet)
+                raise
+            removed += _remove_work_folders(fleet)
+            summary = _finish(batch_pipeline, recordings, fleet, stored, records, executor, notes, removed, parameter,
+                              fail_if_drift, time.perf_counter() - started, __version__)
     finally:
-        lock.close()
+        if cluster is not None:
+            cluster.close()
     if as_json:
         emit_json(summary)
     else:
@@ -147,21 +153,54 @@ def _check_fleet_folder(output: str, inputs: list[Path]) -> Path:
     return fleet
 
 
+@contextlib.contextmanager
+def _batch_folder(fleet: Path):
+    """Create the batch folder when missing and hold its lock (``FLEET/.batch.lock``) while the batch
+    runs: two batches on one folder would remove each other's work folders. At the end, however it
+    ends (an error, Ctrl-C), the lock file goes, and so does the folder when this batch created it
+    and it holds nothing."""
+    created = not fleet.exists()
+    try:
+        fleet.mkdir(exist_ok=True)
+        with _lock(fleet):
+            yield
+    finally:
+        if created:
+            with contextlib.suppress(OSError):  # not empty (outputs of finished tasks), or gone
+                fleet.rmdir()
+
+
+@contextlib.contextmanager
 def _lock(fleet: Path):
-    """Hold the batch folder's lock (``FLEET/.batch.lock``) while the batch runs: two batches on one
-    folder would remove each other's work folders."""
+    """The lock of the batch folder, its file removed on release (while still held). A batch that
+    locked the file just as an ending batch removed it holds a lock on a removed file: it checks
+    that the file it locked is still the folder's lock file, and tries again if not."""
     import fcntl
 
     from nlsid.errors import InputError
 
-    handle = open(fleet / LOCK_FILE, "a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
+    path = fleet / LOCK_FILE
+    while True:
+        handle = open(path, "a+")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            raise InputError(str(fleet), f"another nlsid batch is writing this folder (it holds {LOCK_FILE}); "
+                                         "wait for it to end") from None
+        try:
+            current = os.stat(path)
+        except FileNotFoundError:
+            current = None
+        if current is not None and os.path.samestat(current, os.fstat(handle.fileno())):
+            break
         handle.close()
-        raise InputError(str(fleet), f"another nlsid batch is writing this folder (it holds {LOCK_FILE}); "
-                                     "wait for it to end") from None
-    return handle
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            path.unlink()
+        handle.close()
 
 
 def _remove_work_folders(fleet: Path) -> int:
@@ -181,14 +220,19 @@ def _remove_work_folders(fleet: Path) -> int:
     return removed
 
 
-def _executor(todo: list, workers: int | None, scheduler: str | None, source: str, fleet: Path, version: str,
-              stages: list[str]):
+def _connect(scheduler: str, source: str, version: str):
+    """The Dask cluster of the scheduler, its workers checked (nothing is written)."""
+    from nlsid.batch.cluster import DaskCluster
+
+    return DaskCluster(scheduler, source, version, settings().verbose)
+
+
+def _executor(todo: list, workers: int | None, cluster, fleet: Path, stages: list[str]):
+    """What runs the tasks (None when there are none) and its notes."""
     if not todo:
         return None, []
-    if scheduler is not None:
-        from nlsid.batch.cluster import DaskCluster
-
-        cluster = DaskCluster(scheduler, source, fleet, Path(todo[0].recording), version, settings().verbose)
+    if cluster is not None:
+        cluster.check_folders(fleet, Path(todo[0].recording))
         return cluster, cluster.notes
     from nlsid.batch.pool import LocalPool
 

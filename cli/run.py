@@ -10,10 +10,12 @@ A pipeline config lists steps as nlsid command lines::
 A step's output is the value of its ``-o``/``--output``, and its figures (``--plots``/``--plot``)
 are outputs too; its inputs are every other argument that names an existing file or folder, or
 the output of an earlier step, plus the pipeline config itself. A step runs when an output is
-missing or its ``-o`` output is older than one of its inputs (as make does), and then overwrites
-them; otherwise it is skipped. The whole pipeline is checked before its first step runs
-(:func:`check_steps`); the first failing step stops it with its exit code and one line that names
-the step.
+missing or its ``-o`` output is older than one of its inputs (as make does), or when an input's
+content differs from the stamp recorded when the step last ran (:mod:`nlsid.batch.stamps`, kept in
+``.<output name>.inputs.json`` beside the output: a file replaced by one with an older
+modification time), and then overwrites them; otherwise it is skipped. The whole pipeline is
+checked before its first step runs (:func:`check_steps`); the first failing step stops it with
+its exit code and one line that names the step.
 """
 
 from __future__ import annotations
@@ -27,11 +29,12 @@ from pathlib import Path
 
 import click
 
-from nlsid.errors import EXIT_OK, InputError, NlsidError
+from nlsid.errors import EXIT_CHECK_FAILED, EXIT_OK, InputError, NlsidError
 
 from .common import OUTPUT_PARAMETERS, StageCommand, emit_json, json_option, settings
 
 OUTPUT_FLAGS = ("-o", "--output")
+INPUTS_RECORD = "inputs_record"  # nlsid_format of the stamps of a step's inputs (docs/formats.md)
 FIGURE_FLAGS = ("--plots", "--plot")  # written by the step, like its output: never its inputs
 # (stage, parameter) -> the schema its config file is validated against before the first step runs
 CONFIG_PARAMETERS = {("design", "config"): "design", ("simulate", "config"): "model",
@@ -100,10 +103,37 @@ def _mtime(path: Path) -> float:
 
 
 def up_to_date(step: Step) -> bool:
+    """Every output exists and the ``-o`` output is newer than every input (modification times)."""
     if not all(path.exists() for path in (step.output, *step.figures)):
         return False
     built = _mtime(step.output)
     return all(p.exists() and _mtime(p) <= built for p in step.inputs)
+
+
+def inputs_record_path(step: Step) -> Path:
+    """Where the stamps of a step's inputs are kept: ``.<output name>.inputs.json`` beside its output."""
+    return step.output.parent / f".{step.output.name}.inputs.json"
+
+
+def inputs_changed(step: Step) -> bool:
+    """Whether an input's content differs from its stamp of when the step last ran; False when
+    there is no readable record (outputs of an earlier nlsid: the modification times decide)."""
+    from nlsid.batch.stamps import first_changed
+
+    try:
+        data = json.loads(inputs_record_path(step).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(data, dict) or data.get("nlsid_format") != INPUTS_RECORD or not isinstance(data.get("inputs"), dict):
+        return False
+    return first_changed(step.inputs, data["inputs"]) is not None
+
+
+def _write_inputs_record(step: Step, stamped: dict) -> None:
+    from nlsid.io.atomic import write_text_atomic
+
+    record = {"nlsid_format": INPUTS_RECORD, "nlsid_format_version": 1, "step": step.text, "inputs": stamped}
+    write_text_atomic(inputs_record_path(step), json.dumps(record, indent=2, sort_keys=True) + "\n", force=True)
 
 
 @click.command(cls=StageCommand)
@@ -128,8 +158,10 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
     check_steps(cli, pipeline, root, steps)
     console = settings().console
     done = []
+    from nlsid.batch.stamps import stamps
+
     for step in steps:
-        if not always and up_to_date(step):
+        if not always and up_to_date(step) and not inputs_changed(step):
             done.append({"step": step.text, "status": "up to date", "seconds": 0.0, "output": str(step.output)})
             headline = stored_headline(step)
             if headline:
@@ -138,7 +170,10 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
         step.output.parent.mkdir(parents=True, exist_ok=True)
         console.rule(f"nlsid {step.text}", style="dim")
         started = time.perf_counter()
+        stamped = stamps(step.inputs)  # before the step reads them
         code, headline = _invoke(cli, root, step)
+        if code in (EXIT_OK, EXIT_CHECK_FAILED) and step.output.exists():  # its outputs are of these inputs
+            _write_inputs_record(step, stamped)
         done.append({"step": step.text, "status": "ran" if code == EXIT_OK else f"failed ({code})",
                      "seconds": round(time.perf_counter() - started, 2), "output": str(step.output)})
         headline = headline or (stored_headline(step) if code == EXIT_OK else None)

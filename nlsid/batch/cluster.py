@@ -1,8 +1,10 @@
 """The Dask back-end of ``nlsid batch``: the tasks on an existing ``distributed`` cluster.
 
-Connecting checks, before any task is sent, that the scheduler answers, that some worker is
-connected, and, on every worker, that it runs the batch's nlsid version and sees the output folder
-and the first recording at the same paths (a shared file system). Each failure is one line naming
+Connecting (:class:`DaskCluster`, before the batch writes anything) checks that the scheduler
+answers within a few seconds, that some worker is connected and that every worker runs the batch's
+nlsid version; then (:meth:`DaskCluster.check_folders`, once the batch folder exists, before any
+task is sent) that every worker sees the output folder and the first recording at the same paths (a
+shared file system). Each failure is one line naming
 the worker and what to do. A worker with more than one thread runs its batch tasks one after
 another (:mod:`nlsid.batch.task`): a note says to start workers with ``--nthreads 1``.
 
@@ -24,7 +26,7 @@ from nlsid.errors import InputError, one_line
 
 from .pool import lost_record
 
-CONNECT_TIMEOUT_S = 10
+CONNECT_TIMEOUT_S = 5  # an unreachable address costs this much before the one-line error
 WORKER_TIMEOUT_S = 20
 EXTRA = "pip install 'nlsid[cluster]'"
 
@@ -36,7 +38,7 @@ def _short(exc: BaseException) -> str:
 class DaskCluster:
     """The workers of the Dask scheduler at ``address`` (``source`` says where the address came from)."""
 
-    def __init__(self, address: str, source: str, fleet: Path, probe_recording: Path, version: str, verbose: int = 0):
+    def __init__(self, address: str, source: str, version: str, verbose: int = 0):
         self.where = f"{source} {address}"
         try:
             import distributed
@@ -54,13 +56,14 @@ class DaskCluster:
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(self.where, f"cannot connect to the Dask scheduler within {CONNECT_TIMEOUT_S} s: {_short(exc)}") from None
         try:
-            self.notes = self._check(fleet, probe_recording, version)
+            self.notes = self._check_workers(version)
         except BaseException:
             self.client.close()
             raise
         self.lost = None  # the scheduler retries lost tasks; how often is not reported to the client
 
-    def _check(self, fleet: Path, probe_recording: Path, version: str) -> list[str]:
+    def _check_workers(self, version: str) -> list[str]:
+        """Some worker is connected and every worker runs nlsid ``version``; the notes on them."""
         client = self.client
         try:
             client.wait_for_workers(1, timeout=WORKER_TIMEOUT_S)
@@ -75,21 +78,6 @@ class DaskCluster:
             if found != version:
                 raise InputError(self.where, f"worker {worker} runs nlsid {found}, this command nlsid {version}: "
                                              f"install nlsid {version} on every worker")
-        probe = fleet / f".batch-probe-{secrets.token_hex(4)}"
-        probe.write_text("nlsid batch: can the workers see this folder?\n")
-        try:
-            sees_fleet = client.run(os.path.exists, str(probe))
-            sees_input = client.run(os.path.exists, str(probe_recording))
-            hosts = client.run(socket.gethostname)
-        finally:
-            probe.unlink()
-        for worker in sorted(versions):
-            if not sees_fleet.get(worker):
-                raise InputError(self.where, f"worker {worker} (host {hosts.get(worker)}) does not see the output folder "
-                                             f"{fleet}: the workers need a shared file system with the same paths")
-            if not sees_input.get(worker):
-                raise InputError(self.where, f"worker {worker} (host {hosts.get(worker)}) does not see the recording "
-                                             f"{probe_recording}: the workers need a shared file system with the same paths")
         workers = client.scheduler_info(n_workers=-1)["workers"]
         self.description = f"the Dask cluster at {self.where.split(' ', 1)[1]} ({len(workers)} worker" \
                            f"{'s' if len(workers) != 1 else ''})"
@@ -99,6 +87,26 @@ class DaskCluster:
             return [f"{len(threaded)} worker(s) have more than one thread ({threaded[0]}, ...): each runs its batch "
                     "tasks one at a time; start workers with --nthreads 1 (and --nworkers N) to use every core"]
         return []
+
+    def check_folders(self, fleet: Path, probe_recording: Path) -> None:
+        """Every worker sees the batch folder ``fleet`` (which must exist: a probe file is written
+        into it) and the recording ``probe_recording`` at the same paths as this process."""
+        client = self.client
+        probe = fleet / f".batch-probe-{secrets.token_hex(4)}"
+        probe.write_text("nlsid batch: can the workers see this folder?\n")
+        try:
+            sees_fleet = client.run(os.path.exists, str(probe))
+            sees_input = client.run(os.path.exists, str(probe_recording))
+            hosts = client.run(socket.gethostname)
+        finally:
+            probe.unlink()
+        for worker in sorted(hosts):
+            if not sees_fleet.get(worker):
+                raise InputError(self.where, f"worker {worker} (host {hosts.get(worker)}) does not see the output folder "
+                                             f"{fleet}: the workers need a shared file system with the same paths")
+            if not sees_input.get(worker):
+                raise InputError(self.where, f"worker {worker} (host {hosts.get(worker)}) does not see the recording "
+                                             f"{probe_recording}: the workers need a shared file system with the same paths")
 
     def run(self, specs: list, on_done: Callable[[dict], None]) -> None:
         """Run every spec on the cluster; ``on_done(record)`` as each finishes."""
@@ -131,4 +139,6 @@ class DaskCluster:
         return dask.config.get("distributed.scheduler.allowed-failures", 3)
 
     def close(self) -> None:
-        self.client.close()
+        """Disconnect from the scheduler (again: nothing happens)."""
+        if self.client.status not in ("closing", "closed"):
+            self.client.close()

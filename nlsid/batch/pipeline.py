@@ -123,11 +123,15 @@ def is_up_to_date(pipeline: BatchPipeline, recording: Path, folder: Path, name: 
     """The stored record of a recording whose outputs are up to date, else None.
 
     Up to date: ``task.json`` exists and is newer than the recording, the pipeline file and every
-    other input of the steps outside the folder; and, unless the record is of a bad input (whose
+    other input of the steps outside the folder, and these inputs are as stamped in the record's
+    ``inputs`` when the task ran (:mod:`nlsid.batch.stamps`: a recording replaced by another file
+    with an older modification time runs again); and, unless the record is of a bad input (whose
     later steps never ran), every step's outputs exist and are newer than its inputs (as ``nlsid
     run`` decides). Records of an unexpected error (status ``error``) are never up to date.
     """
     from nlsid.cli.run import _mtime, up_to_date
+
+    from .stamps import first_changed
 
     record = stored_record(folder)
     if record is None or record.get("status") not in ("ok", "check failed", "bad input"):
@@ -136,9 +140,13 @@ def is_up_to_date(pipeline: BatchPipeline, recording: Path, folder: Path, name: 
         return None
     steps = pipeline.plan(recording, folder, name)
     written = (folder / TASK_FILE).stat().st_mtime
-    for path in external_inputs(steps, folder):
+    external = external_inputs(steps, folder)
+    for path in external:
         if not path.exists() or _mtime(path) > written:
             return None
+    stamped = record.get("inputs")
+    if isinstance(stamped, dict) and first_changed(external, stamped) is not None:
+        return None  # a record without stamps (an earlier nlsid): the modification times decide
     if record["status"] != "bad input" and not all(up_to_date(step) for step in steps):
         return None
     return record

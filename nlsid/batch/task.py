@@ -161,7 +161,9 @@ def _steps(spec: TaskSpec, work: Path, record: dict, capture: _Capture) -> None:
     from nlsid.errors import EXIT_CHECK_FAILED, EXIT_OK, NlsidError
 
     from .outputs import row_of
+    from .pipeline import external_inputs
     from .recorded import recording_facts
+    from .stamps import stamps
 
     record.update(status="ok", error=None, steps=[])
     done = []
@@ -173,8 +175,9 @@ def _steps(spec: TaskSpec, work: Path, record: dict, capture: _Capture) -> None:
     try:
         pipeline = BatchPipeline(spec.pipeline)
         record["pipeline_steps"] = pipeline.steps
-        facts = recording_facts(recording)
         steps = pipeline.plan(recording, work, spec.name)
+        record["inputs"] = stamps(external_inputs(steps, work))  # before the steps read them
+        facts = recording_facts(recording)
         with click.Context(cli, info_name="nlsid", obj=settings):
             check_steps(cli, spec.pipeline, pipeline.root, steps)
             for step in steps:
