@@ -21,7 +21,11 @@ four steps; every step states how sure it is.
      of two or more periods has a neighbouring period (before or after) that repeats it, so ``e`` is
      at the noise level at the true period even when realizations change every two periods. The
      period is the smallest divisor of the best lag whose residual is within 25 % of the best (a
-     mean of ``L`` noise terms varies by ``sqrt(2/L)``, under 5 % for ``L >= 1000``).
+     mean of ``L`` noise terms varies by ``sqrt(2/L)``, under 5 % for ``L >= 1000``) or nearer the
+     noise than a change of content. The residual leaves out the first period (a generator's
+     start-up transient), candidates are widened by one sample each way, and a lag counts only if
+     the record repeats there strictly better than one sample off (:func:`repeats_best_at`): a
+     smooth record repeats ever better as the lag shrinks, a periodic one has a sharp minimum.
 
 2. **Slots, lead-in and realizations.** With ``D_j(phi)`` the squared difference between the
    N-sample slots ``j`` and ``j+1`` that start at sample ``phi + j N``, a noise-only comparison has
@@ -36,7 +40,9 @@ four steps; every step states how sure it is.
    joined by *same* comparisons and at least two long are realizations; single slots before one
    (a lead-in, or a transition) become its transient periods; the ``phi`` leading samples and the
    samples after the last whole slot are dropped. All realizations share the phase: they hold whole
-   periods, back to back.
+   periods, back to back. A phase that leaves a comparison out is charged a change for it. The
+   longer realizations keep extra leading periods as transient so that all hold the same number of
+   steady periods; stretches of a held input (a flat mean period) are not realizations.
 
 3. **Excited lines** of each realization, from the one-period spectra ``X_p(k) = (1/N) DFT`` of its
    steady periods (book (2-2) with S = 1/N). The noise variance per line is pooled over periods and
@@ -44,7 +50,10 @@ four steps; every step states how sure it is.
    "not excited", ``T(k) = P |mean_p X_p(k)|^2 / s^2(k)`` follows an F(2, nu) law, whose tail is
    ``(1 + 2 t / nu)^(-nu/2)``. A line is excited when ``T`` exceeds the threshold with family-wise false
    alarm ``LINE_FALSE_ALARM`` over all tested lines (Bonferroni). Lines more than 100 dB below the
-   strongest never count (rounding and quantisation floor, ``NUMERIC_FLOOR``).
+   strongest never count (rounding and quantisation floor, ``NUMERIC_FLOOR``). A polynomial drift
+   is removed first (:func:`without_drift`). A measured input (``measured=True``) also needs its
+   lines ``MEASURED_LINE_SNR`` above their noise or consistent with the strong lines
+   (:func:`consistent_lines`), and drops mains hum (:func:`mains_lines`).
 
 4. **Grid** of the excited bins (book 6.1.2, Ex 89): ``full`` or ``odd`` when every in-band harmonic
    (odd harmonic) is excited, ``random-full`` or ``random-odd`` when some are missing (the detection
