@@ -101,7 +101,8 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function, {report['stability']}"
               + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
               f"cost {fit_.cost:.6g}, {_cost_check(fit_)} ({fit_.lines} lines)",
-              f"weights: {result.level.weights}",
+              f"weights: {result.level.weights}" if result.level.weighted
+              else "unweighted least squares: the BLA is noise-free (zero variances), no weights to fit with",
               f"order: {report['order_reason']}",
               f"report: {report_path(output).name}"]
     if plot:
@@ -121,12 +122,16 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     if as_json:
         emit_json({"output": output, "report": str(report_path(output)), "plot": plot,
                    **{k: report[k] for k in ("domain", "order", "delay_samples", "num", "den", "parameters", "cost",
-                                             "expected_cost", "cost_std", "cost_bound", "weights", "lines", "stable",
+                                             "expected_cost", "cost_std", "cost_bound", "weights", "weighted",
+                                             "lines", "stable",
                                              "stability",
                                              "integrators", "fit", "fit_note", "order_reason", "order_scan",
                                              "warnings")}})
         return
     console = settings().console
+    if not result.level.weighted:
+        console.print("unweighted least squares: the BLA is noise-free (zero variances); cost and std against the "
+                      "numerical-precision floor")
     console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, {_cost_check(fit_)} over "
                   f"{fit_.lines} lines")
     console.print(f"order: {report['order_reason']}")

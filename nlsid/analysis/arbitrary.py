@@ -41,6 +41,13 @@ class LPMLevel:
     probability: float
     uses_reference: bool
     warnings: list[str] = field(default_factory=list)
+    excited: np.ndarray | None = None  # indices into result.lines of the band's excited lines (None: the band)
+
+    @property
+    def excited_lines(self) -> np.ndarray:
+        """Indices into ``result.lines`` of the lines that carry input power themselves
+        (:func:`excited_lines`): the band statistics are taken over these."""
+        return self.band if self.excited is None else self.excited
 
     @property
     def bins(self) -> np.ndarray:
@@ -68,18 +75,24 @@ class LPMLevel:
         return "lpm_reference" if self.uses_reference else "lpm"
 
     def summary(self) -> dict:
-        """Scalars for tables and ``--json`` (docs/formats.md, bla.h5 version 2)."""
-        G2 = float(np.nanmean(np.abs(self.G) ** 2))
+        """Scalars for tables and ``--json`` (docs/formats.md, bla.h5 version 2).
+
+        The band means (``bla_db``, ``total_var_db``) are over the excited lines only
+        (:attr:`excited_lines`, counted in ``excited_lines``): the band, found on the window-smoothed
+        input power, also holds the unexcited lines next to its edges, where G and its variance are
+        the local polynomial's extrapolation."""
+        excited = self.excited_lines
+        G2 = float(np.nanmean(np.abs(self.result.G[excited]) ** 2))
         return {
             "level": self.level,
             "u_rms": self.u_rms,
             "realizations": len(self.run_ids),
             "periods": 0,
             "method": self.method,
-            "excited_lines": int(self.band.size),
+            "excited_lines": int(excited.size),
             "band_hz": [float(self.frequency[0]), float(self.frequency[-1])] if self.band.size else None,
             "bla_db": db(G2),
-            "total_var_db": db(float(np.nanmean(self.var_G))) - db(G2),
+            "total_var_db": db(float(np.nanmean(self.result.var_G[excited]))) - db(G2),
             "nl_var_db": float("nan"),
             "noise_var_db": float("nan"),
             "noise_floor": "upper_bound",
@@ -99,6 +112,16 @@ def excited_band(result: LPMResult, power: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=int)
     keep = (smooth >= top * 10 ** (-BAND_DB / 10)) & np.isfinite(result.G) & np.isfinite(result.var_G)
     return np.flatnonzero(keep)
+
+
+def excited_lines(band: np.ndarray, power: np.ndarray, width: int) -> np.ndarray:
+    """The lines of ``band`` whose own input power (not smoothed) is within BAND_DB of the largest
+    window-smoothed power, the reference :func:`excited_band` uses. Smoothing spreads the power of
+    the band's edge lines over the window, so the band reaches unexcited lines up to half a window
+    beyond its edges; those are left out here."""
+    smooth = np.convolve(power, np.ones(width) / width, mode="same")
+    top = float(np.max(smooth)) if smooth.size else 0.0
+    return band[power[band] >= top * 10 ** (-BAND_DB / 10)]
 
 
 def analyse_level(runs: list[Run], where: str, probability: float, half_width: int = DEFAULT_HALF_WIDTH,
@@ -136,5 +159,8 @@ def analyse_level(runs: list[Run], where: str, probability: float, half_width: i
     elif any(run.r is not None for run in runs):
         warnings.append("some runs carry no reference r: the FRF is taken from u as if u were noise-free")
     u_rms = math.sqrt(float(np.mean([np.mean((run.u[:length] - run.u[:length].mean()) ** 2) for run in runs])))
+    excited = excited_lines(band, power, 2 * half_width + 1)
+    if excited.size == 0:  # a spread-out input whose every line is far below its smoothed peak
+        excited = band
     return LPMLevel(runs[0].level, [run.run_id for run in runs], u_rms, result, band, probability,
-                    use_reference, warnings)
+                    use_reference, warnings, excited)

@@ -115,12 +115,18 @@ def eiv_variance(G: np.ndarray, U: np.ndarray, var_y: np.ndarray, var_u: np.ndar
 class RobustAccumulator:
     """Combine realizations one at a time with :meth:`add`, then call :meth:`result`."""
 
-    def __init__(self, bins: np.ndarray, method: str):
+    def __init__(self, bins: np.ndarray, method: str, period: int | None = None):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         self.bins = np.asarray(bins)
         self.method = method
+        self.period = period
         self.n_periods: int | None = None
+        # reference method: the r-to-u delay of each realization relative to the first one, and
+        # U_R with that delay removed (the actuator test asks whether a delay explains the spread)
+        self._first_ratio: np.ndarray | None = None
+        self.delays: list[float] = []
+        self._aligned = _Welford(self.bins.size)
         size = self.bins.size
         self._spectra = _Welford(size)
         self._noise = np.zeros(size)
@@ -140,6 +146,7 @@ class RobustAccumulator:
         if self.method == "reference":
             rotation = np.exp(-1j * np.angle(stats.R[k]))
             self._spectra.add(U * rotation, Y * rotation)
+            self._add_delay(U / stats.R[k], U * rotation, 2 * (stats.U.size - 1) if self.period is None else self.period)
         else:
             G = Y / U
             self._spectra.add(G)
@@ -151,6 +158,16 @@ class RobustAccumulator:
         self._noise_y += var_y
         self._noise_yu += cov_yu
         self._power_u += np.abs(U) ** 2 - (0.0 if self.method == "frf" else var_u)
+
+    def _add_delay(self, ratio: np.ndarray, U_R: np.ndarray, period: int) -> None:
+        """The delay of this realization's U/R relative to the first realization's, and U_R aligned to it."""
+        if self._first_ratio is None:
+            self._first_ratio = ratio
+            delay = 0.0
+        else:
+            delay = cross_spectrum_delay(ratio * np.conj(self._first_ratio), self.bins, period)
+        self.delays.append(delay)
+        self._aligned.add(U_R * np.exp(2j * np.pi * self.bins * delay / period))
 
     def result(self, probability: float = 0.95) -> RobustBLA:
         """The BLA and its variances; bounds are 100p% circles on the total variance, R = M (Table 6-1)."""
@@ -167,7 +184,8 @@ class RobustAccumulator:
             var_noise = eiv_variance(G, U_R, self._noise_y / M**2, self._noise_u / M**2, self._noise_yu / M**2)
             var_input_nl = M * (acc.variance_of_mean(acc.sxx) - self._noise_u / M**2)
             warnings += _actuator_warning(acc.variance_of_mean(acc.sxx), self._noise_u / M**2,
-                                          float(np.mean(np.abs(U_R) ** 2)))
+                                          float(np.mean(np.abs(U_R) ** 2)),
+                                          self._aligned.variance_of_mean(self._aligned.sxx), self.delays)
         else:
             G = acc.mean_x
             var_total = acc.variance_of_mean(acc.sxx)
@@ -190,6 +208,24 @@ class RobustAccumulator:
         )
 
 
+def nonlinear_variance_missing(M: int, P: int) -> str:
+    """What M realizations x P periods lack for the robust method's nonlinear variance, '' when nothing.
+
+    The same for ``frf``, ``io`` and ``reference`` ((6-7), (6-22), (6-39)): the total variance needs
+    M >= 2 realizations (their spread), the noise variance P >= 2 periods (their spread), and the
+    nonlinear variance is the difference of the two. M = 1 still gives the noise variance, P = 1
+    still gives the total variance (noise and distortion together).
+    """
+    if M < 2 and P < 2:
+        return (f"needs M >= 2 realizations and P >= 2 periods (M = {M}, P = {P}: neither the total nor the "
+                "noise variance can be estimated)")
+    if M < 2:
+        return f"needs M >= 2 realizations (M = 1, P = {P}: the noise variance only)"
+    if P < 2:
+        return f"needs P >= 2 periods (M = {M}, P = 1: the total variance only, noise and distortion together)"
+    return ""
+
+
 def _sample_size_warnings(M: int, P: int) -> list[str]:
     out = []
     if M < 2:
@@ -201,7 +237,37 @@ def _sample_size_warnings(M: int, P: int) -> list[str]:
     return out
 
 
-def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u: float) -> list[str]:
+def cross_spectrum_delay(cross: np.ndarray, bins: np.ndarray, period: int) -> float:
+    """The delay d (samples, sub-sample) of ``cross(k) ~ |c_k| exp(-j 2 pi k d / N)`` at ``bins``.
+
+    A coarse search maximises ``Re sum_k cross(k) exp(j 2 pi k d / N)`` on a grid of half a sample
+    over one period (the cross-correlation, by an inverse FFT of 2 N points), so the phase need not
+    be unwrapped: the grid leaves at most 1/4 sample, a phase of at most pi/4 at the highest line
+    (k < N/2), well inside (-pi, pi). Then the slope of the remaining phase is fitted by least
+    squares through the origin, weighted by |cross|^2 (the phase's inverse variance for an
+    amplitude-proportional signal-to-noise ratio), twice. A delay is a phase linear in k with no
+    constant: the fit has one parameter.
+    """
+    oversample = 2
+    size = oversample * period
+    spectrum = np.zeros(size, complex)
+    spectrum[np.asarray(bins) % size] = cross
+    correlation = np.fft.ifft(spectrum).real
+    index = int(np.argmax(correlation))
+    delay = (index if index < size // 2 else index - size) / oversample
+    weight = np.abs(cross) ** 2
+    k = np.asarray(bins, dtype=float)
+    slope = float(np.sum(weight * k * k))
+    if not slope > 0:
+        return 0.0
+    for _ in range(2):
+        phase = np.angle(cross * np.exp(2j * np.pi * k * delay / period))
+        delay -= period / (2 * np.pi) * float(np.sum(weight * k * phase)) / slope
+    return delay
+
+
+def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u: float,
+                      var_aligned_u: np.ndarray | None = None, delays: list[float] | None = None) -> list[str]:
     """Nonlinear actuator test (6-40)-(6-43): sigma^2_{U_R} significantly above sigma^2_{U_R,n}.
 
     Without actuator distortion both estimate var(N_U)/(M P) and their band means agree within
@@ -209,15 +275,32 @@ def _actuator_warning(var_total_u: np.ndarray, var_noise_u: np.ndarray, power_u:
     Without input noise (a noise-free simulation, as ``diagnose`` runs the model) the test is whether
     the variation exceeds numerical precision next to ``power_u``, the band-mean power of U_R
     (:mod:`nlsid.analysis.precision`).
+
+    A delay from r to u that differs between realizations (a trigger or buffer off by a sample)
+    turns U_R by ``exp(-j 2 pi k d / N)`` and makes it vary as much as distortion would. Before
+    the spread is called distortion, ``var_aligned_u`` (the same variance with each realization's
+    delay relative to the first removed, :func:`cross_spectrum_delay`) is put to the same test: when
+    it passes (the delays explain the spread to within the noise) the warning names the delays.
+    One delay per realization is fitted to F lines, so fitting it lowers the variance of noise
+    alone by a factor (F - 1)/F only.
     """
     total, noise = float(np.mean(var_total_u)), float(np.mean(var_noise_u))
-    if not total > 2 * noise:
+    noise_free = negligible(noise, power_u)  # exactly zero, or rounding: no level to compare with
+
+    def beyond_noise(value: float) -> bool:
+        return not negligible(value, power_u) and (noise_free or value > 2 * noise)
+
+    if not beyond_noise(total):
         return []
-    if not noise > 0:
+    if var_aligned_u is not None and delays and len(delays) >= 2 and not beyond_noise(float(np.mean(var_aligned_u))):
+        low, high = (round(value, 4) + 0.0 for value in (min(delays), max(delays)))  # + 0.0: no "-0"
+        return [f"r-to-u delay varies by {high - low:.3g} samples between realizations (from {low:+.3g} to "
+                f"{high:+.3g} relative to the first): with it removed the projected input varies no more than "
+                f"{'numerical precision' if noise_free else 'its noise'}, so the variation is not actuator distortion; "
+                "the BLA from r averages over the different delays (align the recordings' triggers)"]
+    if noise_free:
         # noise-free input (a simulation): any variation over realizations beyond rounding is the
         # actuator's, but it has no ratio to a noise level to be given in dB
-        if negligible(total, power_u):
-            return []
         return ["the projected input varies over realizations and has no noise (noise-free data): " + _INPUT_DISTORTION]
     return [f"the projected input varies over realizations {10 * np.log10(total / noise):.1f} dB more than its noise: "
             + _INPUT_DISTORTION]

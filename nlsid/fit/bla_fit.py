@@ -57,7 +57,7 @@ class BLAFit:
             "parameters": {n: {"value": float(v), "std": float(s)} for n, v, s in zip(fit.names, fit.values, fit.std)},
             "covariance": fit.covariance,
             "cost": fit.cost, "expected_cost": fit.expected_cost, "cost_std": fit.cost_std,
-            "cost_bound": fit.cost_bound, "weights": self.level.weights,
+            "cost_bound": fit.cost_bound, "weights": self.level.weights, "weighted": self.level.weighted,
             "lines": fit.lines, "n_theta": fit.n_theta, "realizations": data.realizations,
             "poles": [[float(p.real), float(p.imag)] for p in fit.model.poles()],
             "stable": fit.model.stable(), "stability": fit.model.stability(),

@@ -4,7 +4,10 @@ The weight is the variance of the averaged BLA (book Section 7.4.2): the robust 
 ``var_total`` (noise + stochastic nonlinear distortions, (6-3)) when the level has M >= 2
 realizations, else the fast method's ``var_total`` ((6-55)), else the noise variance alone
 (with a warning: nonlinear distortions are then missing from the weight and the cost check
-flags them, book Section 7.5 (i)).
+flags them, book Section 7.5 (i)). A variance counts when it is finite, positive and its band mean
+is above numerical precision next to mean |G|^2 (:mod:`nlsid.analysis.precision`). A noise-free
+BLA, whose variances are zero within that precision, is fitted unweighted (least squares, every
+line alike; ``weighted`` False).
 
 Levels of arbitrary runs (``lpm_levels``, the Local Polynomial Method, docs/lpm.md) are numbered
 after the multisine levels. Their weight is the LPM's ``var_G_smoothed`` (noise plus distortion,
@@ -27,6 +30,7 @@ import numpy as np
 from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.fit.tf_fit import FRFData
+from nlsid.analysis.precision import PRECISION, negligible
 from nlsid.io.bla_file import read_bla
 
 
@@ -45,6 +49,7 @@ class BLALevel:
     nl_std: np.ndarray
     warnings: list[str]
     weights: str = ""
+    weighted: bool = True   # False: a noise-free BLA, fitted by unweighted least squares (:data:`UNWEIGHTED`)
 
 
 #: What the fit's weights measure, by source: the cost check compares the model error with these.
@@ -54,7 +59,22 @@ WEIGHTS = {
     "noise": "var_noise only: noise measured over periods, nonlinear distortion not included",
     "lpm": "var_G of the Local Polynomial Method: noise plus stochastic nonlinear distortion, from the local "
            "residuals (an upper bound of the noise)",
+    "none": "none: a noise-free BLA (its variances are zero within numerical precision), fitted by unweighted "
+            "least squares; the cost and the parameter std are taken against the numerical-precision floor "
+            "(1e-9 of the rms |G|), so they measure how closely the model reproduces the BLA, not noise",
 }
+
+
+def _usable(values, G: np.ndarray) -> bool:
+    """Finite, positive variances whose band mean is above numerical precision next to mean |G|^2."""
+    return _finite(values) and not negligible(float(np.mean(values)), float(np.mean(np.abs(G) ** 2)))
+
+
+def _zero(values, G: np.ndarray) -> bool:
+    """Variances that are zero within numerical precision next to |G|^2 (noise-free data)."""
+    if values is None or not np.all(np.isfinite(values)):
+        return False
+    return negligible(float(np.mean(np.maximum(values, 0.0))), float(np.mean(np.abs(G) ** 2)))
 
 
 def _std(values, divisor: float, size: int) -> np.ndarray:
@@ -82,31 +102,41 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
     attrs, robust, fast = chosen["attrs"], chosen["robust"], chosen["fast"]
     where = f"{path}:/levels/{chosen['name']}"
     warnings = []
-    if _finite(robust.get("var_total")):
+    weighted = True
+    G_robust = np.asarray(robust["G"], dtype=complex)
+    if _usable(robust.get("var_total"), G_robust):
         G, variance, weights = robust["G"], robust["var_total"], WEIGHTS["robust"]
         realizations = int(attrs["n_realizations"])
         if realizations < 7:
             warnings.append(f"weights from M = {realizations} realizations: the variance estimates are rough and the "
                             f"cost check approximate ({BOOK}, Section 6.1.1, advise M >= 7)")
-    elif fast is not None and _finite(fast.get("var_total")):
+    elif fast is not None and _usable(fast.get("var_total"), np.asarray(fast["G"], dtype=complex)):
         G, variance, weights = fast["G"], fast["var_total"], WEIGHTS["fast"]
         realizations = None
         warnings.append("weights: the fast method's total variance (one realization): the cost check is approximate")
-    elif _finite(robust.get("var_noise")):
+    elif _usable(robust.get("var_noise"), G_robust):
         G, variance, weights = robust["G"], robust["var_noise"], WEIGHTS["noise"]
         realizations = None
         warnings.append("weights: noise variance only (one realization, no detection lines): nonlinear distortions "
                         "are not in the weight and raise the cost above its expected value")
+    elif any(_zero(robust.get(name), G_robust) for name in ("var_total", "var_noise")):
+        # noise-free data: no variance to weight with, every line counts alike (least squares); the
+        # constant is the precision floor, so the cost check asks whether the model reproduces the
+        # BLA to numerical precision
+        G, weights, weighted, realizations = robust["G"], WEIGHTS["none"], False, None
+        variance = np.full(G_robust.size, PRECISION**2 * float(np.mean(np.abs(G_robust) ** 2)))
     else:
-        raise InputError(f"{where}/robust", "no finite positive variance (var_total, fast var_total or var_noise) "
-                                            "to weight the fit: measure M >= 2 realizations or P >= 2 periods")
+        M, P = int(attrs["n_realizations"]), int(attrs["n_periods"])
+        raise InputError(f"{where}/robust", f"no variance to weight the fit (M = {M} realization(s) x P = {P} "
+                                            "period(s), no detection lines): measure M >= 2 realizations or "
+                                            "P >= 2 periods")
     period = int(attrs["period"])
     data = FRFData(np.asarray(chosen["excited_bins"], dtype=np.int64), np.asarray(G, dtype=complex),
                    np.asarray(variance, dtype=float), float(attrs["fs"]), period, realizations)
     m = max(int(attrs["n_realizations"]), 1)
     size = data.bins.size
     return BLALevel(data, _std(robust.get("var_noise"), 1.0, size), _std(robust.get("var_nl"), m, size), warnings,
-                    weights)
+                    weights, weighted)
 
 
 def _lpm_level(path, chosen: dict) -> BLALevel:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nlsid.analysis.bla import RobustBLA
+from nlsid.analysis.bla import RobustBLA, nonlinear_variance_missing
 from nlsid.analysis.confidence import Bounds
 from nlsid.analysis.fast_bla import FastBLA
 from nlsid.analysis.levels import LevelResult
@@ -114,42 +114,71 @@ def noise_floor(summary: dict) -> str:
     return summary.get("noise_floor") or ("unknown" if summary["periods"] < 2 else "estimated")
 
 
+def _above_precision(spectrum: dict) -> dict[str, float]:
+    """How far (dB) below the output at the excited lines each class of non-excited harmonic lines
+    stands, for the classes above numerical precision: ``odd`` and ``even`` in band, ``out_of_band``
+    (the stronger of the odd and even harmonics beyond the band). A class whose lines hold exactly
+    zero power has a null level: no distortion of that class."""
+    excited = spectrum["excited_db"]
+    levels = {"odd": spectrum.get("odd_db"), "even": spectrum.get("even_db"),
+              "out_of_band": max((v for v in (spectrum.get("odd_out_of_band_db"), spectrum.get("even_out_of_band_db"))
+                                  if _finite(v)), default=None)}
+    if not _finite(excited):
+        return {}
+    return {name: excited - level for name, level in levels.items() if _finite(level) and level - excited > PRECISION_DB}
+
+
 def _noise_free_verdict(summary: dict, detection: bool) -> tuple[str, list[str]]:
     """A zero noise floor: distortion is whatever stands above numerical precision (PRECISION_DB
-    relative to the output at the excited lines, or to |G_BLA|^2 for the robust variances)."""
+    relative to the output at the excited lines, or to |G_BLA|^2 for the robust variances). The
+    non-excited harmonic lines are read in every case (in band and beyond it): "no distortion" is
+    said only when none of them and no measured nonlinear variance stands above precision."""
     spectrum = summary["spectrum"]
     zero = "the noise floor is zero (noise-free data)"
     findings = [f"noise-free data: every level above numerical precision ({PRECISION_DB:.0f} dB of the output) "
                 "is distortion, and no level has a ratio to the noise"]
+    below = _above_precision(spectrum)
+    text = {name: f"{gap:.0f} dB below the output at the excited lines" for name, gap in below.items()}
+    nl = summary["nl_var_db"]
+    nl_seen = _finite(nl) and nl > PRECISION_DB
+    outside = (f"Nonlinear distortion at the harmonics beyond the excited band, {text['out_of_band']}; {zero}"
+               if "out_of_band" in below else "")
     if not detection:
-        nl = summary["nl_var_db"]
         findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
                         f"multisine, {BOOK}, Section 6.1.2)")
-        if _finite(nl) and nl > PRECISION_DB:
+        if nl_seen:
             return f"Nonlinear distortion: its variance is {nl:.0f} dB relative to |G_BLA|²; {zero}", findings
+        if outside:
+            return outside, findings
+        if not _finite(nl):
+            missing = nonlinear_variance_missing(int(summary["realizations"]), int(summary["periods"]))
+            findings.append(f"the nonlinear variance at the excited lines is not measured: the robust method {missing}")
+            return ("No nonlinear distortion beyond numerical precision at the non-excited harmonic lines; at the "
+                    f"excited lines it is not measured (M = {summary['realizations']}); {zero}"), findings
         return f"No nonlinear distortion beyond numerical precision; {zero}", findings
-    excited = spectrum["excited_db"]
-    # a class's level is null when its lines hold exactly zero power: no distortion of that class
-    below = {name: excited - spectrum[f"{name}_db"] for name in ("odd", "even")
-             if _finite(spectrum[f"{name}_db"]) and _finite(excited) and spectrum[f"{name}_db"] - excited > PRECISION_DB}
-    text = {name: f"{gap:.0f} dB below the output at the excited lines" for name, gap in below.items()}
     if not summary["odd_grid"]:
         findings.append("full grid: the detection lines carry odd and even distortion together")
-        if below:
-            return f"Nonlinear distortion at the detection lines, {min(below.values()):.0f} dB below the output; {zero}", findings
-        return f"No nonlinear distortion beyond numerical precision at the detection lines; {zero}", findings
-    if len(below) == 2:
+        inside = [below[name] for name in ("odd", "even") if name in below]
+        if inside:
+            return f"Nonlinear distortion at the detection lines, {min(inside):.0f} dB below the output; {zero}", findings
+    elif "odd" in below and "even" in below:
         return f"Odd and even nonlinear distortion: odd {text['odd']}, even {text['even']}; {zero}", findings
-    if "odd" in below:
+    elif "odd" in below:
         return f"Odd nonlinear distortion {text['odd']}, no even distortion beyond numerical precision; {zero}", findings
-    if "even" in below:
+    elif "even" in below:
         return f"Even nonlinear distortion {text['even']}, no odd distortion beyond numerical precision; {zero}", findings
+    if outside:
+        return outside, findings
+    if nl_seen:
+        return f"Nonlinear distortion: its variance is {nl:.0f} dB relative to |G_BLA|²; {zero}", findings
     return f"No nonlinear distortion beyond numerical precision; {zero}", findings
 
 
 def _noise_unknown_verdict(summary: dict) -> tuple[str, list[str]]:
-    """One period per realization: no noise estimate, so nothing is compared with the noise; what
-    the file has is said (odd against even, the total variance behind the bounds)."""
+    """One period per realization: no noise estimate, so nothing is compared with the noise. The
+    non-excited lines still hold the distortion: the odd against the even detection lines, the level
+    of the strongest class below the output (noise plus distortion: an upper bound of the distortion),
+    and the classes compared with each other (:mod:`nlsid.analysis.distortion_class`)."""
     spectrum = summary["spectrum"]
     head = "Noise level unknown (one period per realization, P = 1): distortion cannot be compared with the noise"
     findings = ["P = 1: the noise variance cannot be estimated, so noise and nonlinear distortion are not "
@@ -159,10 +188,24 @@ def _noise_unknown_verdict(summary: dict) -> tuple[str, list[str]]:
                         "realizations (noise and nonlinear distortion together)")
     else:
         findings.append("one realization and one period: the BLA has no confidence bounds")
+    excited = spectrum["excited_db"]
+    levels = {name: spectrum.get(f"{name}_db") for name in ("odd", "even")}
+    seen = {name: excited - v for name, v in levels.items() if _finite(v) and _finite(excited)}
+    if seen:
+        findings.append("detection lines (noise plus distortion, so upper bounds of the distortion): "
+                        + ", ".join(f"{name} {gap:.0f} dB below the output at the excited lines"
+                                    for name, gap in seen.items()))
+    classified = summary.get("distortion_class")
+    if classified:
+        findings.append(f"line classes compared with each other: {classified['verdict']}")
     gap = spectrum["odd_above_even_db"]
     if summary["odd_grid"] and _finite(gap):
         lead = "odd" if gap >= 0 else "even"
-        return f"{head}; the {lead} detection lines are {abs(gap):.0f} dB above the {'even' if gap >= 0 else 'odd'}", findings
+        head = f"{head}; the {lead} detection lines are {abs(gap):.0f} dB above the {'even' if gap >= 0 else 'odd'}"
+    elif seen:
+        head = f"{head}; the detection lines stand {min(seen.values()):.0f} dB below the output (noise plus distortion)"
+    if classified and not classified["verdict"].startswith(("no distortion", "no non-excited")):
+        head = f"{head}; {classified['verdict'].split(':')[0]}"
     return head, findings
 
 
@@ -185,10 +228,18 @@ def distortion_verdict(summary: dict, detection: bool | None = None) -> tuple[st
     if not (_finite(odd) or _finite(even)):
         nl, noise = summary["nl_var_db"], summary["noise_var_db"]
         excess = nl - noise if _finite(nl) and _finite(noise) else float("nan")
-        if not _finite(excess):
-            return "Nonlinear distortion not measurable (needs M >= 2 realizations and P >= 2 periods)", findings
         findings.append("no detection lines: odd and even distortion cannot be told apart (use a random-grid "
                         f"multisine, {BOOK}, Section 6.1.2)")
+        if not _finite(excess):
+            missing = nonlinear_variance_missing(int(summary["realizations"]), int(summary["periods"]))
+            if missing:
+                return f"Nonlinear distortion not measurable: the robust method {missing}", findings
+            if _finite(noise):
+                # a non-positive band mean of M (var_total - var_noise): the realizations spread no
+                # more than the noise explains (the estimate is unbiased, so it falls below zero by chance)
+                return ("No nonlinear distortion detected: the BLA varies over the realizations no more than its "
+                        "noise explains (nonlinear variance estimate below zero)"), findings
+            return "Nonlinear distortion not measurable: no noise level to compare it with", findings
         if excess > DETECTED_DB:
             return f"Nonlinear distortion {excess:.0f} dB above the noise (robust-method variances)", findings
         return f"No nonlinear distortion detected: its variance is within {DETECTED_DB:g} dB of the noise", findings
