@@ -25,7 +25,7 @@ from nlsid.diagnose.hypotheses.base import with_lti
 from nlsid.diagnose.hypotheses.linear_dynamics import is_coefficient
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
 from nlsid.diagnose.simulation import ModelRunner
-from nlsid.diagnose.split import ESTIMATION, VALIDATION, assign
+from nlsid.diagnose.split import BUDGET_ABOVE, BUDGET_SAMPLES, ESTIMATION, VALIDATION, Budget, assign, budgeted
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
@@ -38,6 +38,7 @@ STALL_SHARE = 0.01  # ... or less than this share of its distance in dB above th
 MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 NUMERATOR = re.compile(r"\.num\[\d+\]$")  # a numerator coefficient's key path (:func:`refine`)
 LINEAR_REFITS = ("wrong_mechanics", "wrong_dynamics")  # the linear part's refit alone (Outcome.generalizes)
+FINAL_EVALUATIONS = 6  # cost evaluations of the final model's refinement on every estimation sample (_refine_on_all)
 
 
 @dataclass
@@ -138,6 +139,7 @@ class Diagnosis:
     baseline: Score | None = None  # the user's model with the nuisances, on the validation runs
     chain: list[Outcome] = field(default_factory=list)  # the causes accepted, one per round
     accuracy: accuracy.Accuracy | None = None  # of the final model (None: exact, no forces)
+    budget: Budget | None = None  # the estimation parts the hypotheses were fitted on (split.budgeted)
 
     @property
     def final(self) -> Outcome | None:
@@ -201,8 +203,16 @@ class Diagnosis:
                  "std": o.estimate.std, "error_rms": o.score.error_rms, "gain_db": o.score.gain_db,
                  "above_floor_db": o.score.above_floor_db} for o in self.chain]
 
+    def _samples(self) -> dict:
+        """The arbitrary estimation samples the hypotheses' fits used, of all (None without any)."""
+        if self.budget is None or not self.budget.available:
+            return {"estimation_samples_used": None, "estimation_samples": None}
+        return self.budget.summary()
+
     def findings(self) -> list[str]:
         out = self.nuisances.findings() + self.evidence.findings()
+        if self.budget is not None and self.budget.active:
+            out.append(budget_note(self.budget, self.final is not None))
         if self.accuracy is not None:
             out.append(f"{'extended' if self.final else 'the'} model " + self.accuracy.note())
         ranked = [o for o in self.outcomes if o.score is not None]
@@ -257,13 +267,24 @@ class Diagnosis:
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "nuisances": self.nuisances.summary(), "baseline": self.baseline.summary() if self.baseline else None,
-            "chain": self._chain_summary(), "gain": gain,
+            "chain": self._chain_summary(), "gain": gain, **self._samples(),
             "simulation_accuracy": None if self.accuracy is None else {**dataclasses.asdict(self.accuracy),
                                                                          "sufficient": self.accuracy.sufficient},
         }
 
 
 NOISE_UNKNOWN = "the runs have no two periods to separate noise from the rest"
+
+
+def budget_note(budget: Budget, refined: bool) -> str:
+    """The estimation budget in words (:func:`nlsid.diagnose.split.budgeted`): what was fitted on
+    how many samples, and the precision given up."""
+    factor = math.sqrt(budget.available / budget.used)
+    final = ("; the final model refined once more on all of them, so its values have the whole "
+             "record's precision" if refined else "")
+    return (f"estimation budget: the hypotheses were fitted on {budget.used} of the {budget.available} "
+            f"estimation samples (their standard errors about {factor:.2g} times those of a fit on all){final}; "
+            "validated on every validation sample")
 
 
 def versus_floor(score: Score) -> str:
@@ -475,7 +496,8 @@ MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits t
 @blas_in_one_thread
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
              step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
-             estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None) -> Diagnosis:
+             estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
+             estimation_budget: int | None = BUDGET_SAMPLES, budget_above: int = BUDGET_ABOVE) -> Diagnosis:
     """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``);
     ``validate_on`` (runs of further recordings) and the ranges: :func:`nlsid.diagnose.split.assign`.
 
@@ -487,15 +509,21 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     (:func:`_resolve_tie`). The result is the first round's
     diagnosis (the evidence against the user's model) with the ``chain`` of accepted causes; the
     extended model is the last one's.
+
+    ``estimation_budget``: the estimation samples of arbitrary records the hypotheses are fitted
+    on where those records hold more than ``budget_above`` (:func:`nlsid.diagnose.split.budgeted`);
+    the final model is then refined once more on all of them (:func:`_refine_on_all`). None: every
+    fit on all of them.
     """
     step = step or (lambda name: None)
     ModelRunner.from_data(data, source)  # the model is valid before the data are looked at
     runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
-    first = current = last = _round(data, source, runs, roles, where, step, ())
+    budget = budgeted(runs, roles, estimation_budget or math.inf, budget_above if estimation_budget else math.inf)
+    first = current = last = _round(data, source, runs, roles, where, step, (), budget=budget)
     following = None  # the next round, where resolving a tie computed it already
     while True:
         if current.verdict.status == rules.AMBIGUOUS and len(first.chain) + 1 < MAX_CAUSES:
-            resolved = _resolve_tie(current, first.chain, data, source, runs, roles, where, step)
+            resolved = _resolve_tie(current, first.chain, data, source, runs, roles, where, step, budget)
             if resolved is not None:
                 current.verdict, following = resolved
         if current.verdict.status != rules.EXPLAINED:
@@ -506,19 +534,53 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         done = current.winner.score.within_floor
         if done or len(first.chain) == MAX_CAUSES:
             break
-        current = following or _next_round(current.winner, first.chain, data, source, runs, roles, where, step)
+        current = following or _next_round(current.winner, first.chain, data, source, runs, roles, where, step,
+                                           budget)
         following = None
-    first.accuracy = _accurate(first, last, data, source, runs, roles)
+    first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
+    _refine_on_all(first, last, data, source, runs, roles)
     return first
 
 
+def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: list[Run],
+                   roles: dict[str, str]) -> None:
+    """Where the hypotheses were fitted within the estimation budget, the final model's free
+    parameters refined once more on every estimation sample, from the budget's fit (which is within
+    about sqrt(N / B) of its standard errors of the optimum, so a few Gauss-Newton steps, at most
+    :data:`FINAL_EVALUATIONS` cost evaluations, reach it), and scored again on the validation runs
+    (``last``: the round that accepted it). The earlier causes take its values
+    (:func:`_update_earlier`); the verdict stays the budget's."""
+    from nlsid.fit.extension import fit_free_parameters
+
+    outcome = first.final
+    if first.budget is None or not first.budget.active or outcome is None or not outcome.free:
+        return
+    estimation = [run for run in runs if roles.get(run.run_id) == ESTIMATION]
+    free = {path: dataclasses.replace(p, start=None) for path, p in outcome.free.items()}
+    fit = fit_free_parameters(outcome.extended, free, estimation, [], source=source,
+                              max_evaluations=FINAL_EVALUATIONS, stall_db=STALL_DB)
+    est = outcome.estimate
+    values, std = _derived(outcome.hypothesis, *_fitted(est, fit, outcome.paths), outcome.free, outcome.paths,
+                           fit.config["model"])
+    stopped = [w for w in fit.warnings if not w.startswith("optimiser stopped")]
+    again = f"refined once more on all {first.budget.available} estimation samples ({fit.evaluations} simulations)"
+    note = "; ".join([est.note, f"{again}, with: {', '.join(stopped)}" if stopped else again])
+    outcome.estimate = Estimate(values, std, est.explained_db, note)
+    outcome.extended = fit.config
+    val = [res for res in last.evidence.residuals if res.role == VALIDATION]
+    by_id = {run.run_id: run for run in runs}
+    _score(outcome, ModelRunner.from_data(data, source), [by_id[res.run_id] for res in val], val)
+    _update_earlier(first.chain)
+
+
 def _next_round(cause: Outcome, chain: list[Outcome], data: dict, source: str, runs: list[Run],
-                roles: dict[str, str], where: str, step: Callable[[str], None]) -> "Diagnosis":
+                roles: dict[str, str], where: str, step: Callable[[str], None],
+                budget: Budget | None = None) -> "Diagnosis":
     """The round that diagnoses ``cause``'s extended model, the families of ``chain`` (which ends
     with ``cause``) left out and their parameters refined again (:func:`_carried`)."""
     accepted = tuple(o.hypothesis.family for o in chain)
     carried = {name: path for o in chain for name, path in o.paths.items()}
-    return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data)
+    return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data, budget)
 
 
 @dataclass(frozen=True)
@@ -547,7 +609,7 @@ class _Branch:
 
 
 def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source: str, runs: list[Run],
-                 roles: dict[str, str], where: str, step: Callable[[str], None]):
+                 roles: dict[str, str], where: str, step: Callable[[str], None], budget: Budget | None = None):
     """A tie between families resolved by what comes after each: two differences from reality at
     once (a dead time and a quadratic output) leave each of their hypotheses alone an equal share
     of the error, and a missing resonance, which mimics a dead time's phase lag in the band, ties
@@ -572,7 +634,7 @@ def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source:
         if at_floor and least > min(at_floor):
             continue
         branches.append(_Branch(outcome, _next_round(outcome, [*chain, outcome], data, source, runs, roles, where,
-                                                     step)))
+                                                     step, budget)))
     best = min(b.power for b in branches)
     near = [b for b in branches if rules.ratio(b.power, best) <= current.verdict.threshold]
     fewest = min(b.size for b in near)
@@ -585,7 +647,7 @@ def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source:
 
 
 def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: list[Run],
-              roles: dict[str, str]) -> accuracy.Accuracy | None:
+              roles: dict[str, str], budget: Budget | None = None) -> accuracy.Accuracy | None:
     """The accuracy of the final model (:mod:`nlsid.diagnose.accuracy`) against the noise where it
     is measured, else the best model's validation error.
 
@@ -597,10 +659,13 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
     data need. A member whose own simulation already meets the aim at its step is kept as fitted
     (a Coulomb law that 10 sub-steps simulate to 4e-10 where a stiff LuGre law needs 50: refitting
     it at 50 took 49 s on a stage recording and left it where it was). Other families stay as
-    scored: they were beaten by more than the F rule's margin.
+    scored: they were beaten by more than the F rule's margin. Checked, and re-fitted, on the
+    estimation parts of the ``budget`` (the step's error is a property of the simulation, which
+    the part shows as well as the whole record).
     """
     outcome = first.final
     estimation = [run for run in runs if roles.get(run.run_id) == ESTIMATION]
+    estimation = budget.of(estimation) if budget is not None else estimation
     floor, floor_from = _accuracy_floor(first, outcome)
     checked = accuracy.check(outcome.extended if outcome is not None else data, source, estimation, floor, floor_from)
     if checked is None or checked.sufficient or outcome is None or not outcome.free:
@@ -655,7 +720,7 @@ def _decide(evidence: Evidence, found: nuisances.Nuisances, baseline: Score, out
 
 def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], where: str,
            step: Callable[[str], None], accepted: tuple[str, ...], carried: dict[str, str] | None = None,
-           users: dict | None = None) -> Diagnosis:
+           users: dict | None = None, budget: Budget | None = None) -> Diagnosis:
     """One diagnosis of the model ``data``: evidence, nuisances, every hypothesis of a family not in
     ``accepted``, the verdict. ``users``: the user's model (default ``data``), against which the
     outcomes state the mechanics they changed (:meth:`Outcome.mechanics_changed`): the chain
@@ -666,7 +731,9 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     (:mod:`nlsid.diagnose.nuisances`) are fitted to it first; the model with them is the baseline:
     at the noise floor it means nothing beyond noise (and the nuisances), and a hypothesis is a
     cause only when it beats the baseline significantly (each re-fits the nuisances with its own
-    parameters, :func:`refine`).
+    parameters, :func:`refine`). The nuisances and the hypotheses are fitted on the estimation
+    parts of the ``budget`` (:func:`nlsid.diagnose.split.budgeted`; all of them without one); the
+    evidence and the scores are of the whole runs.
     """
     runner = ModelRunner.from_data(data, source)
     evidence, _ = gather(runner, runs, roles, where)
@@ -675,12 +742,15 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
     val = [res for res in evidence.residuals if res.role == VALIDATION]
     est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
-    adjusted, found = (data, nuisances.Nuisances()) if evidence.exact else nuisances.estimate(data, source, est_runs)
+    fit_runs = budget.of(est_runs) if budget is not None else est_runs
+    fit_residuals = [res.residual if part is run else res.residual[:part.period]
+                     for res, run, part in zip(est, est_runs, fit_runs)]
+    adjusted, found = (data, nuisances.Nuisances()) if evidence.exact else nuisances.estimate(data, source, fit_runs)
     with_nuisances = ModelRunner.from_data(adjusted, source)
     found = dataclasses.replace(found, initial=nuisances.initial_states(with_nuisances, est_runs + val_runs))
     baseline = score(val, model_residuals(with_nuisances, val_runs, val))
     step("nuisances")
-    context = Context(runner, est_runs, [r.residual for r in est], [runner.internal(run) for run in est_runs],
+    context = Context(runner, fit_runs, fit_residuals, [runner.internal(run) for run in fit_runs],
                       evidence.bla_levels)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
@@ -716,7 +786,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.reason = estimate
             continue
         try:
-            estimate, extended, outcome.free, outcome.paths = refine(hypothesis, adjusted, estimate, est_runs,
+            estimate, extended, outcome.free, outcome.paths = refine(hypothesis, adjusted, estimate, fit_runs,
                                                                      source, data, carried)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
@@ -732,4 +802,4 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
         step(hypothesis.name)
     outcomes.sort(key=_rank)
     verdict = _decide(evidence, found, baseline, outcomes, val)
-    return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline)
+    return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline, budget=budget)

@@ -422,6 +422,15 @@ class _Cost:
         return [np.concatenate([w * e for w, e in zip(self.weights, errors[signal])])
                 for errors in problem.errors_many(thetas, self.runs, self.inputs)]
 
+    def whole(self, runs: Sequence[Run]) -> bool:
+        """Every one of ``runs`` (the estimation runs) fitted as it is (none :func:`_compact`)."""
+        return all(fitted is run for fitted, run in zip(self.runs, runs))
+
+    def split(self, residual: np.ndarray, signal: str) -> dict[str, list[np.ndarray]]:
+        """The residual vector of :meth:`residuals` as the per-run errors of ``signal``
+        (:meth:`_Problem.errors`), for runs fitted :meth:`whole` (weight 1)."""
+        return {signal: np.split(residual, np.cumsum(self.segments())[:-1])}
+
     def segments(self) -> list[int]:
         """Samples of each run's residual (:func:`_steady`'s)."""
         return [run.n_samples if run.period is None else run.n_periods * run.period for run in self.runs]
@@ -677,7 +686,9 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     scale = _scales(problem.start, problem.lower, problem.upper)
     est_start = problem.errors(problem.start, estimation, est_inputs)  # the start must run: its error stops the fit
     cost = _Cost.of(problem, estimation, est_inputs)
-    start_residual = cost.residuals(problem, [problem.start], fit_on)[0]
+    # every run fitted whole: the cost's residual is the start's error already simulated (not again)
+    start_residual = (np.concatenate(est_start[fit_on]) if cost.whole(estimation)
+                      else cost.residuals(problem, [problem.start], fit_on)[0])
     cost_rms = _rms([start_residual])
     penalty = np.full(start_residual.size, 10.0 * cost_rms if cost_rms > 0 else 1.0)
     x0 = problem.start / scale
@@ -759,7 +770,8 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                                     cost.segments())
     warnings += ident
 
-    est_errors = problem.errors(values, estimation, est_inputs)
+    est_errors = (cost.split(result.fun, fit_on) if cost.whole(estimation) and problem.signals == (fit_on,)
+                  else problem.errors(values, estimation, est_inputs))
     val_errors = problem.errors(values, validation, val_inputs) if validation else {s: [] for s in problem.signals}
     val_start = problem.errors(problem.start, validation, val_inputs) if validation else {s: [] for s in problem.signals}
     runs = []
