@@ -270,6 +270,11 @@ def test_fit_of_a_noise_free_bla_is_unweighted_and_says_so(run_cli, tmp_path, M)
     assert "unweighted least squares" in model.read_text()  # the model file's header says it too
     plain = run_cli("fit", tmp_path / "bla.h5", "--order", "2/2", "-o", tmp_path / "p.yaml")
     assert plain.exit_code == 0 and "unweighted least squares" in plain.stderr
+    assert "misses it by more than numerical precision" not in plain.stderr
+    # one pole short of the system: no 1/1 model equals a 2/2 FRF, so the fit says it misses it
+    short = run_cli("fit", tmp_path / "bla.h5", "--order", "1/1", "-o", tmp_path / "s.yaml", "--json")
+    assert short.exit_code == 0, short.stderr
+    assert any("misses it by more than numerical precision" in w for w in short.json()["warnings"])
 
 
 def test_fit_of_a_noisy_bla_stays_weighted(run_cli, tmp_path):

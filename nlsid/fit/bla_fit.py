@@ -43,7 +43,14 @@ class BLAFit:
 
     @property
     def warnings(self) -> list[str]:
-        return self.level.warnings + (self.selection.warnings if self.selection else self.fit.warnings)
+        out = self.level.warnings + (self.selection.warnings if self.selection else self.fit.warnings)
+        if not self.level.weighted and not self.fit.accepted:
+            # the unit of the unweighted cost is the precision floor: a model error above it is
+            # not noise, and the parameter std (from that floor) do not cover it
+            out = out + [f"unweighted fit of a noise-free BLA: the {self.fit.nb}/{self.fit.na} model misses it by more "
+                         f"than numerical precision (cost {self.fit.cost:.3g}, bound {self.fit.cost_bound:.3g}); the "
+                         "parameter std reflect that precision only, not this model error"]
+        return out
 
     def report(self) -> dict:
         """The numbers of the fit report (``docs/formats.md``, nlsid fit outputs)."""
