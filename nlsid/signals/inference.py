@@ -781,7 +781,11 @@ def _measure(x: np.ndarray, blocks: list[np.ndarray], slots: Slots, tests: list[
                            db(slots.phase_margin / (2 * noise)) if noise > 0 else math.inf,  # noise-free periods
     })
     lead = result.realizations[0].transient_periods
-    if slots.phase or lead:
+    if lead and not slots.phase:
+        result.notes.append(f"the first {lead} period(s) differ from the periods after them (a start-up transient): "
+                            f"{lead} period(s) kept as transient, not analysed; the input repeats from sample "
+                            f"{result.realizations[0].start + lead * period}")
+    elif slots.phase or lead:
         result.notes.append(f"lead-in: {slots.phase} samples dropped and {lead} period(s) kept as transient "
                             f"before the input repeats from sample {result.realizations[0].start + lead * period}")
     if len(result.realizations) > 1:
