@@ -204,12 +204,14 @@ def _lock(fleet: Path):
 
 
 def _remove_work_folders(fleet: Path) -> int:
-    """Remove the work folders that lost workers left behind; returns how many."""
+    """Remove the work folders that lost (or interrupted) workers left behind, and the folders of
+    nested names that held only them (``FLEET/stage3/`` of ``stage3/2026-05-01``); returns how many
+    work folders went."""
     import shutil
 
     from nlsid.batch.task import is_work_folder
 
-    removed = 0
+    removed, parents = 0, set()
     for parent, folders, _ in os.walk(fleet):
         for name in list(folders):
             path = Path(parent, name)
@@ -217,6 +219,14 @@ def _remove_work_folders(fleet: Path) -> int:
                 shutil.rmtree(path, ignore_errors=True)
                 folders.remove(name)
                 removed += 1
+                parents.add(path.parent)
+    for folder in sorted(parents, key=lambda p: len(p.parts), reverse=True):
+        while folder != fleet and fleet in folder.parents:
+            try:
+                folder.rmdir()  # only when empty
+            except OSError:
+                break
+            folder = folder.parent
     return removed
 
 

@@ -150,15 +150,16 @@ def _check_interrupted_batch(process, fleet: Path) -> None:
     assert work_folders(fleet) == [] and not (fleet / ".batch.lock").exists()
     for task in fleet.rglob("task.json"):  # what finished is complete
         assert (task.parent / "fitted.fit.json").is_file() and (task.parent / "bla.h5").is_file()
-    folders = [p for p in fleet.iterdir() if p.is_dir()]
-    assert all((folder / "task.json").is_file() for folder in folders), folders
+    for folder in (p for p in fleet.rglob("*") if p.is_dir()):  # a recording's folder, or the parent of some
+        assert (folder / "task.json").is_file() or any(child.is_dir() for child in folder.iterdir()), folder
 
 
 def _batch(project: Path, fleet: Path) -> subprocess.Popen:
-    # a session of its own: Ctrl-C on a terminal goes to the whole process group, fork server included
+    """Four recordings with nested names (A/night0, ..., B/night1) on two workers, in a session of its
+    own: Ctrl-C on a terminal goes to the whole process group, fork server and workers included."""
     return subprocess.Popen([sys.executable, "-c", "from nlsid.cli.entry import main; main()", "batch",
-                             str(project / "pipeline.yaml"), "--inputs", str(project / "rec" / "A"), "-o", str(fleet),
-                             "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             str(project / "pipeline.yaml"), "--inputs", f"{project}/rec/*/night[01].h5", "-o",
+                             str(fleet), "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
 
 
@@ -176,7 +177,7 @@ def test_ctrl_c_while_the_fork_server_starts(project):
     assert process.returncode == 130 and not fleet.exists()
 
 
-@pytest.mark.parametrize("after_start", [0.2, 0.6, 1.0, 1.5, 2.5, 4.0])
+@pytest.mark.parametrize("after_start", [0.2, 0.6, 1.0, 1.5, 2.5, 4.0, 5.0, 5.5, 6.0, 7.0])
 def test_ctrl_c_at_any_moment_of_a_batch(project, after_start):
     """Ctrl-C to the process group at several moments (from start-up to the last tasks), counted from
     the end of the interpreter's own start-up (an interrupt in it is Python's to report)."""
@@ -186,6 +187,24 @@ def test_ctrl_c_at_any_moment_of_a_batch(project, after_start):
     fleet = project / "fleet"
     process = _batch(project, fleet)
     time.sleep(1.5 * interpreter + after_start)
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGINT)
+    _check_interrupted_batch(process, fleet)
+
+
+@pytest.mark.parametrize("moment", ["a task at work", "a task finished", "the results written"])
+def test_ctrl_c_at_the_moments_of_the_tasks(project, moment):
+    """Ctrl-C to the process group the moment the batch folder shows a phase of the work (the
+    timed moments above land there only when the machine's load lets them)."""
+    fleet = project / "fleet"
+    seen = {"a task at work": lambda: work_folders(fleet) if fleet.exists() else [],
+            "a task finished": lambda: list(fleet.rglob("task.json")) if fleet.exists() else [],
+            "the results written": lambda: (fleet / "results.csv").exists()}[moment]
+    process = _batch(project, fleet)
+    deadline = time.time() + 120
+    while not seen() and time.time() < deadline and process.poll() is None:
+        time.sleep(0.002)
+    assert seen(), f"{moment}: not seen"
     if process.poll() is None:
         os.killpg(process.pid, signal.SIGINT)
     _check_interrupted_batch(process, fleet)
