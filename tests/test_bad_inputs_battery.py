@@ -56,6 +56,7 @@ def test_across_levels_without_multisine_levels_has_no_reference():
     assert across_levels([]) == {"reference_level": None, "levels": []}
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning", "error::UserWarning")
 def test_bla_plots_of_arbitrary_runs_draw_the_lpm_figure(run_cli, tmp_path):
     rec = arbitrary_recording(tmp_path / "rec.h5")
     plots = tmp_path / "figures"
@@ -297,7 +298,10 @@ def constant_recording(path: Path, constant=lambda run_id: True) -> Path:
     return path
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning", "error::UserWarning")
 def test_diagnose_says_a_constant_output_has_nothing_to_explain(run_cli, tmp_path):
+    """Valid input (a disconnected sensor, a stage stuck in friction): no crash, no LAPACK text on
+    stdout, no numpy or matplotlib warning (an error here), in the diagnosis and its report."""
     import json
 
     rec = constant_recording(tmp_path / "stuck.h5")
@@ -315,6 +319,9 @@ def test_diagnose_says_a_constant_output_has_nothing_to_explain(run_cli, tmp_pat
     # from an exact zero-order-hold discretisation of 2 x'' + 20 x' + 2000 x = u (stage_model.yaml)
     expected = model_ac_power(read_runs_of(rec))
     assert summary["evidence"]["error_rms"] == pytest.approx(np.sqrt(expected), rel=0.01)
+    page = run_cli("report", tmp_path / "out", "-o", tmp_path / "page.html")
+    assert page.exit_code == 0 and "Warning" not in page.stderr, (page.stderr, page.exception)
+    assert "The measured output is constant in every run" in (tmp_path / "page.html").read_text()
 
 
 def read_runs_of(path: Path) -> list:

@@ -31,6 +31,14 @@ def _db(x: np.ndarray) -> np.ndarray:
         return 10 * np.log10(np.asarray(x, dtype=float))
 
 
+def _gain_db(G: np.ndarray) -> np.ndarray:
+    """20 log10 |G|; a gain of exactly zero (a measured output that did not respond: the findings
+    say so) is left out of the curve rather than drawn at -inf."""
+    magnitude = np.abs(np.asarray(G))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(magnitude > 0, 20 * np.log10(magnitude), np.nan)
+
+
 def _frequency_axes(*axes) -> None:
     for axis in axes:
         axis.set_xscale("log")
@@ -43,11 +51,11 @@ def model_vs_bla(level: dict, units: Units):
     figure, (mag, phase) = new_figure(2)
     f, G, Gm, radius = level["frequency"], level["G"], level["G_model"], level["radius"]
     lo = np.maximum(np.abs(G) - radius, np.abs(G) * 1e-3)
-    band(mag, f, 20 * np.log10(lo), 20 * np.log10(np.abs(G) + radius), "BLA 95% bounds", color="C0", alpha=0.25)
-    mag.plot(f, 20 * np.log10(np.abs(G)), "C0.-", label="measured BLA")
-    mag.plot(f, 20 * np.log10(np.abs(Gm)), "C3--", label="model")
+    band(mag, f, _gain_db(lo), _gain_db(np.abs(G) + radius), "BLA 95% bounds", color="C0", alpha=0.25)
+    mag.plot(f, _gain_db(G), "C0.-", label="measured BLA")
+    mag.plot(f, _gain_db(Gm), "C3--", label="model")
     out = level["outside"].astype(bool)
-    mag.plot(f[out], 20 * np.log10(np.abs(G[out])), "kx", label="model outside bounds")
+    mag.plot(f[out], _gain_db(G[out]), "kx", label="model outside bounds")
     mag.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
     mag.legend(fontsize=8)
     phase.plot(f, unwrapped_phase(G)[0], "C0.-", label="measured BLA")
@@ -79,8 +87,8 @@ def bla_vs_level(levels: list[dict], units: Units):
     figure, (axis,) = new_figure(height=3.2)
     for i, level in enumerate(levels):
         name = "-" if np.isnan(level["level"]) else f"{level['level']:g}"
-        axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G"])), f"C{i}-", label=f"measured, level {name}")
-        axis.plot(level["frequency"], 20 * np.log10(np.abs(level["G_model"])), f"C{i}--", label=f"model, level {name}")
+        axis.plot(level["frequency"], _gain_db(level["G"]), f"C{i}-", label=f"measured, level {name}")
+        axis.plot(level["frequency"], _gain_db(level["G_model"]), f"C{i}--", label=f"model, level {name}")
     axis.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
     _frequency_axes(axis)
     axis.legend(fontsize=8, ncol=2)
