@@ -163,6 +163,41 @@ def test_a_sensor_drift_is_not_excitation():
         np.testing.assert_array_equal(inf.realizations[0].excited_bins, bins)
 
 
+@pytest.mark.parametrize("strength", [0.01, 0.03])
+def test_distortion_in_a_measured_force_is_not_excitation(run_cli, tmp_path, strength):
+    # A force measured at a shaker carries the structure's periodic distortion on every line, in the
+    # band's gaps and up to 3 times above it: here u = m + c m^3 + c/2 m^2 for a random-odd multisine
+    # m (bins up to 301, line amplitude 0.14) with c = 0.01 or 0.03, i.e. distortion lines about 38
+    # or 28 dB below the excited ones (c^2 E[m^6] = 15 c^2 spread over ~900 lines, against 1/100 per
+    # excited line). Before, 560-640 of them were counted as excited.
+    rng = np.random.default_rng(10)
+    period, periods = 4096, 4
+    bins = random_odd(301, rng)
+    m = multisine(period, bins, rng)
+    u = np.tile(m + strength * m**3 + strength / 2 * m**2, periods) + rng.normal(0, 1e-3, period * periods)
+    summary, out = imported(run_cli, tmp_path, {"u": u, "y": output_of(u)})
+    inference = summary["records"][0]["inference"]
+    assert inference["grid"] == "random-odd" and inference["measures"]["low_lines_not_counted"] > 100
+    (run,) = read_runs(out)
+    np.testing.assert_array_equal(run.excited_bins, bins)
+    assert_bla_accepts(run_cli, out)
+
+
+def test_a_shaped_design_keeps_all_its_lines():
+    # A full multisine whose line amplitudes fall as 1/k (-20 dB/decade, 52 dB over bins 1..400):
+    # within two octaves the profile changes by 12 dB, less than the 20 dB contrast, so every line
+    # of the design stays excited.
+    rng = np.random.default_rng(11)
+    period, periods = 2048, 4
+    bins = np.arange(1, 401)
+    n = np.arange(period)[:, None]
+    one = (np.cos(2 * np.pi * bins[None, :] * n / period + rng.uniform(0, 2 * np.pi, bins.size)) / bins).sum(axis=1)
+    u = np.tile(one, periods) + rng.normal(0, 1e-4, period * periods)
+    inf = infer_excitation(u, FS, measured=True)
+    assert inf.grid == "full"
+    np.testing.assert_array_equal(inf.realizations[0].excited_bins, bins)
+
+
 def test_filtered_noise_alone_is_arbitrary():
     rng = np.random.default_rng(4)
     b, a = signal.butter(2, 1e-2)

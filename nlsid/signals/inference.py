@@ -79,6 +79,9 @@ NUMERIC_FLOOR = 1e-10
 CHI2_1_999 = 10.83
 MEASURED_LINE_SNR = 100.0  # 20 dB: how far a line of a measured input must stand above the noise of its estimate
 MAINS_HZ = (50.0, 60.0)
+LINE_CONTRAST = 0.1  # -20 dB: a measured input's excited line has at least this amplitude of the strongest near it
+NEAR_RATIO = 4.0  # "near": within two octaves, or NEAR_LINES lines
+NEAR_LINES = 4
 DRIFT_DEGREE = 2
 SWEEP_ENVELOPE_CV = 0.2
 SWEEP_SEGMENTS = 20
@@ -686,31 +689,51 @@ def without_drift(block: np.ndarray) -> np.ndarray:
 
 def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitudes: list[np.ndarray], period: int,
                     result: Inference) -> list[np.ndarray]:
-    """The excited lines of a measured input: ``MEASURED_LINE_SNR`` above the noise of their estimate,
-    and not a mains line (:func:`mains_lines`)."""
-    strong = [consistent_lines(bins, t, a) for bins, t, a in zip(excited, tests, amplitudes)]
-    weak = sum(b.size - s.size for b, s in zip(excited, strong))
+    """The excited lines of a measured input: not a mains line (:func:`mains_lines`), at the design's
+    level (:func:`at_design_level`), and ``MEASURED_LINE_SNR`` above the noise of their estimate or
+    consistent with the lines that are (:func:`consistent_lines`)."""
+    resolution = result.fs / period
+    mains = sorted({int(k) for bins, a in zip(excited, amplitudes) for k in mains_lines(bins, a, resolution)})
+    if mains:
+        result.measures["mains_bins"] = mains
+        more = " ..." if len(mains) > 8 else ""
+        result.notes.append(f"mains line(s) seen in the measured input at "
+                            f"{', '.join(f'{k * resolution:.4g}' for k in mains[:8])}{more} Hz (bins "
+                            f"{', '.join(map(str, mains[:8]))}{more}), weaker than the excited lines around them: "
+                            "not counted as excited (record the reference r to have them counted)")
+        excited = [np.setdiff1d(bins, mains) for bins in excited]
+    level = [bins[at_design_level(bins, a)] for bins, a in zip(excited, amplitudes)]
+    below = sum(b.size - kept.size for b, kept in zip(excited, level))
+    if below:
+        result.measures["low_lines_not_counted"] = below
+        result.notes.append(f"{below} line(s) more than {-db(LINE_CONTRAST**2):.0f} dB below the strongest line near them "
+                            "not counted as excited (a measured input: distortion and leakage fill the lines between "
+                            "and beyond the excited ones at such levels)")
+    strong = [consistent_lines(bins, t, a) for bins, t, a in zip(level, tests, amplitudes)]
+    weak = sum(b.size - kept.size for b, kept in zip(level, strong))
     if weak:
         result.measures["weak_lines_not_counted"] = weak
         result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB above it, "
                             "and off the grid or weaker than the excited lines around them, not counted as excited "
                             "(a measured input: leakage, distortion or correlated noise look like that)")
-    resolution = result.fs / period
-    mains = sorted({int(k) for bins, a in zip(strong, amplitudes) for k in mains_lines(bins, a, resolution)})
-    if not mains:
-        return strong
-    result.measures["mains_bins"] = mains
-    more = " ..." if len(mains) > 8 else ""
-    result.notes.append(f"mains line(s) seen in the measured input at {', '.join(f'{k * resolution:.4g}' for k in mains[:8])}"
-                        f"{more} Hz (bins {', '.join(map(str, mains[:8]))}{more}), weaker than the excited lines "
-                        "around them: not counted as excited (record the reference r to have them counted)")
-    return [np.setdiff1d(bins, mains) for bins in strong]
+    return strong
+
+
+def at_design_level(bins: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
+    """Which lines of ``bins`` are within ``LINE_CONTRAST`` (-20 dB) of the strongest line near them
+    (:func:`near_maximum`): the excited lines of a design stand together, and the periodic
+    distortion a measured input carries (a shaker's force) fills the lines between them, and
+    beyond the band, well below."""
+    if bins.size == 0:
+        return np.zeros(0, dtype=bool)
+    return amplitudes[bins - 1] >= LINE_CONTRAST * near_maximum(bins, amplitudes)
 
 
 def consistent_lines(bins: np.ndarray, tests: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
     """The lines of ``bins`` (all above the F threshold) that count as excited in a measured input.
 
-    A line ``MEASURED_LINE_SNR`` (20 dB) above the noise of its estimate counts. A weaker one counts
+    ``bins`` are at the design's level (:func:`at_design_level`). A line ``MEASURED_LINE_SNR``
+    (20 dB) above the noise of its estimate counts. A weaker one counts
     only if it fits the design the strong lines show: on their grid (odd multiples of their common
     base when they are all odd, else multiples of it) and at least half the median amplitude of the
     8 nearest strong lines (a designed line in a noisy band keeps the level of its neighbours;
@@ -730,6 +753,18 @@ def consistent_lines(bins: np.ndarray, tests: np.ndarray, amplitudes: np.ndarray
     return np.array(sorted(kept), dtype=np.int64)
 
 
+def near_maximum(bins: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
+    """For each line of ``bins`` (ascending), the largest amplitude among the lines of ``bins`` near
+    it: within a frequency ratio ``NEAR_RATIO`` (two octaves) or ``NEAR_LINES`` lines. The window
+    scales with frequency: a designed amplitude profile of up to -30 dB/decade changes by less than
+    ``LINE_CONTRAST`` across it, and distortion up to 4 times above the band still has the
+    excitation in its window."""
+    level = amplitudes[bins - 1]
+    lo = np.searchsorted(bins, np.minimum(bins / NEAR_RATIO, bins - NEAR_LINES), side="left")
+    hi = np.searchsorted(bins, np.maximum(bins * NEAR_RATIO, bins + NEAR_LINES), side="right")
+    return np.array([level[a:b].max() for a, b in zip(lo, hi)])
+
+
 def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> np.ndarray:
     """The lines of ``bins`` that are mains hum, not excitation.
 
@@ -744,7 +779,7 @@ def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> 
     for f0 in MAINS_HZ:
         harmonic = np.maximum(np.round(freqs / f0), 1)
         candidate |= np.abs(freqs - harmonic * f0) < resolution
-    others = bins[~candidate]
+    others = bins[~candidate & at_design_level(bins, amplitudes)]
     if others.size == 0:
         return np.array([], dtype=np.int64)
     level = amplitudes[bins - 1]
