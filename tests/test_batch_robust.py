@@ -299,3 +299,34 @@ def test_run_redoes_a_step_whose_input_was_replaced_by_an_older_file(run_cli, pr
             np.testing.assert_array_equal(got[name], value, err_msg=name)
     third = run_cli("run", work / "pipeline.yaml", "--json")
     assert [s["status"] for s in third.json()["steps"]] == ["up to date"]
+
+
+def test_stamps_of_a_folder_see_content_new_and_removed_files(tmp_path):
+    """A folder input (e.g. the diagnosis folder a `report` step reads) is stamped file by file."""
+    import hashlib
+
+    from nlsid.batch.stamps import changed, first_changed, stamp, stamps
+
+    folder = tmp_path / "diagnosis"
+    (folder / "runs").mkdir(parents=True)
+    (folder / "summary.json").write_bytes(b'{"headline": "friction"}')
+    (folder / "runs" / "a.h5").write_bytes(bytes(range(256)))
+    stored = stamp(folder)
+    assert stored["files"]["runs/a.h5"] == {"size": 256, "mtime_ns": (folder / "runs" / "a.h5").stat().st_mtime_ns,
+                                            "sha256": hashlib.sha256(bytes(range(256))).hexdigest()}
+    assert not changed(folder, stored)
+    times = (folder / "summary.json").stat()
+    (folder / "summary.json").write_bytes(b'{"headline": "backlash"}')  # same size, time set back
+    os.utime(folder / "summary.json", ns=(times.st_atime_ns, times.st_mtime_ns - 10**9))
+    assert changed(folder, stored)
+    (folder / "summary.json").write_bytes(b'{"headline": "friction"}')  # the old content, another time
+    assert not changed(folder, stored)
+    (folder / "runs" / "b.h5").write_bytes(b"new")
+    assert changed(folder, stored)
+    (folder / "runs" / "b.h5").unlink()
+    (folder / "runs" / "a.h5").unlink()
+    assert changed(folder, stored)
+    other = tmp_path / "config.yaml"
+    other.write_text("a: 1\n")
+    assert first_changed([other], stamps([other])) is None
+    assert first_changed([other], {}) == other  # not stamped: changed
