@@ -132,8 +132,8 @@ class Inference:
         written)."""
         claim = f"{self.kind} ({self.grid})" if self.kind == "multisine" else self.kind
         count = len(self.realizations)
-        self.notes = [f"inferred {claim} with period {self.period} samples in {count} realization(s), but {reason}: "
-                      "imported as one arbitrary record"]
+        self.notes = [f"inferred {claim} with period {self.period} samples in {count} realization(s), but {reason}, "
+                      "so the record is not taken as periodic"]
         self.kind, self.period, self.grid, self.frequency, self.level = "arbitrary", None, None, None, None
         self.realizations = []
 
@@ -769,26 +769,37 @@ def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> 
     """The lines of ``bins`` that are mains hum, not excitation.
 
     A candidate lies within one bin (``resolution`` Hz) of a multiple of 50 or 60 Hz. Hum adds a
-    line there, usually weaker than the excitation; a designed line on the same bin has the level of
-    the excited lines around it. So a candidate is mains when its amplitude (``amplitudes`` of lines
-    ``1 ..``) is below half the median amplitude of the 8 nearest excited lines that are not
-    candidates.
+    line there that stands out of the floor around it but is usually weaker than the excitation; a
+    designed line on the same bin has the level of the excited lines around it, and a distortion
+    line is part of the floor. So a candidate is mains when its amplitude (``amplitudes`` of lines
+    ``1 ..``) is below half the median amplitude of the 8 nearest lines of ``bins`` that are not
+    candidates and are at the design's level (:func:`at_design_level`), and at least 4 times
+    (12 dB) the median amplitude of the other lines within 8 bins of it that are not at that level.
+    Harmonics count only with their fundamental (50 or 60 Hz itself), as hum has it.
     """
     freqs = bins * resolution
-    candidate = np.zeros(bins.size, dtype=bool)
-    for f0 in MAINS_HZ:
-        harmonic = np.maximum(np.round(freqs / f0), 1)
-        candidate |= np.abs(freqs - harmonic * f0) < resolution
-    others = bins[~candidate & at_design_level(bins, amplitudes)]
+    harmonics = {f0: np.maximum(np.round(freqs / f0), 1) for f0 in MAINS_HZ}
+    near = {f0: np.abs(freqs - h * f0) < resolution for f0, h in harmonics.items()}
+    candidate = np.logical_or.reduce(list(near.values()))
+    design = bins[at_design_level(bins, amplitudes)]
+    others = np.setdiff1d(design, bins[candidate])
     if others.size == 0:
         return np.array([], dtype=np.int64)
-    level = amplitudes[bins - 1]
-    mains = []
-    for k, a in zip(bins[candidate], level[candidate]):
+
+    def hum(k: int) -> bool:
         nearest = others[np.argsort(np.abs(others - k), kind="stable")[:8]]
-        if a < 0.5 * np.median(amplitudes[nearest - 1]):
-            mains.append(int(k))
-    return np.array(mains, dtype=np.int64)
+        around = np.arange(max(k - 8, 1), min(k + 8, amplitudes.size) + 1)
+        floor = np.setdiff1d(around, np.append(design, k))
+        level = amplitudes[k - 1]
+        return bool(level < 0.5 * np.median(amplitudes[nearest - 1])
+                    and floor.size and level >= 4 * np.median(amplitudes[floor - 1]))
+
+    mains: set[int] = set()
+    for f0 in MAINS_HZ:
+        lines = [int(k) for k in bins[near[f0]] if hum(int(k))]
+        if any(abs(k * resolution - f0) < resolution for k in lines):  # the fundamental shows: a family of hum
+            mains.update(lines)
+    return np.array(sorted(mains), dtype=np.int64)
 
 
 def db(value: float) -> float:

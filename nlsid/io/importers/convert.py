@@ -341,7 +341,7 @@ def _runs(record: Record, inference: Inference, extra_transient: int, where: str
                 checks.add(run, f"{where}/{run.run_id}")
     except InputError as error:
         inference.demote(f"its runs fail the check of `nlsid {'hosidf' if inference.kind == 'sine' else 'bla'}` "
-                         f"({error.what})")
+                         f"({error.where.rsplit('/', 1)[-1]}: {error.what})")
         return [_make_run(record.name, {"fs": inference.fs, "kind": "arbitrary"}, signals, where, units)]
     return runs
 
