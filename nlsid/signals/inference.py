@@ -248,7 +248,8 @@ def lag_period(x: np.ndarray) -> int | None:
     # (2 var x): below their geometric mean, as slots are compared in step 2. Noise with a long
     # correlation time has few degrees of freedom, and its residual varies far more than 25 %.
     noise = residual(best)
-    limit = max(DIVISOR_TOLERANCE * noise, math.sqrt(noise * 2 * float(np.var(x)))) + NUMERIC_FLOOR**2 * float(np.mean(x * x))
+    limit = (max(DIVISOR_TOLERANCE * noise, math.sqrt(noise * 2 * float(np.var(x))))
+             + NUMERIC_FLOOR**2 * float(np.mean(x * x)))
     for q in divisors(best):
         if q == best or (residual(q) <= limit and repeats_best_at(x, q, residual)):
             return q
@@ -458,8 +459,8 @@ def infer_excitation(x: np.ndarray, fs: float, period: int | None = None, split:
     ``period`` (samples) skips the period search; the record must then be periodic with it.
     ``split=False`` keeps the record whole: several realizations then make it ``arbitrary``.
     ``measured=True``: ``x`` is a measured input (u, no reference r recorded), not the designed
-    signal: its excited lines must stand ``MEASURED_LINE_SNR`` above the noise of their estimate,
-    and mains lines (50/60 Hz and harmonics) are not counted as excited.
+    signal: mains hum, lines far below the design's level and weak lines off its grid are not
+    counted as excited (:func:`_measured_lines`).
     """
     x = np.asarray(x, dtype=np.float64)
     result = Inference(kind="arbitrary", n_samples=x.size, fs=fs)
@@ -643,9 +644,9 @@ def _held(x: np.ndarray, period: int, slots: Slots, groups: list[tuple[int, int,
     if strongest >= total / PERIODIC_SNR:
         return False
     result.measures["periodic_power_db"] = db(strongest / total)
-    result.notes.append(f"not periodic: the input repeats at lags of {period} samples only within {len(groups)} stretches "
-                        f"whose repeated period is nearly constant ({db(strongest / total):.1f} dB of the input's AC "
-                        "power at most): a held or slowly varying input")
+    result.notes.append(f"not periodic: a held or slowly varying input (it repeats at short lags, e.g. {period} "
+                        f"samples, only within {len(groups)} stretches whose repeated period is nearly constant: "
+                        f"{db(strongest / total):.1f} dB of its AC power at most)")
     return True
 
 
@@ -706,16 +707,16 @@ def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitud
     below = sum(b.size - kept.size for b, kept in zip(excited, level))
     if below:
         result.measures["low_lines_not_counted"] = below
-        result.notes.append(f"{below} line(s) more than {-db(LINE_CONTRAST**2):.0f} dB below the strongest line near them "
-                            "not counted as excited (a measured input: distortion and leakage fill the lines between "
-                            "and beyond the excited ones at such levels)")
+        result.notes.append(f"{below} line(s) more than {-db(LINE_CONTRAST**2):.0f} dB below the strongest line "
+                            "near them not counted as excited (a measured input: distortion and leakage fill the "
+                            "lines between and beyond the excited ones at such levels)")
     strong = [consistent_lines(bins, t, a) for bins, t, a in zip(level, tests, amplitudes)]
     weak = sum(b.size - kept.size for b, kept in zip(level, strong))
     if weak:
         result.measures["weak_lines_not_counted"] = weak
-        result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB above it, "
-                            "and off the grid or weaker than the excited lines around them, not counted as excited "
-                            "(a measured input: leakage, distortion or correlated noise look like that)")
+        result.notes.append(f"{weak} line(s) above the noise floor but less than {db(MEASURED_LINE_SNR):.0f} dB "
+                            "above it, and off the grid or weaker than the excited lines around them, not counted as "
+                            "excited (a measured input: leakage, distortion or correlated noise look like that)")
     return strong
 
 
