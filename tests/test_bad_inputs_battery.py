@@ -345,3 +345,32 @@ def model_ac_power(runs: list) -> float:
         mean_period = y[y.size - P * N:].reshape(P, N).mean(axis=0)
         powers.append(np.var(mean_period))
     return float(np.mean(powers))
+
+
+def _level(G: np.ndarray, var: np.ndarray):
+    """A BLA level as the linear hypotheses read it: excited lines 1..F of a 1 Hz grid."""
+    from types import SimpleNamespace
+
+    excited = np.arange(1, G.size + 1)
+    lines = SimpleNamespace(excited=excited, frequency=lambda bins: bins * 1.0)
+    return SimpleNamespace(lines=lines, robust=SimpleNamespace(G=G, var_total=var, var_noise=var))
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_linear_hypotheses_read_a_level_that_did_not_respond():
+    """A level whose measured output is constant (a stage held by friction at the lowest level):
+    G = 0 with no variance. The ratio's variance is the precision floor 1e-9 relative to the model's
+    BLA, (1e-9)^2, not zero (which made the delay and resonance regressions NaN: "SVD did not
+    converge"); with every level so, the delay has no phase to read and the resonance no fit."""
+    from nlsid.diagnose.hypotheses.base import Context
+    from nlsid.diagnose.hypotheses.bla_ratio import bla_ratios
+    from nlsid.diagnose.hypotheses.delay import HYPOTHESES as DELAY
+    from nlsid.diagnose.hypotheses.resonance import HYPOTHESES as RESONANCE
+
+    model_G = 1 / (1000 - 2 * (2 * np.pi * np.arange(1, 9)) ** 2 + 20j * 2 * np.pi * np.arange(1, 9))
+    zero = np.zeros(8, dtype=complex)
+    ctx = Context(None, [], [], [], ([_level(zero, np.zeros(8))], [_level(model_G, np.zeros(8))]))
+    (w, R, var), = bla_ratios(ctx)
+    assert np.array_equal(R, zero) and np.allclose(var, 1e-18, rtol=1e-12)
+    assert "no phase" in DELAY[0].estimate(ctx)
+    assert "no stable resonance" in RESONANCE[0].estimate(ctx)
