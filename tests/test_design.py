@@ -184,3 +184,23 @@ def test_duration_in_summary(run_cli, tmp_path):
 def test_log_bins_never_leave_the_band():
     bins = log_bins(1000, 1000.0, (3.0, 47.0), 1.5, odd_only=False)
     assert bins.min() >= 3 and bins.max() <= 47 and np.all(np.diff(bins) > 0)
+
+
+@pytest.mark.parametrize("key, line_text, value, bad", [
+    ("fs", "fs: 1024.0", ".inf", ".inf"),
+    ("multisine.band[1]", "  band: [0.5, 60.0]     # Hz", "[0.5, .nan]", ".nan"),
+    ("multisine.rms_levels[1]", "  rms_levels: [1.0, 2.0, 4.0]", "[1.0, -.inf, 4.0]", "-.inf"),
+    ("sines.amplitudes[0]", "  amplitudes: [1.0, 2.0, 4.0]", "[.nan, 2.0, 4.0]", ".nan"),
+])
+def test_a_non_finite_number_is_refused_at_its_key(run_cli, tmp_path, key, line_text, value, bad):
+    from pathlib import Path
+
+    lines = (Path(__file__).parents[1] / "configs" / "stage_design.yaml").read_text().splitlines()
+    index = lines.index(line_text)
+    lines[index] = f"{line_text.split(':')[0]}: {value}"
+    config = tmp_path / "design.yaml"
+    config.write_text("\n".join(lines) + "\n")
+    result = run_cli("design", config, "-o", tmp_path / "exc.h5")
+    assert result.exit_code == 2
+    assert result.stderr.strip() == f"nlsid: error: {config}:{index + 1}: {key}: expected a finite number, got {bad}"
+    assert not (tmp_path / "exc.h5").exists()

@@ -5,12 +5,18 @@ from __future__ import annotations
 from typing import Literal, Optional
 
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from nlsid.io.config import ConfigValueError, StrictModel
 from nlsid.signals.lines import band_bins
 
-class ValueRange(StrictModel):
+class DesignModel(StrictModel):
+    """A part of a design config: every number finite (a signal of an infinite rate or level is no design)."""
+
+    model_config = ConfigDict(**StrictModel.model_config, allow_inf_nan=False)
+
+
+class ValueRange(DesignModel):
     """``count`` values from ``start`` to ``stop`` (both included), log- or linearly spaced."""
 
     start: float = Field(gt=0)
@@ -23,7 +29,7 @@ class ValueRange(StrictModel):
             return np.geomspace(self.start, self.stop, self.count)
         return np.linspace(self.start, self.stop, self.count)
 
-class FrequencySteps(StrictModel):
+class FrequencySteps(DesignModel):
     """Frequencies ``start, start + step, ...`` up to and including ``stop`` (Hz)."""
 
     start: float = Field(gt=0)
@@ -42,7 +48,7 @@ def _one_of(owner: tuple, a: str, va, b: str, vb) -> np.ndarray:
         raise ConfigValueError(owner + ((a,) if va is not None else (b,)), "gives no values")
     return values
 
-class MultisineConfig(StrictModel):
+class MultisineConfig(DesignModel):
     period: int = Field(ge=8, description="samples per period N")
     band: list[float] = Field(min_length=2, max_length=2)
     lines: Literal["full", "odd", "random-full", "random-odd"] = "random-odd"
@@ -78,7 +84,7 @@ class MultisineConfig(StrictModel):
             raise ConfigValueError(key + ("realizations",),
                                    "Schroeder phases are deterministic: use realizations: 1 or phases: random")
 
-class SinesConfig(StrictModel):
+class SinesConfig(DesignModel):
     period: int = Field(ge=8, description="samples per period N")
     frequencies: Optional[list[float]] = Field(None, min_length=1)
     frequency_steps: Optional[FrequencySteps] = None
@@ -117,7 +123,7 @@ class SinesConfig(StrictModel):
             if not 0 < amplitude < np.inf:
                 raise ConfigValueError(("sines", "amplitudes", i), f"must be > 0 and finite, got {amplitude:g}")
 
-class DesignConfig(StrictModel):
+class DesignConfig(DesignModel):
     """Top level of a design config: a sample rate, a seed, and a multisine and/or a sine grid."""
 
     fs: float = Field(gt=0)
