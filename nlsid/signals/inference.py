@@ -23,7 +23,7 @@ four steps; every step states how sure it is.
      period is the smallest divisor of the best lag whose residual is within 25 % of the best (a
      mean of ``L`` noise terms varies by ``sqrt(2/L)``, under 5 % for ``L >= 1000``) or nearer the
      noise than a change of content. The residual leaves out the first period (a generator's
-     start-up transient), candidates are widened by one sample each way, and a lag counts only if
+     start-up transient), each candidate moves to the nearest lag repeating better, and a lag counts only if
      the record repeats there strictly better than one sample off (:func:`repeats_best_at`): a
      smooth record repeats ever better as the lag shrinks, a periodic one has a sharp minimum.
 
@@ -73,6 +73,7 @@ SINE_POWER_FRACTION = 0.99
 PERIODIC_SNR = 10.0
 CANDIDATE_LAGS = 64
 DIVISOR_TOLERANCE = 1.25
+DESCENT_STEPS = 16
 LINE_FALSE_ALARM = 1e-3
 SMOOTH_BINS = 8
 NUMERIC_FLOOR = 1e-10
@@ -226,9 +227,10 @@ def repeats_best_at(x: np.ndarray, lag: int, residual=None) -> bool:
 def lag_period(x: np.ndarray) -> int | None:
     """The smallest lag at which ``x`` repeats up to noise (step 1, candidates and repeat residual).
 
-    Each candidate lag and its neighbours +-1 (a transient in the first period can move the minimum
-    of ``d'`` by a sample) are scored by :func:`steady_residual`, which leaves out the first period;
-    only lags at which the record repeats strictly better than one sample off count
+    From each candidate lag the search steps to the neighbouring lag while that repeats better (a
+    transient in the first period can move the minimum of ``d'`` by a few samples; at most
+    ``DESCENT_STEPS``), scored by :func:`steady_residual`, which leaves out the first period; only
+    lags at which the record repeats strictly better than one sample off count
     (:func:`repeats_best_at`).
     """
     cache: dict[int, float] = {}
@@ -238,8 +240,16 @@ def lag_period(x: np.ndarray) -> int | None:
             cache[lag] = steady_residual(x, lag)
         return cache[lag]
 
-    around = {int(lag) + step for lag in candidate_lags(x) for step in (-1, 0, 1)}
-    lags = sorted(lag for lag in around if 2 <= lag <= x.size // 2 and repeats_best_at(x, lag, residual))
+    def descend(lag: int) -> int:
+        for _ in range(DESCENT_STEPS):
+            step = min((other for other in (lag - 1, lag + 1) if 2 <= other <= x.size // 2), key=residual)
+            if residual(step) >= residual(lag):
+                break
+            lag = step
+        return lag
+
+    found = {descend(int(lag)) for lag in candidate_lags(x)}
+    lags = sorted(lag for lag in found if 2 <= lag <= x.size // 2 and repeats_best_at(x, lag, residual))
     if not lags:
         return None
     best = min(lags, key=residual)
