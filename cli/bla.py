@@ -6,7 +6,6 @@ from __future__ import annotations
 import click
 
 from nlsid.analysis.bla_methods import METHOD_CHOICES
-from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path, check_suffix, check_writable
 
 from .common import LOGGER, StageCommand, emit_json, force_option, json_option, keep_freed_memory, progress, settings
@@ -46,47 +45,33 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     \b
       nlsid bla recording.h5 -o bla.h5 --plots figures/
     """
-    from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
-    from nlsid.io.bla_file import write_bla
     from nlsid.io.provenance import provenance, sha256_in_background
     from nlsid.io.recording import open_recording
-    from nlsid.io.units import common_units
+    from nlsid.stages.bla import bla as run_bla
+    from nlsid.stages.bla import check_options
 
     check_suffix(output)
-    if not 0 < confidence < 1:
-        raise InputError("--confidence", f"expected a probability in (0, 1), got {confidence:g}")
-    if lpm_lines % 2 == 0:
-        raise InputError("--lpm-lines", f"expected an odd number of lines (a window centred on its line), got {lpm_lines}")
+    check_options(method, confidence, lpm_lines, lpm_degree, names=FLAGS)
     check_writable(output, force)
     plot_dir = plot_folder(plots)
-    units_seen = []
     keep_freed_memory()  # the runs' buffers are reused, not page-faulted in anew for each run
     digest = sha256_in_background(recording)  # for the provenance, beside the analysis of the same file
     with open_recording(recording, require_y=True, mapping=parse_map(mapping)) as rec:
         with progress("bla", len(rec.run_ids)) as step:
-            levels, lpm_levels, warnings = analyse_bla(recording_runs(rec, recording), method, confidence,
-                                                       on_run=lambda run: (step(), units_seen.append(run.units)),
-                                                       source=recording,
-                                                       lpm_half_width=lpm_lines // 2, lpm_degree=lpm_degree)
-    across = across_levels(levels)
-    units = common_units(units_seen)
+            result = run_bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=lambda run: step())
     figures = {}
     if plot_dir is not None:
-        from nlsid.report.bla_plots import render_figures
-        from nlsid.report.units import Units
-
-        figures = render_figures(levels, Units(units), lpm_levels)
+        figures = result.figures()
         plot_dir.mkdir(parents=True, exist_ok=True)
         for name in figures:
             check_writable(plot_dir / name, force)
-    write_bla(output, levels, provenance(input_paths=[recording], digests={recording: digest}), confidence, warnings,
-              across, force=force, lpm_levels=lpm_levels, units=units)
+    result.write(output, force=force, provenance=provenance(input_paths=[recording], digests={recording: digest}))
     for name, data in figures.items():
         with atomic_path(plot_dir / name, force) as tmp:
             tmp.write_bytes(data)
-    for message in (warnings + [f"level {i:02d}: {w}" for i, level in enumerate(levels) for w in level.warnings]
-                    + [f"arbitrary level {i:02d}: {w}" for i, level in enumerate(lpm_levels) for w in level.warnings]):
+    for message in result.messages():
         LOGGER.warning(message)
+    levels, lpm_levels, warnings, across = result.levels, result.lpm_levels, result.warnings, result.across_levels
     summaries = [level.summary() for level in levels]
     lpm_summaries = [level.summary() for level in lpm_levels]
     if as_json:
@@ -97,6 +82,9 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         _print_table(output, summaries)
     if lpm_summaries:
         _print_lpm_table(output, lpm_summaries)
+
+
+FLAGS = {"method": "--method", "confidence": "--confidence", "lpm_lines": "--lpm-lines", "lpm_degree": "--lpm-degree"}
 
 
 def _cell(value: float, fmt: str = ".1f") -> str:

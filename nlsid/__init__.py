@@ -1,7 +1,42 @@
 """nlsid: nonlinear system identification from measured data.
 
-The library is usable without the command line: ``nlsid.io`` reads and writes recordings and
-configs, ``nlsid.signals`` designs excitations, and the analysis packages work on numpy arrays.
+The library is the product; the command line is a thin layer over the stage functions named here
+(``docs/api.md``)::
+
+    import nlsid
+    rec = nlsid.read("sample_data/stage.h5")       # a Recording
+    b = nlsid.bla(rec)                              # a BlaResult: .levels, .summary(), .plot(), .write(path)
+
+Names are loaded on first use, so ``import nlsid`` stays light (numpy, scipy and h5py are imported
+by the stage that needs them).
 """
 
+from __future__ import annotations
+
+import importlib
+
 __version__ = "0.1.0"
+
+#: public name -> module that defines it
+_FACE = {
+    "InputError": "nlsid.errors",
+    "Recording": "nlsid.stages.recording",
+    "read": "nlsid.stages.recording",
+    "bla": "nlsid.stages.bla",
+    "BlaResult": "nlsid.stages.bla",
+}
+
+__all__ = ["__version__", *_FACE]
+
+
+def __getattr__(name: str):
+    module = _FACE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'nlsid' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -25,11 +25,19 @@ class NlsidError(Exception):
     exit_code = EXIT_BAD_INPUT
 
 
-class InputError(NlsidError):
-    """Bad usage or bad input: a config, a file, a dataset or an impossible request.
+class InputError(NlsidError, ValueError):
+    """Bad usage or bad input: a config, a file, a dataset, an argument or an impossible request.
 
-    ``where`` names the file (and optionally the key path or dataset) so the message reads
-    ``where: what``.
+    ``where`` names the file (and optionally the key path or dataset), or the argument of a library
+    function, so the message reads ``where: what``. It is a ``ValueError``, as scipy's and numpy's
+    errors of a bad argument are, so ``except ValueError`` in a user's script catches it.
+
+    Examples
+    --------
+    >>> from nlsid.errors import InputError
+    >>> error = InputError("confidence", "expected a probability in (0, 1), got 1.5")
+    >>> str(error), isinstance(error, ValueError)
+    ('confidence: expected a probability in (0, 1), got 1.5', True)
     """
 
     def __init__(self, where: str, what: str):

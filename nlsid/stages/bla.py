@@ -1,0 +1,236 @@
+"""The ``bla`` stage: Best Linear Approximation with its noise and nonlinear distortion levels.
+
+``nlsid.bla(recording)`` gives a :class:`BlaResult`; the command ``nlsid bla`` is this function, a
+``write`` and a table. The methods are those of :mod:`nlsid.analysis.levels` (robust and fast
+methods for multisine levels, Local Polynomial Method for arbitrary runs).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+
+from nlsid.analysis.arbitrary import LPMLevel
+from nlsid.analysis.levels import LevelResult
+from nlsid.errors import InputError
+from nlsid.stages.recording import Recording
+
+
+def check_options(method: str, confidence: float, lpm_lines: int, lpm_degree: int,
+                  names: Mapping[str, str] | None = None) -> None:
+    """The options of :func:`bla`, checked; ``names`` maps an argument to how the caller calls it
+    (``{"confidence": "--confidence"}`` on the command line)."""
+    from nlsid.analysis.bla_methods import METHOD_CHOICES
+
+    names = names or {}
+    if method not in METHOD_CHOICES:
+        raise InputError(names.get("method", "method"), f"expected one of {', '.join(METHOD_CHOICES)}, got {method!r}")
+    if not 0 < confidence < 1:
+        raise InputError(names.get("confidence", "confidence"), f"expected a probability in (0, 1), got {confidence:g}")
+    if lpm_lines < 3:
+        raise InputError(names.get("lpm_lines", "lpm_lines"), f"expected at least 3 lines, got {lpm_lines}")
+    if lpm_lines % 2 == 0:
+        raise InputError(names.get("lpm_lines", "lpm_lines"),
+                         f"expected an odd number of lines (a window centred on its line), got {lpm_lines}")
+    if lpm_degree < 0:
+        raise InputError(names.get("lpm_degree", "lpm_degree"), f"expected a degree >= 0, got {lpm_degree}")
+
+
+@dataclass
+class BlaResult:
+    """What the ``bla`` stage computes, per excitation level.
+
+    Attributes
+    ----------
+    levels : list of LevelResult
+        Multisine levels: ``level.lines.frequency(level.lines.excited)`` the excited frequencies,
+        ``level.robust.G`` the BLA there, ``level.robust.var_noise`` and ``level.robust.var_nl``
+        the noise and nonlinear variances of G (``docs/formats.md``, "BLA results").
+    lpm_levels : list of LPMLevel
+        Levels of arbitrary runs by the Local Polynomial Method (``.frequency``, ``.G``, ...).
+    warnings : list of str
+        What the analysis could not do or doubts, for the whole recording.
+    across_levels : dict
+        The BLA versus the excitation level (``docs/formats.md``).
+    units : dict
+        Signal -> unit that every run of the recording gives it.
+    confidence : float
+        Probability of the confidence bounds.
+    source : str
+        Where the runs came from (a path, or ``"recording"``).
+    """
+
+    levels: list[LevelResult]
+    lpm_levels: list[LPMLevel]
+    warnings: list[str]
+    across_levels: dict
+    units: dict[str, str]
+    confidence: float
+    source: str
+    inputs: list[str] = field(default_factory=list)
+
+    @property
+    def frequency(self) -> np.ndarray:
+        """The excited frequencies (Hz) of the only level; see :attr:`levels` when there are several."""
+        return self._only().frequency
+
+    @property
+    def G(self) -> np.ndarray:
+        """The BLA at :attr:`frequency` (complex) of the only level."""
+        return self._only().G
+
+    def _only(self) -> "_Curve":
+        curves = [_Curve.of(level) for level in self.levels] + [_Curve.of_lpm(level) for level in self.lpm_levels]
+        if len(curves) != 1:
+            raise InputError("BlaResult", f"holds {len(curves)} levels; take one of .levels or .lpm_levels")
+        return curves[0]
+
+    def messages(self) -> list[str]:
+        """Every warning, of the recording and of each level (``level NN: ...``)."""
+        return (self.warnings + [f"level {i:02d}: {w}" for i, level in enumerate(self.levels) for w in level.warnings]
+                + [f"arbitrary level {i:02d}: {w}" for i, level in enumerate(self.lpm_levels) for w in level.warnings])
+
+    def summary(self) -> dict:
+        """Per level the scalars of ``docs/formats.md`` (``levels``, ``lpm_levels``), the
+        ``across_levels`` trend and the ``warnings``: the ``nlsid bla --json`` summary without paths."""
+        return {"levels": [level.summary() for level in self.levels],
+                "lpm_levels": [level.summary() for level in self.lpm_levels],
+                "across_levels": self.across_levels, "warnings": self.warnings}
+
+    def figures(self) -> dict[str, bytes]:
+        """The stage's figures as PNG bytes by file name (``nlsid bla --plots``)."""
+        from nlsid.report.bla_plots import render_figures
+        from nlsid.report.units import Units
+
+        return render_figures(self.levels, Units(self.units), self.lpm_levels)
+
+    def plot(self) -> list:
+        """The figures of :meth:`figures` as matplotlib figures (for a notebook)."""
+        import io
+
+        import matplotlib.image
+        import matplotlib.pyplot as plt
+
+        out = []
+        for name, png in self.figures().items():
+            figure, axes = plt.subplots(figsize=(8, 6))
+            axes.imshow(matplotlib.image.imread(io.BytesIO(png), format="png"))
+            axes.set_axis_off()
+            axes.set_title(name)
+            out.append(figure)
+        return out
+
+    def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
+        """Write ``bla.h5`` (``docs/formats.md``) atomically; an existing file only with ``force``."""
+        from nlsid.io.atomic import check_suffix, check_writable
+        from nlsid.io.bla_file import write_bla
+        from nlsid.io.provenance import provenance as make_provenance
+
+        check_suffix(str(path))
+        check_writable(str(path), force)
+        record = provenance if provenance is not None else make_provenance(input_paths=self.inputs)
+        write_bla(path, self.levels, record, self.confidence, self.warnings, self.across_levels, force=force,
+                  lpm_levels=self.lpm_levels, units=self.units)
+        return Path(path)
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        rows = []
+        for row in self.summary()["levels"]:
+            rows.append(f"<tr><td>{row['level']}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} x "
+                        f"{row['periods']}</td><td>{escape(row['method'])}</td><td>{row['bla_db']:.1f}</td>"
+                        f"<td>{row['nl_var_db']:.1f}</td><td>{row['noise_var_db']:.1f}</td></tr>")
+        for row in self.summary()["lpm_levels"]:
+            rows.append(f"<tr><td>{row['level']}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} records</td>"
+                        f"<td>{escape(row['method'])}</td><td>{row['bla_db']:.1f}</td><td colspan=2>"
+                        f"{row['total_var_db']:.1f} (noise + NL)</td></tr>")
+        warnings = "".join(f"<li>{escape(w)}</li>" for w in self.messages())
+        return (f"<p><b>BLA</b> of {escape(self.source)}</p><table><tr><th>level</th><th>u rms</th><th>M x P</th>"
+                "<th>method</th><th>|G| dB</th><th>NL var dB</th><th>noise var dB</th></tr>" + "".join(rows)
+                + "</table>" + (f"<ul>{warnings}</ul>" if warnings else ""))
+
+
+@dataclass(frozen=True)
+class _Curve:
+    frequency: np.ndarray
+    G: np.ndarray
+
+    @classmethod
+    def of(cls, level: LevelResult) -> "_Curve":
+        return cls(level.lines.frequency(level.lines.excited), level.robust.G)
+
+    @classmethod
+    def of_lpm(cls, level: LPMLevel) -> "_Curve":
+        return cls(level.frequency, level.G)
+
+
+def bla(recording: Recording | str | os.PathLike, method: str = "auto", confidence: float = 0.95,
+        lpm_lines: int = 7, lpm_degree: int = 2, mapping: Mapping[str, str] | None = None,
+        on_run: Callable | None = None) -> BlaResult:
+    """Best Linear Approximation of a recording, per excitation level.
+
+    Multisine runs of a level are M realizations x P periods of a random-phase multisine: the
+    robust method gives G_BLA(k) = mean over m of G^[m](k) with the noise variance from the
+    period-to-period scatter and the nonlinear variance from the realization-to-realization
+    scatter, var_NL = M var_total - var_noise (Pintelon and Schoukens 2012, Sec. 3.4; book
+    Sec. 6.1.1); the fast method uses the detection lines of one random grid (book Sec. 6.1.2).
+    Arbitrary runs get the Local Polynomial Method (book Sec. 3.7).
+
+    Parameters
+    ----------
+    recording : Recording, path, or a recording open for reading (``nlsid.io.recording.open_recording``)
+        The measured runs (u, y, and r for closed loops); a file is read run by run.
+    method : {"auto", "frf", "io", "reference"}
+        Robust-method variant: known input, noisy input, or projected on the reference r.
+    confidence : float
+        Probability of the confidence bounds on |G_BLA| and its phase, in (0, 1).
+    lpm_lines, lpm_degree : int
+        Local Polynomial Method window (odd number of lines) and polynomial degree.
+    mapping : dict, optional
+        Signals of a foreign MCAP log (``read``).
+    on_run : callable, optional
+        Called with each run as it is analysed (progress).
+
+    Returns
+    -------
+    BlaResult
+
+    Raises
+    ------
+    nlsid.InputError
+        A bad argument (named), or runs the methods cannot take (the message says why).
+    """
+    from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
+    from nlsid.io.units import common_units
+
+    check_options(method, confidence, lpm_lines, lpm_degree)
+    units_seen = []
+
+    def seen(run) -> None:
+        units_seen.append(run.units)
+        if on_run is not None:
+            on_run(run)
+
+    options = dict(method=method, probability=confidence, on_run=seen, lpm_half_width=lpm_lines // 2,
+                   lpm_degree=lpm_degree)
+    if isinstance(recording, Recording):
+        source = recording.path or "recording"
+        runs = ((run, f"{source}:/runs/{run.run_id}") for run in recording.runs)
+        levels, lpm_levels, warnings = analyse_bla(runs, source=source, **options)
+        inputs = [recording.path] if recording.path else []
+    elif hasattr(recording, "load") and hasattr(recording, "run_ids"):  # a file open for reading, run by run
+        source = str(recording.path)
+        levels, lpm_levels, warnings = analyse_bla(recording_runs(recording, source), source=source, **options)
+        inputs = [source]
+    else:
+        from nlsid.io.recording import open_recording
+
+        with open_recording(recording, require_y=True, mapping=dict(mapping) if mapping else None) as rec:
+            return bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=on_run)
+    return BlaResult(levels, lpm_levels, warnings, across_levels(levels), common_units(units_seen), confidence,
+                     source, inputs)
