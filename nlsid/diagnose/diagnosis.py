@@ -385,9 +385,9 @@ def _update_earlier(chain: list[Outcome]) -> None:
 def _carried(carried: dict[str, str], extended: dict) -> dict[str, str]:
     """The parameters of the causes accepted in earlier rounds (name -> key path) that the
     extended config still holds, with a value that has a sign to keep: refined again with each
-    hypothesis of a later round (issue 17 items 4 and 6: fitted without the later cause, they carry
-    part of it; Coulomb friction fitted before a cubic spring came out 1.6 % high, and the final
-    model stayed 5 dB above the floor with it held)."""
+    hypothesis of a later round (fitted without the later cause, they carry part of it: Coulomb
+    friction fitted before a cubic spring came out 1.6 % high, and the final model stayed 5 dB above
+    the floor with it held)."""
     from nlsid.fit.extension import value_at
 
     out = {}

@@ -5,8 +5,7 @@ a transfer function refines them with its own parameters, :func:`coefficient_pat
 A transfer function fitted to a BLA is biased where the system is nonlinear: the BLA of a
 saturating actuator has a lower gain than the small-signal one (Bussgang 1952: under Gaussian
 excitation a static curve in series acts on the BLA as its mean slope), so a block added to that
-model with the linear part frozen cannot reach the noise floor (issue 17 item 4: "a BLA-based
-linear part is biased under nonlinearity; keeping it frozen cannot reach the floor"). Freed, the
+model with the linear part frozen cannot reach the noise floor. Freed, the
 coefficients could also absorb what is only a wrong linear model; this hypothesis is that linear
 refit alone, so that the verdict can name a block only when it is significantly better than the
 refit without it (:attr:`nlsid.diagnose.diagnosis.Outcome.generalizes`), as ``wrong_mechanics``

@@ -20,7 +20,7 @@ LINEAR_MECHANICS = {"mass_spring_damper": MECHANICS,
 
 def linear_paths(data: dict) -> dict[str, str]:
     """The linear mechanics a force or block hypothesis refines together with its own parameters
-    (issue 17 item 4: a linear part held at the user's values cannot reach the floor once reality
+    (a linear part held at the user's values cannot reach the floor once reality
     differs from it in two ways, e.g. a 5 % mass error and Coulomb friction): the masses, dampings
     and stiffnesses of a mechanical template that are not zero (a zero has no sign to keep and is
     a structural choice: a free mass has no spring). The actuator gain is held: with the masses,
