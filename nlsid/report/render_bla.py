@@ -29,7 +29,13 @@ distortion is largest:
   on noise-free data (``zero``) a class of distortion is present when its band mean stands above
   numerical precision, :data:`~nlsid.analysis.precision.PRECISION_DB` = -180 dB relative to the
   output at the excited lines (or to ``|G_BLA|^2`` for the robust nonlinear variance), and its
-  level is given relative to the output, never to the noise.
+  level is given relative to the output, never to the noise. Every class of non-excited harmonic
+  lines is read, beyond the band too: "no distortion" is said only when none stands above
+  precision. With P = 1 the detection lines' levels below the output (upper bounds of the
+  distortion) and the line-class comparison of :mod:`nlsid.analysis.distortion_class` are given.
+- Without detection lines and with a noise level, a nonlinear variance is "not measurable" only
+  for M = 1 or P = 1 (:func:`~nlsid.analysis.bla.nonlinear_variance_missing`); with M >= 2 and
+  P >= 2 a band mean below zero means no distortion above the noise.
 """
 
 from __future__ import annotations
