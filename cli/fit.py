@@ -116,7 +116,10 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
                          Units(read_units(bla_file)))
         with atomic_path(plot, force) as tmp:
             tmp.write_bytes(png)
-    write_fit(output, {"model": fit_.model.config()}, header, report, provenance(input_paths=[bla_file]), force=force)
+    record = provenance(input_paths=[bla_file])
+    if not result.level.weighted:  # said where the model's origin is read, as allow_overlap is
+        record = {**record, "unweighted": True}
+    write_fit(output, {"model": fit_.model.config()}, header, report, record, force=force)
     for warning in result.warnings:
         settings().console.print(f"warning: {warning}")
     if as_json:

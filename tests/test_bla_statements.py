@@ -266,7 +266,7 @@ def test_fit_of_a_noise_free_bla_is_unweighted_and_says_so(run_cli, tmp_path, M)
     assert np.allclose(fitted["num"], [0.0, 0.2, 0.1], atol=1e-7)
     assert np.allclose(fitted["den"], [1.0, -1.2, 0.5], atol=1e-7)
     report = json.loads((tmp_path / "m.fit.json").read_text())
-    assert report["weighted"] is False
+    assert report["weighted"] is False and report["provenance"]["unweighted"] is True
     assert "unweighted least squares" in model.read_text()  # the model file's header says it too
     plain = run_cli("fit", tmp_path / "bla.h5", "--order", "2/2", "-o", tmp_path / "p.yaml")
     assert plain.exit_code == 0 and "unweighted least squares" in plain.stderr
@@ -288,3 +288,4 @@ def test_fit_of_a_noisy_bla_stays_weighted(run_cli, tmp_path):
     assert result.exit_code == 0, result.stderr
     summary = result.json()
     assert summary["weighted"] is True and summary["weights"].startswith("var_total of the robust method")
+    assert "unweighted" not in json.loads((tmp_path / "m.fit.json").read_text())["provenance"]
