@@ -194,8 +194,9 @@ def _reference_runs(delay: float, input_noise: float, actuator=lambda r: r, M=6,
         u = actuator(_delayed(r, delay) if m == 2 else r)
         u_all = np.tile(u, P + 1)
         y = np.convolve(u_all, [0.5, 0.3, 0.1])[:u_all.size] + 1e-3 * rng.standard_normal(u_all.size)
-        runs.append(Run(run_id=f"m{m}", fs=1.0, kind="multisine", u=u_all + input_noise * rng.standard_normal(u_all.size),
-                        y=y, r=np.tile(r, P + 1), period=N, transient_periods=1, realization=m, excited_bins=bins))
+        u_measured = u_all + input_noise * rng.standard_normal(u_all.size)
+        runs.append(Run(run_id=f"m{m}", fs=1.0, kind="multisine", u=u_measured, y=y, r=np.tile(r, P + 1),
+                        period=N, transient_periods=1, realization=m, excited_bins=bins))
     return runs
 
 

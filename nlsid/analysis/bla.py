@@ -146,7 +146,8 @@ class RobustAccumulator:
         if self.method == "reference":
             rotation = np.exp(-1j * np.angle(stats.R[k]))
             self._spectra.add(U * rotation, Y * rotation)
-            self._add_delay(U / stats.R[k], U * rotation, 2 * (stats.U.size - 1) if self.period is None else self.period)
+            period = 2 * (stats.U.size - 1) if self.period is None else self.period
+            self._add_delay(U / stats.R[k], U * rotation, period)
         else:
             G = Y / U
             self._spectra.add(G)
