@@ -150,7 +150,7 @@ def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | No
 
 def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: list[dict], titles: dict[str, str]) -> str:
     """The page's HTML text. ``titles`` maps hypothesis names to their titles (for the causes)."""
-    from nlsid.report.html import _CSS
+    from nlsid.report.html import CSS
 
     tally = counts(rows)
     head = (f'<div class="counts"><span><b>{len(rows)}</b> recordings</span><span>{tally["ok"]} ok</span>'
@@ -219,7 +219,7 @@ def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: l
 
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             '<meta name="viewport" content="width=device-width, initial-scale=1">'
-            f"<title>Fleet: {_e(summary['output'])}</title><style>{_CSS}{_EXTRA_CSS}</style></head><body><main>"
+            f"<title>Fleet: {_e(summary['output'])}</title><style>{CSS}{_EXTRA_CSS}</style></head><body><main>"
             f'<header><div class="kind">batch</div><h1>Fleet: {len(rows)} recordings</h1>'
             f'<div class="source">pipeline {_e(summary["pipeline"])}; this run: {_e(summary["executor"])}</div></header>'
             f'<section id="verdict">{head}</section>{causes}{trend}{results}{problems}'

@@ -12,7 +12,7 @@ the plant input ``u`` (``fit_on="u"``: the controller's output, the criterion of
 benchmarks such as EMPS, where the position error is kept small by the loop itself). Each run's
 recorded excitation (open loop: ``u``; closed loop: the reference ``r``) is simulated through the
 noise-free model with the parameters written into the config (the ``sweep`` mechanism:
-:func:`nlsid.simulate.sweep._set`, then the full config validation), and compared with the
+:func:`nlsid.models.key_paths.set_value`, then the full config validation), and compared with the
 recorded signal over the steady-state periods (the last ``n_periods`` periods; a run without
 transient periods with the model in periodic steady state: :func:`nlsid.simulate.engine.lead_periods`; the whole record
 of an arbitrary run; the range of a part cut by :mod:`nlsid.io.ranges`). In closed loop the
@@ -100,7 +100,8 @@ from nlsid.io.feeds import check_run_count
 from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
 from nlsid.io.ranges import SampleRange, check_sources, check_unique, cut, record
-from nlsid.simulate.sweep import SweepPoint, _deep_copy, _keys, _set, check_step
+from nlsid.models.key_paths import check_step, deep_copy, parse, set_value
+from nlsid.simulate.sweep import SweepPoint
 from nlsid.simulate.threads import blas_in_one_thread
 
 IDENTIFIABLE_RATIO = 1e-6   # singular value ratio of J below which a parameter combination is not identifiable
@@ -202,8 +203,8 @@ def free_from_config(free_config: dict) -> dict[str, FreeParameter]:
 def value_at(data: dict, path: str):
     """The value at a dotted key path of a config dict, list elements included (``model.den[2]``);
     None when a mapping key along it is absent. An index beyond a list, or into something that is
-    not a list, is an error naming the path (:func:`nlsid.simulate.sweep.check_step`)."""
-    keys = _keys(path)
+    not a list, is an error naming the path (:func:`nlsid.models.key_paths.check_step`)."""
+    keys = parse(path)
     if keys is None:
         raise InputError(f"free.{path}", "expected a dotted key path such as model.nonlinearities[0].fc")
     node = data
@@ -282,12 +283,12 @@ def _compact(run: Run, excitation: Run, point) -> tuple[Run, Run, float] | None:
     model without a periodic steady state, or one that does not settle within the run's
     transient periods (the measured periods after them are then not in steady state either)."""
     from nlsid.io.ranges import RangeRun
-    from nlsid.simulate.batch import _build
+    from nlsid.simulate.batch import build
     from nlsid.simulate.engine import hysteretic, lead_samples
 
     if run.period is None or isinstance(run, RangeRun) or run.n_periods < 2 or run.channels:
         return None
-    model, loop = _build(point)
+    model, loop = build(point)
     lead = lead_samples(model, loop, dataclasses.replace(excitation, transient_periods=0))
     if lead == 0 or (run.transient_periods and lead > run.transient_periods * run.period):
         return None
@@ -319,7 +320,7 @@ class _Problem:
                  workers: int | None, fit_on: str = "y"):
         if "sweep" in config_data:
             raise InputError(_where(source, lines, ("sweep",)), "sweep: a config with free parameters cannot sweep; remove sweep")
-        base = {k: _deep_copy(v) for k, v in config_data.items() if k not in ("free", "disturbances")}
+        base = {k: deep_copy(v) for k, v in config_data.items() if k not in ("free", "disturbances")}
         self.base, self.source, self.lines, self.workers = base, source, lines or {}, workers
         self.names = list(free)
         if not self.names:
@@ -349,10 +350,10 @@ class _Problem:
         self.point(self.start)  # the start must give a valid config
 
     def data(self, theta: np.ndarray) -> dict:
-        data = _deep_copy(self.base)
+        data = deep_copy(self.base)
         for name, value in zip(self.names, theta):
             try:
-                _set(data, name, float(value), key=f"free.{name}")
+                set_value(data, name, float(value), key=f"free.{name}")
             except InputError as exc:  # named by the free: key the user wrote, at its line
                 raise InputError(_where(self.source, self.lines, ("free", name)), f"{exc.where}: {exc.what}") from None
         return data
@@ -449,11 +450,11 @@ class _Cost:
         (:func:`nlsid.simulate.engine.lead_periods`, at theta). None otherwise (finite differences)."""
         from nlsid.models.from_config import Plant
         from nlsid.simulate import tangent
-        from nlsid.simulate.batch import _build
+        from nlsid.simulate.batch import build
         from nlsid.simulate.engine import lead_periods, with_lead
         from nlsid.simulate.threads import in_threads
 
-        model, loop = _build(problem.point(theta))
+        model, loop = build(problem.point(theta))
         if not isinstance(model, Plant) or self.fits_initial_states:
             return None
         counts = [lead_periods(model, loop, run) for run in self.inputs]
@@ -462,7 +463,7 @@ class _Cost:
 
         def arguments_at(values: np.ndarray) -> list[tuple]:
             point = problem.point(values)
-            return tangent.run_arguments(*_build(point), led, point.config.simulation.substeps)
+            return tangent.run_arguments(*build(point), led, point.config.simulation.substeps)
 
         found = tangent.derivatives(arguments_at, theta)
         if found is None:
@@ -785,9 +786,9 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                                  _rms([errs["u"][i]]) if "u" in errs else math.nan))
     noise = {role: _pooled([r.noise_rms for r in runs if r.role == role], [r.samples for r in runs if r.role == role])
              for role in ("estimation", "validation")}
-    completed = {k: _deep_copy(v) for k, v in config_data.items() if k != "free"}
+    completed = {k: deep_copy(v) for k, v in config_data.items() if k != "free"}
     for name, value in zip(problem.names, values):
-        _set(completed, name, float(value))
+        set_value(completed, name, float(value))
     return ExtensionFit(
         names=problem.names, start=problem.start, values=values, std=np.sqrt(np.abs(np.diag(cov))),
         covariance=cov, correlation=corr,

@@ -110,7 +110,7 @@ def _controllable_form(b: np.ndarray, a: np.ndarray, discrete: bool, delay: floa
     return StateSpace(A, B, C, float(d), discrete, delay)
 
 
-def _roots(entries: list) -> tuple[np.ndarray, float]:
+def roots(entries: list) -> tuple[np.ndarray, float]:
     """The roots of zpk entries (a number, an [re, im] pair, a mode with ``frequency`` in Hz and
     ``damping``) and the product of the modes' normalisations 1 / w^2 (their factors
     (s^2 + 2 zeta w s + w^2) / w^2 have unit gain at s = 0)."""
@@ -132,8 +132,8 @@ def _roots(entries: list) -> tuple[np.ndarray, float]:
 
 def from_zpk(zeros: list, poles: list, gain: float, discrete: bool, delay: float, where: str) -> StateSpace:
     """State space of gain * prod(x - z_i) / prod(x - p_i), x = s or z; [re, im] is a conjugate
-    pair, a mode (continuous) the factor (s^2 + 2 zeta w s + w^2) / w^2 (:func:`_roots`)."""
-    (z, z_scale), (p, p_scale) = _roots(zeros), _roots(poles)
+    pair, a mode (continuous) the factor (s^2 + 2 zeta w s + w^2) / w^2 (:func:`roots`)."""
+    (z, z_scale), (p, p_scale) = roots(zeros), roots(poles)
     if len(z) > len(p):
         raise InputError(where, f"improper model: {len(z)} zeros > {len(p)} poles")
     gain = gain * z_scale / p_scale

@@ -37,7 +37,8 @@ def _levels(point: SweepPoint) -> NoiseLevels:
     return NoiseLevels(d.u_noise, d.y_noise, d.process_noise)
 
 
-def _build(point: SweepPoint):
+def build(point: SweepPoint):
+    """The model and the closed loop (or None) of one sweep point; a build error names the file and key."""
     try:
         return from_config.model(point.config), from_config.closed_loop(point.config)
     except InputError as exc:
@@ -58,7 +59,7 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
     """Simulate each excitation run for each sweep point, in :func:`thread_count` threads;
     ``seed`` overrides the config's seed;
     ``steady``: periodic runs in their periodic steady state (:func:`nlsid.simulate.engine.simulate_run`)."""
-    models = [_build(p) for p in points]
+    models = [build(p) for p in points]
     jobs = [(run, i * len(points) + j, j) for i, run in enumerate(runs) for j in range(len(points))]
     levels = [_levels(p) for p in points]
     try:

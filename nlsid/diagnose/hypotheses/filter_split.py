@@ -54,9 +54,9 @@ def polynomials(model: dict) -> tuple[np.ndarray, np.ndarray]:
             num, den = (np.concatenate([c, np.zeros(size - c.size)]) for c in (num, den))
         return num, den
     if model["type"] == "zpk":
-        from nlsid.models.lti import _roots
+        from nlsid.models.lti import roots
 
-        (z, z_scale), (p, p_scale) = _roots(model["zeros"]), _roots(model["poles"])
+        (z, z_scale), (p, p_scale) = roots(model["zeros"]), roots(model["poles"])
         num, den = zpk2tf(z, p, float(model["gain"]) * z_scale / p_scale)
         return np.real(num), np.real(den)
     b, den = ss2tf(np.asarray(model["A"], float), np.asarray(model["B"], float)[:, None],
