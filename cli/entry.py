@@ -6,7 +6,7 @@ import os
 import signal
 import sys
 
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report an interrupted command
+from nlsid.errors import EXIT_INTERRUPTED
 
 
 def _interrupt_again(unraisable) -> None:

@@ -7,9 +7,7 @@ import sys
 import click
 
 from nlsid import __version__
-from nlsid.errors import NlsidError
-
-from .entry import EXIT_INTERRUPTED
+from nlsid.errors import EXIT_INTERRUPTED, NlsidError
 
 from .batch import batch
 from .bla import bla

@@ -151,8 +151,7 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
     from nlsid.io.config import load_config
     from nlsid.io.pipeline_config import PipelineConfig
 
-    from .main import cli
-
+    cli = click.get_current_context().find_root().command  # the nlsid group whose stages the steps name
     config_path = Path(pipeline)
     root, steps = plan(load_config(config_path, PipelineConfig), config_path)
     check_steps(cli, pipeline, root, steps)

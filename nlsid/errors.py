@@ -8,6 +8,7 @@ The command line turns it into that one line on stderr and exit code 2, never a 
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report an interrupted command
 
 
 def one_line(text: str) -> str:

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 FEW_DECADES = 2.5
+FIGURE_HEIGHT = 3.2  # inches per row of the BLA and LPM figures
 
 
 def unwrapped_phase(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -37,3 +38,10 @@ def plain_log_ticks(axis) -> None:
 
     axis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
     axis.set_minor_formatter(FuncFormatter(minor))
+
+
+def power_db(power: np.ndarray) -> np.ndarray:
+    """10 log10 of a power (or variance), NaN where it is not positive (no point drawn there)."""
+    power = np.asarray(power, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(power > 0, 10 * np.log10(power), np.nan)

@@ -20,19 +20,13 @@ import numpy as np
 
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.axes import FIGURE_HEIGHT, plain_log_ticks, power_db, unwrapped_phase
 from nlsid.report.units import Units
 from nlsid.report.vector import band, fit_labels, new_figure
 
 
-def _db(power: np.ndarray) -> np.ndarray:
-    power = np.asarray(power, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(power > 0, 10 * np.log10(power), np.nan)
-
-
 def _figure(rows: int = 1):
-    return new_figure(rows, height=3.2)
+    return new_figure(rows, height=FIGURE_HEIGHT)
 
 
 def _png(figure) -> bytes:
@@ -57,10 +51,10 @@ def spectrum_figure(level: LevelResult, units: Units):
     for kind, label, colour, marker in styles:
         bins = np.flatnonzero(lines.kind == kind)
         if bins.size:
-            axis.plot(lines.frequency(bins), _db(spectrum.y_power[bins]), linestyle="none", marker=marker,
+            axis.plot(lines.frequency(bins), power_db(spectrum.y_power[bins]), linestyle="none", marker=marker,
                       markersize=3, color=colour, label=label)
     bins = lines.bins
-    axis.plot(lines.frequency(bins), _db(spectrum.y_noise[bins]), color="tab:green", linewidth=1,
+    axis.plot(lines.frequency(bins), power_db(spectrum.y_noise[bins]), color="tab:green", linewidth=1,
               label="noise (variance of the P-mean)")
     axis.set_xlabel("frequency (Hz)")
     axis.set_ylabel(f"output power ({units.power_db('y')})")
@@ -74,16 +68,16 @@ def bla_figure(level: LevelResult, units: Units):
     figure, (magnitude, phase) = _figure(2)
     robust, f = level.robust, level.lines.frequency(level.lines.excited)
     M = robust.n_realizations
-    magnitude.plot(f, _db(np.abs(robust.G) ** 2), color="k", label="|G_BLA|")
-    band(magnitude, f, _db(robust.bounds.mag_lo**2), _db(robust.bounds.mag_hi**2), "95% bounds", color="k",
+    magnitude.plot(f, power_db(np.abs(robust.G) ** 2), color="k", label="|G_BLA|")
+    band(magnitude, f, power_db(robust.bounds.mag_lo**2), power_db(robust.bounds.mag_hi**2), "95% bounds", color="k",
          alpha=0.15)
-    magnitude.plot(f, _db(robust.var_nl / M), "--", color="tab:red", label="std nonlinear (of the estimate)")
-    magnitude.plot(f, _db(robust.var_noise), ":", color="tab:green", label="std noise (of the estimate)")
+    magnitude.plot(f, power_db(robust.var_nl / M), "--", color="tab:red", label="std nonlinear (of the estimate)")
+    magnitude.plot(f, power_db(robust.var_noise), ":", color="tab:green", label="std noise (of the estimate)")
     if level.fast is not None:
-        magnitude.plot(f, _db(level.fast.var_nl / level.fast.n_runs), "-.", color="tab:orange",
+        magnitude.plot(f, power_db(level.fast.var_nl / level.fast.n_runs), "-.", color="tab:orange",
                        label="fast method: std nonlinear" + (" (odd)" if level.lines.odd_grid else ""))
         if level.fast.var_nl_even is not None:
-            magnitude.plot(f, _db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
+            magnitude.plot(f, power_db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
                            label="fast method: std nonlinear (even)")
     magnitude.set_xlabel("frequency (Hz)")
     magnitude.set_ylabel(f"|G_BLA|, std ({units.ratio_db('y', 'u')})")
@@ -103,7 +97,7 @@ def levels_figure(levels: list[LevelResult], units: Units):
     """|G_BLA| per level, and band-mean nonlinear and noise variances versus the rms input."""
     figure, (curves, trend) = _figure(2)
     for level in levels:
-        curves.plot(level.lines.frequency(level.lines.excited), _db(np.abs(level.robust.G) ** 2),
+        curves.plot(level.lines.frequency(level.lines.excited), power_db(np.abs(level.robust.G) ** 2),
                     label=f"u rms {units.value(format(level.u_rms, '.3g'), 'u')}")
     curves.set_xlabel("frequency (Hz)")
     curves.set_ylabel(f"|G_BLA| ({units.ratio_db('y', 'u')})")

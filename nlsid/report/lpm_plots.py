@@ -9,21 +9,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
-from nlsid.report.bla_plots import _db, _figure
+from nlsid.report.axes import FIGURE_HEIGHT, plain_log_ticks, power_db, unwrapped_phase
 from nlsid.report.units import Units
-from nlsid.report.vector import band
+from nlsid.report.vector import band, new_figure
 
 
 def lpm_figure(stored: dict, probability: float, units: Units):
     """The figure of one stored ``lpm_levels`` group (nlsid.io.bla_file.read_bla)."""
-    figure, (magnitude, phase) = _figure(rows=2)
+    figure, (magnitude, phase) = new_figure(2, height=FIGURE_HEIGHT)
     f, G = stored["frequency"], stored["G"]
     radius = stored["radius"]
-    magnitude.plot(f, _db(np.abs(G) ** 2), color="k", linewidth=1, label="|G| (LPM)")
-    band(magnitude, f, _db(np.maximum(np.abs(G) - radius, 0.0) ** 2), _db((np.abs(G) + radius) ** 2),
+    magnitude.plot(f, power_db(np.abs(G) ** 2), color="k", linewidth=1, label="|G| (LPM)")
+    band(magnitude, f, power_db(np.maximum(np.abs(G) - radius, 0.0) ** 2), power_db((np.abs(G) + radius) ** 2),
          f"{probability:.0%} bounds", color="tab:blue", alpha=0.25, linewidth=0)
-    magnitude.plot(f, _db(stored["var_G"]), color="tab:red", linewidth=0.8,
+    magnitude.plot(f, power_db(stored["var_G"]), color="tab:red", linewidth=0.8,
                    label="std of G: noise + distortion (upper bound of noise)")
     magnitude.set_ylabel(f"|G|, std ({units.ratio_db('y', 'u')})")
     magnitude.legend(fontsize=8, loc="best")
