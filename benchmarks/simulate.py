@@ -66,7 +66,7 @@ from nlsid.models import from_config
 from nlsid.models.controller import feedforward, tustin
 from nlsid.models.from_config import Plant
 from nlsid.simulate.batch import simulate_all
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 from nlsid.simulate.sweep import load_points
 
 CONFIG = Path(__file__).resolve().parent.parent / "configs" / "model_stage_lugre.yaml"

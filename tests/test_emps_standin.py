@@ -31,7 +31,7 @@ from nlsid.io import model_config as mc  # noqa: E402
 from nlsid.io.recording import write_recording  # noqa: E402
 from nlsid.io.run import Run  # noqa: E402
 from nlsid.models import from_config  # noqa: E402
-from nlsid.simulate.engine import simulate_run  # noqa: E402
+from nlsid.simulate.runs import simulate_run  # noqa: E402
 
 AXIS = {
     "model": {"type": "mass_spring_damper", "mass": 70.0, "damping": 150.0, "gain": E.GAIN, "force_offset": 0.0,

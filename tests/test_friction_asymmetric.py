@@ -23,7 +23,7 @@ from nlsid.io.model_config import SimulateConfig
 from nlsid.io.run import Run
 from nlsid.models import forces
 from nlsid.models.from_config import closed_loop, model
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 
 M = 1.0
 FS = 100.0  # Hz: Ts = 10 ms

@@ -30,7 +30,7 @@ from nlsid.errors import InputError  # noqa: E402
 from nlsid.io import model_config as mc  # noqa: E402
 from nlsid.io.run import Run  # noqa: E402
 from nlsid.models import from_config  # noqa: E402
-from nlsid.simulate.engine import simulate_run  # noqa: E402
+from nlsid.simulate.runs import simulate_run  # noqa: E402
 
 FS = 1000.0
 TS = 1.0 / FS

@@ -16,7 +16,7 @@ from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
 from nlsid.models.blocks import static_map
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 
 N = 1024
 K0 = 5          # the sine sits on line 5; harmonics up to 3 * 5 = 15 << N / 2

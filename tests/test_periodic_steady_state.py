@@ -22,7 +22,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from diagnose_cases import FS, N, excitation  # noqa: E402
 from nlsid.diagnose.simulation import ModelRunner  # noqa: E402
 from nlsid.fit.extension import FreeParameter, fit_free_parameters  # noqa: E402
-from nlsid.simulate.engine import lead_periods, simulate_run  # noqa: E402
+from nlsid.simulate.engine import lead_periods  # noqa: E402
+from nlsid.simulate.runs import simulate_run  # noqa: E402
 
 DAMPING = 2.0  # damping ratio 0.005 at 31.8 Hz: a transient decays by e only after 1 s = one period
 MODEL = {"model": {"type": "mass_spring_damper", "mass": 1.0, "damping": DAMPING, "stiffness": 4e4, "gain": 1e4}}

@@ -19,7 +19,8 @@ from nlsid.errors import InputError
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
-from nlsid.simulate.engine import Timing, closed_loop_poles, simulate_run
+from nlsid.simulate.engine import Timing, closed_loop_poles
+from nlsid.simulate.runs import simulate_run
 from nlsid.models.controller import tustin
 
 FS, N = 1000.0, 1000

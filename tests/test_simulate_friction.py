@@ -19,7 +19,7 @@ from nlsid.io.run import Run
 from nlsid.models import forces
 from nlsid.models.from_config import Force, Plant
 from nlsid.models.mechanical import mass_spring_damper
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 
 
 def force_element(kind, params, mech, signal="velocity"):

@@ -18,7 +18,7 @@ from nlsid.io.run import Run
 from nlsid.models.from_config import Plant
 from nlsid.models.lti import from_matrices, from_transfer_function, from_zpk
 from nlsid.models.mechanical import two_mass_stage
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 
 FS, N = 1000.0, 1000
 BINS = np.array([1, 3, 7, 20, 51, 130, 333, 480])

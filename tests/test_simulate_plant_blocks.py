@@ -22,7 +22,7 @@ from nlsid.errors import InputError
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.sweep import load_points
 

@@ -27,7 +27,7 @@ from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
 from nlsid.simulate import engine
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 
 FS = 1000.0
 M1, M2, K, C, GAIN = 1.0, 0.5, 2.0e4, 40.0, 5.0

@@ -95,7 +95,7 @@ class ModelRunner:
     def simulate(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None,
                  excite: bool = True) -> Run:
         """The model's noise-free response to ``run`` (plus the optional disturbances, see module)."""
-        from nlsid.simulate.engine import simulate_run
+        from nlsid.simulate.runs import simulate_run
         from nlsid.simulate.noise import Noise
 
         source = self.excitation(run)
@@ -121,7 +121,7 @@ class ModelRunner:
         states, :mod:`nlsid.simulate.structure_state`), None where none is fitted (a periodic
         run, a mode too slow for the record)."""
         from nlsid.models.from_config import Plant
-        from nlsid.simulate.engine import simulate_run
+        from nlsid.simulate.runs import simulate_run
         from nlsid.simulate.initial_state import estimate
         from nlsid.simulate.noise import Noise
 

@@ -19,7 +19,7 @@ from nlsid.errors import InputError
 from nlsid.io.run import Run
 from nlsid.models import from_config
 from nlsid.models.from_config import ClosedLoop
-from nlsid.simulate.engine import simulate_run
+from nlsid.simulate.runs import simulate_run
 from nlsid.simulate.noise import NoiseLevels, draw, run_streams
 from nlsid.simulate.sweep import SweepPoint
 from nlsid.simulate.threads import thread_count
@@ -58,7 +58,7 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
                  step: Callable[[], None] | None = None, steady: bool = False) -> list[Run]:
     """Simulate each excitation run for each sweep point, in :func:`thread_count` threads;
     ``seed`` overrides the config's seed;
-    ``steady``: periodic runs in their periodic steady state (:func:`nlsid.simulate.engine.simulate_run`)."""
+    ``steady``: periodic runs in their periodic steady state (:func:`nlsid.simulate.runs.simulate_run`)."""
     models = [build(p) for p in points]
     jobs = [(run, i * len(points) + j, j) for i, run in enumerate(runs) for j in range(len(points))]
     levels = [_levels(p) for p in points]

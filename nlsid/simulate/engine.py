@@ -399,33 +399,3 @@ def with_lead(run: Run, count: int) -> Run:
     return dataclasses.replace(run, u=_lead(run.u, run.period, count), y=_lead(run.y, run.period, count),
                                r=_lead(run.r, run.period, count),
                                channels={k: _lead(v, run.period, count) for k, v in run.channels.items()})
-
-
-def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, substeps: int | None,
-                 noise: Noise | None = None, steady: bool = False) -> Run:
-    """Simulate one run; ``noise`` defaults to none. ``steady`` (the run as it was measured): a
-    periodic run is simulated in its periodic steady state, as if its excitation had run
-    :func:`lead_periods` more periods before it (each signal's first period repeated ahead of it,
-    then cut off again); an arbitrary record with a measured ``y`` from the initial state that
-    fits its first samples (a plant's: :mod:`nlsid.simulate.initial_state`; a block structure's
-    filters': :mod:`nlsid.simulate.structure_state`)."""
-    noise = noise or Noise.zero(run.n_samples)
-    count = lead_periods(model, loop, run) if steady else 0
-    if count:
-        original, m = run, count * run.period
-        run = with_lead(run, count)
-        noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
-    out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
-           else simulate_plant(model, loop, run, substeps, noise))
-    if steady and run.period is None and isinstance(model, Plant):
-        from nlsid.simulate.initial_state import with_initial_state
-
-        return with_initial_state(model, loop, run, out)
-    if steady and run.period is None:
-        from nlsid.simulate.structure_state import with_initial_states
-
-        return with_initial_states(model, run, substeps, noise, out)
-    if not count:
-        return out
-    return dataclasses.replace(out, u=out.u[m:], y=None if out.y is None else out.y[m:],
-                               r=None if out.r is None else out.r[m:], channels=original.channels)

@@ -3,7 +3,7 @@
 A record that does not start at rest (cut from a longer run, a machine already moving) holds at its
 start the free response of the system to the state it was in. Simulated from rest, a model misses
 that transient, and a fit of its parameters would bend them to explain it. So where the output is
-measured, an arbitrary record is simulated "as measured" (:func:`nlsid.simulate.engine.simulate_run`
+measured, an arbitrary record is simulated "as measured" (:func:`nlsid.simulate.runs.simulate_run`
 with ``steady``) from the initial state that fits its first samples best:
 
     y_sim = y_rest + O x0,   x0 = argmin || y[0:L] - y_rest[0:L] - O x0 ||,
@@ -34,6 +34,8 @@ import numpy as np
 from nlsid.io.run import Run
 from nlsid.models import blocks
 from nlsid.models.from_config import ClosedLoop, Offsets, Plant
+from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate, _loop_decay_rate, simulate_plant
+from nlsid.simulate.noise import Noise
 
 RECORD_SHARE = 0.25  # the free response must decay within this share of the record
 
@@ -41,7 +43,6 @@ RECORD_SHARE = 0.25  # the free response must decay within this share of the rec
 def transient_length(plant: Plant, loop: ClosedLoop | None, run: Run) -> int | None:
     """Samples in which the slowest mode of the linear dynamics decays to STEADY_TOLERANCE, or None
     where that is longer than RECORD_SHARE of the record (or never)."""
-    from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate, _loop_decay_rate
 
     sigma = (_loop_decay_rate(plant, loop, run.fs, run.n_samples) if loop is not None
              else _decay_rate(plant.ss, run.fs))
@@ -54,9 +55,6 @@ def transient_length(plant: Plant, loop: ClosedLoop | None, run: Run) -> int | N
 def free_responses(plant: Plant, loop: ClosedLoop | None, run: Run, length: int) -> np.ndarray:
     """(length, n): the recorded output of the plant's linear dynamics from each unit initial state
     (module docstring), excitation zero."""
-    from nlsid.simulate.engine import simulate_plant
-    from nlsid.simulate.noise import Noise
-
     linear = dataclasses.replace(plant, forces=[], input_block=blocks.encode(None), output_block=blocks.encode(None),
                                  offsets=Offsets(), force_bias=0.0)
     rest = Run(run.run_id, run.fs, "arbitrary", np.zeros(length))

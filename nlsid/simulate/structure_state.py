@@ -37,6 +37,7 @@ import numpy as np
 from nlsid.io.run import Run
 from nlsid.models.from_config import Structure
 from nlsid.models.lti import StateSpace, delay_samples
+from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate, _delay, _filter, simulate_structure, structure_stages
 from nlsid.simulate.initial_state import RECORD_SHARE, InitialState
 from nlsid.simulate.noise import Noise
 
@@ -45,7 +46,6 @@ MAX_EVALUATIONS = 60  # residual evaluations of the inner states' search at most
 
 def transient_length(structure: Structure, run: Run) -> int | None:
     """L of the module docstring, or None where it exceeds RECORD_SHARE of the record (or never ends)."""
-    from nlsid.simulate.engine import STEADY_TOLERANCE, _decay_rate
 
     longest = 0
     for branch in structure.branches:
@@ -76,7 +76,6 @@ def _head(run: Run, noise: Noise, length: int) -> tuple[Run, Noise]:
 
 def _free_response(stage: StateSpace, fs: float, substeps: int, length: int) -> np.ndarray:
     """(length, n): the stage's output from each unit state, input zero, read every sample."""
-    from nlsid.simulate.engine import _delay, _filter
 
     m = substeps
     delay = _delay(stage, fs, length, "model") * m
@@ -101,8 +100,6 @@ def _coordinates(response: np.ndarray) -> np.ndarray:
 def fit_states(structure: Structure, run: Run, substeps: int | None, noise: Noise) -> list[np.ndarray] | None:
     """The stage states of the module docstring, in engine order; None where none are fitted."""
     from scipy.optimize import least_squares
-
-    from nlsid.simulate.engine import simulate_structure, structure_stages
 
     stages = structure_stages(structure)
     length = transient_length(structure, run)
@@ -142,7 +139,6 @@ def fit_states(structure: Structure, run: Run, substeps: int | None, noise: Nois
 def with_initial_states(structure: Structure, run: Run, substeps: int | None, noise: Noise, rest: Run) -> Run:
     """The structure on ``run`` from the stage states fitted to its measured output; ``rest`` (its
     simulation from rest) where none are fitted."""
-    from nlsid.simulate.engine import simulate_structure
 
     fitted = fit_states(structure, run, substeps, noise)
     if fitted is None:
@@ -154,7 +150,6 @@ def estimate(structure: Structure, run: Run, substeps: int | None) -> InitialSta
     """The fitted stage states as an :class:`~nlsid.simulate.initial_state.InitialState` (noise-free
     simulation): ``x0`` the stages' states one after the other (engine order), ``transient`` what
     they change in the output over the L samples; None where none are fitted."""
-    from nlsid.simulate.engine import simulate_structure
 
     noise = Noise.zero(run.n_samples)
     fitted = fit_states(structure, run, substeps, noise)
