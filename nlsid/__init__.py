@@ -24,6 +24,11 @@ _FACE = {
     "read": "nlsid.stages.recording",
     "bla": "nlsid.stages.bla",
     "BlaResult": "nlsid.stages.bla",
+    "hosidf": "nlsid.stages.hosidf",
+    "HosidfResult": "nlsid.stages.hosidf",
+    "design": "nlsid.stages.design",
+    "Excitation": "nlsid.stages.design",
+    "Model": "nlsid.stages.model",
 }
 
 __all__ = ["__version__", *_FACE]
