@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf",
-                "nlsid.stages.design", "nlsid.stages.model")
+FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf")
 
 
 def test_api_page_examples_run(monkeypatch):
