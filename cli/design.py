@@ -24,72 +24,20 @@ def design(config: str, output: str, force: bool, as_json: bool) -> None:
     \b
       nlsid design configs/stage_design.yaml -o excitation.h5
     """
-    import numpy as np
-
-    from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix
-    from nlsid.io.config import config_error, load_yaml, validate
-    from nlsid.io.design_config import DesignConfig
-    from nlsid.io.provenance import provenance
-    from nlsid.io.recording import write_recording
-    from nlsid.signals.design import design_runs, level_key, run_count
-    from nlsid.signals.multisine import crest_factor
+    from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
+    from nlsid.stages.design import design as run_design, parse
 
     check_suffix(output, RECORDING_SUFFIXES)
-    data, lines = load_yaml(config)
-    cfg = validate(data, DesignConfig, config, lines)
-    runs_meta = []
-
-    def collect(runs):
-        with progress("designing", run_count(cfg)) as step:
-            for run in runs:
-                if not np.all(np.isfinite(run.u)):  # a level near the float range overflows
-                    what = "rms" if run.kind == "multisine" else "amplitude"
-                    raise config_error(config, lines, level_key(cfg, run),
-                                       f"{what} {run.level:g} gives non-finite samples (float overflow in run "
-                                       f"{run.run_id}); nothing was written")
-                one_period = run.u[: run.period]
-                runs_meta.append({"run": run.run_id, "kind": run.kind, "level": run.level,
-                                  "frequency": run.frequency, "crest_factor": crest_factor(one_period)})
-                step()
-                yield run
-
-    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused in collect(), by its key
-        write_recording(output, collect(design_runs(cfg)), provenance=provenance(config_paths=[config]), force=force)
-    summary = _summary(cfg, runs_meta, output)
+    source = parse(config)
+    check_writable(output, force)
+    with progress("designing", source.run_count) as step:
+        excitation = run_design(source, on_run=lambda run: step())
+    excitation.write(output, force=force)
+    summary = {"output": output, **excitation.design}
     if as_json:
         emit_json(summary)
     else:
         _print_summary(summary)
-
-
-def _summary(cfg, runs_meta: list[dict], output: str) -> dict:
-    """The --json summary of a design (layout in docs/formats.md); ``cfg`` is the DesignConfig."""
-    from nlsid.signals.design import plan_lines
-
-    summary: dict = {"output": output, "fs": cfg.fs, "seed": cfg.seed, "runs": len(runs_meta)}
-    duration = 0.0
-    if cfg.multisine is not None:
-        m = cfg.multisine
-        plan = plan_lines(m, cfg.fs, cfg.seed)
-        crest = [r["crest_factor"] for r in runs_meta if r["kind"] == "multisine"]
-        summary["multisine"] = {
-            "period": m.period, "frequency_resolution": cfg.fs / m.period, "lines": m.lines,
-            "excited_bins": plan.excited, "detection_bins": plan.detection,
-            "excited_frequency_range": [plan.excited[0] * cfg.fs / m.period, plan.excited[-1] * cfg.fs / m.period],
-            "levels": m.levels(), "realizations": m.realizations, "periods": m.periods,
-            "transient_periods": m.transient_periods, "crest_factors": crest,
-        }
-        duration += len(crest) * (m.periods + m.transient_periods) * m.period / cfg.fs
-    if cfg.sines is not None:
-        s = cfg.sines
-        summary["sines"] = {
-            "period": s.period, "frequencies": s.frequency_values(), "amplitudes": s.amplitude_values(),
-            "repeats": s.repeats, "periods": s.periods, "transient_periods": s.transient_periods,
-        }
-        n_sines = s.frequency_values().size * s.amplitude_values().size * s.repeats
-        duration += n_sines * (s.periods + s.transient_periods) * s.period / cfg.fs
-    summary["duration_s"] = duration
-    return summary
 
 
 def _print_summary(summary: dict) -> None:

@@ -43,20 +43,19 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
       nlsid simulate diagnosis/extended_model.yaml --excitation test.h5 --steady-state -o predicted.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
-    from nlsid.io.provenance import provenance
-    from nlsid.io.recording import read_runs, write_recording
-    from nlsid.simulate.batch import simulate_all
-    from nlsid.simulate.sweep import load_points
+    from nlsid.stages.model import Model
+    from nlsid.stages.recording import read
 
     check_suffix(output, RECORDING_SUFFIXES)
     check_writable(output, force)
-    points = load_points(config)
-    runs = read_runs(excitation, require_y=False)
+    model = Model.from_yaml(config)
+    runs = read(excitation, require_y=False)
     start = time.perf_counter()
-    with progress("simulate", len(runs) * len(points)) as step:
-        out = simulate_all(points, runs, seed=seed, workers=workers, step=step, steady=steady)
+    with progress("simulate", len(runs) * len(model.points)) as step:
+        recording = model.simulate(runs, seed=seed, workers=workers, steady=steady, on_run=step)
     seconds = time.perf_counter() - start
-    write_recording(output, out, provenance(config_paths=[config], input_paths=[excitation]), force=force)
+    recording.write(output, force=force)
+    out = recording.runs
     samples = sum(run.n_samples for run in out)
     if as_json:
         emit_json({"output": output, "runs": len(out), "samples": samples, "seconds": seconds,

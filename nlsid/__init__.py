@@ -26,6 +26,9 @@ _FACE = {
     "BlaResult": "nlsid.stages.bla",
     "hosidf": "nlsid.stages.hosidf",
     "HosidfResult": "nlsid.stages.hosidf",
+    "design": "nlsid.stages.design",
+    "Excitation": "nlsid.stages.design",
+    "Model": "nlsid.stages.model",
 }
 
 __all__ = ["__version__", *_FACE]

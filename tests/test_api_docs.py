@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf")
+FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf",
+                "nlsid.stages.design", "nlsid.stages.model")
 
 
 def test_api_page_examples_run(monkeypatch):

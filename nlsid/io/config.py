@@ -231,13 +231,15 @@ def _untagged(loc: tuple, data: Any) -> tuple:
     return tuple(out)
 
 
-def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tuple, int] | None = None) -> T:
+def validate(data: Any, schema: Type[T], path: str | os.PathLike | None, lines: dict[tuple, int] | None = None) -> T:
     """Validate loaded data against ``schema`` (and its ``check()``, if any).
 
-    Raises one :class:`InputError` naming the file, the line, the key path and what was expected.
+    Raises one :class:`InputError` naming the file, the line, the key path and what was expected
+    (``path`` None: a config given as a dict, named by its key path alone).
     """
     if data is not None and not isinstance(data, dict):
-        raise InputError(str(path), f"top level: expected a mapping of keys, got {type(data).__name__}")
+        raise InputError("top level" if path is None else str(path),
+                         f"{'' if path is None else 'top level: '}expected a mapping of keys, got {type(data).__name__}")
     try:
         config = schema.model_validate(data if data is not None else {})
         check = getattr(config, "check", None)
@@ -254,8 +256,11 @@ def validate(data: Any, schema: Type[T], path: str | os.PathLike, lines: dict[tu
     raise config_error(path, lines, key_path, message)
 
 
-def config_error(path: str | os.PathLike, lines: dict[tuple, int] | None, key_path: tuple, message: str) -> InputError:
-    """The error of a config key found wrong after validation: ``file:line: a.b[2]: message``."""
+def config_error(path: str | os.PathLike | None, lines: dict[tuple, int] | None, key_path: tuple, message: str) -> InputError:
+    """The error of a config key found wrong after validation: ``file:line: a.b[2]: message``; for a
+    config given as a dict (``path`` None) the key path is the place: ``a.b[2]: message``."""
+    if path is None:
+        return InputError(_dotted(tuple(key_path)) or "top level", message)
     line = _line_of(lines or {}, tuple(key_path))
     where = f"{path}:{line}" if line is not None else str(path)
     return InputError(where, f"{_dotted(tuple(key_path)) or 'top level'}: {message}")

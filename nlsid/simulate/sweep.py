@@ -51,9 +51,16 @@ def sweep_values(config: SimulateConfig) -> np.ndarray:
 def load_points(path: str | os.PathLike) -> list[SweepPoint]:
     """The configs to simulate: the file itself, or one per value of its sweep."""
     data, lines = load_yaml(path)
+    return config_points(data, path, lines)
+
+
+def config_points(data, path: str | os.PathLike | None, lines: dict | None = None) -> list[SweepPoint]:
+    """:func:`load_points` of loaded data; ``path`` None for a config given as a dict (its errors
+    then name the key path alone)."""
+    source, lines = ("" if path is None else str(path)), lines or {}
     config = validate_simulate_config(data, path, lines)
     if config.sweep is None:
-        return [SweepPoint({}, config, str(path), lines)]
+        return [SweepPoint({}, config, source, lines)]
     name = config.sweep.name or config.sweep.parameter
     points = []
     for value in sweep_values(config):
@@ -61,9 +68,9 @@ def load_points(path: str | os.PathLike) -> list[SweepPoint]:
         try:
             set_value(copy, config.sweep.parameter, float(value))
         except InputError as exc:
-            raise SweepPoint({}, config, str(path), lines).locate(exc) from None
+            raise SweepPoint({}, config, source, lines).locate(exc) from None
         try:
-            points.append(SweepPoint({name: float(value)}, validate_simulate_config(copy, path, lines), str(path), lines))
+            points.append(SweepPoint({name: float(value)}, validate_simulate_config(copy, path, lines), source, lines))
         except InputError as exc:
             raise InputError(exc.where, f"sweep value {value:g}: {exc.what}") from None
     return points

@@ -1,0 +1,261 @@
+"""A model in memory: a model config (``docs/configs.md``) that simulates numpy signals and recordings.
+
+``nlsid.Model.from_yaml(path)`` or ``nlsid.Model.from_dict(d)`` validates the config as ``nlsid
+simulate`` does; ``.parameters`` lists its numbers by dotted key path (``model.mass``,
+``model.nonlinearities[0].fc``, ``model.den[1]``: the paths of ``sweep.parameter`` and of
+``free:`` in ``fit --model``), ``.with_parameters`` gives a changed copy, ``.simulate`` runs it.
+The command ``nlsid simulate`` is :meth:`Model.simulate` of a recording and a ``write``.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+import re
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from nlsid.errors import InputError
+from nlsid.stages.recording import Recording
+
+#: The sections whose numbers :attr:`Model.parameters` lists (the others are noise, sweep,
+#: simulation settings and fit bounds).
+PARAMETER_SECTIONS = ("model", "closed_loop")
+
+
+class Model:
+    """A validated model config: the plant (open or closed loop), its noise, and a sweep if any.
+
+    Make one with :meth:`from_yaml` or :meth:`from_dict`; a Model is not changed in place
+    (:meth:`with_parameters` returns a new one).
+
+    Attributes
+    ----------
+    path : str or None
+        The YAML file it was read from (None for a dict or a changed copy).
+
+    Examples
+    --------
+    >>> m = Model.from_dict({"model": {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0,
+    ...                                "stiffness": 2000.0}})
+    >>> m.parameters
+    {'model.mass': 2.0, 'model.damping': 20.0, 'model.stiffness': 2000.0}
+    >>> m.with_parameters({"model.mass": 2.5}).parameters["model.mass"]
+    2.5
+    """
+
+    def __init__(self, data: Mapping[str, Any], path: str | os.PathLike | None = None, lines: dict | None = None):
+        from nlsid.models.key_paths import deep_copy
+        from nlsid.simulate.sweep import config_points
+
+        self._data = deep_copy(dict(data) if isinstance(data, Mapping) else data)  # not a mapping: refused below
+        self.path = None if path is None else str(path)
+        self._points = config_points(self._data, path, lines)
+
+    @classmethod
+    def from_yaml(cls, path: str | os.PathLike) -> "Model":
+        """Read a model config file (``configs/stage_true.yaml``).
+
+        Raises
+        ------
+        nlsid.InputError
+            A missing file, bad YAML or a bad key: ``file:line: key.path: what``.
+        """
+        from nlsid.io.config import load_yaml
+
+        data, lines = load_yaml(path)
+        return cls(data, path, lines)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Model":
+        """A model from a dict of the keys of a model config (a copy is kept).
+
+        Raises
+        ------
+        nlsid.InputError
+            A bad key, named by its key path: ``model.mass: must be > 0, got -1.0``.
+        """
+        if not isinstance(data, Mapping):
+            raise InputError("config", f"expected a mapping of keys (a dict), got {type(data).__name__}")
+        return cls(data)
+
+    @property
+    def parameters(self) -> dict[str, float | int]:
+        """The numbers of the ``model`` and ``closed_loop`` sections as written, by dotted key path
+        (``{"model.mass": 2.0, "model.nonlinearities[0].fc": 0.5, ...}``): the paths that
+        :meth:`with_parameters`, ``sweep.parameter`` and ``free:`` take. Keys left to their
+        defaults are not listed, yet :meth:`with_parameters` sets them too."""
+        out: dict[str, float | int] = {}
+        for section in PARAMETER_SECTIONS:
+            if section in self._data:
+                _numbers(self._data[section], (section,), out)
+        return out
+
+    @property
+    def points(self) -> list[dict]:
+        """What each simulation of a run adds to its ``params``: one dict per sweep value
+        (``{name: value}``), or ``[{}]`` without a sweep."""
+        return [dict(point.params) for point in self._points]
+
+    def with_parameters(self, values: Mapping[str, float]) -> "Model":
+        """A new Model with the numbers of ``values`` (dotted key path -> number) written in.
+
+        The whole config is validated again, so a value obeys the rules of a value written in
+        the file. Any key path of a number is taken (``model.damping`` also where the config
+        leaves it to its default; ``disturbances.y_noise``), except in ``sweep``.
+
+        Raises
+        ------
+        nlsid.InputError
+            Named by the key path: not a number, no such place, or a value the model refuses.
+        """
+        from nlsid.models.key_paths import set_value
+
+        data = self.to_dict()
+        for key, value in dict(values).items():
+            set_value(data, str(key), _number(str(key), value), key=str(key))
+        return Model(data)
+
+    def simulate(self, u, fs: float | None = None, seed: int | None = None, workers: int | None = None,
+                 steady: bool = False, on_run: Callable | None = None):
+        """Simulate the model on a signal or on every run of a recording.
+
+        Continuous LTI parts are run exactly for an input held between samples (zero-order hold);
+        nonlinear forces by sub-stepping (``docs/commands.md``, "Numerical method and its error").
+        The config's ``disturbances`` add their noise, drawn from ``disturbances.seed`` (or
+        ``seed``): the same numbers as ``nlsid simulate``.
+
+        Parameters
+        ----------
+        u : 1-D array, Recording, or path of a recording
+            An array: the input samples (in closed loop the reference), simulated from rest.
+            A Recording (or file): each run's u (closed loop: its r where it has one, else u), as
+            ``nlsid simulate MODEL --excitation FILE``.
+        fs : float, optional
+            Sample rate (Hz) of an array (default 1000.0); a recording carries its own.
+        seed : int, optional
+            Seed of the noise, overriding ``disturbances.seed``.
+        workers : int, optional
+            Parallel simulations (threads); default all cores (or ``NLSID_THREADS``).
+        steady : bool
+            Recording only: periodic runs in their periodic steady state (``--steady-state``).
+        on_run : callable, optional
+            Called once per simulated run (progress).
+
+        Returns
+        -------
+        numpy.ndarray or Recording
+            For an array, the output y (as measured, with the config's y noise); for a recording, a
+            Recording of one run per excitation run and sweep value (``<id>_s<k>``), with u, y (and
+            r in closed loop) and the excitation's attributes and channels.
+
+        Raises
+        ------
+        nlsid.InputError
+            A bad argument (named), or a model that cannot run on the signal (e.g. unstable).
+        """
+        if isinstance(u, Recording):
+            if fs is not None:
+                raise InputError("fs", "a Recording carries its own sample rate; give fs only with an array")
+            return self._simulate_recording(u, seed, workers, steady, on_run)
+        if isinstance(u, (str, os.PathLike)):
+            from nlsid.stages.recording import read
+
+            return self.simulate(read(u), fs, seed, workers, steady, on_run)
+        return self._simulate_array(u, 1000.0 if fs is None else fs, seed, workers, steady, on_run)
+
+    def _simulate_recording(self, rec: Recording, seed, workers, steady, on_run) -> Recording:
+        from nlsid.io.provenance import provenance
+        from nlsid.simulate.batch import simulate_all
+
+        out = simulate_all(self._points, list(rec.runs), seed=seed, workers=workers,
+                           step=None if on_run is None else (lambda: on_run()), steady=steady)
+        record = provenance(config_paths=[self.path] if self.path else [], input_paths=[rec.path] if rec.path else [])
+        return Recording(out, record)
+
+    def _simulate_array(self, u, fs, seed, workers, steady, on_run):
+        import math
+
+        from nlsid.io.run import Run, validate_signal
+        from nlsid.simulate.batch import simulate_all
+
+        if steady:
+            raise InputError("steady", "needs a Recording (its periods or its measured y); an array runs from rest")
+        if isinstance(fs, bool) or not isinstance(fs, numbers.Real) or not (math.isfinite(fs) and fs > 0):
+            raise InputError("fs", f"expected a sample rate > 0 in Hz, got {fs!r}")
+        if len(self._points) > 1:
+            raise InputError("u", f"the model sweeps {self._points[0].config.sweep.parameter} over "
+                                  f"{len(self._points)} values: simulate a Recording (one run per value)")
+        signal = validate_signal(u, "u")
+        if signal.size == 0:
+            raise InputError("u", "no samples")
+        run = Run(run_id="u", fs=float(fs), kind="arbitrary", u=signal)
+        out = simulate_all(self._points, [run], seed=seed, workers=workers,
+                           step=None if on_run is None else (lambda: on_run()))
+        return out[0].y
+
+    def to_dict(self) -> dict:
+        """The config as a dict (a copy): the keys as written, with the values set by
+        :meth:`with_parameters`."""
+        from nlsid.models.key_paths import deep_copy
+
+        return deep_copy(self._data)
+
+    def write(self, path: str | os.PathLike, force: bool = False) -> Path:
+        """Write the config as YAML (``.yaml`` or ``.yml``) atomically; an existing file only with
+        ``force``. Reading it back with :meth:`from_yaml` gives the same config."""
+        from nlsid.io.atomic import check_suffix, write_text_atomic
+
+        check_suffix(path, (".yaml", ".yml"))
+        return write_text_atomic(path, to_yaml(self._data), force=force)
+
+    def __repr__(self) -> str:
+        model = self._data.get("model", {})
+        kind = model.get("type") if isinstance(model, dict) else None
+        loop = ", closed loop" if "closed_loop" in self._data else ""
+        sweep = f", sweep of {len(self._points)}" if len(self._points) > 1 else ""
+        return f"Model({kind}{loop}{sweep}, path={self.path!r})"
+
+
+def _numbers(node, keys: tuple, out: dict) -> None:
+    """Every number (not a bool) under ``node`` by its dotted key path."""
+    from nlsid.models.key_paths import key_text
+
+    if isinstance(node, dict):
+        for key, value in node.items():
+            _numbers(value, keys + (key,), out)
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            _numbers(value, keys + (i,), out)
+    elif isinstance(node, numbers.Real) and not isinstance(node, bool):
+        out[key_text(keys)] = node
+
+
+def _number(key: str, value) -> float | int:
+    """A value for a config key as a plain Python number (numpy scalars too); an int stays an int
+    (keys such as ``closed_loop.computation_delay`` take whole numbers only)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(key, f"expected a number, got {value!r}")
+    return int(value) if isinstance(value, numbers.Integral) else float(value)
+
+
+#: Text written without quotes: names and key paths, which no YAML resolver takes for a number
+_PLAIN = re.compile(r"[A-Za-z_][A-Za-z0-9_.\[\]/-]*")
+
+
+def to_yaml(data: dict) -> str:
+    """A config as YAML text that the config loader reads back to the same data (YAML 1.2: text
+    that would read as a number, a boolean or null is quoted)."""
+    import yaml
+
+    reserved = {"true", "false", "null", "yes", "no", "on", "off", "y", "n"}
+
+    class Dumper(yaml.SafeDumper):
+        pass
+
+    def text(dumper, value: str):
+        plain = _PLAIN.fullmatch(value) is not None and value.lower() not in reserved
+        return dumper.represent_scalar("tag:yaml.org,2002:str", value, style=None if plain else '"')
+
+    Dumper.add_representer(str, text)
+    return yaml.dump(data, Dumper=Dumper, sort_keys=False, default_flow_style=False, allow_unicode=True)
