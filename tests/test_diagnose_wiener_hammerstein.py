@@ -158,13 +158,14 @@ def test_piecewise_linear_basis_is_the_block_law():
     """The hats times the knot values equal the ``piecewise_linear`` block of the simulator,
     beyond the end knots too (the end segments continued)."""
     from nlsid.io.model_config import PiecewiseLinearConfig
-    from nlsid.models.blocks import static_map
+    from nlsid.models.blocks import static_block
+    from nlsid.simulate.engine import apply_static
 
     curve = static_curve.PiecewiseLinear((-1.0, -0.2, 0.3, 1.5))
     theta = np.array([-0.7, 0.4, 1.1])
     block = static_curve.block(curve.values(theta))
     x = np.linspace(-3, 3, 301)
-    expected = static_map(PiecewiseLinearConfig(**block))(x)
+    expected = apply_static(static_block(PiecewiseLinearConfig(**block)), x)
     assert np.allclose(theta @ curve.basis(x), expected, atol=1e-12)
 
 

@@ -15,7 +15,8 @@ from scipy.special import comb
 from nlsid.io import model_config as mc
 from nlsid.io.run import Run
 from nlsid.models import from_config
-from nlsid.models.blocks import static_map
+from nlsid.models.blocks import static_block
+from nlsid.simulate.engine import apply_static
 from nlsid.simulate.runs import simulate_run
 
 N = 1024
@@ -24,8 +25,9 @@ GAMMA, PHI = 0.8, 0.4
 
 
 def block(**kw):
-    return static_map(mc.SimulateConfig.model_validate({"model": {"type": "wiener", "linear": {
+    encoded = static_block(mc.SimulateConfig.model_validate({"model": {"type": "wiener", "linear": {
         "type": "transfer_function", "num": [1.0], "den": [1.0], "domain": "discrete"}, "nonlinear": kw}}).model.nonlinear)
+    return lambda x: apply_static(encoded, x)
 
 
 def test_polynomial_block_evaluates_ascending_coefficients():

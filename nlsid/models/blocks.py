@@ -16,7 +16,8 @@ samples (a DAC's zero-order hold) the play operator's output is itself held, so 
 the samples is exact.
 
 The laws are implemented in :func:`nlsid.simulate.kernels.block` (the kernel's module, so that
-numba's on-disk cache stays current); this module encodes a block config for them.
+numba's on-disk cache stays current) and applied to a signal by
+:func:`nlsid.simulate.engine.apply_static`; this module encodes a block config for them.
 
 Kinds and parameter vectors:
 
@@ -27,7 +28,7 @@ Kinds and parameter vectors:
 
 from __future__ import annotations
 
-from typing import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,14 +49,19 @@ def encode(config) -> tuple[int, np.ndarray]:
     return kind, np.array(values(config), dtype=np.float64)
 
 
-def static_map(config) -> Callable[[np.ndarray], np.ndarray]:
-    """The block of ``config`` as a function of arrays (a backlash starts from y = 0 on each call)."""
-    from nlsid.simulate.kernels import apply_block
+@dataclass(frozen=True, eq=False)
+class StaticBlock:
+    """A nonlinear block of a block structure: its kind and parameter vector (:func:`encode`)."""
 
-    kind, params = encode(config)
+    kind: int
+    params: np.ndarray
 
-    def apply(x: np.ndarray) -> np.ndarray:
-        return apply_block(kind, params, np.ascontiguousarray(x, dtype=np.float64))
+    @property
+    def memory(self) -> bool:
+        """Whether its output depends on the input's history (the backlash; :func:`nlsid.simulate.engine.hysteretic`)."""
+        return self.kind == BACKLASH
 
-    apply.memory = kind == BACKLASH  # its output depends on the input's history (:func:`nlsid.simulate.engine.hysteretic`)
-    return apply
+
+def static_block(config) -> StaticBlock:
+    """The block of ``config`` (a backlash starts from y = 0 each time it is applied)."""
+    return StaticBlock(*encode(config))

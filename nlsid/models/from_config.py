@@ -14,14 +14,14 @@ Two kinds of model come out:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Union
+from typing import Union
 
 import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io import model_config as mc
 from nlsid.models import blocks, forces
-from nlsid.models.blocks import static_map
+from nlsid.models.blocks import StaticBlock, static_block
 from nlsid.models.controller import pid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
 from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage
@@ -71,7 +71,7 @@ class Plant:
     difference_output: bool = False
 
 
-Stage = Union[StateSpace, Callable[[np.ndarray], np.ndarray]]
+Stage = Union[StateSpace, StaticBlock]
 
 
 @dataclass(frozen=True)
@@ -182,18 +182,18 @@ def structure(config) -> Structure:
     where = "model"
     offsets = _offsets(config)
     if config.type == "wiener":
-        return Structure([[_stage_lti(config.linear, f"{where}.linear"), static_map(config.nonlinear)]], offsets)
+        return Structure([[_stage_lti(config.linear, f"{where}.linear"), static_block(config.nonlinear)]], offsets)
     if config.type == "hammerstein":
-        return Structure([[static_map(config.nonlinear), _stage_lti(config.linear, f"{where}.linear")]], offsets)
+        return Structure([[static_block(config.nonlinear), _stage_lti(config.linear, f"{where}.linear")]], offsets)
     if config.type == "wiener_hammerstein":
-        return Structure([[_stage_lti(config.first, f"{where}.first"), static_map(config.nonlinear),
+        return Structure([[_stage_lti(config.first, f"{where}.first"), static_block(config.nonlinear),
                            _stage_lti(config.second, f"{where}.second")]], offsets)
     branches = []
     for i, branch in enumerate(config.branches):
         stages: list[Stage] = []
         if branch.before is not None:
             stages.append(_stage_lti(branch.before, f"{where}.branches[{i}].before"))
-        stages.append(static_map(branch.nonlinear))
+        stages.append(static_block(branch.nonlinear))
         if branch.after is not None:
             stages.append(_stage_lti(branch.after, f"{where}.branches[{i}].after"))
         branches.append(stages)

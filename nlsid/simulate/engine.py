@@ -20,7 +20,7 @@ from nlsid.models import blocks, forces
 from nlsid.models.controller import discrete_path, feedforward, tustin, two_input
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
-from nlsid.simulate.kernels import SIZED_SAMPLES, simulate_loop
+from nlsid.simulate.kernels import SIZED_SAMPLES, apply_block, simulate_loop
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.propagation import propagation
 
@@ -281,6 +281,11 @@ def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int, x0: np.nd
                        1.0 / fs_step, Timing(delay), fs_step, None, _EMPTY_1, _EMPTY_1, x, zero, zero)[1]
 
 
+def apply_static(block: blocks.StaticBlock, x: np.ndarray) -> np.ndarray:
+    """A nonlinear block (:mod:`nlsid.models.blocks`) along the signal ``x``, a backlash from y = 0."""
+    return apply_block(block.kind, block.params, np.ascontiguousarray(x, dtype=np.float64))
+
+
 def structure_stages(structure: Structure) -> list[StateSpace]:
     """The LTI stages of a structure, branch by branch, each branch's in series order."""
     return [s for branch in structure.branches for s in branch if isinstance(s, StateSpace)]
@@ -309,7 +314,7 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
                 delay = _delay(stage, run.fs, n, "model") * m
                 signal = _filter(stage, signal, run.fs * m, delay, next(starts))
             else:
-                signal = stage(signal)
+                signal = apply_static(stage, signal)
         y += signal
     y = y[::m] + noise.y + structure.offsets.output
     _check_finite(y, run.run_id)

@@ -22,10 +22,12 @@ def no_block(key: str) -> Callable[[ModelRunner], str | None]:
 
 def block_map(block: dict) -> Callable[[np.ndarray], np.ndarray]:
     from nlsid.io.model_config import BacklashConfig, DeadzoneConfig, SaturationConfig
-    from nlsid.models.blocks import static_map
+    from nlsid.models.blocks import static_block
+    from nlsid.simulate.engine import apply_static
 
     schema = {"saturation": SaturationConfig, "deadzone": DeadzoneConfig, "backlash": BacklashConfig}[block["type"]]
-    return static_map(schema(**block))
+    encoded = static_block(schema(**block))
+    return lambda x: apply_static(encoded, x)
 
 def set_block(key: str, kind: str) -> Callable[[dict, dict], dict]:
     def extend(data: dict, values: dict) -> dict:
