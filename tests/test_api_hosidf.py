@@ -65,6 +65,20 @@ def test_static_cubic_hosidfs_are_exact():
     assert h.warnings == [] and h.units == {"u": "V", "y": "m"} and h.input_signal == "u"
 
 
+def test_the_analytic_hosidfs_of_a_model_config(tmp_path):
+    """The cubic as a Hammerstein model with a unit discrete block: Lemma 2 gives the closed form too."""
+    config = tmp_path / "cubic.yaml"
+    config.write_text("model:\n  type: hammerstein\n"
+                      f"  nonlinear: {{type: polynomial, coefficients: [0, {A1}, 0, {A3}]}}\n"
+                      "  linear: {type: transfer_function, domain: discrete, num: [1.0], den: [1.0]}\n")
+    h = nlsid.hosidf(grid_recording(), harmonics=3, model=config)
+    a = np.array(AMPLITUDES)[None, :]
+    np.testing.assert_allclose(h.analytic[:, :, 1], np.broadcast_to(A1 + 0.75 * A3 * a**2, (2, 3)), rtol=1e-12)
+    np.testing.assert_allclose(h.analytic[:, :, 3], np.full((2, 3), A3 / 4), rtol=1e-12)
+    assert np.abs(h.analytic[:, :, 2]).max() < 1e-12
+    assert h.configs == [str(config)]
+
+
 def test_noisy_cubic_within_its_measured_and_its_theoretical_variance():
     """White output noise of sd s: a period's X[k] = 2 DFT[k b]/N has E|X|^2 = 4 s^2/N, so the mean of
     R x P periods normalised by U^k has variance 4 s^2/(N R P A^(2k)) (the same for every k >= 1)."""
