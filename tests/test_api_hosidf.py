@@ -176,7 +176,13 @@ def test_the_command_is_the_function(run_cli, tmp_path):
     assert summary == h.summary()
     with pytest.raises(nlsid.InputError, match="exists"):
         h.write(written)
-    assert "<table>" in h._repr_html_() and len(h.plot()) == len(figures)
+    assert "<table>" in h._repr_html_()
+    import matplotlib.pyplot as plt
+
+    shown = h.plot()
+    assert len(shown) == len(figures) and all(plt.fignum_exists(f.number) for f in shown)
+    for figure in shown:
+        plt.close(figure)
 
 
 def test_the_command_names_its_flags(run_cli, tmp_path):

@@ -294,12 +294,18 @@ class HosidfResult:
         return out
 
     def plot(self) -> list:
-        """The figures of :meth:`figures` as matplotlib figures (for a notebook)."""
-        from nlsid.report.vector import fit_labels
+        """The figures of :meth:`figures` as pyplot figures (a notebook shows them below the cell)."""
+        import io
+
+        import matplotlib.image
+        import matplotlib.pyplot as plt
 
         out = []
-        for _, figure in self._figures():
-            fit_labels(figure)
+        for name, png in self.figures().items():
+            figure, axes = plt.subplots(figsize=(8, 6))
+            axes.imshow(matplotlib.image.imread(io.BytesIO(png), format="png"))
+            axes.set_axis_off()
+            axes.set_title(name)
             out.append(figure)
         return out
 
