@@ -1,7 +1,7 @@
 """``nlsid batch``: a single-recording pipeline over many recordings, on local processes or a
 Dask cluster, resumable, with a results table and a fleet page.
 
-The heavy parts live in :mod:`nlsid.batch` and are imported inside the command (importing the
+The heavy parts live in :mod:`nlsid.cli.fleet` and are imported inside the command (importing the
 CLI loads click alone; tests/test_cli_startup.py).
 """
 
@@ -60,9 +60,9 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
       nlsid batch fleet.yaml --inputs rec/ -o fleet/ --scheduler tcp://10.0.0.1:8786
     """
     from nlsid import __version__
-    from nlsid.batch.inputs import find_recordings
-    from nlsid.batch.pipeline import BatchPipeline, check_first, is_up_to_date
-    from nlsid.batch.task import TaskSpec
+    from nlsid.cli.fleet.inputs import find_recordings
+    from nlsid.cli.fleet.pipeline import BatchPipeline, check_first, is_up_to_date
+    from nlsid.cli.fleet.task import TaskSpec
     from nlsid.errors import InputError
 
     ctx = click.get_current_context()
@@ -97,7 +97,7 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
         if scheduler is not None:  # an unreachable scheduler is one line, the batch folder untouched
             cluster = _connect(scheduler, source, __version__)
         else:  # the fork server imports while the pipeline is checked
-            from nlsid.batch.pool import LocalPool
+            from nlsid.cli.fleet.pool import LocalPool
 
             LocalPool.start_server(batch_pipeline.stages, _local_workers(workers, len(recordings)))
     try:
@@ -112,7 +112,7 @@ def batch(pipeline: str, patterns: tuple[str, ...], lists: tuple[str, ...], outp
             try:
                 records = _run(executor, todo, len(recordings), len(stored))
             except BaseException:
-                from nlsid.batch.pool import LocalPool
+                from nlsid.cli.fleet.pool import LocalPool
 
                 if isinstance(executor, LocalPool):  # its workers are ended: their work folders go (a cluster's finish)
                     _remove_work_folders(fleet)
@@ -209,7 +209,7 @@ def _remove_work_folders(fleet: Path) -> int:
     work folders went."""
     import shutil
 
-    from nlsid.batch.task import is_work_folder
+    from nlsid.cli.fleet.task import is_work_folder
 
     removed, parents = 0, set()
     for parent, folders, _ in os.walk(fleet):
@@ -232,7 +232,7 @@ def _remove_work_folders(fleet: Path) -> int:
 
 def _connect(scheduler: str, source: str, version: str):
     """The Dask cluster of the scheduler, its workers checked (nothing is written)."""
-    from nlsid.batch.cluster import DaskCluster
+    from nlsid.cli.fleet.cluster import DaskCluster
 
     return DaskCluster(scheduler, source, version, settings().verbose)
 
@@ -244,7 +244,7 @@ def _executor(todo: list, workers: int | None, cluster, fleet: Path, stages: lis
     if cluster is not None:
         cluster.check_folders(fleet, Path(todo[0].recording))
         return cluster, cluster.notes
-    from nlsid.batch.pool import LocalPool
+    from nlsid.cli.fleet.pool import LocalPool
 
     return LocalPool(_local_workers(workers, len(todo)), stages), []
 
@@ -292,8 +292,8 @@ def _run(executor, todo: list, total: int, skipped: int) -> dict[str, dict]:
 
 def _finish(pipeline, recordings, fleet: Path, stored: dict, records: dict, executor, notes: list[str], removed: int,
             parameter: str | None, fail_if_drift: bool, seconds: float, version: str) -> dict:
-    from nlsid.batch import results as res
-    from nlsid.batch.fleet_page import render_page
+    from nlsid.cli.fleet import results as res
+    from nlsid.cli.fleet.fleet_page import render_page
     from nlsid.io.atomic import write_text_atomic
 
     rows = []

@@ -11,7 +11,7 @@ A step's output is the value of its ``-o``/``--output``, and its figures (``--pl
 are outputs too; its inputs are every other argument that names an existing file or folder, or
 the output of an earlier step, plus the pipeline config itself. A step runs when an output is
 missing or its ``-o`` output is older than one of its inputs (as make does), or when an input's
-content differs from the stamp recorded when the step last ran (:mod:`nlsid.batch.stamps`, kept in
+content differs from the stamp recorded when the step last ran (:mod:`nlsid.cli.fleet.stamps`, kept in
 ``.<output name>.inputs.json`` beside the output: a file replaced by one with an older
 modification time), and then overwrites them; otherwise it is skipped. The whole pipeline is
 checked before its first step runs (:func:`check_steps`); the first failing step stops it with
@@ -118,7 +118,7 @@ def inputs_record_path(step: Step) -> Path:
 def inputs_changed(step: Step) -> bool:
     """Whether an input's content differs from its stamp of when the step last ran; False when
     there is no readable record (outputs of an earlier nlsid: the modification times decide)."""
-    from nlsid.batch.stamps import first_changed
+    from nlsid.cli.fleet.stamps import first_changed
 
     try:
         data = json.loads(inputs_record_path(step).read_text(encoding="utf-8"))
@@ -157,7 +157,7 @@ def run(pipeline: str, always: bool, as_json: bool) -> None:
     check_steps(cli, pipeline, root, steps)
     console = settings().console
     done = []
-    from nlsid.batch.stamps import stamps
+    from nlsid.cli.fleet.stamps import stamps
 
     for step in steps:
         if not always and up_to_date(step) and not inputs_changed(step):

@@ -245,7 +245,7 @@ def test_when_a_recording_was_recorded(project, monkeypatch):
     modification time; a time zone is honoured, a missing one means UTC, a bad value is an error."""
     import h5py
 
-    from nlsid.batch import recorded as rec_module
+    from nlsid.cli.fleet import recorded as rec_module
     from nlsid.errors import InputError
     from nlsid.io import mcap_recording
     from nlsid.io.recording import read_runs, write_recording
@@ -309,7 +309,7 @@ def test_the_fork_server_preloads_modules_that_exist_for_every_stage():
     workers would silently pay the import in their first task again)."""
     import importlib
 
-    from nlsid.batch.pool import PRELOAD, STAGE_PRELOAD, preload_modules
+    from nlsid.cli.fleet.pool import PRELOAD, STAGE_PRELOAD, preload_modules
     from nlsid.cli.main import cli
 
     assert set(STAGE_PRELOAD) == set(cli.commands) - {"run", "batch", "info"}
@@ -333,7 +333,7 @@ def test_a_progress_bar_with_eta_on_a_terminal(project):
 
 def test_the_example_batch_pipeline_checks_on_the_sample_recording(tmp_path):
     """configs/batch_stage.yaml (docs/configs.md) passes every check `nlsid batch` makes before work."""
-    from nlsid.batch.pipeline import BatchPipeline, check_first
+    from nlsid.cli.fleet.pipeline import BatchPipeline, check_first
 
     root = Path(__file__).parents[1]
     pipeline = BatchPipeline(str(root / "configs" / "batch_stage.yaml"))
@@ -346,8 +346,8 @@ def test_an_unexpected_exception_in_a_step_is_the_recordings_error_and_runs_agai
     log, the folder published all the same; such a record is never up to date."""
     import nlsid.cli.run
     from nlsid import __version__
-    from nlsid.batch.pipeline import BatchPipeline, is_up_to_date
-    from nlsid.batch.task import TaskSpec, run_task
+    from nlsid.cli.fleet.pipeline import BatchPipeline, is_up_to_date
+    from nlsid.cli.fleet.task import TaskSpec, run_task
 
     def broken(cli, root, step):
         raise RuntimeError("boom")

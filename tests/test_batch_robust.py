@@ -95,7 +95,7 @@ def free_port() -> int:
 @pytest.mark.parametrize("fleet_exists", [False, True])
 def test_an_unreachable_scheduler_is_one_line_and_nothing_is_written(project, fleet_exists):
     pytest.importorskip("distributed")
-    from nlsid.batch.cluster import CONNECT_TIMEOUT_S
+    from nlsid.cli.fleet.cluster import CONNECT_TIMEOUT_S
 
     fleet = project / "fleet"
     if fleet_exists:
@@ -238,8 +238,8 @@ def test_a_bad_recording_replaced_by_a_good_copy_with_an_old_time_runs_again(run
 def test_a_rerun_whose_recording_was_only_touched_reads_it_once(run_cli, project):
     """Stamps: a recording whose time changed but whose content did not is hashed and found the
     same (it runs again by its time only when it is newer than the outputs, as before)."""
-    from nlsid.batch.pipeline import BatchPipeline, is_up_to_date
-    from nlsid.batch.stamps import sha256
+    from nlsid.cli.fleet.pipeline import BatchPipeline, is_up_to_date
+    from nlsid.cli.fleet.stamps import sha256
 
     fleet = project / "fleet"
     recording = project / "rec" / "A" / "night0.h5"
@@ -305,7 +305,7 @@ def test_stamps_of_a_folder_see_content_new_and_removed_files(tmp_path):
     """A folder input (e.g. the diagnosis folder a `report` step reads) is stamped file by file."""
     import hashlib
 
-    from nlsid.batch.stamps import changed, first_changed, stamp, stamps
+    from nlsid.cli.fleet.stamps import changed, first_changed, stamp, stamps
 
     folder = tmp_path / "diagnosis"
     (folder / "runs").mkdir(parents=True)

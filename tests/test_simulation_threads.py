@@ -55,7 +55,7 @@ def test_batch_workers_start_with_cores_over_n_threads():
     server for 2 workers gives each worker NLSID_THREADS = cores // 2 (at least 1)."""
     code = (
         "import os, subprocess\n"
-        "from nlsid.batch.pool import LocalPool\n"
+        "from nlsid.cli.fleet.pool import LocalPool\n"
         "context = LocalPool.start_server(('bla',), 2)\n"
         "expected = str(max(1, (os.cpu_count() or 1) // 2))\n"
         "p = context.Process(target=subprocess.check_call, args=(['sh', '-c', 'test \"$NLSID_THREADS\" = ' + expected],))\n"

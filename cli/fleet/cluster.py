@@ -6,7 +6,7 @@ nlsid version; then (:meth:`DaskCluster.check_folders`, once the batch folder ex
 task is sent) that every worker sees the output folder and the first recording at the same paths (a
 shared file system). Each failure is one line naming
 the worker and what to do. A worker with more than one thread runs its batch tasks one after
-another (:mod:`nlsid.batch.task`): a note says to start workers with ``--nthreads 1``.
+another (:mod:`nlsid.cli.fleet.task`): a note says to start workers with ``--nthreads 1``.
 
 A worker lost while running a task (killed, its machine gone) costs only that task: the
 scheduler gives it to another worker (up to ``distributed.scheduler.allowed-failures`` times, 3 by

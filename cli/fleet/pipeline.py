@@ -124,7 +124,7 @@ def is_up_to_date(pipeline: BatchPipeline, recording: Path, folder: Path, name: 
 
     Up to date: ``task.json`` exists and is newer than the recording, the pipeline file and every
     other input of the steps outside the folder, and these inputs are as stamped in the record's
-    ``inputs`` when the task ran (:mod:`nlsid.batch.stamps`: a recording replaced by another file
+    ``inputs`` when the task ran (:mod:`nlsid.cli.fleet.stamps`: a recording replaced by another file
     with an older modification time runs again); and, unless the record is of a bad input (whose
     later steps never ran), every step's outputs exist and are newer than its inputs (as ``nlsid
     run`` decides). Records of an unexpected error (status ``error``) are never up to date.

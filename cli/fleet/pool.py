@@ -50,8 +50,8 @@ _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS
 _PATH_VARIABLES = ("PYTHONPATH", "PYTHONSAFEPATH")  # set for the fork server only; its workers put them back
 # imported by the fork server before it forks the workers (a name that fails to import is skipped
 # by multiprocessing; tests/test_batch.py imports every one)
-PRELOAD = ("numpy", "scipy.optimize", "h5py", "yaml", "pydantic", "numba", "nlsid.cli.main", "nlsid.batch.task",
-           "nlsid.batch.pool", "nlsid.io.recording", "nlsid.io.model_config")
+PRELOAD = ("numpy", "scipy.optimize", "h5py", "yaml", "pydantic", "numba", "nlsid.cli.main", "nlsid.cli.fleet.task",
+           "nlsid.cli.fleet.pool", "nlsid.io.recording", "nlsid.io.model_config")
 STAGE_PRELOAD = {
     "design": ("nlsid.signals.design",),
     "import": ("nlsid.io.importers",),
@@ -83,7 +83,7 @@ class WorkerStartError(NlsidError):
 # cannot be imported still reports why, in one line, instead of dying with a traceback.
 _BOOTSTRAP = """
 try:
-    from nlsid.batch.pool import _worker_main
+    from nlsid.cli.fleet.pool import _worker_main
 except Exception as exc:
     try:
         conn.send(("cannot start", f"{type(exc).__name__}: {exc}"))
