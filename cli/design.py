@@ -25,15 +25,18 @@ def design(config: str, output: str, force: bool, as_json: bool) -> None:
       nlsid design configs/stage_design.yaml -o excitation.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
-    from nlsid.stages.design import design as run_design, parse
+    from nlsid.io.provenance import provenance
+    from nlsid.io.recording import write_recording
+    from nlsid.stages.design import iter_runs, parse
 
     check_suffix(output, RECORDING_SUFFIXES)
     source = parse(config)
     check_writable(output, force)
-    with progress("designing", source.run_count) as step:
-        excitation = run_design(source, on_run=lambda run: step())
-    excitation.write(output, force=force)
-    summary = {"output": output, **excitation.design}
+    design = {}
+    with progress("designing", source.run_count) as step:  # written run by run: nlsid.design() keeps all
+        write_recording(output, iter_runs(source, design, on_run=lambda run: step()),
+                        provenance=provenance(config_paths=[config]), force=force)
+    summary = {"output": output, **design}
     if as_json:
         emit_json(summary)
     else:

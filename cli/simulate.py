@@ -42,6 +42,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
       nlsid simulate configs/model_stage_lugre.yaml --excitation excitation.h5 -o recording.h5
       nlsid simulate diagnosis/extended_model.yaml --excitation test.h5 --steady-state -o predicted.h5
     """
+    import nlsid.simulate.batch  # noqa: F401  (the simulator loaded before the clock: "seconds" is the simulation's)
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
     from nlsid.stages.model import Model
     from nlsid.stages.recording import read

@@ -258,3 +258,18 @@ def test_design_is_reproducible_and_the_seed_draws_the_phases():
     assert np.array_equal(a[0].u, b[0].u)
     assert not np.array_equal(a[0].u, c[0].u)
     assert isinstance(a, nlsid.Recording) and a.path is None and a.provenance["configs"] == {}
+
+
+def test_iter_runs_makes_one_run_at_a_time_and_then_the_summary():
+    from nlsid.stages.design import iter_runs
+
+    config = {"fs": 1000.0, "seed": 2, "multisine": {"period": 128, "band": [2.0, 200.0], "realizations": 3,
+                                                     "rms_levels": [1.0, 2.0]}}
+    made, summary = [], {}
+    runs = iter_runs(config, summary, on_run=made.append)
+    first = next(runs)
+    assert [run.run_id for run in made] == [first.run_id] and summary == {}  # nothing made ahead
+    rest = list(runs)
+    whole = nlsid.design(config)
+    assert [first.run_id] + [run.run_id for run in rest] == whole.run_ids and len(whole) == 6
+    assert summary == whole.design and summary["runs"] == 6

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -156,12 +156,29 @@ def design(config: str | os.PathLike | Mapping[str, Any] | DesignSource,
     >>> round(float(exc[0].u.std()), 12)
     0.5
     """
+    source = parse(config)
+    made: dict = {}
+    runs = list(iter_runs(source, made, on_run))
+    return Excitation(runs, _provenance(source), source.path, design=made)
+
+
+def iter_runs(config: str | os.PathLike | Mapping[str, Any] | DesignSource, summary_into: dict | None = None,
+              on_run: Callable[[Run], None] | None = None) -> Iterator[Run]:
+    """The runs of :func:`design` one at a time, so that a design larger than memory can be
+    written run by run (``nlsid.io.recording.write_recording`` takes them so). Once all are made,
+    ``summary_into`` (a dict) receives the design summary (:attr:`Excitation.design`).
+
+    Raises
+    ------
+    nlsid.InputError
+        As :func:`design`, when the run concerned is reached.
+    """
     from nlsid.signals.design import design_runs, level_key
     from nlsid.signals.multisine import crest_factor
 
     source = parse(config)
     cfg = source.config
-    runs, meta = [], []
+    meta = []
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by its key
         for run in design_runs(cfg):
             if not np.all(np.isfinite(run.u)):  # a level near the float range overflows
@@ -170,10 +187,11 @@ def design(config: str | os.PathLike | Mapping[str, Any] | DesignSource,
                                                          f"overflow in run {run.run_id}); nothing was written")
             meta.append({"run": run.run_id, "kind": run.kind, "level": run.level, "frequency": run.frequency,
                          "crest_factor": crest_factor(run.u[: run.period])})
-            runs.append(run)
             if on_run is not None:
                 on_run(run)
-    return Excitation(runs, _provenance(source), source.path, design=summary(cfg, meta))
+            yield run
+    if summary_into is not None:
+        summary_into.update(summary(cfg, meta))
 
 
 def _provenance(source: DesignSource) -> dict:

@@ -165,13 +165,14 @@ class Model:
         return self._simulate_array(u, 1000.0 if fs is None else fs, seed, workers, steady, on_run)
 
     def _simulate_recording(self, rec: Recording, seed, workers, steady, on_run) -> Recording:
-        from nlsid.io.provenance import provenance
+        from nlsid.io.provenance import provenance, sha256_in_background
         from nlsid.simulate.batch import simulate_all
 
+        configs, inputs = [self.path] if self.path else [], [rec.path] if rec.path else []
+        digests = {path: sha256_in_background(path) for path in configs + inputs}  # beside the simulation
         out = simulate_all(self._points, list(rec.runs), seed=seed, workers=workers,
                            step=None if on_run is None else (lambda: on_run()), steady=steady)
-        record = provenance(config_paths=[self.path] if self.path else [], input_paths=[rec.path] if rec.path else [])
-        return Recording(out, record)
+        return Recording(out, provenance(config_paths=configs, input_paths=inputs, digests=digests))
 
     def _simulate_array(self, u, fs, seed, workers, steady, on_run):
         import math
