@@ -110,19 +110,9 @@ class BlaResult:
 
     def plot(self) -> list:
         """The figures of :meth:`figures` as matplotlib figures (for a notebook)."""
-        import io
+        from nlsid.stages.plotting import pyplot_figures
 
-        import matplotlib.image
-        import matplotlib.pyplot as plt
-
-        out = []
-        for name, png in self.figures().items():
-            figure, axes = plt.subplots(figsize=(8, 6))
-            axes.imshow(matplotlib.image.imread(io.BytesIO(png), format="png"))
-            axes.set_axis_off()
-            axes.set_title(name)
-            out.append(figure)
-        return out
+        return pyplot_figures(self.figures())
 
     def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
         """Write ``bla.h5`` (``docs/formats.md``) atomically; an existing file only with ``force``."""

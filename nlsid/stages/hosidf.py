@@ -295,19 +295,9 @@ class HosidfResult:
 
     def plot(self) -> list:
         """The figures of :meth:`figures` as pyplot figures (a notebook shows them below the cell)."""
-        import io
+        from nlsid.stages.plotting import pyplot_figures
 
-        import matplotlib.image
-        import matplotlib.pyplot as plt
-
-        out = []
-        for name, png in self.figures().items():
-            figure, axes = plt.subplots(figsize=(8, 6))
-            axes.imshow(matplotlib.image.imread(io.BytesIO(png), format="png"))
-            axes.set_axis_off()
-            axes.set_title(name)
-            out.append(figure)
-        return out
+        return pyplot_figures(self.figures())
 
     def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
         """Write ``hosidf.h5`` (``docs/formats.md``) atomically; an existing file only with ``force``.
