@@ -53,7 +53,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     runs = read(excitation, require_y=False)
     start = time.perf_counter()
     with progress("simulate", len(runs) * len(model.points)) as step:
-        recording = model.simulate(runs, seed=seed, workers=workers, steady=steady, on_run=step)
+        recording = model.simulate(runs, seed=seed, workers=workers, steady=steady, progress=step)
     seconds = time.perf_counter() - start
     recording.write(output, force=force)
     out = recording.runs

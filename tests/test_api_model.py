@@ -236,7 +236,10 @@ def test_design_multisine_lines_and_levels_follow_the_config():
     crest = [np.max(np.abs(r.u)) / np.sqrt(np.mean(r.u ** 2)) for r in multisines]
     assert np.allclose(m["crest_factors"], crest, rtol=1e-12)
     assert exc.design["duration_s"] == (9 * 3 * 2048 + 27 * 3 * 1024) / 1024
-    assert "configs/stage_design.yaml" in exc.provenance["configs"]
+    assert "configs/stage_design.yaml" in exc.provenance["configs"] and exc.path is None
+    # simulated, the excitation is no input file: the model config alone is named
+    sim = nlsid.Model.from_yaml("configs/stage_true.yaml").simulate(exc)
+    assert list(sim.provenance["configs"]) == ["configs/stage_true.yaml"] and sim.provenance["inputs"] == {}
 
 
 def test_design_sines_follow_their_formula():

@@ -36,6 +36,8 @@ class Excitation(Recording):
         detection bins, levels, crest factors, ...) and/or ``sines``.
     provenance : dict
         Tool, version and the config file with its SHA-256 (no config file for a dict).
+    path : None
+        No file holds the runs until :meth:`write`.
     """
 
     design: dict = field(default_factory=dict)
@@ -159,7 +161,7 @@ def design(config: str | os.PathLike | Mapping[str, Any] | DesignSource,
     source = parse(config)
     made: dict = {}
     runs = list(iter_runs(source, made, on_run))
-    return Excitation(runs, _provenance(source), source.path, design=made)
+    return Excitation(runs, _provenance(source), None, design=made)  # path: no recording file holds it yet
 
 
 def iter_runs(config: str | os.PathLike | Mapping[str, Any] | DesignSource, summary_into: dict | None = None,

@@ -117,7 +117,7 @@ class Model:
         return Model(data)
 
     def simulate(self, u, fs: float | None = None, seed: int | None = None, workers: int | None = None,
-                 steady: bool = False, on_run: Callable | None = None):
+                 steady: bool = False, progress: Callable[[], None] | None = None):
         """Simulate the model on a signal or on every run of a recording.
 
         Continuous LTI parts are run exactly for an input held between samples (zero-order hold);
@@ -139,8 +139,8 @@ class Model:
             Parallel simulations (threads); default all cores (or ``NLSID_THREADS``).
         steady : bool
             Recording only: periodic runs in their periodic steady state (``--steady-state``).
-        on_run : callable, optional
-            Called once per simulated run (progress).
+        progress : callable, optional
+            Called without arguments after each simulated run (a progress bar's step).
 
         Returns
         -------
@@ -157,24 +157,24 @@ class Model:
         if isinstance(u, Recording):
             if fs is not None:
                 raise InputError("fs", "a Recording carries its own sample rate; give fs only with an array")
-            return self._simulate_recording(u, seed, workers, steady, on_run)
+            return self._simulate_recording(u, seed, workers, steady, progress)
         if isinstance(u, (str, os.PathLike)):
             from nlsid.stages.recording import read
 
-            return self.simulate(read(u), fs, seed, workers, steady, on_run)
-        return self._simulate_array(u, 1000.0 if fs is None else fs, seed, workers, steady, on_run)
+            return self.simulate(read(u), fs, seed, workers, steady, progress)
+        return self._simulate_array(u, 1000.0 if fs is None else fs, seed, workers, steady, progress)
 
-    def _simulate_recording(self, rec: Recording, seed, workers, steady, on_run) -> Recording:
+    def _simulate_recording(self, rec: Recording, seed, workers, steady, progress) -> Recording:
         from nlsid.io.provenance import provenance, sha256_in_background
         from nlsid.simulate.batch import simulate_all
 
         configs, inputs = [self.path] if self.path else [], [rec.path] if rec.path else []
         digests = {path: sha256_in_background(path) for path in configs + inputs}  # beside the simulation
         out = simulate_all(self._points, list(rec.runs), seed=seed, workers=workers,
-                           step=None if on_run is None else (lambda: on_run()), steady=steady)
+                           step=progress, steady=steady)
         return Recording(out, provenance(config_paths=configs, input_paths=inputs, digests=digests))
 
-    def _simulate_array(self, u, fs, seed, workers, steady, on_run):
+    def _simulate_array(self, u, fs, seed, workers, steady, progress):
         import math
 
         from nlsid.io.run import Run, validate_signal
@@ -192,7 +192,7 @@ class Model:
             raise InputError("u", "no samples")
         run = Run(run_id="u", fs=float(fs), kind="arbitrary", u=signal)
         out = simulate_all(self._points, [run], seed=seed, workers=workers,
-                           step=None if on_run is None else (lambda: on_run()))
+                           step=progress)
         return out[0].y
 
     def to_dict(self) -> dict:
