@@ -276,3 +276,16 @@ def test_iter_runs_makes_one_run_at_a_time_and_then_the_summary():
     whole = nlsid.design(config)
     assert [first.run_id] + [run.run_id for run in rest] == whole.run_ids and len(whole) == 6
     assert summary == whole.design and summary["runs"] == 6
+
+
+def test_closed_loop_array_is_the_reference_and_integral_action_removes_the_static_error():
+    # PI around m x'' + c x' + k x = u: characteristic polynomial 2 s^3 + 20 s^2 + 4000 s + 20000
+    # (continuous), slowest root near -5 /s, so after 20 s the transient is exp(-100) of the step;
+    # an integrator (a pole at z = 1) leaves no static error (final value theorem): y -> r to rounding
+    model = nlsid.Model.from_dict({**msd(), "closed_loop": {"controller": {"type": "pid", "kp": 2000.0, "ki": 20000.0}}})
+    y = model.simulate(np.full(20000, 1e-3), fs=1000.0)
+    assert abs(y[-1] / 1e-3 - 1) < 1e-9
+    # without the integrator y / r = kp / (k + kp) in steady state (poles -5 +- 44j /s): 1/2 here
+    proportional = model.with_parameters({"closed_loop.controller.ki": 0.0})
+    y = proportional.simulate(np.full(20000, 1e-3), fs=1000.0)
+    assert abs(y[-1] / 1e-3 - 2000.0 / 4000.0) < 1e-9
