@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import math
-
 import click
 
 from nlsid.errors import InputError
 
 from .common import StageCommand, emit_json, force_option, json_option, settings
-from .options import map_option, overlap_provenance, parse_map, read_split, split_options
+from .options import map_option, parse_map, split_options
 
 
 @click.command(cls=StageCommand)
@@ -86,105 +84,69 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
     _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
 
 
-def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
-    from nlsid.fit.bla_fit import fit_bla, parse_delay, parse_order
-    from nlsid.io.atomic import atomic_path, check_writable
-    from nlsid.io.fit_file import report_path, write_fit
-    from nlsid.io.provenance import provenance
+#: the face's arguments -> this command's flags, for its messages
+FLAGS = {"order": "--order", "domain": "--domain", "delay": "--delay", "max_order": "--max-order", "level": "--level",
+         "b": "BLA_FILE", "model": "--model", "rec": "--data", "validate_on": "--validate-on",
+         "validation": "--validation", "estimation_range": "--estimation-range",
+         "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "fit_on": "--fit-on",
+         "jacobian": "--jacobian", "workers": "--workers", "free": "free"}
 
-    order_pair, delay_samples = parse_order(order), parse_delay(delay)
+
+def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
+    from nlsid.io.atomic import check_writable
+    from nlsid.io.fit_file import report_path
+    from nlsid.io.provenance import provenance
+    from nlsid.stages.fit import check_tf_options, cost_check, fit_tf
+
+    check_tf_options(order, domain, delay, max_order, level, names=FLAGS)
     for path in (output, report_path(output)) + ((plot,) if plot else ()):
         check_writable(path, force)
-    result = fit_bla(bla_file, order_pair, domain, delay_samples, max_order, level)
-    fit_ = result.fit
-    report = result.report()
-    header = [f"nlsid fit {bla_file}: {fit_.nb}/{fit_.na} {domain}-domain transfer function, {report['stability']}"
-              + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
-              f"cost {fit_.cost:.6g}, {_cost_check(fit_)} ({fit_.lines} lines)",
-              f"weights: {result.level.weights}" if result.level.weighted
-              else "unweighted least squares: the BLA is noise-free (zero variances), no weights to fit with",
-              f"order: {report['order_reason']}",
-              f"report: {report_path(output).name}"]
-    if plot:
-        from nlsid.io.bla_file import read_units
-        from nlsid.report.fit_plots import tf_fit_png
-        from nlsid.report.units import Units
-
-        data = result.level.data
-        png = tf_fit_png(data.frequency, data.G, fit_.response, fit_.response_std, result.level.noise_std,
-                         result.level.nl_std, f"{bla_file}: {fit_.nb}/{fit_.na} ({domain})",
-                         Units(read_units(bla_file)))
-        with atomic_path(plot, force) as tmp:
-            tmp.write_bytes(png)
-    record = provenance(input_paths=[bla_file])
-    if not result.level.weighted:  # said where the model's origin is read, as allow_overlap is
-        record = {**record, "unweighted": True}
-    write_fit(output, {"model": fit_.model.config()}, header, report, record, force=force)
+    result = fit_tf(bla_file, order, domain, level, delay, max_order, names=FLAGS)
+    result.write(output, force=force, provenance=provenance(input_paths=[bla_file]), plot=plot)
     for warning in result.warnings:
         settings().console.print(f"warning: {warning}")
     if as_json:
-        emit_json({"output": output, "report": str(report_path(output)), "plot": plot,
-                   **{k: report[k] for k in ("domain", "order", "delay_samples", "num", "den", "parameters", "cost",
-                                             "expected_cost", "cost_std", "cost_bound", "weights", "weighted",
-                                             "lines", "stable",
-                                             "stability",
-                                             "integrators", "fit", "fit_note", "order_reason", "order_scan",
-                                             "warnings")}})
+        emit_json({"output": output, "report": str(report_path(output)), "plot": plot, **result.summary()})
         return
+    fit_ = result.fitted.fit
     console = settings().console
-    if not result.level.weighted:
+    if not result.fitted.level.weighted:
         console.print("unweighted least squares: the BLA is noise-free (zero variances); cost and std against the "
                       "numerical-precision floor")
-    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, {_cost_check(fit_)} over "
+    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, {cost_check(fit_)} over "
                   f"{fit_.lines} lines")
-    console.print(f"order: {report['order_reason']}")
+    console.print(f"order: {result.report()['order_reason']}")
     for name, value, std in zip(fit_.names, fit_.values, fit_.std):
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")
 
 
-def _cost_check(fit_) -> str:
-    """The cost's expected value, spread and bound in words; what has no finite value is said."""
-    if not math.isfinite(fit_.expected_cost):
-        return "no expected value and no cost check (M = 2 realizations)"
-    spread = f"+- {fit_.cost_std:.3g}" if math.isfinite(fit_.cost_std) else "(spread unbounded for M = 3)"
-    return f"expected {fit_.expected_cost:.6g} {spread}, bound {fit_.cost_bound:.6g}"
-
-
 def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on, jacobian,
                    start_estimate, workers, mapping, output, force, as_json, allow_overlap=False) -> None:
-    from nlsid.fit.extension import fit_config_file
-    from nlsid.io.fit_file import report_path, write_fit
-    from nlsid.io.provenance import provenance
     from nlsid.io.atomic import check_writable
-    from nlsid.io.recording import read_runs
+    from nlsid.io.fit_file import report_path
+    from nlsid.io.provenance import provenance
+    from nlsid.stages.fit import fit_model
 
     check_writable(output, force)
     check_writable(report_path(output), force)
-    estimation, validation_part, extra = read_split(validate_on, estimation_range, validation_range, mapping, data,
-                                                    allow_overlap)
-    runs = read_runs(data, require_y=True, mapping=mapping)
-    result = fit_config_file(model_config, runs, validation or None, workers, start_estimate, validate_on=extra,
-                             estimation_range=estimation, validation_range=validation_part, fit_on=fit_on, where=data,
-                             jacobian=jacobian)
-    summary = {**result.summary(), "allow_overlap": allow_overlap}
-    header = [f"nlsid fit --model {model_config} --data {data}",
-              "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}" for n, v, s in zip(result.names, result.values, result.std)),
-              f"validation rms error of {fit_on} {result.validation_rms:.4g} (noise {result.noise_rms_validation:.4g}); "
-              f"report: {report_path(output).name}"]
-    write_fit(output, result.config, header, {"kind": "extension", **summary},
-              overlap_provenance(provenance(config_paths=[model_config], input_paths=[data, *validate_on]),
-                                 allow_overlap), force=force)
+    result = fit_model(model_config, data, validate_on=list(validate_on), validation=validation or None,
+                       estimation_range=estimation_range, validation_range=validation_range,
+                       allow_overlap=allow_overlap, fit_on=fit_on, jacobian=jacobian, start_estimate=start_estimate,
+                       workers=workers, mapping=mapping, names=FLAGS)
+    result.write(output, force=force, provenance=provenance(config_paths=[model_config],
+                                                            input_paths=[data, *validate_on]))
     for warning in result.warnings:
         settings().console.print(f"warning: {warning}")
     if as_json:
-        emit_json({"output": output, "report": str(report_path(output)), **summary})
+        emit_json({"output": output, "report": str(report_path(output)), **result.summary()})
         return
+    fitted = result.fitted
     console = settings().console
-    for name, value, std, start in zip(result.names, result.values, result.std, result.start):
+    for name, value, std, start in zip(fitted.names, fitted.values, fitted.std, fitted.start):
         console.print(f"  {name} = {value:.6g} +- {std:.2g} (start {start:.6g})")
-    console.print(f"rms error of {fit_on} (fitted): estimation {result.estimation_rms:.4g} (start "
-                  f"{result.start_estimation_rms:.4g}), validation {result.validation_rms:.4g} (start "
-                  f"{result.start_validation_rms:.4g}); noise level {result.noise_rms_validation:.4g}")
-    for signal, rms in result.signal_rms.items():
+    console.print(f"rms error of {fit_on} (fitted): estimation {fitted.estimation_rms:.4g} (start "
+                  f"{fitted.start_estimation_rms:.4g}), validation {fitted.validation_rms:.4g} (start "
+                  f"{fitted.start_validation_rms:.4g}); noise level {fitted.noise_rms_validation:.4g}")
+    for signal, rms in fitted.signal_rms.items():
         if signal != fit_on:
             console.print(f"rms error of {signal}: estimation {rms['estimation']:.4g}, validation {rms['validation']:.4g}")

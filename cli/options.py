@@ -87,21 +87,10 @@ def read_split(validate_on: tuple[str, ...], estimation_range: str | None, valid
 
 
 def same_recording(first: str, second: str) -> str | None:
-    """How ``second`` is the recording ``first``: ``"the same file"`` (one resolved path, a link to
-    it, or a hard link), ``"a copy of it"`` (other bytes on disk, the same SHA-256), else None. A
-    file that does not exist is no recording yet (its reader says so)."""
-    import os
+    """:func:`nlsid.io.ranges.same_recording` (imported when called: numpy stays out of ``--help``)."""
+    from nlsid.io.ranges import same_recording as same
 
-    from nlsid.io.provenance import file_sha256
-
-    a, b = Path(first), Path(second)
-    if not (a.is_file() and b.is_file()):
-        return None
-    if os.path.samefile(a, b):
-        return "the same file"
-    if a.stat().st_size == b.stat().st_size and file_sha256(a) == file_sha256(b):
-        return "a copy of it: the same SHA-256"
-    return None
+    return same(first, second)
 
 
 def check_no_overlap(data: str, validate_on: tuple[str, ...]) -> None:

@@ -12,7 +12,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf",
-                "nlsid.stages.design", "nlsid.stages.model")
+                "nlsid.stages.design", "nlsid.stages.model", "nlsid.stages.fit")
 
 
 def test_api_page_examples_run(monkeypatch):

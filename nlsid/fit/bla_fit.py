@@ -86,7 +86,12 @@ def fit_bla(path: str | os.PathLike, order: tuple[int, int] | None, domain: str,
     """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``; ``max_order``
     None: up to DEFAULT_MAX_ORDER, beyond it up to EXTENDED_MAX_ORDER where no order reaches its
     cost bound (:func:`nlsid.fit.order.select_order`)."""
-    source = frf_from_bla(path, level)
+    return fit_level(frf_from_bla(path, level), order, domain, delay, max_order)
+
+
+def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, delay: int | None,
+              max_order: int | None) -> BLAFit:
+    """:func:`fit_bla` of a level already taken from its BLA (:mod:`nlsid.fit.bla_source`)."""
     if order is not None:
         return BLAFit(source, fit_transfer_function(source.data, order[0], order[1], domain, delay), None)
     scanned = DEFAULT_MAX_ORDER if max_order is None else max_order

@@ -87,17 +87,27 @@ def frf_from_bla(path: str | os.PathLike, level: int | None = None) -> BLALevel:
     """One level of ``bla.h5`` (multisine levels first, then arbitrary-run levels); ``level`` may
     be omitted when the file holds one level."""
     content = read_bla(path)
-    levels = content["levels"]
-    total = len(levels) + len(content["lpm_levels"])
+    return frf_from_levels(content["levels"], content["lpm_levels"], level, str(path))
+
+
+def frf_from_levels(levels: list[dict], lpm_levels: list[dict], level: int | None, source: str,
+                    option: str = "--level", container: str = "the file") -> BLALevel:
+    """One level, as :func:`frf_from_bla` takes it, of levels in the layout of
+    :func:`nlsid.io.bla_file.read_bla` (``levels``, ``lpm_levels``): a file read, or a BLA computed
+    in memory laid out so. ``source`` names them in messages (the file, with the levels' groups
+    after it), ``option`` the level's argument (``--level`` on the command line), ``container``
+    what holds them."""
+    path = source
+    total = len(levels) + len(lpm_levels)
     if level is None:
         if total > 1:
-            raise InputError(f"{path}", f"{total} levels in the file; choose one with --level 0..{total - 1} "
+            raise InputError(f"{path}", f"{total} levels in {container}; choose one with {option} 0..{total - 1} "
                                         "(multisine levels first, then levels of arbitrary runs)")
         level = 0
     if not 0 <= level < total:
-        raise InputError("--level", f"expected 0..{total - 1} for {path}, got {level}")
+        raise InputError(option, f"expected 0..{total - 1} for {path}, got {level}")
     if level >= len(levels):
-        return _lpm_level(path, content["lpm_levels"][level - len(levels)])
+        return _lpm_level(path, lpm_levels[level - len(levels)])
     chosen = levels[level]
     attrs, robust, fast = chosen["attrs"], chosen["robust"], chosen["fast"]
     where = f"{path}:/levels/{chosen['name']}"

@@ -817,7 +817,20 @@ def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequen
     from nlsid.io.config import load_yaml
 
     data, lines = load_yaml(model_path)
-    config = validate_simulate_config(data, model_path, lines)
+    return fit_config(data, runs, validation_ids, workers, estimate_start, validate_on=validate_on,
+                      estimation_range=estimation_range, validation_range=validation_range, fit_on=fit_on,
+                      where=where, jacobian=jacobian, source=str(model_path), lines=lines)
+
+
+def fit_config(data: dict, runs: Sequence[Run], validation_ids: Sequence[str] | None = None,
+               workers: int | None = None, estimate_start: bool = False, *, validate_on: Sequence[Run] = (),
+               estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
+               fit_on: str = "y", where: str = "", jacobian: str = "differences", source: str = "model",
+               lines: dict | None = None) -> ExtensionFit:
+    """:func:`fit_config_file` of a config already loaded (a dict as :func:`nlsid.io.config.load_yaml`
+    gives it); ``source`` and ``lines`` name its origin in messages."""
+    model_path = source
+    config = validate_simulate_config(data, model_path, lines or {})
     if not config.free:
         raise InputError(str(model_path), "free: no free parameters to fit; mark them under a top-level free: key")
     estimation, validation = split_runs(runs, validation_ids, validate_on, estimation_range, validation_range, where)

@@ -158,3 +158,22 @@ def check_unique(runs: list[Run]) -> None:
         if run.run_id in seen:
             raise InputError(run.run_id, "two runs have this id (give each --validate-on recording once)")
         seen.add(run.run_id)
+
+
+def same_recording(first: str, second: str) -> str | None:
+    """How ``second`` is the recording ``first``: ``"the same file"`` (one resolved path, a link to
+    it, or a hard link), ``"a copy of it"`` (other bytes on disk, the same SHA-256), else None. A
+    file that does not exist is no recording yet (its reader says so)."""
+    import os
+    from pathlib import Path
+
+    from nlsid.io.provenance import file_sha256
+
+    a, b = Path(first), Path(second)
+    if not (a.is_file() and b.is_file()):
+        return None
+    if os.path.samefile(a, b):
+        return "the same file"
+    if a.stat().st_size == b.stat().st_size and file_sha256(a) == file_sha256(b):
+        return "a copy of it: the same SHA-256"
+    return None
