@@ -147,7 +147,7 @@ def test_fit_tf_of_the_bla_in_memory_gives_the_command_s_numbers_and_files(sampl
                                                                           order, domain, level):
     flag = order if isinstance(order, str) else f"{order[0]}/{order[1]}"
     out = run_cli("fit", str(sample_bla_file), "--order", flag, "--domain", domain, "--level", str(level),
-                  "-o", str(tmp_path / "cli.yaml"), "--json")
+                  "-o", str(tmp_path / "cli.yaml"), "--plot", str(tmp_path / "cli.png"), "--json")
     assert out.exit_code == 0, out.output
     cli_json = json.loads(out.stdout)
     tf = nlsid.fit_tf(nlsid.bla(nlsid.read(SAMPLE)), order=order, domain=domain, level=level)
@@ -164,6 +164,7 @@ def test_fit_tf_of_the_bla_in_memory_gives_the_command_s_numbers_and_files(sampl
     b = json.loads((tmp_path / "cli.fit.json").read_text())
     assert a.pop("provenance")["inputs"] == b.pop("provenance")["inputs"]
     assert a == b
+    assert from_file.png() == (tmp_path / "cli.png").read_bytes()
 
 
 def test_to_control_gives_the_same_response_or_says_how_to_install(monkeypatch):
@@ -219,6 +220,17 @@ def _sample_bla():
     if "bla" not in _CACHE:
         _CACHE["bla"] = nlsid.bla(nlsid.read(SAMPLE))
     return _CACHE["bla"]
+
+
+def test_the_notebook_views_show_the_fit():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    tf = nlsid.fit_tf(_sample_bla(), order=(0, 2), level=2)
+    html = tf._repr_html_()
+    assert "0/2 (s-domain, delay 0 samples)" in html and "<td>b0</td>" in html and "stable" in html
+    figure = tf.plot()
+    assert type(figure).__name__ == "Figure" and len(figure.axes) == 1
 
 
 def test_fit_tf_refuses_what_is_not_a_bla():

@@ -68,7 +68,8 @@ def check_tf_options(order, domain: str, delay, max_order, level,
     else:
         raise InputError(names.get("delay", "delay"), f"expected a whole number of samples >= 0 or auto, got {delay!r}")
     if max_order is not None and not (_whole(max_order) and max_order >= 1):
-        raise InputError(names.get("max_order", "max_order"), f"expected a whole number >= 1 or None, got {max_order!r}")
+        raise InputError(names.get("max_order", "max_order"),
+                         f"expected a whole number >= 1 or None, got {max_order!r}")
     if level is not None and not (_whole(level) and level >= 0):
         raise InputError(names.get("level", "level"), f"expected a level index >= 0 or None, got {level!r}")
     return pair, samples
@@ -522,8 +523,8 @@ class ModelFit:
                   else make_provenance(config_paths=self.configs, input_paths=self.inputs))
         if self.allow_overlap:
             record = {**record, "allow_overlap": True}
-        write_fit(path, self.fitted.config, self.header(report_path(path).name), {"kind": "extension", **self.summary()},
-                  record, force=force)
+        write_fit(path, self.fitted.config, self.header(report_path(path).name),
+                  {"kind": "extension", **self.summary()}, record, force=force)
         return Path(path)
 
     def _repr_html_(self) -> str:
@@ -593,7 +594,8 @@ def _runs(item, argument: str, mapping: dict | None) -> list:
         from nlsid.io.recording import read_runs
 
         return read_runs(item, require_y=True, mapping=mapping)
-    raise InputError(argument, f"expected a Recording (nlsid.read) or the path of a recording, got {type(item).__name__}")
+    raise InputError(argument, "expected a Recording (nlsid.read) or the path of a recording, got "
+                               f"{type(item).__name__}")
 
 
 def _model_config(model, free, names: Mapping[str, str]) -> tuple[dict, dict, str, list[str]]:
