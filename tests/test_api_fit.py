@@ -292,6 +292,11 @@ def test_fit_model_names_the_argument_in_error():
         nlsid.fit_model(FC_FREE, rec, fit_on="q")
     with pytest.raises(nlsid.InputError, match="^validate_on: .* is the rec recording .*pass allow_overlap=True"):
         nlsid.fit_model(FC_FREE, rec, validate_on=nlsid.read(SAMPLE))
+    in_memory = Recording(rec.runs)  # no path: only the same object is the same recording
+    with pytest.raises(nlsid.InputError, match=r"\(the same Recording\)"):
+        nlsid.fit_model(FC_FREE, in_memory, validate_on=in_memory)
+    with pytest.raises(nlsid.InputError, match=r"\(the same file\)"):
+        nlsid.fit_model(FC_FREE, str(SAMPLE), validate_on=str(SAMPLE))
     with pytest.raises(nlsid.InputError, match="^estimation_range: nothing to validate on: give validation_range or "
                                                "validate_on"):
         nlsid.fit_model(FC_FREE, rec, estimation_range=(0, 100))

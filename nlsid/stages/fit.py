@@ -573,7 +573,7 @@ def _overlap(data, item) -> str | None:
     """How the ``validate_on`` recording ``item`` is the fitted recording ``data`` (None: it is not)."""
     from nlsid.io.ranges import same_recording
 
-    if item is data:
+    if isinstance(item, Recording) and item is data:
         return "the same Recording"
     first = data.path if isinstance(data, Recording) else data
     second = item.path if isinstance(item, Recording) else item
