@@ -185,6 +185,21 @@ def test_to_control_gives_the_same_response_or_says_how_to_install(monkeypatch):
         tf.to_control()
 
 
+@pytest.mark.filterwarnings("error::scipy.signal.BadCoefficients")  # the delay's zeros are not leading zeros
+def test_a_discrete_dead_time_is_found_and_kept_in_the_dlti():
+    fs = 100.0
+    rec = _multisine_recording(lambda u: np.concatenate([np.zeros(2), signal.lfilter(B_Z, A_Z, u)[:-2]]), fs,
+                               np.random.default_rng(7))
+    tf = nlsid.fit_tf(nlsid.bla(rec), order=(2, 2), domain="z", delay="auto")
+    assert tf.delay == 2
+    np.testing.assert_allclose(tf.num, B_Z, rtol=1e-6)
+    f = np.array([1.0, 5.0, 20.0])
+    _, truth = signal.freqz(np.concatenate([[0.0, 0.0], B_Z]), A_Z, worN=f, fs=fs)
+    _, h = tf.to_scipy().freqresp(2 * np.pi * f / fs)
+    np.testing.assert_allclose(h, truth, rtol=1e-6)
+    np.testing.assert_allclose(tf.frequency_response(f), truth, rtol=1e-6)
+
+
 def test_a_continuous_model_with_a_dead_time_is_not_silently_dropped_into_an_lti():
     fs = 100.0
     bd, ad, _ = signal.cont2discrete(([400.0], [1.0, 8.0, 400.0]), 1 / fs, method="zoh")

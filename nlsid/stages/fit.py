@@ -241,13 +241,14 @@ class TransferFunctionFit:
                                     "use .frequency_response, or a Pade approximation of the delay")
 
     def _z_polynomials(self) -> tuple[np.ndarray, np.ndarray]:
-        """num, den in descending powers of z, the dead time in the numerator."""
+        """num, den in descending powers of z (z^-d B(z^-1) / A(z^-1) times z^n over z^n), the dead
+        time as the numerator's lower degree (leading zeros left out: scipy warns of them)."""
         b, a = self.num, self.den
         n = max(a.size - 1, b.size - 1 + self.delay)
         num, den = np.zeros(n + 1), np.zeros(n + 1)
         num[self.delay:self.delay + b.size] = b
         den[:a.size] = a
-        return num, den
+        return num[self.delay:], den
 
     def to_scipy(self):
         """The model as :class:`scipy.signal.lti` (``s``) or :class:`scipy.signal.dlti` (``z``, dt = 1/fs,
