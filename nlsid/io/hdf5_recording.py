@@ -51,6 +51,8 @@ def hdf5_damage(where: str) -> Iterator[None]:
     """
     try:
         yield
+    except InputError:  # a ValueError too, but nlsid's own message: passed on as it is
+        raise
     except H5PY_ERRORS as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
         raise InputError(where, f"damaged HDF5 file ({reason})") from None
