@@ -9,7 +9,7 @@ import click
 from nlsid.errors import CheckFailed
 
 from .common import StageCommand, emit_json, force_option, json_option, progress, settings
-from .options import map_option, overlap_provenance, parse_map, read_split, split_options
+from .options import map_option, parse_map, split_options
 
 
 @click.command(cls=StageCommand)
@@ -53,40 +53,27 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
       nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/
       nlsid diagnose --model model.yaml --data long.h5 --estimation-range :60000 --validation-range 60000: -o diagnosis/
     """
-    from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
-    from nlsid.diagnose.hypotheses import LIBRARY
-    from nlsid.io.config import load_yaml
-    from nlsid.io.diagnosis_file import extended_yaml, write_diagnosis
-    from nlsid.io.model_config import validate_simulate_config
     from nlsid.io.provenance import provenance
-    from nlsid.io.recording import read_runs
-    from nlsid.io.units import common_units
-    from nlsid.simulate.threads import default_threads
+    from nlsid.stages.diagnose import diagnosis_inputs
 
-    data, lines = load_yaml(model_path)
-    if not isinstance(data, dict):
-        from nlsid.errors import InputError
-
-        raise InputError(model_path, "expected a model config (a mapping with a 'model' key)")
-    validate_simulate_config(data, model_path, lines)  # here, where a refused key's line is known
-    estimation, validation, extra = read_split(validate_on, estimation_range, validation_range, parse_map(mapping),
-                                               data_path, allow_overlap)
-    runs = read_runs(data_path, require_y=True, mapping=parse_map(mapping))
-    with progress("diagnose", len(LIBRARY) + 2) as step, default_threads(workers):  # evidence, nuisances, each hypothesis
-        result = run_diagnosis(data, model_path, runs, data_path, step=lambda name: step(), validate_on=extra,
-                               estimation_range=estimation, validation_range=validation)
-    final = result.final
-    extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
-    summary = {**result.summary(), "units": common_units(run.units for run in [*runs, *extra]),
-               "allow_overlap": allow_overlap}
-    write_diagnosis(output, summary, result.arrays(), extended,
-                    overlap_provenance(provenance(config_paths=[model_path], input_paths=[data_path, *validate_on]),
-                                       allow_overlap), force=force)
+    inputs = diagnosis_inputs(model_path, data_path, list(validate_on), estimation_range, validation_range,
+                              allow_overlap, workers, parse_map(mapping), names=FLAGS)
+    with progress("diagnose", inputs.steps) as step:  # evidence, nuisances, each hypothesis
+        result = inputs.run(progress=step)
+    summary = result.summary()
+    result.write(output, force=force, provenance=provenance(config_paths=[model_path],
+                                                            input_paths=[data_path, *validate_on]))
     if as_json:
         emit_json({"output": output, **summary})
     else:
-        _print(result, output)
+        _print(result.diagnosis, output)
     _check(summary, fail_if_discrepancy, fail_if_error_above, fail_if_distortion_above)
+
+
+#: the face's arguments -> this command's flags, for its messages
+FLAGS = {"model": "--model", "rec": "--data", "validate_on": "--validate-on", "estimation_range": "--estimation-range",
+         "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "workers": "--workers",
+         "mapping": "--map"}
 
 
 def _print(result, output: str) -> None:

@@ -33,6 +33,8 @@ _FACE = {
     "design": "nlsid.stages.design",
     "Excitation": "nlsid.stages.design",
     "Model": "nlsid.stages.model",
+    "diagnose": "nlsid.diagnose",
+    "DiagnosisResult": "nlsid.stages.diagnose",
 }
 
 __all__ = ["__version__", *_FACE]
@@ -42,7 +44,9 @@ def __getattr__(name: str):
     module = _FACE.get(name)
     if module is None:
         raise AttributeError(f"module 'nlsid' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
+    imported = importlib.import_module(module)
+    # a name that is its own subpackage (nlsid.diagnose, callable) is the package itself
+    value = imported if module == f"nlsid.{name}" else getattr(imported, name)
     globals()[name] = value
     return value
 

@@ -12,7 +12,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 FACE_MODULES = ("nlsid.errors", "nlsid.stages.recording", "nlsid.stages.bla", "nlsid.stages.hosidf",
-                "nlsid.stages.design", "nlsid.stages.model", "nlsid.stages.fit")
+                "nlsid.stages.design", "nlsid.stages.model", "nlsid.stages.fit",
+                "nlsid.stages.diagnose")
 
 
 def test_api_page_examples_run(monkeypatch):

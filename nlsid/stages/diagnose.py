@@ -1,0 +1,371 @@
+"""The ``diagnose`` stage: what a simulation model gets wrong on measured data, the cause, the fix, the gain.
+
+``nlsid.diagnose(model, recording)`` gives a :class:`DiagnosisResult`; the command ``nlsid diagnose``
+is this call, a ``write`` of the diagnosis folder (:mod:`nlsid.io.diagnosis_file`), a few printed
+lines and its ``--fail-if`` checks. The method is that of :func:`nlsid.diagnose.diagnosis.diagnose`:
+the model is simulated on the measured excitation, the evidence (BLA against its bounds, odd and
+even distortion against the noise, the error in time) is gathered, every hypothesis of the library
+is estimated on the estimation runs and scored on the validation runs, and a cause is named only
+when its gain is significant.
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterator, Mapping
+
+from nlsid.errors import InputError
+from nlsid.stages.fit import _overlap, _path_of, _runs, _sample_range, _source_name, _whole
+from nlsid.stages.model import Model
+from nlsid.stages.recording import Recording
+
+if TYPE_CHECKING:
+    from nlsid.diagnose.diagnosis import Diagnosis
+
+#: The resolution of the PNG figures of :meth:`DiagnosisResult.figures`.
+DPI = 100
+
+
+@dataclass
+class DiagnosisResult:
+    """A model's diagnosis on measured data: the verdict, the accepted causes, the extended model.
+
+    Attributes
+    ----------
+    diagnosis : nlsid.diagnose.diagnosis.Diagnosis
+        The evidence, every hypothesis' outcome, the verdict and the chain of accepted causes.
+    extended_text : str or None
+        The extended model config as written to ``extended_model.yaml`` (its header comment names
+        each cause with its values and standard errors); None when no cause is named.
+    units : dict
+        The recording's units (``summary.json`` ``units``).
+    configs, inputs : list of str
+        Config files and recordings the diagnosis comes from (its provenance).
+    allow_overlap : bool
+        A ``validate_on`` recording that is the diagnosed one was accepted.
+    """
+
+    diagnosis: Diagnosis
+    extended_text: str | None
+    units: dict
+    configs: list[str] = field(default_factory=list)
+    inputs: list[str] = field(default_factory=list)
+    allow_overlap: bool = False
+
+    @property
+    def headline(self) -> str:
+        """The verdict in one sentence, as ``nlsid diagnose`` prints it first."""
+        return self.diagnosis.headline()
+
+    @property
+    def status(self) -> str:
+        """``explained``, ``partial``, ``ambiguous``, ``unexplained``, ``no_discrepancy`` or
+        ``undetermined`` (:mod:`nlsid.diagnose.verdict`)."""
+        return self.diagnosis.verdict.status
+
+    @property
+    def cause(self) -> str | None:
+        """The named cause (the hypothesis' name, e.g. ``coulomb_friction``): the first accepted
+        cause; None when none is named. Further causes accepted after it are in :attr:`chain`."""
+        chain = self.diagnosis.chain
+        return chain[0].hypothesis.name if chain else None
+
+    @property
+    def chain(self) -> list[dict]:
+        """The accepted causes in order, each with its ``cause`` name, ``title``, fitted ``values`` and
+        ``std``, validation ``error_rms``, ``gain_db`` and ``above_floor_db`` (``summary.json`` ``chain``)."""
+        return self.summary()["chain"]
+
+    @property
+    def findings(self) -> list[str]:
+        """What the evidence shows, in words (the lines printed under the headline)."""
+        return self.diagnosis.findings()
+
+    @property
+    def gain_db(self) -> float | None:
+        """How much smaller the extended model's validation error is than the original model's, in dB
+        (20 log10 of the ratio of their rms; positive: smaller), None when no cause is named."""
+        gain = self.summary()["gain"]
+        return None if gain is None else float(gain["gain_db"])
+
+    @property
+    def extended_model(self) -> Model | None:
+        """The user's model with every accepted cause added and fitted (a :class:`nlsid.Model`), or None."""
+        final = self.diagnosis.final
+        return None if final is None else Model.from_dict(final.extended)
+
+    def summary(self) -> dict:
+        """The content of ``summary.json`` without its format, provenance and file list (the
+        ``nlsid diagnose --json`` summary without ``output``; ``docs/formats.md``)."""
+        return {**self.diagnosis.summary(), "units": dict(self.units), "allow_overlap": bool(self.allow_overlap)}
+
+    def write(self, folder: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
+        """Write the diagnosis folder ``nlsid diagnose -o`` writes (``summary.json``, ``results.h5``,
+        ``extended_model.yaml`` when a cause is named), atomically; an existing folder only with
+        ``force``. ``provenance``: the record to store (default: this process, the config and the
+        recordings). Returns the folder."""
+        from nlsid.io.diagnosis_file import write_diagnosis
+        from nlsid.io.provenance import provenance as make_provenance
+
+        record = (provenance if provenance is not None
+                  else make_provenance(config_paths=self.configs, input_paths=self.inputs))
+        if self.allow_overlap:
+            record = {**record, "allow_overlap": True}
+        return write_diagnosis(folder, self.summary(), self.diagnosis.arrays(), self.extended_text, record,
+                               force=force)
+
+    @contextmanager
+    def _folder(self) -> Iterator[Path]:
+        """The diagnosis folder written to a temporary place (what the report and the figures read)."""
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="nlsid-diagnosis-") as tmp:
+            yield self.write(Path(tmp) / "diagnosis")
+
+    def report(self, path: str | os.PathLike, force: bool = False) -> Path:
+        """Write the HTML page ``nlsid report`` makes of the diagnosis folder (verdict, figures,
+        tables, provenance) to ``path``; an existing file only with ``force``. Returns ``path``."""
+        import dataclasses
+
+        from nlsid import __version__
+        from nlsid.io.atomic import check_writable, write_text_atomic
+        from nlsid.report.html import render_html
+        from nlsid.report.render import render
+
+        check_writable(str(path), force)
+        with self._folder() as folder:
+            page = render(folder)
+        page = dataclasses.replace(page, source=f"nlsid.diagnose of {self.diagnosis.model_source}")
+        write_text_atomic(str(path), render_html(page, f"nlsid {__version__} report"), force=force)
+        return Path(path)
+
+    def figures(self) -> dict[str, bytes]:
+        """The report's figures as PNG bytes by name (``model_vs_bla``, ``spectrum``, ``bla_vs_level``,
+        ``residual_vs_state``, ``before_after``: those the data allow)."""
+        import io
+
+        from nlsid.io.diagnosis_file import read_diagnosis
+        from nlsid.report import diagnosis_plots as plots
+        from nlsid.report.units import units_of
+
+        with self._folder() as folder:
+            summary, arrays = read_diagnosis(folder)
+        units = units_of(summary.get("units"))
+        made = []
+        if arrays["bla"]:
+            made.append(("model_vs_bla", plots.model_vs_bla(arrays["bla"][-1], units)))
+        if arrays["spectrum"]:
+            made.append(("spectrum", plots.spectrum(arrays["spectrum"][-1], units)))
+        if len(arrays["bla"]) > 1:
+            made.append(("bla_vs_level", plots.bla_vs_level(arrays["bla"], units)))
+        if "residual" in arrays["time"]:
+            made.append(("residual_vs_state", plots.residual_vs_state(arrays["time"], units)))
+        if "original_error" in arrays["validation"]:
+            made.append(("before_after", plots.before_after(arrays["validation"], units)))
+        out = {}
+        for name, figure in made:
+            buffer = io.BytesIO()
+            figure.savefig(buffer, format="png", dpi=DPI)
+            out[name] = buffer.getvalue()
+        return out
+
+    def plot(self) -> list:
+        """The figures of :meth:`figures` as pyplot figures (a notebook shows them below the cell)."""
+        from nlsid.stages.plotting import pyplot_figures
+
+        return pyplot_figures(self.figures())
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        rows = []
+        for o in self.diagnosis.outcomes:
+            if o.score is None:
+                rows.append(f"<tr><td>{escape(o.hypothesis.title)}</td><td colspan=2>{escape(o.reason)}</td></tr>")
+                continue
+            gain = o.score.gain_db
+            rows.append(f"<tr><td>{escape(o.hypothesis.title)}</td><td>{escape(o.hypothesis.main)} = "
+                        f"{o.estimate.values[o.hypothesis.main]:.4g}</td><td>{gain:+.1f}</td></tr>")
+        findings = "".join(f"<li>{escape(line)}</li>" for line in self.findings)
+        return (f"<p><b>Diagnosis</b> of {escape(self.diagnosis.model_source)}: {escape(self.headline)}</p>"
+                + (f"<ul>{findings}</ul>" if findings else "")
+                + "<table><tr><th>hypothesis</th><th>main parameter</th><th>gain dB</th></tr>" + "".join(rows)
+                + "</table>")
+
+    def __repr__(self) -> str:
+        gain = "" if self.gain_db is None else f", gain_db={self.gain_db:.1f}"
+        return f"DiagnosisResult(status={self.status!r}, cause={self.cause!r}{gain})"
+
+
+@dataclass
+class DiagnosisInputs:
+    """The checked inputs of a diagnosis, read before anything is simulated (:func:`diagnosis_inputs`);
+    :meth:`run` diagnoses them. The command line reads them before it shows its progress bar."""
+
+    config: dict
+    model_source: str
+    runs: list
+    where: str
+    extra: list
+    estimation: object
+    validation: object
+    configs: list[str]
+    inputs: list[str]
+    allow_overlap: bool
+    workers: int | None
+
+    @property
+    def steps(self) -> int:
+        """The progress steps of one round of :meth:`run` at most: the evidence, the nuisances, each
+        hypothesis."""
+        from nlsid.diagnose.hypotheses import LIBRARY
+
+        return len(LIBRARY) + 2
+
+    def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
+        """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
+        from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
+        from nlsid.io.diagnosis_file import extended_yaml
+        from nlsid.io.units import common_units
+        from nlsid.simulate.threads import default_threads
+
+        tick = progress or (lambda: None)
+        with default_threads(self.workers):
+            result = run_diagnosis(self.config, self.model_source, self.runs, self.where, step=lambda name: tick(),
+                                   validate_on=self.extra, estimation_range=self.estimation,
+                                   validation_range=self.validation)
+        final = result.final
+        extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
+        units = common_units(run.units for run in [*self.runs, *self.extra])
+        return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap)
+
+
+def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:
+    """The model config as a validated dict, its name in messages and its config files."""
+    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.models.key_paths import deep_copy
+
+    if isinstance(model, Model):
+        return model.to_dict(), model.path or "model", [model.path] if model.path else []
+    if isinstance(model, (str, os.PathLike)):
+        from nlsid.io.config import load_yaml
+
+        source = str(model)
+        data, lines = load_yaml(model)
+    elif isinstance(model, Mapping):
+        source, data, lines = "model", deep_copy(dict(model)), {}
+    else:
+        raise InputError(name("model"), "expected a Model (nlsid.Model), a model config's path or its dict, got "
+                                        f"{type(model).__name__}")
+    if not isinstance(data, dict):
+        raise InputError(source, "expected a model config (a mapping with a 'model' key)")
+    validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
+    return data, source, [source] if isinstance(model, (str, os.PathLike)) else []
+
+
+def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
+                     validation_range=None, allow_overlap: bool = False, workers: int | None = None,
+                     mapping: Mapping[str, str] | None = None, *,
+                     names: Mapping[str, str] | None = None) -> DiagnosisInputs:
+    """The arguments of :func:`diagnose` checked and read, in the order the command line checks them:
+    the model, the ranges, the overlap of ``validate_on`` with ``rec``, the recordings."""
+    from nlsid.io.ranges import qualify
+
+    names = dict(names or {})
+    name = lambda argument: names.get(argument, argument)  # noqa: E731
+    if workers is not None and not (_whole(workers) and workers >= 1):
+        raise InputError(name("workers"), f"expected a whole number >= 1 or None, got {workers!r}")
+    if mapping is not None and not isinstance(mapping, Mapping):
+        raise InputError(name("mapping"), f"expected signal -> topic/field (a dict), got {type(mapping).__name__}")
+    config, source, configs = _model_config(model, name)
+    extra = [] if validate_on is None else (
+        list(validate_on) if isinstance(validate_on, (list, tuple)) else [validate_on])
+    estimation = _sample_range(estimation_range, name("estimation_range"))
+    validation = _sample_range(validation_range, name("validation_range"))
+    if validation is not None and estimation is None:
+        raise InputError(name("validation_range"), f"needs {name('estimation_range')} (the samples of each run to "
+                                                   "fit on)")
+    if estimation is not None and validation is None and not extra:
+        raise InputError(name("estimation_range"), f"nothing to validate on: give {name('validation_range')} or "
+                                                   f"{name('validate_on')}")
+    where = _source_name(rec, "recording")
+    if not allow_overlap:
+        for item in extra:
+            how = _overlap(rec, item)
+            if how is not None:
+                raise InputError(name("validate_on"), f"{_source_name(item, 'recording')} is the {name('rec')} "
+                                 f"recording {where} ({how}): its runs are fitted, so validating on them "
+                                 "measures the fit, not the model on unseen data; give another recording, or pass "
+                                 f"{names.get('allow_overlap', 'allow_overlap=True')}")
+    signals = dict(mapping) if mapping else None
+    extra_runs = [run for index, item in enumerate(extra)
+                  for run in qualify(_runs(item, name("validate_on"), signals),
+                                     _source_name(item, f"validate_on[{index}]"))]
+    runs = _runs(rec, name("rec"), signals)
+    inputs = [p for p in (_path_of(rec), *(_path_of(item) for item in extra)) if p is not None]
+    return DiagnosisInputs(config, source, runs, where, extra_runs, estimation, validation, configs, inputs,
+                           bool(allow_overlap), workers)
+
+
+def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
+             validation_range=None, allow_overlap: bool = False, workers: int | None = None,
+             mapping: Mapping[str, str] | None = None, progress: Callable[[], None] | None = None, *,
+             names: Mapping[str, str] | None = None) -> DiagnosisResult:
+    """Show what a simulation model gets wrong on measured data, name the cause and fix it.
+
+    The model is simulated on the measured excitation (u, or r in closed loop) and compared with
+    the measured output per line (BLA with bounds, odd and even distortion against the noise), per
+    level and in time. Each hypothesis of the library (friction laws, cubic stiffness, polynomial
+    feedback, saturation, deadzone, backlash, a missing resonance, wrong mechanics, a delay, ...)
+    is estimated on the estimation runs and scored on the validation runs; a cause is named only
+    when its gain is significant, and the extended model is diagnosed again for a further cause
+    (``docs/commands.md``, "nlsid diagnose").
+
+    Parameters
+    ----------
+    model : Model, path or dict
+        The simulation model (:class:`nlsid.Model`), or its config (``docs/configs.md``): the YAML
+        file or the loaded dict.
+    rec : Recording or path
+        The measured recording: multisine and/or sine runs with u and y (and r).
+    validate_on : Recording, path, or a list of them, optional
+        Further recordings whose runs are validation only (ids ``PATH:ID``); ``rec``'s runs are then
+        all estimation runs.
+    estimation_range, validation_range : "a:b" or (a, b), optional
+        Sample ranges of every (arbitrary) run to estimate on and to validate on.
+    allow_overlap : bool
+        Accept a ``validate_on`` recording that is ``rec`` (its validation then measures fitted samples).
+    workers : int, optional
+        Parallel simulations (threads; default: ``NLSID_THREADS`` if set, else all cores).
+    mapping : dict, optional
+        Signals of a foreign MCAP log (``u``/``y``/``r`` -> topic/field).
+    progress : callable, optional
+        Called without arguments after each step: the evidence, the nuisances, each hypothesis
+        scored (a hypothesis that cannot apply is passed without a call), in every round.
+    names : dict, optional
+        Argument -> how the caller calls it in messages (the command line passes its flags).
+
+    Returns
+    -------
+    DiagnosisResult
+
+    Raises
+    ------
+    nlsid.InputError
+        A bad argument (named), config or recording, or a ``validate_on`` recording that is ``rec``.
+
+    Examples
+    --------
+    A diagnosis of the sample takes about 10 s (``docs/api.md``); a bad argument is refused at once:
+
+    >>> import nlsid
+    >>> nlsid.diagnose("configs/stage_model.yaml", "sample_data/stage.h5", validation_range="1000:")
+    Traceback (most recent call last):
+    ...
+    nlsid.errors.InputError: validation_range: needs estimation_range (the samples of each run to fit on)
+    """
+    return diagnosis_inputs(model, rec, validate_on, estimation_range, validation_range, allow_overlap, workers,
+                            mapping, names=names).run(progress)
