@@ -178,13 +178,34 @@ def test_arguments_are_named_in_messages(case):
         nlsid.diagnose(MSD, no_y)
 
 
-def test_nlsid_diagnose_is_the_package_and_the_call():
+@pytest.mark.parametrize("first", ["import nlsid.diagnose.diagnosis, nlsid; f = nlsid.diagnose",
+                                   "import nlsid; f = nlsid.diagnose; import nlsid.diagnose.evidence"])
+def test_nlsid_diagnose_is_the_package_and_the_call(first):
     """``nlsid.diagnose`` names both the stage's call and the package of its method: one object,
-    callable whichever import came first."""
-    import nlsid.diagnose.diagnosis  # noqa: F401
+    callable with the face's signature whichever import came first."""
+    import subprocess
+    import sys
 
-    assert callable(nlsid.diagnose) and nlsid.diagnose.diagnosis.Diagnosis is not None
-    assert "validate_on" in __import__("inspect").signature(nlsid.diagnose).parameters
+    probe = (f"{first}; import inspect; print(f is nlsid.diagnose, callable(f), "
+             "'validate_on' in inspect.signature(f).parameters, f.diagnosis.Diagnosis.__name__ "
+             "if hasattr(f, 'diagnosis') else None)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.split()[:3] == ["True", "True", "True"], out.stdout + out.stderr
+
+
+def test_validate_on_a_second_recording(case):
+    """With ``validate_on`` every run of ``rec`` is estimated on and the other recording's runs (ids
+    ``validate_on[0]:ID`` for an in-memory one) are the validation runs; the cause is the same. The
+    two recordings: realizations 0-2 of each level, and realization 3 (the same lines, other phases
+    and noise)."""
+    _, rec, _, _ = case
+    estimation = Recording([run for run in rec.runs if run.realization < 3])
+    other = Recording([run for run in rec.runs if run.realization == 3])
+    d = nlsid.diagnose(MSD, estimation, validate_on=other)
+    split = d.summary()["split"]
+    assert split["estimation"] == sorted(estimation.run_ids)
+    assert split["validation"] == sorted(f"validate_on[0]:{run_id}" for run_id in other.run_ids)
+    assert d.cause == "coulomb" and abs(d.chain[0]["values"]["fc"] - FC) < STD_BOUND * d.chain[0]["std"]["fc"]
 
 
 def test_progress_is_called_after_each_step(case):
