@@ -1,4 +1,4 @@
-"""The diagnose battery (tests/test_diagnose_msd_battery.py) for the benchmarks: its plant, a
+"""The diagnose battery (tests/diagnose/test_diagnose_msd_battery.py) for the benchmarks: its plant, a
 mass-spring-damper near 32 Hz with damping ratio 0.03 (m = 0.5 kg); its excitation, odd multisines
 over 1-150 Hz of N = 4096 samples at fs = 1 kHz, flat amplitudes scaled to each level's rms, random
 phases, a transient period and the steady ones; and a recording of the plant with forces."""

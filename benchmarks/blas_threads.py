@@ -3,7 +3,7 @@ threads, in the same process on the same data; prints JSON.
 
     python benchmarks/blas_threads.py [--repeats 2]
 
-The case is the slowest kind of the diagnose battery (tests/test_diagnose_msd_battery.py): a
+The case is the slowest kind of the diagnose battery (tests/diagnose/test_diagnose_msd_battery.py): a
 mass-spring-damper near 32 Hz with damping ratio 0.03 (m = 0.5 kg) that has Coulomb friction
 fc = 0.2 N and a hardening cubic spring k3 = 1e9 N/m^3 the model lacks; fs 1 kHz, random-odd
 multisines over 1-150 Hz of 4096 samples at 1, 2 and 4 N rms, six realizations each, a transient

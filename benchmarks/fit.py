@@ -48,7 +48,7 @@ from nlsid.simulate.batch import simulate_all
 from nlsid.simulate.sweep import SweepPoint
 
 sys.path.insert(0, str(Path(__file__).parent.parent / "tests"))
-from bla_cases import multisine  # noqa: E402
+from generators.bla_cases import multisine  # noqa: E402  (the tests' multisine generator)
 
 M, P, N, FS = 10, 4, 4096, 1000.0
 MASS, DAMPING, STIFFNESS, FC = 1.0, 20.0, 4000.0, 0.5

@@ -2,7 +2,7 @@
 
     python benchmarks/friction_laws.py [--repeats 5]
 
-The runs are those of the diagnose battery (tests/test_diagnose_msd_battery.py): a mass-spring-damper
+The runs are those of the diagnose battery (tests/diagnose/test_diagnose_msd_battery.py): a mass-spring-damper
 near 32 Hz with damping ratio 0.03 (m = 0.5 kg), fs 1 kHz, random-odd multisines over 1-150 Hz of
 4096 samples at 1, 2 and 4 N rms, three realizations each, two periods (a transient one and the
 steady state, as the fit engine simulates them), the config's 10 sub-steps. Each law is simulated

@@ -4,7 +4,7 @@
     python benchmarks/jacobian.py [--repeats 3]
 
 The problem is the refinement of the diagnose battery's cubic-spring hypothesis
-(tests/test_diagnose_msd_battery.py): a mass-spring-damper near 32 Hz with damping ratio 0.03
+(tests/diagnose/test_diagnose_msd_battery.py): a mass-spring-damper near 32 Hz with damping ratio 0.03
 (m = 0.5 kg) and a hardening cubic spring k3 = 1e9 N/m^3, fs 1 kHz, random-odd multisines over
 1-150 Hz of 4096 samples at 1, 2 and 4 N rms, three realizations each, a transient and two steady
 periods, 10 sub-steps; free: k3, mass, damping, stiffness, input and output offsets (6), the

@@ -4,7 +4,7 @@ the same process on the same data; prints JSON.
 
     python benchmarks/stribeck_start.py [--repeats 2]
 
-The case is the diagnose battery's Stribeck friction (tests/test_diagnose_msd_battery.py): a
+The case is the diagnose battery's Stribeck friction (tests/diagnose/test_diagnose_msd_battery.py): a
 mass-spring-damper near 32 Hz with damping ratio 0.03 (m = 0.5 kg) that has Stribeck friction
 fc = 0.2 N, fs = 0.4 N, vs = 2 mm/s the model lacks; fs 1 kHz, random-odd multisines over 1-150 Hz
 of 4096 samples at 1, 2 and 4 N rms, six realizations each, a transient and four steady periods,

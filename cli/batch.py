@@ -2,7 +2,7 @@
 Dask cluster, resumable, with a results table and a fleet page.
 
 The heavy parts live in :mod:`nlsid.cli.fleet` and are imported inside the command (importing the
-CLI loads click alone; tests/test_cli_startup.py).
+CLI loads click alone; tests/cli/test_cli_startup.py).
 """
 
 from __future__ import annotations

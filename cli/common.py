@@ -13,7 +13,7 @@ from typing import Any, Iterator
 import click
 
 # rich, numpy and the library are imported where they are used, so that ``nlsid --help`` and shell
-# completion load click alone (tests/test_cli_startup.py lists what importing the CLI may load).
+# completion load click alone (tests/cli/test_cli_startup.py lists what importing the CLI may load).
 
 LOGGER = logging.getLogger("nlsid")
 

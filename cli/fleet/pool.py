@@ -49,7 +49,7 @@ ATTEMPTS = 3  # a task whose worker dies this often is recorded as an error
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NLSID_THREADS")
 _PATH_VARIABLES = ("PYTHONPATH", "PYTHONSAFEPATH")  # set for the fork server only; its workers put them back
 # imported by the fork server before it forks the workers (a name that fails to import is skipped
-# by multiprocessing; tests/test_batch.py imports every one)
+# by multiprocessing; tests/cli/fleet/test_batch.py imports every one)
 PRELOAD = ("numpy", "scipy.optimize", "h5py", "yaml", "pydantic", "numba", "nlsid.cli.main", "nlsid.cli.fleet.task",
            "nlsid.cli.fleet.pool", "nlsid.io.recording", "nlsid.io.model_config")
 STAGE_PRELOAD = {

@@ -101,7 +101,7 @@ def saturated_beta(a: int, b: int, x: float) -> float | None:
     With n = a + b - 1, ``I_x(a, b) = P[Bin(n, x) >= a]`` and ``1 - I_x(a, b) = P[Bin(n, x) <= a - 1]``,
     and each binomial tail beyond its mean is at most ``exp(-n KL(k/n || x))`` (Chernoff), so a
     bound under :data:`_LOG_ZERO` (resp. :data:`_LOG_ONE`) fixes the correctly rounded value:
-    scipy's betainc gives the same 0.0 or 1.0 (tests/test_distortion_class.py).
+    scipy's betainc gives the same 0.0 or 1.0 (tests/analysis/test_distortion_class.py).
     """
     if x <= 0.0 or x >= 1.0:
         return 0.0 if x <= 0.0 else 1.0

@@ -25,7 +25,7 @@ and 0 otherwise (``C`` the binomial coefficient).
 Examples 1 and 2 (P <= 3) are unaffected. From ``cos^p x = 2^{-p} sum_j C(p, j) e^{i (p - 2j) x}``
 the mean of ``cos^p`` is ``2^{-p} C(p, p/2)``, so the DC row is ``C(p, p/2)``: for p = 4,
 ``cos^4 x = 3/8 + cos(2x)/2 + cos(4x)/8`` has mean 3/8 = 6/16, while the printed row gives
-12/16 = 3/4. A DFT of sampled ``cos^p`` (``tests/test_hosidf_analytic.py``) confirms the corrected
+12/16 = 3/4. A DFT of sampled ``cos^p`` (``tests/analysis/test_hosidf_analytic.py``) confirms the corrected
 row for p = 1..8 and rejects the printed one for every even p >= 4. The harmonic rows k >= 1 agree
 with the DFT as printed.
 

@@ -42,7 +42,7 @@ line-to-line |U|^2, which stays exact in [A^-1]_00), so ``var_G_smoothed`` avera
 :func:`smoothing_lines` B lines around k (shifted at the band edges like the window) and applies
 the same formula. The average holds at least B / (2n+1) disjoint windows, hence at least
 ``smoothed_dof = q B / (2n+1)`` degrees of freedom (more: overlapping windows' residuals are only
-partly dependent; Monte Carlo in tests/test_lpm.py).
+partly dependent; Monte Carlo in tests/analysis/test_lpm.py).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ otherwise says which N the data need. A static curve between two continuous filt
 (``wiener_hammerstein``) is checked the same way from the engine's one sub-step: at one step the
 curve's output is held over each sample into the second filter, while in the circuit it varies
 within the sample. Filters with freedom to spare absorb that (a 5/6 BLA fit split over them: 0.41
-mV of test error at one sub-step on the analog stand-in of tests/wh_cases.py), filters of the
+mV of test error at one sub-step on the analog stand-in of tests/generators/wh_cases.py), filters of the
 circuit's own orders cannot (a 2/6 fit: 1.45 mV at one sub-step, 0.18 mV re-fitted at 16,
 :func:`refit_substeps`). Other models are exact at one sub-step and are not checked.
 """
@@ -120,7 +120,7 @@ def refit_substeps(found: Accuracy, data: dict) -> int | None:
     filters: the ones needed, at most STRUCTURE_SUBSTEPS. Its step error is of first order with a
     large constant (the curve's output held over each sub-step into the second filter), so the
     need is in the hundreds, while each re-fit multiplies the cost of its simulations; measured on
-    the analog stand-in of tests/wh_cases.py at the SYSID 2009 benchmark's size (needed: 90 to
+    the analog stand-in of tests/generators/wh_cases.py at the SYSID 2009 benchmark's size (needed: 90 to
     1030): a 2/6 s fit's test error 1.45 mV at one sub-step, 0.18 mV re-fitted at 16 (35 s in
     all), 0.31 mV at 80 (96 s); a 5/6 fit 0.41 mV at one, 0.05 mV at 80 (435 s). That stand-in
     holds the curve's output over an eighth of a sample itself, so it cannot tell steps finer than

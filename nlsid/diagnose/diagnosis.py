@@ -550,7 +550,7 @@ def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, r
     sqrt(N / B) of its standard errors of the optimum on all N samples, where the cost is nearly
     quadratic, so one Gauss-Newton step reaches it: :data:`FINAL_EVALUATIONS` (2) cost evaluations
     are the start and that step, with a Jacobian at each (the second gives the standard errors).
-    Measured on the 40000-sample Duffing record of tests/test_diagnose_budget.py (budget 4096): k3
+    Measured on the 40000-sample Duffing record of tests/diagnose/test_diagnose_budget.py (budget 4096): k3
     0.01 standard errors from the fit on all samples with 2 evaluations (16 simulations), 0.0002
     with 3 or 6 (24, 27). The earlier causes take its values
     (:func:`_update_earlier`); the verdict stays the budget's."""

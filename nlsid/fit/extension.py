@@ -54,7 +54,7 @@ G(k) the DFT of the run's Jacobian rows (N samples, k over all N lines; the real
 lines 1 .. N/2 - 1 count twice), Phi(k) the residual's spectrum, estimated by its periodogram
 |E(k)|^2 / N averaged over SPECTRUM_LINES neighbouring lines. For white residuals Phi = sigma^2 and
 Parseval gives back sigma^2 J^T J. The factor n / (n - p) (n samples, p parameters) is the usual
-degrees-of-freedom correction. docs/fit_covariance.md derives it; tests/test_fit_covariance.py
+degrees-of-freedom correction. docs/fit_covariance.md derives it; tests/fit/test_fit_covariance.py
 checks it by Monte Carlo.
 
 Identifiability: a warning names a parameter that has no effect (zero Jacobian column: its

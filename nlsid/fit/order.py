@@ -133,7 +133,7 @@ def line_correlation(data: FRFData, fit: TFFit) -> float:
     (1/2) e^T P e, P the projection on the extra parameters' whitened directions; with errors of
     correlation R its mean is (1/2) tr(P R), and for directions smooth over D lines (a pole's or a
     zero's effect) tr(P R) = kappa tr(P) (docs/commands.md, "--order auto"; Monte Carlo in
-    tests/test_fit_tf.py). From the residuals of ``fit``: a model within its cost bound leaves
+    tests/fit/test_fit_tf.py). From the residuals of ``fit``: a model within its cost bound leaves
     mostly the errors of the data there."""
     if data.shared_lags <= 0:
         return 1.0

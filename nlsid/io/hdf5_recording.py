@@ -31,7 +31,7 @@ FORMAT_VERSION = 2
 READ_VERSIONS = (1, 2)  # version 2 added /runs/<run-id>/channels
 FORMATS = ("recording", "excitation")
 
-# What h5py raises for a damaged file (HDF5 library errors, found by tests/test_fuzz_inputs.py):
+# What h5py raises for a damaged file (HDF5 library errors, found by tests/cli/test_fuzz_inputs.py):
 # OSError (unreadable or truncated data, bad messages), KeyError (an object whose header cannot be
 # read), RuntimeError (a link or B-tree that points past the end of the file) and ValueError
 # (a datatype or dataspace h5py cannot map to numpy).

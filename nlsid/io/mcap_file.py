@@ -29,7 +29,7 @@ MAGIC = b"\x89MCAP0\r\n"
 # What the mcap package raises on damaged content: its own errors, short reads inside a record
 # (struct.error), CRC mismatches (a ValueError), broken compressed chunks, and KeyError for a
 # message whose channel id the summary does not list and OverflowError for a chunk whose stated
-# uncompressed size does not fit in C (both found by tests/test_fuzz_inputs.py). Only calls into
+# uncompressed size does not fit in C (both found by tests/cli/test_fuzz_inputs.py). Only calls into
 # the package are wrapped (open_mcap, checked), so these never hide nlsid's own errors.
 LIBRARY_ERRORS = (McapError, struct.error, ValueError, EOFError, KeyError, OverflowError, zstandard.ZstdError)
 
@@ -44,7 +44,7 @@ class CappedReader(io.BufferedReader):
 
     ``read(n)`` returns what a file returns (at most the bytes left) without first allocating ``n``
     bytes as Python's file objects do: the ``mcap`` package reads each record with the length its
-    header states, and a damaged length (found by tests/test_fuzz_inputs.py) would otherwise ask
+    header states, and a damaged length (found by tests/cli/test_fuzz_inputs.py) would otherwise ask
     for terabytes and end in MemoryError instead of a short read, which it reports as damage.
     """
 

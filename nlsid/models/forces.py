@@ -42,7 +42,7 @@ stand for the two sides of fc, and "the side" for the direction of the motion.
   The Stribeck mean over a speed ramp uses the integral of e^{-(v/vs)^delta} (erf for delta = 2,
   otherwise vs Gamma(1 + 1/delta) P(1/delta, (w/vs)^delta), the regularised incomplete gamma
   function). The step is second order in h, at reversals through zero and at
-  break-away too (tests/test_simulate_friction.py: 4x finer sub-steps divide the error of an
+  break-away too (tests/simulate/test_simulate_friction.py: 4x finer sub-steps divide the error of an
   event-located reference by about 16; Moreau's plain step, held at the end side's level over the
   whole sub-step, was first order at a reversal, 300x the error at one sub-step), and exact while
   sticking.

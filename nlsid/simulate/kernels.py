@@ -143,7 +143,7 @@ def _relaxation(x: float) -> tuple[float, float, float, float]:
     evaluations under a sine, 23-39 % under a multisine) their power series, with no exponential,
     division or cancellation on the kernel's serial chain;
     beyond, the closed forms with exp, which have no cancellation there. Both within a few units in
-    the last place (tests/test_simulate_friction.py checks against an 80-digit evaluation). Measured on
+    the last place (tests/simulate/test_simulate_friction.py checks against an 80-digit evaluation). Measured on
     the sample stage: kernel time 16-27 % lower than with expm1 at every x (docs/commands.md).
     """
     if x <= SERIES_END:

@@ -22,9 +22,9 @@ A discrete model (as ``nlsid fit`` writes it) is extended as its continuous equi
 whose zero-order-hold discretisation at the runs' fs is exactly G(z) - b0
 (:mod:`nlsid.models.continuous_equivalent`), simulated with sub-steps, so that the force acts
 within the sample as a spring's does. Fed back around G(z) itself, the force would be held over a
-whole sample: on tests/test_diagnose_polynomial_feedback.py's data that structure with the true
+whole sample: on tests/diagnose/test_diagnose_polynomial_feedback.py's data that structure with the true
 parameters is 2.9e-3 rms from the continuous Duffing truth (2.9e-5 for a continuous G), and its
-fits stopped 18-22 dB above the noise (tests/test_diagnose_continuous_equivalent.py). Where no
+fits stopped 18-22 dB above the noise (tests/diagnose/test_diagnose_continuous_equivalent.py). Where no
 continuous equivalent exists (a pole at z = 0 or on the negative real z axis) the feedback is
 extended around G(z), and the note says so. The fit engine then refines k3 together with the
 linear part's coefficients (the nonzero ones of the numerator but a discrete b0, the denominator
@@ -50,7 +50,7 @@ direction, :func:`_from_cubic`): the polynomial's fit holds ``force_offset`` at 
 It can beat the cubic only where the cubic's fit stops short, and it does: the cubic reaches a
 shifted centre only through three strongly coupled parameters (force offset, output offset,
 linear stiffness), which the budget of :data:`nlsid.diagnose.diagnosis.FIT_STEPS` steps does not
-reach (tests/test_diagnose_polynomial_feedback.py: the cubic stops 23-25 dB above the noise, the
+reach (tests/diagnose/test_diagnose_polynomial_feedback.py: the cubic stops 23-25 dB above the noise, the
 polynomial within 0.04 dB of it). Where the cubic's fit leaves nothing along the quadratic term
 (a score test, :func:`_estimate_polynomial`) the polynomial is not fitted.
 """
@@ -113,7 +113,7 @@ def _estimate(ctx: Context) -> Estimate | str:
     A model fitted to the BLA already holds the cubic's mean stiffening (3 k3 E{y^2} for a
     Gaussian y): the response to -y^3 is mostly linear in y, a part the residual of that model
     lacks, and regressed alone it took k3 with the wrong sign on 4 of 8 noise seeds of
-    tests/test_diagnose_continuous_equivalent.py (a 2/2 fitted to the BLA; the fit keeps the sign,
+    tests/diagnose/test_diagnose_continuous_equivalent.py (a 2/2 fitted to the BLA; the fit keeps the sign,
     and the diagnosis named nothing). With c beside it k3 is the regression on the part of the
     response to -y^3 that is not the response to -y (Frisch-Waugh), and c the linear stiffness the
     model lacks (negative where the BLA took part of the cubic's). Where G / (1 + c G) would change

@@ -15,7 +15,7 @@ offset takes). An offset c before the block moves along a direction the data can
 
 Left free, the offset and the limits trade along that direction, and the limits' values are
 wherever the search stopped on it (a saturation at +-8 came out at -9.50 / +6.49 with the input
-offset at -1.49 on an independent-plant record at 35 dB, tests/test_diagnose_msd_battery.py);
+offset at -1.49 on an independent-plant record at 35 dB, tests/diagnose/test_diagnose_msd_battery.py);
 held, the limits are those of the recorded input."""
 
 from __future__ import annotations

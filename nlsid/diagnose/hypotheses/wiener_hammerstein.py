@@ -175,7 +175,7 @@ def separable(ctx: Context, start: Candidate, curve, y: np.ndarray, steps: int) 
     (:func:`~nlsid.diagnose.hypotheses.filter_split.to_sections`: a pair can become two real roots),
     in coordinates relative to the start. A discrete filter's zeros at the origin move too: they
     hold the place of its own zeros, which the BLA cannot tell apart from the other filter's (the
-    sampling zeros of a zero-order-hold equivalent: on the circuit of tests/wh_cases.py the
+    sampling zeros of a zero-order-hold equivalent: on the circuit of tests/generators/wh_cases.py the
     BLA's fit puts the first filter's zeros, -3.10 and -0.23, into the product's, and with them held
     at the origin the search ended with its real pole 5 % low, at 2614 instead of 2756 Hz, and
     2.9x the residual; test error 0.93 -> 0.39 mV at the benchmark's size). Poles at the origin

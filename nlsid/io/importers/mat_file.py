@@ -122,7 +122,7 @@ def _library_errors() -> tuple[type[BaseException], ...]:
     read from the file that does not fit (a field name length of 0 divides by zero), and IndexError
     and KeyError, the same fault in an index or a code; UnboundLocalError for an array of a class
     code MATLAB does not have (scipy's reader falls through its class cases). zlib.error,
-    ZeroDivisionError and UnboundLocalError were found by tests/test_fuzz_inputs.py.
+    ZeroDivisionError and UnboundLocalError were found by tests/cli/test_fuzz_inputs.py.
     NotImplementedError: HDF5-based (v7.3) content scipy cannot read. Only the call of loadmat
     is wrapped, so these never hide nlsid's own errors."""
     import zlib
@@ -198,7 +198,7 @@ def _loadmat_isolated(path: Path) -> dict:
     """:func:`_loadmat` in a forked child process, where the platform can fork.
 
     scipy's compiled MAT v5 reader trusts the type codes and lengths in the file, and a damaged
-    file can crash the interpreter: tests/test_fuzz_inputs.py found segmentation faults (a data
+    file can crash the interpreter: tests/cli/test_fuzz_inputs.py found segmentation faults (a data
     element of a reserved type, 0, 8, 10, 11 or 19, or a matrix type, where an array's numbers
     are). A crashed child takes only itself down, and its signal becomes one error line. Forking
     costs a few milliseconds: the child starts with scipy already imported.
