@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 from nlsid.errors import InputError
-from nlsid.stages.fit import _overlap, _path_of, _runs, _sample_range, _source_name, _whole
+from nlsid.stages.held_out import held_out, whole
 from nlsid.stages.model import Model
 from nlsid.stages.recording import Recording
 
@@ -272,42 +272,16 @@ def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None
                      names: Mapping[str, str] | None = None) -> DiagnosisInputs:
     """The arguments of :func:`diagnose` checked and read, in the order the command line checks them:
     the model, the ranges, the overlap of ``validate_on`` with ``rec``, the recordings."""
-    from nlsid.io.ranges import qualify
-
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
-    if workers is not None and not (_whole(workers) and workers >= 1):
+    if workers is not None and not (whole(workers) and workers >= 1):
         raise InputError(name("workers"), f"expected a whole number >= 1 or None, got {workers!r}")
     if mapping is not None and not isinstance(mapping, Mapping):
         raise InputError(name("mapping"), f"expected signal -> topic/field (a dict), got {type(mapping).__name__}")
     config, source, configs = _model_config(model, name)
-    extra = [] if validate_on is None else (
-        list(validate_on) if isinstance(validate_on, (list, tuple)) else [validate_on])
-    estimation = _sample_range(estimation_range, name("estimation_range"))
-    validation = _sample_range(validation_range, name("validation_range"))
-    if validation is not None and estimation is None:
-        raise InputError(name("validation_range"), f"needs {name('estimation_range')} (the samples of each run to "
-                                                   "fit on)")
-    if estimation is not None and validation is None and not extra:
-        raise InputError(name("estimation_range"), f"nothing to validate on: give {name('validation_range')} or "
-                                                   f"{name('validate_on')}")
-    where = _source_name(rec, "recording")
-    if not allow_overlap:
-        for item in extra:
-            how = _overlap(rec, item)
-            if how is not None:
-                raise InputError(name("validate_on"), f"{_source_name(item, 'recording')} is the {name('rec')} "
-                                 f"recording {where} ({how}): its runs are fitted, so validating on them "
-                                 "measures the fit, not the model on unseen data; give another recording, or pass "
-                                 f"{names.get('allow_overlap', 'allow_overlap=True')}")
-    signals = dict(mapping) if mapping else None
-    extra_runs = [run for index, item in enumerate(extra)
-                  for run in qualify(_runs(item, name("validate_on"), signals),
-                                     _source_name(item, f"validate_on[{index}]"))]
-    runs = _runs(rec, name("rec"), signals)
-    inputs = [p for p in (_path_of(rec), *(_path_of(item) for item in extra)) if p is not None]
-    return DiagnosisInputs(config, source, runs, where, extra_runs, estimation, validation, configs, inputs,
-                           bool(allow_overlap), workers)
+    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
+    return DiagnosisInputs(config, source, data.runs, data.where, data.extra_runs, data.estimation, data.validation,
+                           configs, data.inputs, bool(allow_overlap), workers)
 
 
 def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,

@@ -27,6 +27,7 @@ from nlsid.errors import InputError
 from nlsid.fit.bla_fit import BLAFit
 from nlsid.fit.extension import ExtensionFit
 from nlsid.stages.bla import BlaResult
+from nlsid.stages.held_out import held_out, whole
 from nlsid.stages.model import Model
 from nlsid.stages.recording import Recording
 
@@ -35,10 +36,6 @@ _ORDER = re.compile(r"(\d+)/(\d+)")
 #: the options of the fitting modules' own messages -> the argument of :func:`fit_tf` they are
 _INNER_OPTIONS = {"--order": "order", "--delay": "delay", "--max-order": "max_order", "--domain": "domain",
                   "--level": "level"}
-
-
-def _whole(value) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
 def check_tf_options(order, domain: str, delay, max_order, level,
@@ -54,7 +51,7 @@ def check_tf_options(order, domain: str, delay, max_order, level,
             raise InputError(names.get("order", "order"),
                              f"expected NB/NA (numerator/denominator orders, e.g. 2/2) or auto, got {order!r}")
         pair = None if text == "auto" else (int(match.group(1)), int(match.group(2)))
-    elif isinstance(order, (tuple, list)) and len(order) == 2 and all(_whole(x) and x >= 0 for x in order):
+    elif isinstance(order, (tuple, list)) and len(order) == 2 and all(whole(x) and x >= 0 for x in order):
         pair = (int(order[0]), int(order[1]))
     else:
         raise InputError(names.get("order", "order"),
@@ -63,14 +60,14 @@ def check_tf_options(order, domain: str, delay, max_order, level,
         raise InputError(names.get("domain", "domain"), f"expected s or z, got {domain!r}")
     if isinstance(delay, str) and (delay == "auto" or delay.isdigit()):
         samples = None if delay == "auto" else int(delay)
-    elif _whole(delay) and delay >= 0:
+    elif whole(delay) and delay >= 0:
         samples = int(delay)
     else:
         raise InputError(names.get("delay", "delay"), f"expected a whole number of samples >= 0 or auto, got {delay!r}")
-    if max_order is not None and not (_whole(max_order) and max_order >= 1):
+    if max_order is not None and not (whole(max_order) and max_order >= 1):
         raise InputError(names.get("max_order", "max_order"),
                          f"expected a whole number >= 1 or None, got {max_order!r}")
-    if level is not None and not (_whole(level) and level >= 0):
+    if level is not None and not (whole(level) and level >= 0):
         raise InputError(names.get("level", "level"), f"expected a level index >= 0 or None, got {level!r}")
     return pair, samples
 
@@ -547,58 +544,6 @@ class ModelFit:
         return f"ModelFit({fitted}, validation_rms={self.fitted.validation_rms:.4g})"
 
 
-def _sample_range(value, argument: str):
-    """``"a:b"``, ``(a, b)`` (None: an open end) or None as a :class:`nlsid.io.ranges.SampleRange`."""
-    from nlsid.io.ranges import SampleRange, parse_range
-
-    if value is None or isinstance(value, SampleRange):
-        return value
-    if isinstance(value, str):
-        return parse_range(value, argument)
-    if (isinstance(value, (tuple, list)) and len(value) == 2
-            and all(v is None or (_whole(v) and v >= 0) for v in value)):
-        start, stop = (None if v is None else int(v) for v in value)
-        if start is not None and stop is not None and start >= stop:
-            raise InputError(argument, f"{value}: the range [a, b) needs a < b")
-        return SampleRange(argument, start, stop)
-    raise InputError(argument, f"expected \"a:b\" or (a, b), sample indices >= 0 (None: an open end), got {value!r}")
-
-
-def _source_name(item, default: str) -> str:
-    if isinstance(item, Recording):
-        return item.path or default
-    return str(item)
-
-
-def _overlap(data, item) -> str | None:
-    """How the ``validate_on`` recording ``item`` is the fitted recording ``data`` (None: it is not)."""
-    from nlsid.io.ranges import same_recording
-
-    if isinstance(item, Recording) and item is data:
-        return "the same Recording"
-    first = data.path if isinstance(data, Recording) else data
-    second = item.path if isinstance(item, Recording) else item
-    if first is None or second is None:
-        return None
-    return same_recording(str(first), str(second))
-
-
-def _runs(item, argument: str, mapping: dict | None) -> list:
-    """The runs of a Recording or a recording file, each with a measured y."""
-    if isinstance(item, Recording):
-        missing = [run.run_id for run in item.runs if run.y is None]
-        if missing:
-            raise InputError(argument, f"run {missing[0]!r} has no measured output y: a fit compares the model's "
-                                       "simulation with it")
-        return list(item.runs)
-    if isinstance(item, (str, os.PathLike)):
-        from nlsid.io.recording import read_runs
-
-        return read_runs(item, require_y=True, mapping=mapping)
-    raise InputError(argument, "expected a Recording (nlsid.read) or the path of a recording, got "
-                               f"{type(item).__name__}")
-
-
 def _model_config(model, free, names: Mapping[str, str]) -> tuple[dict, dict, str, list[str]]:
     """The model config as a dict, its line map, its name in messages and its config files."""
     from nlsid.models.key_paths import deep_copy
@@ -681,7 +626,6 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
         A bad argument (named), config, key path, bound or run, or a model that refuses its start.
     """
     from nlsid.fit.extension import JACOBIANS, fit_config
-    from nlsid.io.ranges import qualify
 
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
@@ -689,41 +633,14 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
         raise InputError(name("fit_on"), f"expected y or u, got {fit_on!r}")
     if jacobian not in JACOBIANS:
         raise InputError(name("jacobian"), f"expected one of {', '.join(JACOBIANS)}, got {jacobian!r}")
-    if workers is not None and not (_whole(workers) and workers >= 1):
+    if workers is not None and not (whole(workers) and workers >= 1):
         raise InputError(name("workers"), f"expected a whole number >= 1 or None, got {workers!r}")
     if isinstance(validation, str):
         validation = [validation]
-    extra = [] if validate_on is None else (
-        list(validate_on) if isinstance(validate_on, (list, tuple)) else [validate_on])
-    estimation = _sample_range(estimation_range, name("estimation_range"))
-    validation_part = _sample_range(validation_range, name("validation_range"))
-    if validation_part is not None and estimation is None:
-        raise InputError(name("validation_range"), f"needs {name('estimation_range')} (the samples of each run to "
-                                                   "fit on)")
-    if estimation is not None and validation_part is None and not extra:
-        raise InputError(name("estimation_range"), f"nothing to validate on: give {name('validation_range')} or "
-                                                   f"{name('validate_on')}")
-    data_source = _source_name(rec, "recording")
-    if not allow_overlap:
-        for item in extra:
-            how = _overlap(rec, item)
-            if how is not None:
-                raise InputError(name("validate_on"), f"{_source_name(item, 'recording')} is the {name('rec')} "
-                                 f"recording {data_source} ({how}): its runs are fitted, so validating on them "
-                                 "measures the fit, not the model on unseen data; give another recording, or pass "
-                                 f"{names.get('allow_overlap', 'allow_overlap=True')}")
-    signals = dict(mapping) if mapping else None
-    extra_runs = [run for index, item in enumerate(extra)
-                  for run in qualify(_runs(item, name("validate_on"), signals),
-                                     _source_name(item, f"validate_on[{index}]"))]
-    runs = _runs(rec, name("rec"), signals)
+    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
     config, lines, source, configs = _model_config(model, free, names)
-    fitted = fit_config(config, runs, list(validation) if validation else None, workers, start_estimate,
-                        validate_on=extra_runs, estimation_range=estimation, validation_range=validation_part,
-                        fit_on=fit_on, where=data_source, jacobian=jacobian, source=source, lines=lines)
-    inputs = [p for p in (_path_of(rec), *(_path_of(item) for item in extra)) if p is not None]
-    return ModelFit(fitted, source, data_source, configs, inputs, bool(allow_overlap))
-
-
-def _path_of(item) -> str | None:
-    return item.path if isinstance(item, Recording) else str(item)
+    fitted = fit_config(config, data.runs, list(validation) if validation else None, workers, start_estimate,
+                        validate_on=data.extra_runs, estimation_range=data.estimation,
+                        validation_range=data.validation, fit_on=fit_on, where=data.where, jacobian=jacobian,
+                        source=source, lines=lines)
+    return ModelFit(fitted, source, data.where, configs, data.inputs, bool(allow_overlap))

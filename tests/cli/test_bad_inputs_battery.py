@@ -237,7 +237,7 @@ def test_validate_on_the_data_recording_is_refused(run_cli, tmp_path, monkeypatc
 
 def test_a_different_recording_of_the_same_size_is_no_overlap(tmp_path):
     """Only equal content counts: one changed byte (same size) makes another recording."""
-    from nlsid.cli.options import same_recording
+    from nlsid.io.ranges import same_recording
 
     data = STAGE.read_bytes()
     other = tmp_path / "other.h5"
