@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 from click.testing import CliRunner
@@ -27,6 +28,23 @@ class CliResult:
         assert len(lines) == 1 and "Traceback" not in self.stderr, self.stderr
         for fragment in fragments:
             assert fragment in lines[0], lines[0]
+
+
+def _one_blas_thread_per_worker() -> None:
+    """The suite's worker processes share the cores (one each): with OpenBLAS's default of a thread
+    per core in each, two workers ran the fit tests 2.6 times slower (tests/fit/test_fit_order_stability.py
+    and test_fit_tf.py: 122 s against 47 s with one BLAS thread each). nlsid's own command sets one
+    BLAS thread too (cli/entry.py); tests that need more raise it inside a threadpool_limits block."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # threadpoolctl limits the BLAS libraries already loaded: numpy's, and scipy's own OpenBLAS
+        import numpy  # noqa: F401
+        import scipy.linalg  # noqa: F401
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1, user_api="blas")
+
+
+_one_blas_thread_per_worker()
 
 
 def pytest_collection_modifyitems(config, items):
