@@ -210,6 +210,15 @@ class Model:
         check_suffix(path, (".yaml", ".yml"))
         return write_text_atomic(path, to_yaml(self._data), force=force)
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: the model's type, its file, and its numbers by key path."""
+        from html import escape
+
+        rows = "".join(f"<tr><td><code>{escape(key)}</code></td><td>{value:.6g}</td></tr>"
+                       for key, value in self.parameters.items())
+        return (f"<p><b>{escape(repr(self))}</b></p>"
+                f"<table><tr><th>parameter</th><th>value</th></tr>{rows}</table>")
+
     def __repr__(self) -> str:
         model = self._data.get("model", {})
         kind = model.get("type") if isinstance(model, dict) else None

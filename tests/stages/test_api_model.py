@@ -289,3 +289,21 @@ def test_closed_loop_array_is_the_reference_and_integral_action_removes_the_stat
     proportional = model.with_parameters({"closed_loop.controller.ki": 0.0})
     y = proportional.simulate(np.full(20000, 1e-3), fs=1000.0)
     assert abs(y[-1] / 1e-3 - 2000.0 / 4000.0) < 1e-9
+
+
+def test_the_notebook_view_lists_every_number_of_the_config_file():
+    """The table holds each number of the YAML file (read here with yaml, not through nlsid) by key path."""
+    import re
+
+    import yaml as pyyaml
+
+    from generators import REPO
+
+    path = REPO / "configs" / "stage_true.yaml"
+    model = pyyaml.safe_load(path.read_text())["model"]
+    html = nlsid.Model.from_yaml(path)._repr_html_()
+    cells = dict(re.findall(r"<tr><td><code>([^<]+)</code></td><td>([^<]+)</td></tr>", html))
+    expected = {f"model.{key}": value for key, value in model.items() if isinstance(value, (int, float))}
+    expected["model.nonlinearities[0].fc"] = model["nonlinearities"][0]["fc"]
+    for key, value in expected.items():
+        assert float(cells[key]) == value, key
