@@ -145,8 +145,6 @@ class DiagnosisResult:
     def figures(self) -> dict[str, bytes]:
         """The report's figures as PNG bytes by name (``model_vs_bla``, ``spectrum``, ``bla_vs_level``,
         ``residual_vs_state``, ``before_after``: those the data allow)."""
-        import io
-
         from nlsid.io.diagnosis_file import read_diagnosis
         from nlsid.report import diagnosis_plots as plots
         from nlsid.report.units import units_of
@@ -165,12 +163,9 @@ class DiagnosisResult:
             made.append(("residual_vs_state", plots.residual_vs_state(arrays["time"], units)))
         if "original_error" in arrays["validation"]:
             made.append(("before_after", plots.before_after(arrays["validation"], units)))
-        out = {}
-        for name, figure in made:
-            buffer = io.BytesIO()
-            figure.savefig(buffer, format="png", dpi=DPI)
-            out[name] = buffer.getvalue()
-        return out
+        from nlsid.stages.plotting import png_bytes
+
+        return {name: png_bytes(figure, DPI) for name, figure in made}
 
     def plot(self) -> list:
         """The figures of :meth:`figures` as pyplot figures (a notebook shows them below the cell)."""

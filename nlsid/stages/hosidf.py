@@ -281,16 +281,14 @@ class HosidfResult:
         """The stage's figures as PNG bytes by file name, in the order ``nlsid hosidf --plots`` lists them:
         grid: ``hosidf_vs_amplitude_fNNN.png`` per frequency, ``hosidf_h1_map.png``, ``spectrum_<run>.png``;
         sweep: ``sweep_harmonics.png``, ``sweep_spectrum.png``, ``sweep_hosidf.png``, ``sweep_performance.png``."""
-        import io
-
         from nlsid.report.vector import fit_labels
+
+        from nlsid.stages.plotting import png_bytes
 
         out = {}
         for name, figure in self._figures():
             fit_labels(figure)
-            buffer = io.BytesIO()
-            figure.savefig(buffer, format="png", dpi=DPI)
-            out[name] = buffer.getvalue()
+            out[name] = png_bytes(figure, DPI)
         return out
 
     def plot(self) -> list:

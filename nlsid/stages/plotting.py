@@ -19,3 +19,12 @@ def pyplot_figures(pngs: dict[str, bytes]) -> list:
         axes.set_title(name)
         out.append(figure)
     return out
+
+
+def png_bytes(figure, dpi: int) -> bytes:
+    """A matplotlib figure as PNG bytes at ``dpi`` (what the command writes as a file)."""
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
