@@ -10,17 +10,9 @@ import pytest
 from mcap.writer import Writer
 from scipy.io import savemat
 
+from generators import assert_refused
+
 GOOD = [f"{0.001 * k:.3f},{np.sin(k / 3):.6f},{np.cos(k / 3):.6f}" for k in range(40)]
-
-
-def assert_refused(result, tmp_path, source, *fragments) -> None:
-    assert result.exit_code == 2, (result.exit_code, result.stderr, result.exception)
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("nlsid: error: "), lines
-    assert "Traceback" not in result.stderr and result.stdout == ""
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
-    assert sorted(p.name for p in tmp_path.iterdir()) == [source.name], "nothing written"
 
 
 def csv_source(tmp_path, rows: list[str], name: str = "bad.csv"):

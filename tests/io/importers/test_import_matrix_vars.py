@@ -16,6 +16,7 @@ import pytest
 from scipy import sparse
 from scipy.io import savemat
 
+from generators import assert_refused
 from nlsid.io.hdf5_recording import HDF5Recording
 from nlsid.io.recording import read_runs
 
@@ -49,17 +50,6 @@ def imported(result, out) -> tuple[dict, list, dict]:
     with HDF5Recording(out) as rec:
         prov = rec.provenance["import"]
     return result.json(), read_runs(out), prov
-
-
-def assert_refused(result, tmp_path, source, *fragments) -> None:
-    """Exit 2, one line naming each fragment, no traceback, nothing written next to the source."""
-    assert result.exit_code == 2, (result.exit_code, result.stderr, result.exception)
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("nlsid: error: "), lines
-    assert "Traceback" not in result.stderr and result.stdout == ""
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
-    assert sorted(p.name for p in tmp_path.iterdir()) == [source.name], "nothing written"
 
 
 def test_mat_v5_row_of_a_matrix_with_fs_from_the_file(run_cli, tmp_path):
