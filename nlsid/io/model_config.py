@@ -331,8 +331,25 @@ class PolynomialStiffnessConfig(FiniteModel):
         return self
 
 
+class QuadraticDampingConfig(FiniteModel):
+    """Quadratic damping F = c2 v |v| on the velocity of mass ``at`` (c2 > 0: a drag)."""
+
+    type: Literal["quadratic_damping"]
+    c2: Positive
+    at: Optional[str] = None
+
+
+class CubicDampingConfig(FiniteModel):
+    """Cubic damping F = c3 v^3 on the velocity of mass ``at`` (c3 > 0)."""
+
+    type: Literal["cubic_damping"]
+    c3: Positive
+    at: Optional[str] = None
+
+
 ForceConfig = Annotated[
-    Union[CoulombConfig, StribeckConfig, LuGreConfig, CubicStiffnessConfig, PolynomialStiffnessConfig],
+    Union[CoulombConfig, StribeckConfig, LuGreConfig, CubicStiffnessConfig, PolynomialStiffnessConfig,
+          QuadraticDampingConfig, CubicDampingConfig],
     Field(discriminator="type")
 ]
 

@@ -83,6 +83,13 @@ stand for the two sides of fc, and "the side" for the direction of the motion.
 * ``cubic_stiffness`` F = k3 p^3, evaluated at the sub-step midpoint estimate (p + p_free) / 2:
   second order for this smooth force (the Duffing oscillator of the book's Exercise 79, Eq. 5-12,
   is a unit mass with damping 1, stiffness -10 and k3 = 100).
+* ``quadratic_damping`` F = c2 v |v| and ``cubic_damping`` F = c3 v^3 (c2, c3 > 0: a drag that
+  grows faster than the viscous one, as a fluid's at high Reynolds number), one law
+  F = c2 m |m| + c3 m^3 of the sub-step's mean velocity m = (v + v+) / 2. The force moves v+ by
+  g_v F, a change of O(h) in m, so m is solved for with the force (the implicit midpoint rule:
+  m = (v + v_free) / 2 - (g_v / 2) F(m), Newton's method, monotone for c2, c3 >= 0): second order
+  in h. (The cubic spring's explicit midpoint, with v_free for v+, would be first order here: a
+  force changes the velocity it reads by O(h) within the sub-step, the position only by O(h^2).)
 * ``polynomial_stiffness`` F = k2 p^2 + k3 p^3 + ... + k10 p^10 (Horner), at the same midpoint
   estimate and so second order as well; with k3 alone it is ``cubic_stiffness``.
 
@@ -94,7 +101,7 @@ a factor 2 of each other (Sterbenz's lemma), within about one rounding otherwise
 
     0 coulomb  [fc, fv, dfc, dfv]     1 stribeck [fc, fs, vs, delta, fv, dfc, dfs, dfv]
     2 lugre    [sigma0, sigma1, sigma2, fc, fs, vs, dsigma2, dfc, dfs]     3 cubic_stiffness [k3]
-    4 polynomial_stiffness [k2, k3, ..., k10]
+    4 polynomial_stiffness [k2, k3, ..., k10]     5 quadratic_damping [c2, 0], cubic_damping [0, c3]
 """
 
 from __future__ import annotations
@@ -105,12 +112,13 @@ import numpy as np
 # keyed on kernels.py alone: after editing a value here, touch kernels.py (or delete its
 # __pycache__/*.nbi) or the old value stays in force. An installed package is unaffected.
 COULOMB, STRIBECK, LUGRE, CUBIC, POLYNOMIAL = 0, 1, 2, 3, 4
+DAMPING = 5  # quadratic and cubic damping, one law
 MAX_PARAMS = 9
 MAX_ITERATIONS = 60   # Newton iterations (Stribeck, LuGre) at most, stopping
 TOLERANCE = 1e-10     # when the velocity changes by less than TOLERANCE (|v| + vs)
 LUGRE_TOLERANCE = 1e-5  # LuGre: its step is carried to first order, an error O(step^2) ~ TOLERANCE
 POSITION_KINDS = (CUBIC, POLYNOMIAL)
-START_KINDS = (COULOMB, STRIBECK, LUGRE, CUBIC, POLYNOMIAL)  # laws that read their signal at the start of the sub-step too
+START_KINDS = (COULOMB, STRIBECK, LUGRE, CUBIC, POLYNOMIAL, DAMPING)  # laws that read their signal at the start of the sub-step too
 
 
 def _pos(config, name: str) -> float:
@@ -135,6 +143,8 @@ def encode(config) -> tuple[int, np.ndarray]:
                                     *_offsets(c, "sigma2", "fc", "fs")]),
         "cubic_stiffness": (CUBIC, lambda c: [c.k3]),
         "polynomial_stiffness": (POLYNOMIAL, lambda c: c.coefficients()),
+        "quadratic_damping": (DAMPING, lambda c: [c.c2, 0.0]),
+        "cubic_damping": (DAMPING, lambda c: [0.0, c.c3]),
     }[config.type]
     params = np.zeros(MAX_PARAMS)
     vals = values(config)

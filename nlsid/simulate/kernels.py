@@ -441,6 +441,24 @@ def _friction(kind: int, p: tuple, s_now: float, s_free: float, g: float) -> flo
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _damping(c2: float, c3: float, a: float, b: float) -> float:
+    """The nonlinear damping force F = c2 m |m| + c3 m^3 at the sub-step's mean velocity m, which the
+    force itself lowers: m = (v + v+) / 2 = a - b F with a = (v + v_free) / 2 and b = g / 2 (the
+    implicit midpoint rule, :mod:`nlsid.models.forces`). Newton's method on
+    m + b (c2 m |m| + c3 m^3) = a from m = a: for c2, c3 >= 0 the left side is increasing and
+    convex on the side of a, so the iterates fall monotonically onto the root (no overshoot)."""
+    m = a
+    for _ in range(forces.MAX_ITERATIONS):
+        value = c2 * m * abs(m) + c3 * m * m * m
+        slope = 1.0 + b * (2.0 * c2 * abs(m) + 3.0 * c3 * m * m)
+        step = (m + b * value - a) / slope
+        m -= step
+        if abs(step) <= forces.TOLERANCE * abs(a):
+            break
+    return c2 * m * abs(m) + c3 * m * m * m
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
           h: float) -> tuple[float, float]:
     """The force of an element (parameters ``p``, LuGre's constants ``d``) held over one sub-step
@@ -457,6 +475,8 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
         return _lugre(p, d, z, previous, s_free, s_now, g, h)
     if kind == forces.COULOMB or kind == forces.STRIBECK:
         return _friction(kind, p, s_now, s_free, g), z
+    if kind == forces.DAMPING:
+        return _damping(p[0], p[1], 0.5 * (s_now + s_free), 0.5 * g), z
     mid = 0.5 * (s_now + s_free)
     if kind == forces.POLYNOMIAL:  # k2 mid^2 + ... + k10 mid^10, Horner from k10 down
         acc = p[8]
