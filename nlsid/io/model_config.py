@@ -347,9 +347,51 @@ class CubicDampingConfig(FiniteModel):
     at: Optional[str] = None
 
 
+class BoucWenConfig(FiniteModel):
+    """Bouc-Wen hysteretic force F = k z on the velocity of mass ``at``, with the internal state
+    z' = A v - beta |v| |z|^(n-1) z - gamma v |z|^n (z in position units; the elastic part alpha k x
+    of the classical form alpha k x + (1 - alpha) k z is the model's own stiffness)."""
+
+    type: Literal["bouc_wen"]
+    k: Positive
+    A: Positive = 1.0
+    beta: Positive
+    gamma: float = 0.0
+    n: float = Field(1.0, ge=1.0)
+    at: Optional[str] = None
+
+    @model_validator(mode="after")
+    def _bounded(self):
+        if not -self.beta < self.gamma <= self.beta:
+            raise ValueError(f"expected -beta < gamma <= beta (a bounded, dissipative loop), got beta = {self.beta:g}, "
+                             f"gamma = {self.gamma:g}")
+        return self
+
+
+class EndStopConfig(FiniteModel):
+    """End stops on the position p of mass ``at``: a one-sided spring and damper beyond ``upper``
+    (F = max(0, stiffness (p - upper) + damping v) while p > upper) and below ``lower`` (the mirror
+    image, F <= 0), either side optional."""
+
+    type: Literal["end_stop"]
+    upper: Optional[float] = None
+    lower: Optional[float] = None
+    stiffness: Positive
+    damping: NonNegative = 0.0
+    at: Optional[str] = None
+
+    @model_validator(mode="after")
+    def _sides(self):
+        if self.upper is None and self.lower is None:
+            raise ValueError("give upper, lower or both (the positions where the stops begin)")
+        if self.upper is not None and self.lower is not None and not self.lower < self.upper:
+            raise ValueError(f"expected lower < upper, got lower = {self.lower:g}, upper = {self.upper:g}")
+        return self
+
+
 ForceConfig = Annotated[
     Union[CoulombConfig, StribeckConfig, LuGreConfig, CubicStiffnessConfig, PolynomialStiffnessConfig,
-          QuadraticDampingConfig, CubicDampingConfig],
+          QuadraticDampingConfig, CubicDampingConfig, BoucWenConfig, EndStopConfig],
     Field(discriminator="type")
 ]
 

@@ -15,6 +15,11 @@ damper c, ground dampers c1, c2:
     m1 p1'' = gain u - k (p1 - p2) - c (v1 - v2) - c1 v1 - F_nl,1
     m2 p2'' =          k (p1 - p2) + c (v1 - v2) - c2 v2 - F_nl,2
 
+A force may also act in the coupling itself, ``at: joint``: it reads the relative position
+p1 - p2 (or velocity v1 - v2) and acts on the two masses equal and opposite, - F on the motor and
++ F on the load, as a spring between them does (a cubic joint: ``cubic_stiffness`` at the joint,
+k (p1 - p2) + k3 (p1 - p2)^3 in the coupling).
+
 Its transfer function from force to load position, for c1 = c2 = 0, is
 (c s + k) / (s^2 (m1 m2 s^2 + c (m1 + m2) s + k (m1 + m2))): a rigid-body double integrator and a
 flexible mode at w = sqrt(k (m1 + m2) / (m1 m2)).
@@ -97,9 +102,10 @@ def two_mass_stage(motor_mass: float, load_mass: float, stiffness: float, dampin
     C = (positions if output == "position" else velocities)[output_at]
     return MechanicalPlant(
         StateSpace(A, B, C, 0.0, False, delay), np.zeros(4),
-        force_columns={"motor": np.array([0.0, 1.0 / m1, 0.0, 0.0]), "load": np.array([0.0, 0.0, 0.0, 1.0 / m2])},
-        position_rows=positions,
-        velocity_rows=velocities,
+        force_columns={"motor": np.array([0.0, 1.0 / m1, 0.0, 0.0]), "load": np.array([0.0, 0.0, 0.0, 1.0 / m2]),
+                       "joint": np.array([0.0, 1.0 / m1, 0.0, -1.0 / m2])},
+        position_rows={**positions, "joint": positions["motor"] - positions["load"]},
+        velocity_rows={**velocities, "joint": velocities["motor"] - velocities["load"]},
     )
 
 

@@ -377,14 +377,15 @@ def lead_samples(model: Plant | Structure, loop: ClosedLoop | None, run: Run) ->
 
 def hysteretic(model: Plant | Structure) -> bool:
     """Whether a nonlinearity of ``model`` keeps a memory of the excitation's past that its decay
-    does not erase: friction (a stuck mass holds its place), backlash (the play's position). Such
+    does not erase: friction (a stuck mass holds its place), backlash (the play's position), the
+    Bouc-Wen state (which a stroke of the motion, not time, relaxes). Such
     a memory is wiped out by the excitation's extremes (Mayergoyz 1991, the wiping-out property of
     rate-independent hysteresis), which a whole period of a periodic excitation holds."""
     from nlsid.models import blocks, forces
 
     if isinstance(model, Structure):
         return any(getattr(stage, "memory", False) for branch in model.branches for stage in branch)
-    return (any(f.kind in (forces.COULOMB, forces.STRIBECK, forces.LUGRE) for f in model.forces)
+    return (any(f.kind in (forces.COULOMB, forces.STRIBECK, forces.LUGRE, forces.BOUC_WEN) for f in model.forces)
             or blocks.BACKLASH in (model.input_block[0], model.output_block[0]))
 
 

@@ -459,11 +459,85 @@ def _damping(c2: float, c3: float, a: float, b: float) -> float:
 
 
 @njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _bouc_wen_rate(v: float, z: float, a: float, beta: float, gamma: float, n: float) -> float:
+    """z' = A v - beta |v| |z|^(n-1) z - gamma v |z|^n (no power for the usual n = 1)."""
+    if n != 1.0:
+        size = abs(z) ** n
+        return a * v - beta * abs(v) * math.copysign(size, z) - gamma * v * size
+    return a * v - beta * abs(v) * z - gamma * v * abs(z)
+
+
+# Not inlined: its loops would lengthen the kernel's compilation for a rarely used law.
+@njit(cache=True, fastmath={"contract"}, nogil=True)
+def _bouc_wen(p: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
+              h: float) -> tuple[float, float]:
+    """Bouc-Wen force over a sub-step and z at its end (scheme in :mod:`nlsid.models.forces`): z
+    integrated by Heun's method along the velocity ramp from ``s_now`` to v+ = s_free - g F on
+    parts short against its relaxation, the force k times z's trapezoidal mean; twice, from the
+    ``previous`` sub-step's force and then from the first pass's."""
+    k, a, beta, gamma, n = p[0], p[1], p[2], p[3], p[4]
+    bound = (a / (beta + gamma)) ** (1.0 / n)
+    force, end = previous, z
+    for _ in range(2):
+        v_end = s_free - g * force
+        size = max(abs(z), bound)
+        rate = (beta + abs(gamma)) * n * size ** (n - 1.0) * max(abs(s_now), abs(v_end))
+        parts = min(forces.BOUC_WEN_PARTS, int(rate * h / forces.BOUC_WEN_PART) + 1)
+        dt = h / parts
+        dv = (v_end - s_now) / parts
+        end = z
+        total = 0.5 * z
+        for i in range(parts):
+            va = s_now + i * dv
+            slope = _bouc_wen_rate(va, end, a, beta, gamma, n)
+            guess = end + dt * slope
+            end = end + 0.5 * dt * (slope + _bouc_wen_rate(va + dv, guess, a, beta, gamma, n))
+            total += end
+        force = k * (total - 0.5 * end) / parts
+    return force, end
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _stop(edge: float, sign: float, k: float, c: float, s_now: float, s_free: float, g: float, h: float) -> float:
+    """The force of one end stop (``sign`` +1 beyond an upper edge, -1 below a lower) held over a
+    sub-step (:mod:`nlsid.models.forces`): the free path from ``s_now`` to ``s_free`` taken as
+    linear, the stop is touched over the share phi of the sub-step where it is beyond the edge,
+    at the mean depth of that part; the spring and damper there, at the depth and velocity the
+    force itself lowers, held over phi of the sub-step, cut at zero (a contact only pushes) and at
+    the force that brings the mean depth back to zero."""
+    d0, d1 = sign * (s_now - edge), sign * (s_free - edge)
+    if d0 <= 0.0 and d1 <= 0.0:
+        return 0.0
+    if d0 >= 0.0 and d1 >= 0.0:
+        phi = 1.0
+    else:  # the edge is crossed within the sub-step
+        phi = max(d0, d1) / abs(d1 - d0)
+    depth = 0.5 * (max(d0, 0.0) + max(d1, 0.0))
+    push = (k * depth + c * sign * (s_free - s_now) / h) / (1.0 + phi * g * (0.5 * k + c / h))
+    if push <= 0.0:
+        return 0.0
+    if g > 0.0:
+        push = min(push, 2.0 * depth / (phi * g))
+    return sign * phi * push
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
+def _end_stop(p: tuple, s_free: float, s_now: float, g: float, h: float) -> float:
+    """The end stops' force over a sub-step from the position at its start ``s_now`` and at its
+    end without the force ``s_free``: the stop whose side the sub-step reaches (lower < upper)."""
+    if p[4] != 0.0 and max(s_now, s_free) > p[0]:
+        return _stop(p[0], 1.0, p[2], p[3], s_now, s_free, g, h)
+    if p[5] != 0.0 and min(s_now, s_free) < p[1]:
+        return _stop(p[1], -1.0, p[2], p[3], s_now, s_free, g, h)
+    return 0.0
+
+
+@njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: float, s_now: float, g: float,
           h: float) -> tuple[float, float]:
     """The force of an element (parameters ``p``, LuGre's constants ``d``) held over one sub-step
-    and its internal state after it (LuGre's bristle deflection; ``z``, unused by the other laws,
-    is returned unchanged). ``previous`` is the element's force over the previous sub-step (LuGre's
+    and its internal state after it (LuGre's bristle deflection, Bouc-Wen's z; ``z``, unused by the
+    other laws, is returned unchanged). ``previous`` is the element's force over the previous sub-step (LuGre's
     prediction of the velocity).
 
     ``s_free`` is the read-out signal (velocity, or position for cubic and polynomial stiffness) at the
@@ -477,6 +551,10 @@ def force(kind: int, p: tuple, d: tuple, z: float, previous: float, s_free: floa
         return _friction(kind, p, s_now, s_free, g), z
     if kind == forces.DAMPING:
         return _damping(p[0], p[1], 0.5 * (s_now + s_free), 0.5 * g), z
+    if kind == forces.BOUC_WEN:
+        return _bouc_wen(p, z, previous, s_free, s_now, g, h)
+    if kind == forces.END_STOP:
+        return _end_stop(p, s_free, s_now, g, h), z
     mid = 0.5 * (s_now + s_free)
     if kind == forces.POLYNOMIAL:  # k2 mid^2 + ... + k10 mid^10, Horner from k10 down
         acc = p[8]

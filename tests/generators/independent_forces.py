@@ -1,0 +1,176 @@
+"""Hysteresis, end stops and a cubic joint for the tests, written independently of nlsid's simulator
+(which steps them with the force held over each sub-step, nlsid.models.forces): here the classical
+fourth-order Runge-Kutta method on a fine fixed grid, the input held over each sample period T.
+
+- Bouc-Wen on a mass-spring-damper (:func:`bouc_wen_response`): state (p, v, z),
+
+      m p'' + c p' + k p = gain u - kh z,   z' = A v - beta |v| |z|^(n-1) z - gamma v |z|^n,
+
+  the classical alpha k0 p + (1 - alpha) k0 z with k = alpha k0, kh = (1 - alpha) k0 (Wen 1976).
+  The right-hand side is continuous with kinks (|v|, |z|) where v or z changes sign: there RK4 is
+  of second order, so the step is checked by halving (tests/diagnose/test_hysteresis.py).
+- End stops on a mass-spring-damper (:func:`end_stop_response`): beyond ``upper`` the force
+  max(0, ks (p - upper) + cs v) acts against the motion (below ``lower`` its mirror image). The
+  force jumps by cs v where the mass reaches a stop, so the contact instants are located: a step
+  that would cross an edge from outside is bisected on its length (60 halvings) and the rest of
+  it taken in contact. Leaving a stop the force has fallen to zero already (ks d + cs v <= 0
+  before d = 0 with v < 0 at an upper stop), a kink that needs no location.
+- A two-mass stage with a cubic spring in its coupling (:func:`joint_response`): state
+  (p1, v1, p2, v2), k (p1 - p2) + k3 (p1 - p2)^3 + c (v1 - v2) between the masses; smooth, so RK4
+  is of fourth order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+BISECTIONS = 60
+
+
+@numba.njit(cache=False)
+def _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n):
+    size = abs(z) ** n
+    dz = a * v - beta * abs(v) * math.copysign(size, z) - gamma * v * size
+    return (drive - c * v - k * p - kh * z) / m, dz
+
+
+@numba.njit(cache=False)
+def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n):
+    h = 1.0 / (fs_hz * substeps)
+    Y = np.empty_like(U)
+    for r in range(U.shape[0]):
+        p = v = z = 0.0
+        for i in range(U.shape[1]):
+            Y[r, i] = p
+            drive = gain * U[r, i]
+            for _ in range(substeps):
+                a1, d1 = _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n)
+                p2, v2, z2 = p + 0.5 * h * v, v + 0.5 * h * a1, z + 0.5 * h * d1
+                a2, d2 = _bw_rates(p2, v2, z2, drive, m, c, k, kh, a, beta, gamma, n)
+                p3, v3, z3 = p + 0.5 * h * v2, v + 0.5 * h * a2, z + 0.5 * h * d2
+                a3, d3 = _bw_rates(p3, v3, z3, drive, m, c, k, kh, a, beta, gamma, n)
+                p4, v4, z4 = p + h * v3, v + h * a3, z + h * d3
+                a4, d4 = _bw_rates(p4, v4, z4, drive, m, c, k, kh, a, beta, gamma, n)
+                p += h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+                v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+                z += h / 6 * (d1 + 2 * d2 + 2 * d3 + d4)
+    return Y
+
+
+@numba.njit(cache=False)
+def _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching):
+    force = 0.0
+    if touching > 0:
+        force = max(0.0, ks * (p - upper) + cs * v)
+    elif touching < 0:
+        force = min(0.0, ks * (p - lower) + cs * v)
+    return (drive - c * v - k * p - force) / m
+
+
+@numba.njit(cache=False)
+def _stop_rk4(p, v, tau, drive, m, c, k, upper, lower, ks, cs, touching):
+    a1 = _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching)
+    p2, v2 = p + 0.5 * tau * v, v + 0.5 * tau * a1
+    a2 = _stop_acceleration(p2, v2, drive, m, c, k, upper, lower, ks, cs, touching)
+    p3, v3 = p + 0.5 * tau * v2, v + 0.5 * tau * a2
+    a3 = _stop_acceleration(p3, v3, drive, m, c, k, upper, lower, ks, cs, touching)
+    p4, v4 = p + tau * v3, v + tau * a3
+    a4 = _stop_acceleration(p4, v4, drive, m, c, k, upper, lower, ks, cs, touching)
+    return p + tau / 6 * (v + 2 * v2 + 2 * v3 + v4), v + tau / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+
+
+@numba.njit(cache=False)
+def _side(p, upper, lower):
+    return 1 if p > upper else (-1 if p < lower else 0)
+
+
+@numba.njit(cache=False)
+def _end_stop_runs(U, fs_hz, substeps, m, c, k, gain, upper, lower, ks, cs):
+    h = 1.0 / (fs_hz * substeps)
+    Y = np.empty_like(U)
+    for r in range(U.shape[0]):
+        p = v = 0.0
+        for i in range(U.shape[1]):
+            Y[r, i] = p
+            drive = gain * U[r, i]
+            for _ in range(substeps):
+                touching = _side(p, upper, lower)
+                p1, v1 = _stop_rk4(p, v, h, drive, m, c, k, upper, lower, ks, cs, touching)
+                if touching != 0 or _side(p1, upper, lower) == 0:
+                    p, v = p1, v1
+                    continue
+                lo, hi = 0.0, h  # entering a stop within the step: its instant by bisection
+                for _ in range(BISECTIONS):
+                    mid = 0.5 * (lo + hi)
+                    if _side(_stop_rk4(p, v, mid, drive, m, c, k, upper, lower, ks, cs, 0)[0], upper, lower) == 0:
+                        lo = mid
+                    else:
+                        hi = mid
+                p, v = _stop_rk4(p, v, hi, drive, m, c, k, upper, lower, ks, cs, 0)
+                touching = _side(p, upper, lower)
+                p, v = _stop_rk4(p, v, h - hi, drive, m, c, k, upper, lower, ks, cs, touching)
+    return Y
+
+
+@numba.njit(cache=False)
+def _joint_rates(x, drive, m1, m2, k, c, c1, c2, k3):
+    d = x[0] - x[2]
+    coupling = k * d + k3 * d**3 + c * (x[1] - x[3])
+    return np.array([x[1], (drive - coupling - c1 * x[1]) / m1, x[3], (coupling - c2 * x[3]) / m2])
+
+
+@numba.njit(cache=False)
+def _joint_runs(U, fs_hz, substeps, m1, m2, k, c, c1, c2, gain, k3, at):
+    h = 1.0 / (fs_hz * substeps)
+    Y = np.empty_like(U)
+    for r in range(U.shape[0]):
+        x = np.zeros(4)
+        for i in range(U.shape[1]):
+            Y[r, i] = x[at]
+            drive = gain * U[r, i]
+            for _ in range(substeps):
+                k1 = _joint_rates(x, drive, m1, m2, k, c, c1, c2, k3)
+                k2 = _joint_rates(x + 0.5 * h * k1, drive, m1, m2, k, c, c1, c2, k3)
+                k3_ = _joint_rates(x + 0.5 * h * k2, drive, m1, m2, k, c, c1, c2, k3)
+                k4 = _joint_rates(x + h * k3_, drive, m1, m2, k, c, c1, c2, k3)
+                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3_ + k4)
+    return Y
+
+
+def _mechanics(model: dict) -> tuple[float, float, float, float]:
+    return tuple(float(model.get(key, default)) for key, default in
+                 (("mass", 0.0), ("damping", 0.0), ("stiffness", 0.0), ("gain", 1.0)))
+
+
+def _inputs(U: np.ndarray) -> np.ndarray:
+    return np.atleast_2d(np.asarray(U, dtype=float))
+
+
+def bouc_wen_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 32) -> np.ndarray:
+    """Sampled positions (runs x samples) of a mass_spring_damper with one ``bouc_wen`` force
+    (keys k, A, beta, gamma, n as docs/configs.md) for held inputs U, from rest."""
+    (f,) = model["nonlinearities"]
+    law = [float(f["k"]), float(f.get("A", 1.0)), float(f["beta"]), float(f.get("gamma", 0.0)), float(f.get("n", 1.0))]
+    return _bouc_wen_runs(_inputs(U), float(fs_hz), int(substeps), *_mechanics(model), *law)
+
+
+def end_stop_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 32) -> np.ndarray:
+    """Sampled positions (runs x samples) of a mass_spring_damper with one ``end_stop`` force
+    (upper and/or lower, stiffness, damping) for held inputs U, from rest."""
+    (f,) = model["nonlinearities"]
+    law = [float(f.get("upper", math.inf)), float(f.get("lower", -math.inf)), float(f["stiffness"]),
+           float(f.get("damping", 0.0))]
+    return _end_stop_runs(_inputs(U), float(fs_hz), int(substeps), *_mechanics(model), *law)
+
+
+def joint_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 16) -> np.ndarray:
+    """Sampled positions (runs x samples) of a two_mass_stage (output_at motor or load) with a
+    cubic spring k3 in its coupling (``cubic_stiffness`` at ``joint``) for held inputs U, from rest."""
+    (f,) = model["nonlinearities"]
+    keys = ("motor_mass", "load_mass", "stiffness", "damping", "motor_damping", "load_damping", "gain")
+    values = [float(model.get(key, 1.0 if key == "gain" else 0.0)) for key in keys]
+    at = 0 if model.get("output_at", "load") == "motor" else 2
+    return _joint_runs(_inputs(U), float(fs_hz), int(substeps), *values, float(f["k3"]), at)
