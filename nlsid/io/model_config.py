@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, ClassVar, Literal, Optional, Union
 
-from pydantic import ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
 from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
@@ -480,10 +480,95 @@ class LPLConfig(_Offsets):
     branches: list[BranchConfig] = Field(min_length=1)
 
 
+def _expression_text(value):
+    """An expression of :mod:`nlsid.models.expressions` as its text (a number is a constant one),
+    checked for its syntax here so that an error names its key; its names are checked by
+    :class:`EquationsConfig`."""
+    from nlsid.models.expressions import parse
+
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise ValueError(f"expected an expression (a text or a number), got {value!r}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got {value!r}")
+    try:
+        parse(value, "")
+    except ValueError as exc:  # InputError: "column C: what"
+        raise ValueError(getattr(exc, "what", str(exc))) from None
+    return str(value)
+
+
+Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+ExpressionText = Annotated[str, BeforeValidator(_expression_text)]
+StateBounds = Annotated[list[Optional[float]], Field(min_length=2, max_length=2)]
+
+
+class EquationsConfig(_Offsets):
+    """A grey-box model written as equations (``docs/configs.md``, "Models written as equations").
+
+    ``states``: name -> initial value; ``parameters``: name -> value; ``derivatives`` (continuous:
+    dx/dt in the recording's time unit) or ``updates`` (discrete: x[k+1]), one expression per
+    state; ``output``: y as an expression; ``bounds``: state -> [lower, upper] (null: no bound),
+    the state clipped into them; ``delay``: dead time of the plant input u in seconds (whole
+    samples). Expressions read the states, the parameters, ``u`` (the plant input), ``r`` and the
+    recording's channels (:mod:`nlsid.models.expressions`, :mod:`nlsid.models.equations`)."""
+
+    RESERVED: ClassVar[tuple[str, ...]] = ("u", "r")
+    type: Literal["equations"]
+    states: dict[Name, float] = Field(min_length=1)
+    parameters: dict[Name, float] = {}
+    derivatives: Optional[dict[Name, ExpressionText]] = None
+    updates: Optional[dict[Name, ExpressionText]] = None
+    bounds: dict[Name, StateBounds] = {}
+    output: ExpressionText
+    delay: NonNegative = 0.0
+
+    @property
+    def equations(self) -> dict[str, str]:
+        """State -> its expression (the derivatives, or the updates)."""
+        return self.derivatives if self.derivatives is not None else self.updates
+
+    @property
+    def section(self) -> str:
+        return "derivatives" if self.derivatives is not None else "updates"
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        from nlsid.models.expressions import FUNCTIONS
+
+        if (self.derivatives is None) == (self.updates is None):
+            raise ValueError("give derivatives (continuous time) or updates (discrete time), one of them")
+        for section, names in (("states", self.states), ("parameters", self.parameters)):
+            for name in names:
+                if name in self.RESERVED or name in FUNCTIONS:
+                    what = "a function" if name in FUNCTIONS else ("the plant input" if name == "u" else "the reference")
+                    raise ValueError(f"{section}.{name}: {name!r} is {what} in expressions; choose another name")
+        both = sorted(set(self.states) & set(self.parameters))
+        if both:
+            raise ValueError(f"parameters.{both[0]}: {both[0]!r} is a state too; give it one meaning")
+        for name in self.equations:
+            if name not in self.states:
+                raise ValueError(f"{self.section}.{name}: no state {name!r} (states: {', '.join(self.states)})")
+        missing = [name for name in self.states if name not in self.equations]
+        if missing:
+            raise ValueError(f"{self.section}: no expression for state {missing[0]!r}; give one per state")
+        for name, (lower, upper) in self.bounds.items():
+            if name not in self.states:
+                raise ValueError(f"bounds.{name}: no state {name!r} (states: {', '.join(self.states)})")
+            lo = -math.inf if lower is None else lower
+            hi = math.inf if upper is None else upper
+            if not lo < hi:
+                raise ValueError(f"bounds.{name}: lower ({lo:g}) must be < upper ({hi:g})")
+            if not lo <= self.states[name] <= hi:
+                raise ValueError(f"states.{name}: initial value {self.states[name]:g} outside its bounds "
+                                 f"[{lo:g}, {hi:g}]")
+        return self
+
+
 ModelConfig = Annotated[
     Union[
         TransferFunctionPlant, ZPKPlant, StateSpacePlant, MassSpringDamperConfig, TwoMassStageConfig,
         NonlinearFeedbackConfig, WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
+        EquationsConfig,
     ],
     Field(discriminator="type"),
 ]

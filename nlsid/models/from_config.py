@@ -9,6 +9,8 @@ Two kinds of model come out:
 * :class:`Structure`: a block-structured model (Wiener, Hammerstein, Wiener-Hammerstein, the
   parallel LPL of seed 002 Definition 1): branches of LTI blocks and nonlinear blocks in series,
   summed. Open loop only.
+* :class:`nlsid.models.equations.Equations`: a model written as equations (``type: equations``).
+  Open loop only.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io import model_config as mc
-from nlsid.models import blocks, forces
+from nlsid.models import blocks, equations, forces
 from nlsid.models.blocks import StaticBlock, static_block
 from nlsid.models.controller import pid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
@@ -203,8 +205,13 @@ def structure(config) -> Structure:
 STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
 
 
-def model(config: mc.SimulateConfig) -> Union[Plant, Structure]:
-    """The plant or structure of a whole config."""
+def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equations]:
+    """The plant, structure or equations model of a whole config."""
+    if config.model.type == "equations":
+        if config.closed_loop is not None:
+            raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not an equations model "
+                                            "(write the controller into the equations, reading r)")
+        return equations.build(config.model, _offsets(config.model))
     if config.model.type in STRUCTURES:
         if config.closed_loop is not None:
             raise InputError("closed_loop", f"a closed loop needs an LTI or mechanical plant, not a {config.model.type} structure")

@@ -16,7 +16,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
-from nlsid.models import blocks, forces
+from nlsid.models import blocks, equations, forces
 from nlsid.models.controller import discrete_path, feedforward, tustin, two_input
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
@@ -270,6 +270,16 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
     return dataclasses.replace(run, u=u_out, y=y_out, r=run.u.copy(), units=units)
 
 
+def simulate_equations(model: equations.Equations, run: Run, substeps: int | None, noise: Noise) -> Run:
+    """Run a model written as equations on ``run`` (:mod:`nlsid.models.equations`): its plant input
+    is u + the input offset and channels + process noise, the recorded y its output + the output
+    offset + output noise."""
+    plant_input = run.u + plant_input_terms(model.offsets, run, noise.process)
+    y = equations.response(model, run, plant_input, substeps) + noise.y + model.offsets.output
+    _check_finite(y, run.run_id)
+    return dataclasses.replace(run, u=run.u + noise.u, y=y, r=None)
+
+
 def _filter(ss: StateSpace, x: np.ndarray, fs_step: float, delay: int, x0: np.ndarray | None = None) -> np.ndarray:
     """An LTI block alone on the held signal x at the rate fs_step, with ``delay`` samples of dead
     time, from the state ``x0`` (default rest)."""
@@ -354,16 +364,19 @@ def _loop_decay_rate(plant: Plant, loop: ClosedLoop, fs: float, n: int) -> float
         return max(float(np.min(-np.log(np.abs(poles)) * fs)), 0.0)
 
 
-def lead_samples(model: Plant | Structure, loop: ClosedLoop | None, run: Run) -> int:
+def lead_samples(model: Plant | Structure | equations.Equations, loop: ClosedLoop | None, run: Run) -> int:
     """The samples t fs in which the slowest mode of the linear dynamics (rate sigma:
     :func:`_decay_rate` of a plant's linear part, forces aside, or of every stage of a structure; in
     closed loop :func:`_loop_decay_rate`, the loop's modes) decays to STEADY_TOLERANCE, t =
     ln(1 / STEADY_TOLERANCE) / sigma, at most MAX_LEAD_PERIODS periods. 0 for an arbitrary record,
     a run with transient periods (simulated as measured), and a model (or loop) with an integrator
-    or an unstable mode (no periodic steady state to reach) or without modes."""
+    or an unstable mode (no periodic steady state to reach) or without modes, and a model written as
+    equations (its initial states are part of the model: no lead-in)."""
     from nlsid.io.ranges import RangeRun
 
     if run.period is None or isinstance(run, RangeRun) or run.transient_periods:
+        return 0
+    if isinstance(model, equations.Equations):  # starts at its written initial states (nlsid.models.equations)
         return 0
     if loop is not None:
         sigma = _loop_decay_rate(model, loop, run.fs, run.n_samples)

@@ -12,27 +12,31 @@ from __future__ import annotations
 import dataclasses
 
 from nlsid.io.run import Run
+from nlsid.models.equations import Equations
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
-from nlsid.simulate.engine import _lead, lead_periods, simulate_plant, simulate_structure, with_lead
+from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
 from nlsid.simulate.initial_state import with_initial_state
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.structure_state import with_initial_states
 
 
-def simulate_run(model: Plant | Structure, loop: ClosedLoop | None, run: Run, substeps: int | None,
+def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, run: Run, substeps: int | None,
                  noise: Noise | None = None, steady: bool = False) -> Run:
     """Simulate one run; ``noise`` defaults to none. ``steady`` (the run as it was measured): a
     periodic run is simulated in its periodic steady state, as if its excitation had run
     :func:`lead_periods` more periods before it (each signal's first period repeated ahead of it,
     then cut off again); an arbitrary record with a measured ``y`` from the initial state that
     fits its first samples (a plant's: :mod:`nlsid.simulate.initial_state`; a block structure's
-    filters': :mod:`nlsid.simulate.structure_state`)."""
+    filters': :mod:`nlsid.simulate.structure_state`). A model written as equations runs from its
+    written initial states in either case (:mod:`nlsid.models.equations`)."""
     noise = noise or Noise.zero(run.n_samples)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
         original, m = run, count * run.period
         run = with_lead(run, count)
         noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
+    if isinstance(model, Equations):  # from its written initial states, whatever the run (no lead, no fitted state)
+        return simulate_equations(model, run, substeps, noise)
     out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
            else simulate_plant(model, loop, run, substeps, noise))
     if steady and run.period is None and isinstance(model, Plant):
