@@ -375,8 +375,11 @@ class _Problem:
                 raise InputError(run.run_id, "run has no measured y to fit to")
             if self.closed and run.r is None:
                 raise InputError(run.run_id, "the model has a closed_loop but the run has no reference r")
-            # y stays: an arbitrary record starts from the initial state fitted to it (nlsid.simulate.initial_state)
-            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, r=None))
+            # y stays: an arbitrary record starts from the initial state fitted to it (nlsid.simulate.initial_state);
+            # r stays for a model written as equations, whose expressions may read it
+            model = self.base.get("model")
+            keep_r = not self.closed and isinstance(model, dict) and model.get("type") == "equations"
+            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, r=run.r if keep_r else None))
         return out
 
     def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:
