@@ -1,0 +1,591 @@
+"""Fitting a PNLSS model (:mod:`nlsid.models.pnlss`) to measured runs by minimising the simulation
+error (Paduart et al., Automatica 46, 2010, Sec. 4):
+
+    theta_hat = argmin_theta sum_runs sum_t (y_sim(t; theta) - y(t))^2,
+
+theta = the coefficients of A, B, C, D, E, F and the initial state of each arbitrary run.
+
+* Start: a linear model (:func:`nlsid.models.pnlss.from_linear`: the BLA's fit, balanced), E = F = 0.
+  Stage "linear": A, B, C, D (and the initial states) first, E and F held at zero; stage
+  "nonlinear": all coefficients. A start whose nonlinear terms make the simulation diverge has them
+  shrunk tenfold until it does not (stated in the notes).
+* Levenberg-Marquardt with the exact Jacobian (:mod:`nlsid.simulate.pnlss_kernels`, forward
+  sensitivities). The columns are normalised to unit length (parameter scaling); the normal matrix
+  H = J'J of the normalised Jacobian is decomposed once per iteration, H = V diag(s) V', so that
+  every damping tried costs one simulation: step = -V diag(1 / (s + lambda)) V' J'e, directions
+  with s below S_FLOOR s_max left out (the n^2 directions of a state transformation, along which
+  the output does not change, and numerically void ones). lambda = mu s_max; an accepted step
+  divides mu by 3, a rejected one multiplies it by 10. A trial whose simulation leaves the bound
+  (:data:`BOUND_FACTOR` times the largest state of the start) or is not finite is rejected.
+* Periodic runs: simulated in periodic steady state (their first steady period repeated ahead as
+  a lead-in: as many periods as the linear part needs to decay to 1e-6, at least 1, at most 20,
+  the lead samples discarded); arbitrary runs: from their initial state, a parameter of the fit.
+* Early stopping (the number of iterations, hence how far the nonlinear terms are fitted, chosen
+  on validation data): every accepted iterate is simulated on the validation runs (their initial
+  states fitted to their output, arbitrary ones; periodic ones in steady state) and the iterate
+  with the lowest validation rms is the result, the linear iterates and the start included; the
+  fit stops after PATIENCE iterates without a lower one. Without validation runs the result is the
+  last iterate (the lowest estimation error).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+from nlsid.models.pnlss import Pnlss
+from nlsid.simulate.pnlss_kernels import sensitivities
+
+S_FLOOR = 1e-12          # eigenvalues of the normalised J'J below this share of the largest are left out
+BOUND_FACTOR = 1e3       # a simulated state beyond this times the start's largest |x| counts as diverged
+STEADY_TOLERANCE = 1e-6  # the linear part's slowest mode decays to this within the lead-in
+MAX_LEAD_PERIODS = 20
+MU_START = 1e-3
+MU_MAX = 1e12
+MAX_REJECTED = 14        # rejected trials per iteration before the fit stops (mu grows 10x per trial)
+CHUNK_BYTES = 32 * 2 ** 20  # Jacobian rows are formed in chunks of at most this size
+CONVERGED = 1e-10        # relative cost decrease below which an accepted step ends the stage
+X0_ITERATIONS = 6
+
+
+@dataclass
+class Iteration:
+    """One accepted iterate: its stage (``start``, ``linear``, ``nonlinear``), its number within
+    the stage, the rms simulation errors on the estimation and validation runs (None without
+    validation runs; inf where the simulation diverged) and the damping mu that produced it."""
+
+    stage: str
+    number: int
+    estimation_rms: float
+    validation_rms: float | None
+    mu: float
+
+    def as_dict(self) -> dict:
+        return {"stage": self.stage, "iteration": self.number, "estimation_rms": self.estimation_rms,
+                "validation_rms": self.validation_rms, "mu": self.mu}
+
+
+@dataclass
+class PnlssFit:
+    """The result of :func:`fit_pnlss`.
+
+    Attributes
+    ----------
+    model : the chosen model (:attr:`chosen`).
+    start : the start model (after any shrinking of its nonlinear terms).
+    linear : the best linear iterate (E = F = 0; the start if no linear stage ran).
+    iterations : every accepted iterate, in order (:class:`Iteration`).
+    chosen : index into ``iterations`` of the model returned.
+    reason : why it was chosen (a sentence).
+    status : how the fit ended: ``converged``, ``stopped early`` (validation error no longer
+        falling), ``iteration limit``, ``no decrease`` (no trial step lowered the cost), or
+        ``failed`` (the start diverges even without nonlinear terms: model is the start, errors inf).
+    notes : further statements (shrunk start, realisation, lead-in periods).
+    initial_states : the fitted initial state of each estimation run (None for a periodic run).
+    seconds : the wall time of the fit; jacobian_rate : samples x parameters per second of the
+        Jacobian computations (kernel and normal matrix).
+    """
+
+    model: Pnlss
+    start: Pnlss
+    linear: Pnlss
+    iterations: list[Iteration]
+    chosen: int
+    reason: str
+    status: str
+    notes: list[str] = field(default_factory=list)
+    initial_states: list = field(default_factory=list)
+    seconds: float = 0.0
+    jacobian_rate: float = 0.0
+
+    @property
+    def estimation_rms(self) -> float:
+        return self.iterations[self.chosen].estimation_rms
+
+    @property
+    def validation_rms(self) -> float | None:
+        return self.iterations[self.chosen].validation_rms
+
+    def best_of(self, stage: str) -> Iteration | None:
+        """The iterate of ``stage`` with the lowest validation rms (estimation rms without validation)."""
+        items = [it for it in self.iterations if it.stage == stage]
+        if not items:
+            return None
+        key = (lambda it: it.validation_rms) if items[0].validation_rms is not None else (lambda it: it.estimation_rms)
+        return min(items, key=key)
+
+    def summary(self) -> dict:
+        """The numbers of the fit as a JSON-ready dict (documented in docs/formats.md)."""
+        chosen = self.iterations[self.chosen]
+        lin = self.best_of("linear") or self.iterations[0]
+        return {"status": self.status, "reason": self.reason, "chosen": chosen.as_dict(),
+                "estimation_rms": chosen.estimation_rms, "validation_rms": chosen.validation_rms,
+                "linear_estimation_rms": lin.estimation_rms, "linear_validation_rms": lin.validation_rms,
+                "start_estimation_rms": self.iterations[0].estimation_rms,
+                "start_validation_rms": self.iterations[0].validation_rms,
+                "states": self.model.order, "state_degrees": list(self.model.state_degrees),
+                "output_degrees": list(self.model.output_degrees), "with_input": self.model.with_input,
+                "parameters": self.model.n_parameters, "notes": list(self.notes),
+                "seconds": self.seconds, "jacobian_rate": self.jacobian_rate,
+                "iterations": [it.as_dict() for it in self.iterations]}
+
+
+# --------------------------------------------------------------------------------------------------
+# parameters
+
+
+def global_vector(model: Pnlss) -> np.ndarray:
+    """theta in the kernel's column order after x0: A (row-major), B, E (row-major), C, D, F."""
+    return np.concatenate([model.A.ravel(), model.B, model.E.ravel(), model.C, [model.D], model.F])
+
+
+def with_vector(model: Pnlss, theta: np.ndarray) -> Pnlss:
+    """``model`` with the coefficients of :func:`global_vector` set to ``theta``."""
+    n, nz, nh = model.order, model.E.shape[1], model.F.size
+    cuts = np.cumsum([n * n, n, n * nz, n, 1, nh])
+    A, B, E, C, D, F, _ = np.split(np.asarray(theta, dtype=float), cuts)
+    return model.replace(A=A.reshape(n, n).copy(), B=B.copy(), E=E.reshape(n, nz).copy(), C=C.copy(),
+                         D=float(D[0]), F=F.copy())
+
+
+def linear_indices(model: Pnlss) -> np.ndarray:
+    """Positions of A, B, C, D in :func:`global_vector`."""
+    n, nz = model.order, model.E.shape[1]
+    ab = np.arange(n * n + n)
+    cd = n * n + n + n * nz + np.arange(n + 1)
+    return np.concatenate([ab, cd])
+
+
+# --------------------------------------------------------------------------------------------------
+# records
+
+
+@dataclass(eq=False)
+class Record:
+    """A run prepared for the fit: ``u`` (steady part of a periodic run, or the whole arbitrary
+    record), the measured ``y`` over it, ``period`` (None: arbitrary, its initial state fitted)."""
+
+    run_id: str
+    u: np.ndarray
+    y: np.ndarray
+    period: int | None
+
+    @property
+    def arbitrary(self) -> bool:
+        return self.period is None
+
+
+def records(runs: Sequence[Run], where: str) -> list[Record]:
+    """The runs as :class:`Record`: a periodic run's steady-state periods (whole periods after its
+    transient periods), an arbitrary run whole; each needs a measured y."""
+    out = []
+    for run in runs:
+        if run.y is None:
+            raise InputError(f"{where}: run {run.run_id}", "has no measured output y")
+        if run.period is not None and run.n_periods >= 1:
+            start = run.transient_periods * run.period
+            stop = start + run.n_periods * run.period
+            out.append(Record(run.run_id, np.ascontiguousarray(run.u[start:stop], dtype=float),
+                              np.ascontiguousarray(run.y[start:stop], dtype=float), int(run.period)))
+        else:
+            out.append(Record(run.run_id, np.ascontiguousarray(run.u, dtype=float),
+                              np.ascontiguousarray(run.y, dtype=float), None))
+    return out
+
+
+def lead_periods(model: Pnlss, period: int) -> int:
+    """Periods ahead of a periodic record in which the linear part's slowest mode decays to
+    STEADY_TOLERANCE: ceil(ln(tol) / ln(rho) / period) for the spectral radius rho of A, at least
+    1 (the nonlinear part's transient) and at most MAX_LEAD_PERIODS."""
+    rho = model.spectral_radius()
+    if rho >= 1.0:
+        return MAX_LEAD_PERIODS
+    if rho <= 0.0:
+        return 1
+    samples = math.log(STEADY_TOLERANCE) / math.log(rho)
+    return int(min(MAX_LEAD_PERIODS, max(1, math.ceil(samples / period))))
+
+
+def _driven(model: Pnlss, record: Record) -> tuple[np.ndarray, int]:
+    """The input the kernel runs on (lead-in ahead for a periodic record, input offset added) and
+    the lead samples to discard."""
+    if record.arbitrary:
+        return record.u + model.input_offset, 0
+    count = lead_periods(model, record.period)
+    u = np.concatenate([np.tile(record.u[:record.period], count), record.u])
+    return u + model.input_offset, count * record.period
+
+
+def simulate_record(model: Pnlss, record: Record, x0: np.ndarray | None, bound: float) -> np.ndarray | None:
+    """The simulated output over the record (None if it diverged): steady state for a periodic
+    record, from ``x0`` for an arbitrary one."""
+    from nlsid.simulate.pnlss_kernels import simulate
+
+    u, lead = _driven(model, record)
+    start = np.zeros(model.order) if x0 is None or not record.arbitrary else np.asarray(x0, dtype=float)
+    y = np.empty(u.shape[0])
+    if simulate(*model.kernel_matrices(), u, start, float(bound), y) >= 0:
+        return None
+    out = y[lead:]
+    out += model.output_offset
+    return out
+
+
+def _chunk_rows(columns: int) -> int:
+    return int(max(256, min(65536, CHUNK_BYTES // (8 * max(columns, 1)))))
+
+
+def jacobian_blocks(model: Pnlss, record: Record, x0: np.ndarray | None, bound: float, full: bool = True,
+                    samples: int | None = None):
+    """Yield (residual, J) chunks over the record's first ``samples`` (default all; lead-in rows
+    dropped): residual = y_sim - y and the Jacobian rows in the kernel's column layout
+    (:mod:`nlsid.simulate.pnlss_kernels`: x0, A, B, E, C, D, F; x0 alone if not ``full``).
+    Raises FloatingPointError if the simulation diverges."""
+    n = model.order
+    u, lead = _driven(model, record)
+    if samples is not None:
+        u = u[:lead + samples]
+    matrices = model.kernel_matrices()
+    ps = n + (n * n + n + n * matrices[6].shape[0] if full else 0)
+    width = ps + (n + 1 + matrices[7].shape[0] if full else 0)
+    x = np.zeros(n) if x0 is None or not record.arbitrary else np.array(x0, dtype=float)
+    S = np.zeros((n, ps))
+    S[:, :n] = np.eye(n)
+    rows = _chunk_rows(width)
+    J = np.empty((min(rows, u.shape[0]), width))
+    y = np.empty(J.shape[0])
+    for start in range(0, u.shape[0], rows):
+        stop = min(start + rows, u.shape[0])
+        m = stop - start
+        t = sensitivities(*matrices, u[start:stop], x, S, full, float(bound), y[:m], J[:m])
+        if t >= 0:
+            raise FloatingPointError(f"diverged at sample {start + t}")
+        first = max(lead - start, 0)
+        if first >= m:
+            continue
+        measured = record.y[start + first - lead:stop - lead]
+        yield y[first:m] + model.output_offset - measured, J[first:m]
+
+
+def transient_samples(model: Pnlss, limit: int) -> int:
+    """Samples in which the linear part's slowest mode decays to STEADY_TOLERANCE (at least 10 n,
+    at most ``limit``): the part of a record that tells its initial state."""
+    rho = model.spectral_radius()
+    if rho >= 1.0:
+        return limit
+    samples = math.log(STEADY_TOLERANCE) / math.log(rho) if rho > 0 else 1.0
+    return int(min(limit, max(10 * model.order, math.ceil(samples))))
+
+
+def estimate_x0(model: Pnlss, record: Record, bound: float = math.inf, start: np.ndarray | None = None) -> np.ndarray | None:
+    """The initial state of an arbitrary record that fits its measured output best over its first
+    :func:`transient_samples` (Gauss-Newton on x0 alone, from ``start`` or rest; exact in one step
+    for a linear model); None for a periodic record or a divergence."""
+    if not record.arbitrary:
+        return None
+    n = model.order
+    length = transient_samples(model, record.y.size)
+    x0 = np.zeros(n) if start is None else np.array(start, dtype=float)
+    last = math.inf
+    for _ in range(X0_ITERATIONS):
+        H, g, cost = np.zeros((n, n)), np.zeros(n), 0.0
+        try:
+            for e, J in jacobian_blocks(model, record, x0, bound, full=False, samples=length):
+                H += J.T @ J
+                g += J.T @ e
+                cost += float(e @ e)
+        except FloatingPointError:
+            return None
+        if not cost < last * (1 - 1e-6):
+            break
+        last = cost
+        x0 = x0 + np.linalg.lstsq(H, -g, rcond=1e-12)[0]
+    return x0
+
+
+def rms_on(model: Pnlss, recs: Sequence[Record], bound: float, starts: dict | None = None) -> float:
+    """rms of the simulation error over the records (initial states fitted, each from its value in
+    ``starts`` by run id, which is updated; inf if one diverges)."""
+    total, count = 0.0, 0
+    starts = {} if starts is None else starts
+    for rec in recs:
+        x0 = estimate_x0(model, rec, bound, starts.get(rec.run_id))
+        if x0 is not None:
+            starts[rec.run_id] = x0
+        if rec.arbitrary and x0 is None:
+            return math.inf
+        y = simulate_record(model, rec, x0, bound)
+        if y is None:
+            return math.inf
+        total += float(np.sum((y - rec.y) ** 2))
+        count += rec.y.size
+    return math.sqrt(total / count) if count else math.inf
+
+
+def simulate_run(model: Pnlss, run: Run, bound: float = math.inf) -> np.ndarray:
+    """The model's output on a measured run as it was measured: a periodic run over its steady
+    periods in periodic steady state, an arbitrary one (whole) from the initial state fitted to its
+    measured output (from rest without one). Raises InputError on divergence."""
+    if run.y is None and run.period is None:
+        return model.simulate(run.u, None, bound)
+    (rec,) = records([run] if run.y is not None else [Run(run.run_id, run.fs, run.kind, run.u, np.zeros_like(run.u),
+                                                          period=run.period, transient_periods=run.transient_periods)],
+                     "simulate")
+    x0 = estimate_x0(model, rec, bound) if run.y is not None else None
+    y = simulate_record(model, rec, x0, bound)
+    if y is None:
+        raise InputError("model", f"run {run.run_id}: the PNLSS simulation diverged")
+    return y
+
+
+# --------------------------------------------------------------------------------------------------
+# Levenberg-Marquardt
+
+
+class _Problem:
+    """The cost and normal equations of one stage over the estimation records."""
+
+    def __init__(self, records_: list[Record], active: np.ndarray, bound: float):
+        self.records = records_
+        self.active = active
+        self.bound = bound
+        self.arbitrary = [i for i, r in enumerate(records_) if r.arbitrary]
+        self.jacobian_seconds = 0.0
+        self.jacobian_work = 0.0
+
+    def size(self, model: Pnlss) -> int:
+        return self.active.size + model.order * len(self.arbitrary)
+
+    def unpack(self, base: Pnlss, theta0: np.ndarray, x0s: list, delta: np.ndarray) -> tuple[Pnlss, list]:
+        n = base.order
+        theta = theta0.copy()
+        theta[self.active] += delta[:self.active.size]
+        x0s = [None if x is None else x.copy() for x in x0s]
+        for k, i in enumerate(self.arbitrary):
+            x0s[i] = x0s[i] + delta[self.active.size + k * n:self.active.size + (k + 1) * n]
+        return with_vector(base, theta), x0s
+
+    def cost(self, model: Pnlss, x0s: list) -> float:
+        total = 0.0
+        for rec, x0 in zip(self.records, x0s):
+            y = simulate_record(model, rec, x0, self.bound)
+            if y is None:
+                return math.inf
+            e = y - rec.y
+            total += float(e @ e)
+        return total if math.isfinite(total) else math.inf
+
+    def normal_equations(self, model: Pnlss, x0s: list) -> tuple[np.ndarray, np.ndarray, float]:
+        from scipy.linalg.blas import dsyrk
+
+        clock = time.perf_counter()
+        n = model.order
+        p = self.size(model)
+        H, g, cost = np.zeros((p, p)), np.zeros(p), 0.0
+        every = self.active.size == global_vector(model).size
+        for i, (rec, x0) in enumerate(zip(self.records, x0s)):
+            # kernel columns taken, and their places in the LM parameter vector
+            if rec.arbitrary:
+                k = self.arbitrary.index(i)
+                x_cols = self.active.size + k * n + np.arange(n)
+                columns = None if every else np.concatenate([np.arange(n), n + self.active])
+                index = np.concatenate([x_cols, np.arange(self.active.size)])
+            else:
+                columns = slice(n, None) if every else n + self.active
+                index = np.arange(self.active.size)
+            block = np.zeros((index.size, index.size))
+            gb = np.zeros(index.size)
+            for e, J in jacobian_blocks(model, rec, x0, self.bound):
+                Jc = J if columns is None else np.ascontiguousarray(J[:, columns])
+                block += dsyrk(1.0, Jc.T, trans=0, lower=0)  # J'J, upper triangle; Jc.T is Fortran-ordered
+                gb += Jc.T @ e
+                cost += float(e @ e)
+                self.jacobian_work += Jc.shape[0] * Jc.shape[1]
+            block = np.triu(block) + np.triu(block, 1).T
+            H[np.ix_(index, index)] += block
+            g[index] += gb
+        self.jacobian_seconds += time.perf_counter() - clock
+        return H, g, cost
+
+
+@dataclass
+class _Decomposed:
+    scale: np.ndarray
+    values: np.ndarray
+    vectors: np.ndarray
+    projected: np.ndarray   # V' (g / scale)
+
+    @classmethod
+    def of(cls, H: np.ndarray, g: np.ndarray) -> "_Decomposed":
+        scale = np.sqrt(np.diag(H))
+        scale[~(scale > 0)] = 1.0
+        Hn = H / np.outer(scale, scale)
+        values, vectors = np.linalg.eigh(Hn)
+        keep = values > S_FLOOR * max(values[-1], 0.0)
+        values, vectors = values[keep], vectors[:, keep]
+        return cls(scale, values, vectors, vectors.T @ (g / scale))
+
+    def step(self, mu: float) -> np.ndarray:
+        lam = mu * self.values[-1] if self.values.size else mu
+        return -(self.vectors @ (self.projected / (self.values + lam))) / self.scale
+
+
+def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterations: int, validate,
+           history: list, kept: list, patience: int) -> tuple[Pnlss, list, str]:
+    """Levenberg-Marquardt iterations of one stage from ``model``; appends each accepted iterate to
+    ``history`` and its (model, initial states) to ``kept``. Returns the last model, its initial
+    states and how the stage ended."""
+    mu = MU_START
+    theta0 = global_vector(model)
+    H, g, cost = problem.normal_equations(model, x0s)
+    n_samples = sum(r.y.size for r in problem.records)
+    for number in range(1, max_iterations + 1):
+        decomposed = _Decomposed.of(H, g)
+        trial_cost = math.inf
+        while mu <= MU_MAX:
+            trial, trial_x0s = problem.unpack(model, theta0, x0s, decomposed.step(mu))
+            trial_cost = problem.cost(trial, trial_x0s)
+            if trial_cost < cost:
+                break
+            mu *= 10.0
+        if not trial_cost < cost:
+            return model, x0s, "no decrease"
+        decrease = (cost - trial_cost) / cost if cost > 0 else 0.0
+        model, x0s, theta0 = trial, trial_x0s, global_vector(trial)
+        mu = max(mu / 3.0, 1e-15)
+        history.append(Iteration(stage, number, math.sqrt(trial_cost / n_samples), validate(model), mu))
+        kept.append((model, x0s))
+        if decrease < CONVERGED:
+            return model, x0s, "converged"
+        if history[-1].validation_rms is not None and len(history) - 1 - _best(history) >= patience:
+            return model, x0s, "stopped early"
+        H, g, cost = problem.normal_equations(model, x0s)
+    return model, x0s, "iteration limit"
+
+
+def _best(history: list[Iteration], stage: str | None = None) -> int:
+    """Index of the iterate (of ``stage``, or any) with the lowest validation rms (the first of
+    equals), or without validation runs the last one (the lowest estimation rms)."""
+    indices = [i for i, it in enumerate(history) if stage is None or it.stage == stage]
+    if history[indices[0]].validation_rms is None:
+        return indices[-1]
+    return min(indices, key=lambda i: (history[i].validation_rms, i))
+
+
+def _bound(linear: Pnlss, recs: list[Record]) -> float:
+    """BOUND_FACTOR times the largest |state| of the linear part on the estimation inputs (from
+    rest; periodic ones in steady state), at least BOUND_FACTOR times the largest |u| and |y|."""
+    from nlsid.simulate.pnlss_kernels import states
+
+    peak = 0.0
+    for rec in recs:
+        u, _ = _driven(linear, rec)
+        x = np.zeros((u.size, linear.order))
+        states(*linear.replace(input_offset=0.0).kernel_matrices(), u, np.zeros(linear.order), x)
+        peak = max(peak, float(np.max(np.abs(x), initial=0.0)), float(np.max(np.abs(rec.u))), float(np.max(np.abs(rec.y))))
+    if not math.isfinite(peak) or peak == 0.0:
+        peak = 1.0
+    return BOUND_FACTOR * peak
+
+
+def _tamed(start: Pnlss, recs: list[Record], bound: float) -> tuple[Pnlss | None, str | None]:
+    """The start, or, if its simulation diverges on the estimation runs, the start with its
+    nonlinear coefficients shrunk tenfold until it does not (zero at last); None if even the linear
+    part diverges. The second value states what was done (None: nothing)."""
+    zero = [np.zeros(start.order) if r.arbitrary else None for r in recs]
+
+    def diverges(m: Pnlss) -> bool:
+        return any(simulate_record(m, r, x, bound) is None for r, x in zip(recs, zero))
+
+    if not diverges(start):
+        return start, None
+    for k in range(1, 7):
+        factor = 10.0 ** -k
+        trial = start.replace(E=start.E * factor, F=start.F * factor)
+        if not diverges(trial):
+            return trial, (f"the start diverged on the estimation runs; its nonlinear coefficients E, F were "
+                           f"scaled by {factor:g} to start from a point that does not")
+    linear = start.replace(E=np.zeros_like(start.E), F=np.zeros_like(start.F))
+    if not diverges(linear):
+        return linear, ("the start diverged on the estimation runs even with its nonlinear coefficients scaled "
+                        "by 1e-6; they were set to zero")
+    return None, "the start diverges on the estimation runs even without nonlinear terms"
+
+
+def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run] = (), max_iterations: int = 100,
+              linear_iterations: int | None = None, patience: int = 15) -> PnlssFit:
+    """Fit a PNLSS model to the estimation runs from ``start`` (module docstring).
+
+    Parameters
+    ----------
+    start : the start model (typically :func:`nlsid.models.pnlss.from_linear` of the BLA's fit).
+    estimation, validation : measured runs (each with u and y; periodic or arbitrary).
+    max_iterations : accepted iterations of the nonlinear stage at most (0: none).
+    linear_iterations : of the linear stage (E = F = 0); default 20 when the start has no nonlinear
+        coefficients, else 0 (a nonlinear start is refined as a whole).
+    patience : the fit stops after this many accepted iterates without a lower validation error.
+
+    Returns
+    -------
+    PnlssFit : a start that diverges does not raise (``status`` and ``notes`` say what happened).
+    """
+    clock = time.perf_counter()
+    est = records(estimation, "estimation")
+    val = records(validation, "validation")
+    if not est:
+        raise InputError("estimation", "no estimation runs")
+    for rec in est + val:
+        if rec.u.size == 0:
+            raise InputError(f"run {rec.run_id}", "is empty")
+    notes: list[str] = []
+    nonlinear_start = bool(np.any(start.E) or np.any(start.F))
+    if linear_iterations is None:
+        linear_iterations = 0 if nonlinear_start else 20
+
+    bound = _bound(start.replace(E=np.zeros_like(start.E), F=np.zeros_like(start.F)), est)
+    model, shrunk = _tamed(start, est, bound)
+    if shrunk:
+        notes.append(shrunk)
+    if model is None:
+        history = [Iteration("start", 0, math.inf, math.inf if val else None, MU_START)]
+        return PnlssFit(start, start, start, history, 0, "nothing was fitted: " + shrunk, "failed", notes,
+                        [None] * len(est), time.perf_counter() - clock, 0.0)
+    nonlinear_start = bool(np.any(model.E) or np.any(model.F))
+
+    validation_x0s: dict = {}
+
+    def validate(m: Pnlss) -> float | None:
+        return rms_on(m, val, bound, validation_x0s) if val else None
+
+    x0s = [estimate_x0(model, rec, bound) if rec.arbitrary else None for rec in est]
+    x0s = [np.zeros(model.order) if rec.arbitrary and x is None else x for rec, x in zip(est, x0s)]
+    n_samples = sum(r.y.size for r in est)
+    full = _Problem(est, np.arange(global_vector(model).size), bound)
+    history = [Iteration("start", 0, math.sqrt(full.cost(model, x0s) / n_samples), validate(model), MU_START)]
+    kept = [(model, x0s)]
+    tamed_start, status = model, "converged"
+    seconds, work = 0.0, 0.0
+    if linear_iterations > 0 and not nonlinear_start:
+        problem = _Problem(est, linear_indices(model), bound)
+        model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience)
+        seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
+    linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
+    if max_iterations > 0 and model.E.size + model.F.size:
+        model, x0s, status = _stage(full, model, x0s, "nonlinear", max_iterations, validate, history, kept, patience)
+        seconds, work = seconds + full.jacobian_seconds, work + full.jacobian_work
+    chosen = _best(history)
+    item = history[chosen]
+    if val:
+        reason = (f"the lowest validation rms, {item.validation_rms:.6g}, of {len(history)} iterates "
+                  f"({item.stage} iteration {item.number}; the fit {status})")
+    else:
+        reason = (f"no validation runs: the last iterate ({item.stage} iteration {item.number}, "
+                  f"the lowest estimation rms; the fit {status})")
+    return PnlssFit(kept[chosen][0], tamed_start, linear_model, history, chosen, reason, status, notes,
+                    kept[chosen][1], time.perf_counter() - clock, work / seconds if seconds > 0 else 0.0)
