@@ -96,7 +96,7 @@ def cause_key(row: dict) -> str:
     verdict = row["verdict"]
     if verdict is None:
         return "no diagnosis"
-    if verdict == "explained" and row["causes"]:
+    if verdict in ("explained", "partly_explained") and row["causes"]:
         return row["causes"][0]["name"]
     return {"no_discrepancy": "no discrepancy", "ambiguous": "ambiguous", "unexplained": "unexplained"}.get(verdict, verdict)
 

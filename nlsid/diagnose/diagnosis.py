@@ -54,6 +54,7 @@ class Outcome:
     free: dict = field(default_factory=dict)   # key path -> FreeParameter of its refinement
     paths: dict = field(default_factory=dict)  # its parameter -> key path
     model: dict | None = None  # the user's config, which the mechanics changes are stated against
+    found: nuisances.Nuisances | None = None  # the nuisances as its refinement re-fitted them
 
     def fitted_mechanics(self) -> dict[str, str]:
         """The linear mechanics (name -> key path, :func:`linear_paths`) its refinement fitted."""
@@ -140,6 +141,8 @@ class Diagnosis:
     chain: list[Outcome] = field(default_factory=list)  # the causes accepted, one per round
     accuracy: accuracy.Accuracy | None = None  # of the final model (None: exact, no forces)
     budget: Budget | None = None  # the estimation parts the hypotheses were fitted on (split.budgeted)
+    leading: Outcome | None = None  # without a named cause: the best hypothesis that lowers the error
+    validation_samples: int = 0  # the steady-state samples of the validation runs the scores are of
 
     @property
     def final(self) -> Outcome | None:
@@ -174,13 +177,19 @@ class Diagnosis:
         if status == rules.UNDETERMINED:
             return (f"Undetermined: the noise level is unknown ({NOISE_UNKNOWN}), so the simulation error "
                     f"({ev.error_rms:.3g} rms against {ev.output_rms:.3g} rms of output) cannot be compared with "
-                    "it, and no hypothesis lowers the validation error significantly")
-        if status == rules.EXPLAINED:
+                    f"it, and no hypothesis lowers the validation error significantly{self._leading_text()}")
+        if status in rules.NAMED:
             stated = [o.mechanics_changed() for o in self.chain]
             causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(stated[:i]))})"
                                     for i, o in enumerate(self.chain))
             final = self.final_score()
-            return (f"Cause{'s' if len(self.chain) > 1 else ''}: {causes}; the extended model's validation error is "
+            several = len(self.chain) > 1
+            if status == rules.PARTLY_EXPLAINED:
+                return (f"Cause{'s' if several else ''} in part: {causes} explain{'' if several else 's'} "
+                        f"{final.gain_db:.1f} dB of the validation error; {final.above_floor_db:.1f} dB remain above "
+                        f"the noise floor (p = {final.p_above_noise:.2g}): a further effect, outside the library or "
+                        "richer than the named cause, is left")
+            return (f"Cause{'s' if several else ''}: {causes}; the extended model's validation error is "
                     f"{gain_text(final)}, {versus_floor(final)}")
         if ev.noise_zero:
             seen = f"the simulation error is {ev.error_rms:.3g} rms against a zero noise floor: noise-free data"
@@ -194,7 +203,71 @@ class Diagnosis:
             return (f"The measured output is constant in every run: nothing responded to the input, so no extension "
                     f"of the model can explain anything; the model's simulation error is its whole response "
                     f"({ev.error_rms:.3g} rms)")
-        return f"Discrepancy ({seen}); no hypothesis of the library explains it"
+        return f"Discrepancy ({seen}); no hypothesis of the library explains it{self._leading_text()}"
+
+    def leading_summary(self) -> dict | None:
+        """The leading candidate where no cause is named (``summary.json`` ``leading``), or None:
+        its gain over the baseline (the model with its nuisances) on the validation runs in dB, the
+        gain the verdict needs (10 log10 F*), the validation samples, and the multiple of them that
+        would decide a real gain of that size (:func:`nlsid.diagnose.verdict.data_to_decide`)."""
+        o = self.leading
+        if o is None:
+            return None
+        power_ratio = rules.ratio(self.baseline.error_rms ** 2, o.score.error_rms ** 2)
+        factor = rules.data_to_decide(power_ratio, self.verdict.dof)
+        more = (factor - 1) * self.validation_samples if math.isfinite(factor) else math.inf
+        return {"name": o.hypothesis.name, "title": o.named(), "gain_db": 10 * math.log10(power_ratio),
+                "needed_db": 10 * math.log10(self.verdict.threshold), "validation_samples": self.validation_samples,
+                "data_factor": factor, "more_samples": more if math.isfinite(more) else None,
+                "file": CANDIDATE}
+
+    def _leading_text(self) -> str:
+        lead = self.leading_summary()
+        if lead is None:
+            return ""
+        more = ("" if lead["more_samples"] is None else
+                f"; if the gain is real, about {lead['more_samples']:,.0f} more validation samples of this kind "
+                "would decide it")
+        return (f"; most likely {lead['title']} ({lead['gain_db']:+.1f} dB on the validation runs, not significant: "
+                f"{lead['needed_db']:+.1f} dB needed with {lead['validation_samples']} validation samples{more}; "
+                f"its model in {CANDIDATE})")
+
+    def explanation(self) -> dict | None:
+        """How much of the error the named causes explain (``summary.json`` ``explanation``), or None
+        without a cause: ``extent`` ``full`` (the final model at the noise floor, or above it by
+        less than :data:`nlsid.diagnose.verdict.REMAINS_DB` or not significantly), ``partial``
+        (the status ``partly_explained``) or ``unknown`` (no noise floor to measure the rest by),
+        the final model's ``gain_db`` and ``above_floor_db`` (the remainder)."""
+        final = self.final_score()
+        if final is None:
+            return None
+        if self.verdict.status == rules.PARTLY_EXPLAINED:
+            extent = "partial"
+        elif final.exact or math.isfinite(final.above_floor_db):
+            extent = "full"
+        else:
+            extent = "unknown"
+        return {"extent": extent, "gain_db": final.gain_db, "above_floor_db": final.above_floor_db}
+
+    def moved_nuisances(self) -> list[dict]:
+        """The nuisances that moved by more than :data:`MOVED` standard errors between the user's
+        model (fitted first) and the final extended model, or the leading candidate's
+        (:func:`nlsid.diagnose.nuisances.moved`): fitted without the cause they took part of it."""
+        other = self.final or self.leading
+        if other is None or other.found is None:
+            return []
+        return nuisances.moved(self.nuisances, other.found, MOVED)
+
+    def _nuisance_findings(self) -> list[str]:
+        other = self.final or self.leading
+        out = [f"{m['key']} {m['before']:.4g} on the user's model but {m['after']:.4g} with {other.hypothesis.title} "
+               f"({m['standard_errors']:.1f} standard errors apart): fitted without the effect it absorbed part of "
+               "it, so the first value is not a fact about the converters" for m in self.moved_nuisances()]
+        if self.verdict.status == rules.PARTLY_EXPLAINED and self.final.found is not None and self.final.found.values:
+            keys = ", ".join(self.final.found.values)
+            out.append(f"with error left above the floor, the extended model's nuisances ({keys}) may still absorb "
+                       "part of the remaining effect: read them with that caution")
+        return out
 
     def _chain_summary(self) -> list[dict]:
         """Each accepted cause: its values, the gain over the model before it, the distance to the floor."""
@@ -210,7 +283,7 @@ class Diagnosis:
         return self.budget.summary()
 
     def findings(self) -> list[str]:
-        out = self.nuisances.findings() + self.evidence.findings()
+        out = self.nuisances.findings() + self._nuisance_findings() + self.evidence.findings()
         if self.budget is not None and self.budget.active:
             out.append(budget_note(self.budget, self.final is not None))
         if self.accuracy is not None:
@@ -251,6 +324,19 @@ class Diagnosis:
         gain = f"{final.gain_db:+.1f} dB" if math.isfinite(final.gain_db) else "zero within numerical precision"
         lines.append(f"Validation error {final.error_rms:.4g} rms ({gain} against the original "
                      f"model, {versus_floor(final)})")
+        if self.verdict.status == rules.PARTLY_EXPLAINED:
+            lines.append(f"Partly explained: {final.above_floor_db:.1f} dB remain above the noise floor")
+        return lines
+
+    def candidate_header(self) -> list[str]:
+        """Header comment of the leading candidate's model (:data:`CANDIDATE`): not a named cause."""
+        o, lead = self.leading, self.leading_summary()
+        lines = [f"Leading candidate of nlsid diagnose, NOT a named cause (its gain is not significant): "
+                 f"{o.hypothesis.title} added to {self.model_source}"]
+        lines += [f"  {name} = {value:.6g} +- {o.estimate.std[name]:.2g} (one standard error)"
+                  for name, value in o.estimate.values.items()]
+        lines.append(f"Validation error {o.score.error_rms:.4g} rms ({lead['gain_db']:+.1f} dB against the model with "
+                     f"its nuisances; {lead['needed_db']:+.1f} dB needed to name it)")
         return lines
 
     def summary(self) -> dict:
@@ -266,7 +352,8 @@ class Diagnosis:
             "headline": self.headline(), "findings": self.findings(), "model": self.model_source,
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
-            "nuisances": self.nuisances.summary(), "baseline": self.baseline.summary() if self.baseline else None,
+            "nuisances": {**self.nuisances.summary(), "moved": self.moved_nuisances()},
+            "explanation": self.explanation(), "leading": self.leading_summary(), "baseline": self.baseline.summary() if self.baseline else None,
             "chain": self._chain_summary(), "gain": gain, **self._samples(),
             "simulation_accuracy": None if self.accuracy is None else {**dataclasses.asdict(self.accuracy),
                                                                          "sufficient": self.accuracy.sufficient},
@@ -274,6 +361,7 @@ class Diagnosis:
 
 
 NOISE_UNKNOWN = "the runs have no two periods to separate noise from the rest"
+CANDIDATE = "candidate_model.yaml"  # the leading candidate's model (Diagnosis.leading), as the stage writes it
 
 
 def budget_note(budget: Budget, refined: bool) -> str:
@@ -305,7 +393,8 @@ def gain_text(score: Score) -> str:
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
-           nominal: dict, carried: dict[str, str] | None = None) -> tuple[Estimate, dict, dict, dict]:
+           nominal: dict, carried: dict[str, str] | None = None
+           ) -> tuple[Estimate, dict, dict, dict, nuisances.Nuisances]:
     """The signature estimate refined by the fit engine (simulation error of the estimation runs),
     together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
     ``data``): fitted on a model that lacks the cause, they absorb part of it (a skew takes some of
@@ -314,8 +403,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     its value in the user's ``nominal`` model, not fitted). An estimate with an ``lti`` extends
     the model with that LTI part in place of its own (:func:`with_lti`: a discrete model's
     continuous equivalent). Returns the estimate, the extended config with every fitted value
-    written in, the free parameters fitted (key path -> FreeParameter) and the hypothesis'
-    parameters' key paths.
+    written in, the free parameters fitted (key path -> FreeParameter), the hypothesis'
+    parameters' key paths and the nuisances as re-fitted with them.
 
     Each parameter keeps its sign and stays within three decades of its signature estimate, but a
     numerator coefficient of a linear part (a key path ending in ``num[i]``), which may change sign
@@ -368,7 +457,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
     note = "; ".join(filter(None, [estimate.note, what, *fit.warnings, reading]))
-    return Estimate(values, std, estimate.explained_db, note), fit.config, free, paths
+    return Estimate(values, std, estimate.explained_db, note), fit.config, free, paths, nuisances.fitted(fit)
 
 
 def _update_earlier(chain: list[Outcome]) -> None:
@@ -444,7 +533,7 @@ def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str) -
     note = "; ".join([est.note, f"re-fitted with {substeps} sub-steps per sample (the simulation's error "
                                 "below a tenth of the floor)", *fit.warnings])
     outcome.estimate = Estimate(values, std, est.explained_db, note)
-    outcome.extended = fit.config
+    outcome.extended, outcome.found = fit.config, nuisances.fitted(fit)
 
 
 def sufficient_simpler(hypothesis: Hypothesis, outcomes: list[Outcome]) -> Outcome | None:
@@ -539,7 +628,24 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
+    judge_extent(first)
     return first
+
+
+def judge_extent(first: Diagnosis) -> None:
+    """How much the verdict explains (:mod:`nlsid.diagnose.verdict`): a named cause whose final
+    model stays significantly above the floor makes the status ``partly_explained``; without a
+    named cause, the best-scored hypothesis is the leading candidate when its gain over the
+    baseline is suggestive (:func:`nlsid.diagnose.verdict.suggestive`)."""
+    status = first.verdict.status
+    final = first.final_score()
+    if status == rules.EXPLAINED and final is not None and rules.partly(final.above_floor_db, final.p_above_noise):
+        first.verdict = dataclasses.replace(first.verdict, status=rules.PARTLY_EXPLAINED)
+    if status in (rules.UNEXPLAINED, rules.UNDETERMINED) and first.baseline is not None:
+        base = first.baseline.error_rms ** 2
+        better = [o for o in first.outcomes if o.score is not None and o.estimate is not None
+                  and rules.suggestive(rules.ratio(base, o.score.error_rms ** 2), first.verdict.dof)]
+        first.leading = better[0] if better else None
 
 
 def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: list[Run],
@@ -576,7 +682,7 @@ def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, r
     again = f"refined once more on all {first.budget.available} estimation samples ({fit.evaluations} simulations{cap})"
     note = "; ".join([est.note, f"{again}, with: {', '.join(warnings)}" if warnings else again])
     outcome.estimate = Estimate(values, std, est.explained_db, note)
-    outcome.extended = fit.config
+    outcome.extended, outcome.found = fit.config, nuisances.fitted(fit)
     val = [res for res in last.evidence.residuals if res.role == VALIDATION]
     by_id = {run.run_id: run for run in runs}
     _score(outcome, ModelRunner.from_data(data, source), [by_id[res.run_id] for res in val], val)
@@ -796,8 +902,8 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.reason = estimate
             continue
         try:
-            estimate, extended, outcome.free, outcome.paths = refine(hypothesis, adjusted, estimate, fit_runs,
-                                                                     source, data, carried)
+            estimate, extended, outcome.free, outcome.paths, outcome.found = refine(
+                hypothesis, adjusted, estimate, fit_runs, source, data, carried)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
             continue
@@ -812,4 +918,6 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
         step(hypothesis.name)
     outcomes.sort(key=_rank)
     verdict = _decide(evidence, found, baseline, outcomes, val)
-    return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline, budget=budget)
+    samples = sum(res.period * res.n_periods for res in val)
+    return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline, budget=budget,
+                     validation_samples=samples)

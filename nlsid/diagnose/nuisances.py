@@ -176,7 +176,37 @@ def estimate(data: dict, source: str, runs: list[Run]) -> tuple[dict, Nuisances]
         # a shift of a sample or more is a dead time, a cause: left to the delay hypothesis
         free.pop("model.output_timing")
         fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
-    keys = [name.split(".", 1)[1] for name in fit.names]
-    values = {key: float(v) for key, v in zip(keys, fit.values)}
-    std = {key: float(s) if math.isfinite(s) else float("nan") for key, s in zip(keys, fit.std)}
-    return fit.config, Nuisances(values, std, list(fit.warnings))
+    return fit.config, fitted(fit)
+
+
+def fitted(fit) -> Nuisances:
+    """The nuisances among a fit's free parameters (:class:`nlsid.fit.extension.ExtensionFit`, key
+    paths ``model.<key>`` for the keys of :data:`KEYS`): values, standard errors (NaN where not
+    finite) and the fit's warnings."""
+    values, std = {}, {}
+    for path, value, s in zip(fit.names, fit.values, fit.std):
+        key = path.split(".", 1)[1] if path.startswith("model.") else ""
+        if key in KEYS:
+            values[key], std[key] = float(value), float(s) if math.isfinite(s) else float("nan")
+    return Nuisances(values, std, list(fit.warnings))
+
+
+def moved(before: Nuisances, after: Nuisances, limit: float) -> list[dict]:
+    """The nuisances whose values differ between two fits by more than ``limit`` combined standard
+    errors, ``|a - b| > limit sqrt(s_a^2 + s_b^2)`` (NaN standard errors left out of the sum; a
+    pair without any finite one is not judged): fitted on a model that lacks a cause, a nuisance
+    takes what it can of the cause (an output timing a friction's phase lag), so a value that moves
+    once the cause is in the model was not a fact about the converters. Per moved key: ``key``,
+    ``before``, ``after`` (values), ``std_before``, ``std_after``, ``standard_errors`` (the
+    difference over the combined standard error)."""
+    out = []
+    for key, a in before.values.items():
+        if key not in after.values:
+            continue
+        b = after.values[key]
+        sa, sb = before.std.get(key, float("nan")), after.std.get(key, float("nan"))
+        combined = math.sqrt(sum(x * x for x in (sa, sb) if math.isfinite(x)))
+        if combined > 0 and abs(a - b) > limit * combined:
+            out.append({"key": key, "before": a, "after": b, "std_before": sa, "std_after": sb,
+                        "standard_errors": abs(a - b) / combined})
+    return out

@@ -20,6 +20,8 @@ Layout (``docs/formats.md``, drafted in ``docs/drafts/diagnose.md``)::
                             [extended_error] (the winner's)
       extended_model.yaml   only when a cause is named: the user's model plus the fitted block,
                             parameter values and standard errors in its header comment
+      candidate_model.yaml  only when no cause is named but a hypothesis' gain is suggestive: the
+                            leading candidate's model, its header marking it as not significant
 
 The folder is written next to its final place under a temporary name and renamed when complete, so
 a failed run leaves nothing; an existing folder is replaced only with ``force``.
@@ -82,16 +84,18 @@ def extended_yaml(data: dict, header: list[str]) -> str:
 
 
 def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, extended: str | None,
-                    provenance: dict, force: bool = False) -> Path:
-    """Write the folder of the module docstring atomically; refuse an existing one unless ``force``."""
+                    provenance: dict, force: bool = False, others: dict[str, str] | None = None) -> Path:
+    """Write the folder of the module docstring atomically; refuse an existing one unless ``force``.
+    ``others``: further model files (file name -> YAML text) beside ``extended_model.yaml``."""
     target = check_output_folder(folder, force)
     parent = target.absolute().parent
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
     try:
-        files = [SUMMARY, RESULTS] + ([EXTENDED] if extended is not None else [])
+        models = {**({EXTENDED: extended} if extended is not None else {}), **(others or {})}
+        files = [SUMMARY, RESULTS, *models]
         _write_results(tmp / RESULTS, arrays)
-        if extended is not None:
-            (tmp / EXTENDED).write_text(extended, encoding="utf-8")
+        for name, text in models.items():
+            (tmp / name).write_text(text, encoding="utf-8")
         document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": provenance,
                     **summary, "files": files}
         (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n", encoding="utf-8")

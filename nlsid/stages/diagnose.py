@@ -46,6 +46,9 @@ class DiagnosisResult:
         Config files and recordings the diagnosis comes from (its provenance).
     allow_overlap : bool
         A ``validate_on`` recording that is the diagnosed one was accepted.
+    other_models : dict
+        Further model configs the folder holds, file name -> YAML text: ``candidate_model.yaml``
+        (the leading candidate where no cause is named, marked as not significant).
     """
 
     diagnosis: Diagnosis
@@ -54,6 +57,7 @@ class DiagnosisResult:
     configs: list[str] = field(default_factory=list)
     inputs: list[str] = field(default_factory=list)
     allow_overlap: bool = False
+    other_models: dict[str, str] = field(default_factory=dict)
 
     @property
     def headline(self) -> str:
@@ -62,7 +66,7 @@ class DiagnosisResult:
 
     @property
     def status(self) -> str:
-        """``explained``, ``partial``, ``ambiguous``, ``unexplained``, ``no_discrepancy`` or
+        """``explained``, ``partly_explained``, ``ambiguous``, ``unexplained``, ``no_discrepancy`` or
         ``undetermined`` (:mod:`nlsid.diagnose.verdict`)."""
         return self.diagnosis.verdict.status
 
@@ -115,7 +119,7 @@ class DiagnosisResult:
         if self.allow_overlap:
             record = {**record, "allow_overlap": True}
         return write_diagnosis(folder, self.summary(), self.diagnosis.arrays(), self.extended_text, record,
-                               force=force)
+                               force=force, others=self.other_models)
 
     @contextmanager
     def _folder(self) -> Iterator[Path]:
@@ -222,6 +226,7 @@ class DiagnosisInputs:
 
     def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
         """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
+        from nlsid.diagnose.diagnosis import CANDIDATE
         from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
         from nlsid.io.diagnosis_file import extended_yaml
         from nlsid.io.units import common_units
@@ -234,8 +239,11 @@ class DiagnosisInputs:
                                    validation_range=self.validation)
         final = result.final
         extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
+        others = {}
+        if result.leading is not None:
+            others[CANDIDATE] = extended_yaml(result.leading.extended, result.candidate_header())
         units = common_units(run.units for run in [*self.runs, *self.extra])
-        return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap)
+        return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap, others)
 
 
 def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:
