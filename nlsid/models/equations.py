@@ -38,9 +38,14 @@ with an :class:`~nlsid.errors.InputError` naming the expression's key and the sa
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import math
+import os
+import sys
 import threading
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -172,20 +177,56 @@ def kernel_source(equations: list, output, names: tuple, discrete: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _source_module(text: str):
+    """The kernel source as a module: a file in the numba cache folder of :mod:`nlsid.simulate.jit`
+    named by the text's hash (so that numba's disk cache, which keys a function by its file, keeps
+    its compiled code across processes), else, where nothing can be cached, a namespace of its own.
+    Returns (namespace, cacheable)."""
+    from nlsid.simulate.jit import CACHING
+
+    header = "import math\n\nimport numpy as np\n\n\n"
+    if not CACHING:
+        namespace: dict = {}
+        exec(compile(header + text, "<nlsid equations>", "exec"), namespace)  # noqa: S102 (from a checked tree)
+        return namespace, False
+    digest = hashlib.sha256(text.encode()).hexdigest()[:32]
+    folder = Path(os.environ["NUMBA_CACHE_DIR"]) / "nlsid_equations"
+    path = folder / f"kernel_{digest}.py"
+    content = header + text
+    try:
+        if not path.is_file() or path.read_text() != content:
+            folder.mkdir(parents=True, exist_ok=True)
+            part = folder / f".{path.name}.{os.getpid()}.{threading.get_ident()}"
+            part.write_text(content)
+            os.replace(part, path)  # whole or not at all, whoever writes it at the same time
+    except OSError:
+        namespace = {}
+        exec(compile(content, "<nlsid equations>", "exec"), namespace)  # noqa: S102 (from a checked tree)
+        return namespace, False
+    name = f"nlsid_equations_kernel_{digest}"
+    module = sys.modules.get(name)
+    if module is None:  # registered by name: numba's cached code finds its globals through it
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return module.__dict__, True
+
+
 def compile_kernel(text: str):
     """The numba kernel of a :func:`kernel_source` text, compiled once per text in a process
-    (eagerly, for the one signature it is called with, so that threads share it). IEEE
-    arithmetic without exceptions (numba's ``error_model="numpy"``): x / 0 is an infinity, which
-    the kernel reports, not a Python ZeroDivisionError."""
+    (eagerly, for the one signature it is called with, so that threads share it) and kept in
+    numba's disk cache across processes (:func:`_source_module`). IEEE arithmetic without
+    exceptions (numba's ``error_model="numpy"``): x / 0 is an infinity, which the kernel reports,
+    not a Python ZeroDivisionError."""
     with _LOCK:
         kernel = _KERNELS.get(text)
         if kernel is not None:
             return kernel
         from nlsid.simulate.jit import njit
 
-        options = dict(error_model="numpy", cache=False)  # generated source has no file for numba's disk cache
-        namespace: dict = {"math": math, "np": np}
-        exec(compile(text, "<nlsid equations>", "exec"), namespace)  # noqa: S102 (source made from a checked tree)
+        namespace, cacheable = _source_module(text)
+        options = dict(error_model="numpy", cache=cacheable)
         for name in ("rates", "modes", "changed", "project", "step"):
             namespace[name] = njit(**options)(namespace[name])
         a1, a2 = "float64[::1]", "float64[:, ::1]"

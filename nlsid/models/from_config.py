@@ -211,6 +211,8 @@ def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equati
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not an equations model "
                                             "(write the controller into the equations, reading r)")
+        if config.model.updates is not None and config.simulation.substeps not in (None, 1):
+            raise InputError("simulation.substeps", "a discrete-time model runs one step per sample; remove substeps")
         return equations.build(config.model, _offsets(config.model))
     if config.model.type in STRUCTURES:
         if config.closed_loop is not None:
