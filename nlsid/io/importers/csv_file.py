@@ -40,8 +40,10 @@ from __future__ import annotations
 import csv
 import re
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -62,6 +64,9 @@ UNIT_SUFFIX = r"(?:\s*[\[(][^\])]*[\])])?"  # a trailing unit, as in "u1 (V)"
 UNITS_ROW_CELL = re.compile(r"^[\[(][^\[\]()]*[^\[\]()\d\s][^\[\]()]*[\])]$")  # "(ms)", "[V]"; not "(1)"
 DELIMITERS = ("\t", ";", ",")
 PREVIEW = 80  # characters of a preamble line kept in the details
+HEAD_LINES = 200  # lines read cell by cell to find where a table of numbers starts
+# Line ends of str.splitlines that a file read in text mode (numpy.loadtxt) does not end a line at
+SPLITLINES_ONLY = "\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
 
 
 def split_unit(cell: str) -> tuple[str, str | None]:
@@ -87,24 +92,72 @@ def _delimiter_text(delimiter: str | None) -> str:
 class Table:
     """The rows of a CSV/TSV file: its header (cells, or None), the rows below it (line number,
     cells), the delimiter (None: whitespace, "": none, one column), the lines above the header
-    that were skipped (line number, text), and the line of the units row read into the header."""
+    that were skipped (line number, text), and the line of the units row read into the header.
+    ``numbers``: the rows as a (rows, width) matrix when every cell of every row is a number (read
+    in one pass, :func:`_numeric_table`); None when some cell is not (then the columns are parsed
+    cell by cell, and a cell that is not a number is named)."""
 
     header: list[str] | None
-    body: list[tuple[int, list[str]]]
+    body: Sequence[tuple[int, list[str]]]
     delimiter: str | None
     preamble: list[tuple[int, str]]
     units_line: int | None = None
+    numbers: np.ndarray | None = None
 
     @property
     def width(self) -> int:
         return len(self.header) if self.header is not None else len(self.body[0][1])
 
 
-def _lines(path: Path) -> list[str]:
+class NumericRows(Sequence):
+    """The rows of a numeric body as (line number, cells), split from the file's text only when one
+    is looked at (a message naming a cell): its numbers are in :attr:`Table.numbers`. ``start``,
+    ``stop``: the indices of its first line and of the line after its last."""
+
+    def __init__(self, text: str, start: int, stop: int, delimiter: str | None):
+        self._text, self._start, self._stop, self._delimiter = text, start, stop, delimiter
+        self._lines: list[str] | None = None
+
+    def __len__(self) -> int:
+        return self._stop - self._start
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        if not -len(self) <= index < len(self):
+            raise IndexError(index)
+        if self._lines is None:
+            self._lines = self._text.splitlines()
+        k = self._start + index % len(self)
+        return k + 1, _split(self._lines[k], self._delimiter)
+
+
+def _text(path: Path) -> str:
     try:
-        return path.read_text(encoding="utf-8-sig").splitlines()
+        return path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(str(path), f"not a text file ({exc.reason} at byte {exc.start})") from None
+
+
+def _head(text: str, count: int) -> list[str]:
+    """The first ``count`` lines of ``text`` (all when it has fewer), with their line ends."""
+    size = 1 << 16
+    while True:
+        lines = text[:size].splitlines(keepends=True)
+        if size >= len(text):
+            return lines[:count]
+        if len(lines) > count:  # the last line of the slice may be cut: it is not among them
+            return lines[:count]
+        size *= 4
+
+
+def _content_lines(text: str) -> int:
+    """The number of lines of ``text`` up to its last that is not blank (a file read in text mode:
+    its line ends are ``\\n``, ``\\r\\n`` and ``\\r`` read as ``\\n``)."""
+    end = len(text)
+    while end and text[end - 1].isspace():
+        end -= 1
+    return text.count("\n", 0, end) + 1
 
 
 def _choose_delimiter(path: Path, lines: list[str]) -> str | None:
@@ -113,8 +166,15 @@ def _choose_delimiter(path: Path, lines: list[str]) -> str | None:
     hold whitespace between cells, else ``""``: one column, a line is a cell (``Voltage (V)``)."""
     if path.suffix.lower() == ".tsv":
         return "\t"
-    found = next((d for d in DELIMITERS if 2 * sum(d in line for line in lines) > len(lines)), None)
-    if found is None and 2 * sum(len(line.split(None, 1)) > 1 for line in lines) <= len(lines):
+    return _delimiter_of(lambda d: sum(d in line for line in lines),
+                         lambda: sum(len(line.split(None, 1)) > 1 for line in lines), len(lines))
+
+
+def _delimiter_of(holding: Callable[[str], int], spaced: Callable[[], int], total: int) -> str | None:
+    """The rule of :func:`_choose_delimiter` on counts: of ``total`` lines, ``holding(d)`` hold the
+    delimiter d and ``spaced()`` hold whitespace between cells."""
+    found = next((d for d in DELIMITERS if 2 * holding(d) > total), None)
+    if found is None and 2 * spaced() <= total:
         return ""
     return found
 
@@ -180,38 +240,132 @@ def _with_units(header: list[str], units: list[str]) -> list[str]:
             for cell, unit in zip(header, units)]
 
 
+@dataclass(frozen=True)
+class Start:
+    """Where a table starts among its rows: the header's row ``top`` (the preamble is above it), the
+    header cells (None: the first row is data; a units row's units joined in), the index of the
+    first row of the body, and the line of the units row (None: there is none)."""
+
+    top: int
+    header: list[str] | None
+    body: int
+    units_line: int | None
+
+
+def _table_lines(lines: list[str], first: int, stop: int) -> list[tuple[int, str]]:
+    """(line number, text) of the lines ``first..stop-1`` that are neither empty nor a ``#`` comment."""
+    return [(i + 1, line) for i, line in enumerate(lines[first:stop], start=first)
+            if line.strip() and not line.lstrip().startswith("#")]
+
+
+def _start(path: Path, rows: list[tuple[int, list[str]]], delimiter: str | None, skip_rows: int | None) -> Start:
+    """The header (found above the first rows of numbers unless ``skip_rows`` says where it is), its
+    units row, and where the body starts."""
+    top = 0 if skip_rows is not None else _header_index(path, rows, delimiter)
+    first = rows[top][1]
+    header = None if _is_numbers(first) else first
+    body = top + 1 if header is not None else top
+    units_line = None
+    if header is not None and body < len(rows) and len(rows[body][1]) == len(header) and _is_units_row(rows[body][1]):
+        units_line, header = rows[body][0], _with_units(header, rows[body][1])
+        body += 1
+    return Start(top, header, body, units_line)
+
+
 def read_table(path: Path, skip_rows: int | None = None) -> Table:
-    """Split ``path`` into header, rows and preamble; check that every row has the header's width."""
-    lines = _lines(path)
+    """Split ``path`` into header, rows and preamble; check that every row has the header's width.
+
+    A body of numbers only is read in one pass (:func:`_numeric_table`); any other is read cell by
+    cell, and the first row or cell that does not fit is named."""
+    text = _text(path)
+    numeric = _numeric_table(path, text, skip_rows)
+    if numeric is not None:
+        return numeric
+    lines = text.splitlines()
     if skip_rows is not None and skip_rows >= len(lines):
         raise InputError(f"--skip-rows {skip_rows}", f"{path} has only {len(lines)} line(s)")
-    start = skip_rows or 0
-    numbered = [(i + 1, line) for i, line in enumerate(lines[start:], start=start)
-                if line.strip() and not line.lstrip().startswith("#")]
+    numbered = _table_lines(lines, skip_rows or 0, len(lines))
     if not numbered:
         raise InputError(str(path), "holds no rows" + (f" below the {skip_rows} line(s) skipped" if skip_rows else ""))
     delimiter = _choose_delimiter(path, [line for _, line in numbered])
     rows = [(n, _split(line, delimiter)) for n, line in numbered]
-    top = 0 if skip_rows is not None else _header_index(path, rows, delimiter)
-    preamble = [(n, line.strip()[:PREVIEW]) for n, line in numbered[:top]]
-    first_line, first = rows[top]
-    header = None if _is_numbers(first) else first
-    body = rows[top + 1:] if header is not None else rows[top:]
-    units_line = None
-    if header is not None and body and len(body[0][1]) == len(header) and _is_units_row(body[0][1]):
-        units_line, header = body[0][0], _with_units(header, body[0][1])
-        body = body[1:]
+    start = _start(path, rows, delimiter, skip_rows)
+    body = rows[start.body:]
     if not body:
         raise InputError(str(path), "holds a header but no data rows")
+    first_line, first = rows[start.top]
     width = len(first)
     for line, cells in body:
         if len(cells) != width:
             hint = ("; if lines above the header are not part of the table, pass --skip-rows N"
                     if line == body[0][0] else "")
-            raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the {'header' if header else 'first row'} "
+            raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the "
+                                               f"{'header' if start.header else 'first row'} "
                                                f"(line {first_line}) has {width} (split at "
                                                f"{_delimiter_text(delimiter)}){hint}")
-    return Table(header=header, body=body, delimiter=delimiter, preamble=preamble, units_line=units_line)
+    preamble = [(n, line.strip()[:PREVIEW]) for n, line in numbered[:start.top]]
+    return Table(header=start.header, body=body, delimiter=delimiter, preamble=preamble, units_line=start.units_line)
+
+
+def _numeric_table(path: Path, text: str, skip_rows: int | None) -> Table | None:
+    """The table read the fast way, when the careful reading would find the same: its start found
+    cell by cell in the first :data:`HEAD_LINES` lines, then its body, from its first row to the
+    last line that is not blank, read from the file in one pass by :func:`numpy.loadtxt` (a C
+    parser, which reads a number as ``float`` does). None when the careful reading must decide: a
+    cell that is empty, quoted or not a number, a row of another width, a blank or comment line
+    inside the body, a delimiter the whole file would not choose, a start found differently on the
+    whole file (the head's most common width not the body's), one column, or a line end that
+    ``str.splitlines`` knows and a file read in text mode does not (form feed, ``\\x1c``, U+2028,
+    ...: the line numbers would differ)."""
+    if any(end in text for end in SPLITLINES_ONLY):
+        return None
+    first_index = skip_rows or 0
+    raw = _head(text, first_index + HEAD_LINES)
+    head = _table_lines([line.rstrip("\r\n") for line in raw], first_index, len(raw))
+    if not head:
+        return None
+    delimiter = _choose_delimiter(path, [line for _, line in head])
+    if delimiter == "":
+        return None
+    rows = [(n, _split(line, delimiter)) for n, line in head]
+    try:
+        start = _start(path, rows, delimiter, skip_rows)
+    except InputError:  # said by the careful reading, which sees every line
+        return None
+    width = len(rows[start.top][1])
+    common = Counter(len(cells) for _, cells in rows).most_common(1)[0][0]
+    if start.body >= len(rows) or width < 2 or (skip_rows is None and common != width):
+        return None
+    begin = rows[start.body][0] - 1  # the index of the body's first line
+    stop = _content_lines(text)  # the index after the last line that is not blank
+    try:
+        numbers = np.loadtxt(path, dtype=np.float64, delimiter=delimiter, comments=None, skiprows=begin, ndmin=2,
+                             encoding="utf-8-sig")
+    except ValueError:
+        return None
+    if numbers.shape != (stop - begin, width):  # a blank line loadtxt passed over is not a row
+        return None
+    offset = sum(len(line) for line in raw[:begin])
+    if not _same_delimiter(path, [line for n, line in head if n <= begin], text, offset, stop - begin, delimiter):
+        return None
+    preamble = [(n, line.strip()[:PREVIEW]) for n, line in head[:start.top]]
+    return Table(header=start.header, body=NumericRows(text, begin, stop, delimiter), delimiter=delimiter,
+                 preamble=preamble, units_line=start.units_line, numbers=numbers)
+
+
+def _same_delimiter(path: Path, above: list[str], text: str, offset: int, rows: int, delimiter: str | None) -> bool:
+    """Whether :func:`_choose_delimiter` over every line of the table (``above`` the body, and the
+    body: ``rows`` rows of numbers from ``text[offset:]``, split at ``delimiter``, at least 2 per
+    row) picks ``delimiter`` too. A body that holds no other delimiter is counted at once: each
+    of its rows holds ``delimiter`` (whitespace between cells, for None) and no other."""
+    if path.suffix.lower() == ".tsv":
+        return delimiter == "\t"
+    if any(text.find(other, offset) >= 0 for other in DELIMITERS if other != delimiter):
+        body = text[offset:].splitlines()[:rows]
+        return _choose_delimiter(path, above + body) == delimiter
+    return delimiter == _delimiter_of(lambda d: sum(d in line for line in above) + (rows if d == delimiter else 0),
+                                      lambda: sum(len(line.split(None, 1)) > 1 for line in above) + rows,
+                                      len(above) + rows)
 
 
 @dataclass(frozen=True)
@@ -231,7 +385,8 @@ def groups_of(table: Table) -> tuple[list[Group], list[str | int]]:
     width = table.width
     if table.header is None:
         return [], list(range(1, width + 1))
-    holds_data = [any(cells[i] for _, cells in table.body) for i in range(width)]
+    holds_data = ([True] * width if table.numbers is not None else
+                  [any(cells[i] for _, cells in table.body) for i in range(width)])
     spans: list[list[int]] = []
     current: list[int] | None = None
     for i, cell in enumerate(table.header):
@@ -444,7 +599,7 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
         rate_groups = [g for g in groups if (RATE_NAME.match(g.name) or INTERVAL_NAME.match(g.name))
                        and not used.intersection(g.columns)]
         if rate_groups:
-            _apply_rate_columns(source, path, body, rate_groups, titles)
+            _apply_rate_columns(source, path, table, rate_groups, titles)
             used.update(i for g in rate_groups for i in g.columns)
     details["ignored_columns"] = [titles[i] for i in range(width) if i not in used]
     if table.preamble:
@@ -472,7 +627,7 @@ class Rate:
     kind: str  # "sample-rate" or "sampling-interval"
 
 
-def _rate_of(path: Path, body: list[tuple[int, list[str]]], group: Group, titles: list[str | int]) -> Rate:
+def _rate_of(path: Path, table: Table, group: Group, titles: list[str | int]) -> Rate:
     """The sample rate of a sample-rate (``fs``) or sampling-interval (``Ts``, ``dt``) column: one
     value over all its cells (empty cells allowed)."""
     title = str(titles[group.columns[0]]) if len(group.columns) == 1 else group.cell
@@ -485,7 +640,7 @@ def _rate_of(path: Path, body: list[tuple[int, list[str]]], group: Group, titles
         understood = TIME_UNITS_TEXT if interval else "Hz, kHz, MHz"
         raise InputError(f"{path}:{title}", f"unknown unit {group.unit!r} of a {what}; units understood: {understood}")
     first: tuple[float, int] | None = None
-    for line, cells in body:
+    for line, cells in _rate_rows(table, group):
         for index in group.columns:
             cell = cells[index]
             if not cell:
@@ -508,11 +663,22 @@ def _rate_of(path: Path, body: list[tuple[int, list[str]]], group: Group, titles
     return Rate(fs, title, "sampling-interval" if interval else "sample-rate")
 
 
-def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[str]]], groups: list[Group],
+def _rate_rows(table: Table, group: Group) -> Sequence[tuple[int, list[str]]]:
+    """The rows a rate column's cells must be read from: all of them, or, in a table of numbers,
+    those up to the first that holds a value not > 0 or other than the first row's (the others
+    repeat the first row's value)."""
+    if table.numbers is None:
+        return table.body
+    values = table.numbers[:, list(group.columns)]
+    odd = np.flatnonzero((~np.isfinite(values) | (values <= 0) | (values != values[0, 0])).any(axis=1))
+    return table.body[: int(odd[0]) + 1 if odd.size else 1]
+
+
+def _apply_rate_columns(source: Source, path: Path, table: Table, groups: list[Group],
                         titles: list[str | int]) -> None:
     """Set the source's sample rate from its sample-rate and sampling-interval columns, which must
     agree with each other and with the time vector."""
-    rates = [_rate_of(path, body, group, titles) for group in groups]
+    rates = [_rate_of(path, table, group, titles) for group in groups]
     first = rates[0]
     for other in rates[1:]:
         if abs(other.fs / first.fs - 1) > REL_TOL:
@@ -538,6 +704,8 @@ def _apply_rate_columns(source: Source, path: Path, body: list[tuple[int, list[s
 def _parse(path: Path, table: Table, index: int, title: str | int) -> np.ndarray:
     """The numbers of one column; a cell that is not a number is refused naming its line and the
     delimiter (a wrong delimiter, or decimal commas, show there)."""
+    if table.numbers is not None:
+        return np.ascontiguousarray(table.numbers[:, index])
     body = table.body
     try:  # the fast path; a cell that is not a number is found and named below
         return np.fromiter(map(float, [cells[index] for _, cells in body]), dtype=np.float64, count=len(body))
