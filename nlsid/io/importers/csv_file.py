@@ -16,7 +16,10 @@ Rules (``docs/commands.md``, "nlsid import"):
 - Group labels: a header cell followed by empty header cells labels all those columns (as long as
   they hold data): ``u`` over 10 columns names 10 realizations of u, like ``u1..u10``. Columns with
   an empty header cell and no label to their left are not read (and listed as ignored).
-- Every row below the header has as many cells as the header; every selected cell is a number.
+- Every row below the header has as many cells as the header; every selected cell is a number. A
+  header with fewer cells than every row below it is padded with empty cells when the cells beyond
+  it are all empty (a delimiter ending each row), and refused when some hold a number (it may name
+  the first columns or the last: :func:`_short_header`).
 - Without ``--fs`` and ``--time``, a header column called ``t``, ``time`` or ``timestamp`` (ignoring
   case) is the time vector, in seconds unless its unit says ``ms``, ``us``/``µs``, ``ns`` or ``min``.
 - Without ``--fs``, a header column called ``fs``, ``sample rate``, ``sampling rate`` or ``sampling
@@ -204,7 +207,8 @@ def _is_units_row(cells: list[str]) -> bool:
 
 def _header_index(path: Path, rows: list[tuple[int, list[str]]], delimiter: str | None) -> int:
     """Where the table starts: the line above the first row of data of the common width (above its
-    units row, if it has one), when that line is a header of the same width without numbers; else 0
+    units row, if it has one), when that line is a header of the same width without numbers (or a
+    shorter one, over a row whose cells beyond it are empty: a delimiter ending each row); else 0
     (the first line). A row of data is one of numbers (empty cells allowed), or, when no row is,
     one with a number (a text column beside the numbers). Two header-like lines above the data are
     refused as ambiguous."""
@@ -221,11 +225,11 @@ def _header_index(path: Path, rows: list[tuple[int, list[str]]], delimiter: str 
         top -= 1
     if top < 1:
         return 0
-    above = rows[top][1]
-    if len(above) != width or any(_number(c) is not None for c in above):
+    above, data = rows[top][1], rows[first][1]
+    if (len(above) > width or any(data[len(above):])) or any(_number(c) is not None for c in above):
         return 0
     higher = rows[top - 1][1]
-    if len(higher) == width and not any(_number(c) is not None for c in higher):
+    if len(higher) == len(above) and not any(_number(c) is not None for c in higher):
         raise InputError(f"{path}:{rows[top - 1][0]}", f"lines {rows[top - 1][0]} and {rows[top][0]} both look like the "
                                                        f"header ({width} cells split at {_delimiter_text(delimiter)}, no "
                                                        "numbers); pass --skip-rows N so that the header is the first "
@@ -294,17 +298,41 @@ def read_table(path: Path, skip_rows: int | None = None) -> Table:
     if not body:
         raise InputError(str(path), "holds a header but no data rows")
     first_line, first = rows[start.top]
-    width = len(first)
+    header = start.header if start.header is None else _short_header(path, start.header, first_line, body, delimiter)
+    width = len(header) if header is not None else len(first)
     for line, cells in body:
         if len(cells) != width:
             hint = ("; if lines above the header are not part of the table, pass --skip-rows N"
                     if line == body[0][0] else "")
             raise InputError(f"{path}:{line}", f"row has {len(cells)} cells, the "
-                                               f"{'header' if start.header else 'first row'} "
+                                               f"{'header' if header else 'first row'} "
                                                f"(line {first_line}) has {width} (split at "
                                                f"{_delimiter_text(delimiter)}){hint}")
     preamble = [(n, line.strip()[:PREVIEW]) for n, line in numbered[:start.top]]
-    return Table(header=start.header, body=body, delimiter=delimiter, preamble=preamble, units_line=start.units_line)
+    return Table(header=header, body=body, delimiter=delimiter, preamble=preamble, units_line=start.units_line)
+
+
+def _short_header(path: Path, header: list[str], header_line: int, body: list[tuple[int, list[str]]],
+                  delimiter: str | None) -> list[str]:
+    """The header of a table whose rows all have more cells than it: padded with empty cells when
+    the cells beyond it are empty on every row (a delimiter ending each row: those columns hold
+    nothing), else refused at the first row with a number beyond it. Which columns a short header
+    names is not said (the first ones, as loggers that add a channel write it, or the last ones, as
+    a table with row names has it), and a guess could import one signal as another."""
+    width = len(body[0][1])
+    if width <= len(header) or any(len(cells) != width for _, cells in body):
+        return header  # a row of another width is named by the width check
+    named = len(header)
+    beyond = next((line for line, cells in body if any(cells[named:])), None)
+    if beyond is None:
+        return header + [""] * (width - named)
+    columns = f"column {width} holds" if width == named + 1 else f"columns {named + 1}..{width} hold"
+    raise InputError(f"{path}:{beyond}", f"row has {width} cells (split at {_delimiter_text(delimiter)}), as has every "
+                                         f"row below the header (line {header_line}), which has {named}: {columns} "
+                                         f"numbers under no header cell, and a short header may name the first "
+                                         f"{named} columns or the last {named}; name every column in the header, or "
+                                         f"pass --skip-rows {body[0][0] - 1} to read the rows without it and name the "
+                                         "columns by number (--u 1 --y 2)")
 
 
 def _numeric_table(path: Path, text: str, skip_rows: int | None) -> Table | None:

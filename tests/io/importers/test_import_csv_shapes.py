@@ -345,21 +345,24 @@ def layouts(draw):
     blocks += [extras[name] for name in chosen]
     order = draw(st.permutations(range(len(blocks))))
     lead = [("", rng.normal(size=ROWS), "ignored", None) for _ in range(draw(st.integers(0, 2)))]
-    columns = lead + [column for i in order for column in blocks[i]]
+    # empty columns beyond a header that ends before them (a delimiter ending each row)
+    unheaded = [("", np.full(ROWS, np.nan), "ignored", None) for _ in range(draw(st.integers(0, 2)))]
+    columns = lead + [column for i in order for column in blocks[i]] + unheaded
     for key in signals:  # repeated cells pair in column order; numbered columns in number order
         truth[key] = ([numbered_truth[key][m] for m in sorted(numbered_truth[key])] if numbered_truth[key] else
                       [x for cell_, x, role, _ in columns if role == key])
     titles = [title if title is not None else j + 1 for j, (_, _, _, title) in enumerate(columns)]
     preamble = draw(st.booleans()) and len(columns) >= 2
-    return columns, titles, truth, realizations, preamble
+    return columns, titles, truth, realizations, preamble, len(unheaded)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(layouts())
 def test_every_column_is_imported_or_listed_as_ignored(layout):
-    columns, titles, truth, realizations, preamble = layout
+    columns, titles, truth, realizations, preamble, unheaded = layout
+    header = [c for c, _, _, _ in columns][: len(columns) - unheaded]
     with tempfile.TemporaryDirectory() as folder:
-        path = write_table(Path(folder) / "layout.csv", [c for c, _, _, _ in columns], [x for _, x, _, _ in columns],
+        path = write_table(Path(folder) / "layout.csv", header, [x for _, x, _, _ in columns],
                            above=["Axis1", "Date: 2024-05-01"] if preamble else [])
         source = read_csv(path, {"u": "u", "y": "y", "r": "r"}, None, {"y", "r"}, fs_given=False,
                           defaulted=frozenset({"u", "y", "r"}))
