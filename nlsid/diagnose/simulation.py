@@ -119,15 +119,17 @@ class ModelRunner:
         """The initial state fitted to the start of an arbitrary record as the model simulates it
         (:class:`nlsid.simulate.initial_state.InitialState`; of a block structure its filters'
         states, :mod:`nlsid.simulate.structure_state`), None where none is fitted (a periodic
-        run, a mode too slow for the record)."""
+        run, a mode too slow for the record, a model written as equations)."""
         from nlsid.models.from_config import Plant
         from nlsid.simulate.runs import simulate_run
         from nlsid.simulate.initial_state import estimate
         from nlsid.simulate.noise import Noise
 
+        from nlsid.models.equations import Equations
+
         source = self.excitation(run)
-        if source.period is not None or source.y is None:
-            return None
+        if source.period is not None or source.y is None or isinstance(self.plant, Equations):
+            return None  # a model written as equations starts at its written states (nlsid.models.equations)
         if not isinstance(self.plant, Plant):
             from nlsid.simulate.structure_state import estimate as structure_estimate
 

@@ -508,8 +508,9 @@ class EquationsConfig(_Offsets):
     ``states``: name -> initial value; ``parameters``: name -> value; ``derivatives`` (continuous:
     dx/dt in the recording's time unit) or ``updates`` (discrete: x[k+1]), one expression per
     state; ``output``: y as an expression; ``bounds``: state -> [lower, upper] (null: no bound),
-    the state clipped into them; ``delay``: dead time of the plant input u in seconds (whole
-    samples). Expressions read the states, the parameters, ``u`` (the plant input), ``r`` and the
+    the state clipped into them; ``delay``: dead time of the command u in seconds (whole
+    samples); ``input_nonlinearity`` and ``output_nonlinearity`` blocks as a plant has them
+    (:class:`_PlantBlocks`). Expressions read the states, the parameters, ``u`` (the plant input), ``r`` and the
     recording's channels (:mod:`nlsid.models.expressions`, :mod:`nlsid.models.equations`)."""
 
     RESERVED: ClassVar[tuple[str, ...]] = ("u", "r")
@@ -521,6 +522,8 @@ class EquationsConfig(_Offsets):
     bounds: dict[Name, StateBounds] = {}
     output: ExpressionText
     delay: NonNegative = 0.0
+    input_nonlinearity: Optional[BlockConfig] = None   # on the plant input u, as a plant's
+    output_nonlinearity: Optional[BlockConfig] = None  # on the output expression's value, before output_offset
 
     @property
     def equations(self) -> dict[str, str]:

@@ -23,9 +23,10 @@ sub-steps, as for the other models with sub-steps.
 
 Discrete time (``updates``): x[k+1] = B(f(x[k], p, w[k])), y[k] = g(x[k], p, w[k]) + output_offset.
 
-The plant input is u + input_offset + sum gain * channel (``input_channels``) + process noise,
-delayed by ``delay`` (whole samples, zero before the record); ``r`` and the channels are read as
-recorded. The states start at their written initial values on every run (no lead-in, no initial
+The name ``u`` is the plant input as a plant gets it, f_in(u[k - d] + input_offset + sum gain *
+channel + process noise): the command delayed by ``delay`` (d whole samples, zero before the
+record) through the ``input_nonlinearity`` f_in (identity without one); ``r`` and the channels are
+read as recorded. The recorded y is f_out(g) + output_offset, f_out the ``output_nonlinearity``. The states start at their written initial values on every run (no lead-in, no initial
 state fitted: free them with ``fit --model``, ``model.states.NAME``).
 
 Compilation: the checked expressions (:mod:`nlsid.models.expressions`) are written into the
@@ -81,6 +82,8 @@ class Equations:
     kernel: object
     offsets: object
     delay: float = 0.0
+    input_block: tuple = ()   # (kind, parameters) of nlsid.models.blocks; () is the identity
+    output_block: tuple = ()
     columns: dict = field(default_factory=dict)  # input name -> the column of its first use in its expression (key, column)
 
 
@@ -240,6 +243,8 @@ def build(config, offsets, where: str = "model") -> Equations:
     """The :class:`Equations` of a validated :class:`nlsid.io.model_config.EquationsConfig`
     (its expressions checked again with their keys, and compiled); ``offsets`` its
     :class:`nlsid.models.from_config.Offsets`."""
+    from nlsid.models.blocks import encode
+
     states, parameters = list(config.states), list(config.parameters)
     section = config.section
     texts = [(f"{where}.{section}.{name}", config.equations[name]) for name in states]
@@ -260,7 +265,8 @@ def build(config, offsets, where: str = "model") -> Equations:
     return Equations(tuple(states), np.array([config.states[n] for n in states], dtype=np.float64),
                      np.array([config.parameters[n] for n in parameters], dtype=np.float64), lower, upper,
                      config.updates is not None, tuple(inputs), tuple(key for key, _ in texts),
-                     compile_kernel(text), offsets, config.delay, columns)
+                     compile_kernel(text), offsets, config.delay, encode(config.input_nonlinearity),
+                     encode(config.output_nonlinearity), columns)
 
 
 def _bound(pair, index: int, default: float) -> float:
@@ -268,17 +274,10 @@ def _bound(pair, index: int, default: float) -> float:
 
 
 def input_matrix(model: Equations, run, plant_input: np.ndarray) -> np.ndarray:
-    """(n, inputs) float64: the delayed plant input, then r and the channels the expressions
-    read; a name that is none of the model's nor the run's is an error listing them all."""
-    from nlsid.models.lti import delay_samples
-
-    n = run.n_samples
-    out = np.empty((n, len(model.inputs)))
-    d = delay_samples(model.delay, run.fs, "model.delay")
-    if d >= n:
-        raise InputError("model.delay", f"dead time of {d} samples is not shorter than the record ({n} samples)")
-    out[:d, 0] = 0.0
-    out[d:, 0] = plant_input[:n - d]
+    """(n, inputs) float64: the plant input, then r and the channels the expressions read; a
+    name that is none of the model's nor the run's is an error listing them all."""
+    out = np.empty((run.n_samples, len(model.inputs)))
+    out[:, 0] = plant_input
     unknown = [name for name in model.inputs[1:] if not (name == "r" and run.r is not None or name in run.channels)]
     if unknown:
         key, column = model.columns[unknown[0]]
@@ -304,8 +303,9 @@ def substeps_of(model: Equations, requested: int | None) -> int:
 
 
 def response(model: Equations, run, plant_input: np.ndarray, substeps: int | None) -> np.ndarray:
-    """The model output y (without output offset and noise) on ``run`` driven by ``plant_input``
-    (the plant input before the delay: u + offsets + channels + process noise)."""
+    """The value of the output expression on ``run`` (before an output block, offset and noise)
+    driven by ``plant_input``, the input u of the expressions (:func:`nlsid.simulate.engine.simulate_equations`:
+    the delayed command with offsets, channels and process noise, through the input block)."""
     w = input_matrix(model, run, np.asarray(plant_input, dtype=np.float64))
     m = substeps_of(model, substeps)
     y = np.empty(run.n_samples)

@@ -271,11 +271,20 @@ def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: in
 
 
 def simulate_equations(model: equations.Equations, run: Run, substeps: int | None, noise: Noise) -> Run:
-    """Run a model written as equations on ``run`` (:mod:`nlsid.models.equations`): its plant input
-    is u + the input offset and channels + process noise, the recorded y its output + the output
-    offset + output noise."""
-    plant_input = run.u + plant_input_terms(model.offsets, run, noise.process)
-    y = equations.response(model, run, plant_input, substeps) + noise.y + model.offsets.output
+    """Run a model written as equations on ``run`` (:mod:`nlsid.models.equations`) as the kernel
+    runs a plant: the plant input f_in(u[k - d] + input offset + channels + process noise), the
+    recorded y = f_out(output) + output offset + output noise."""
+    d = delay_samples(model.delay, run.fs, "model.delay")
+    if d >= run.n_samples:
+        raise InputError("model.delay", f"dead time of {d} samples is not shorter than the record ({run.n_samples} samples)")
+    command = np.concatenate([np.zeros(d), run.u[:run.n_samples - d]])
+    plant_input = command + plant_input_terms(model.offsets, run, noise.process)
+    if model.input_block[0] != blocks.IDENTITY:
+        plant_input = apply_block(model.input_block[0], model.input_block[1], plant_input)
+    y = equations.response(model, run, plant_input, substeps)
+    if model.output_block[0] != blocks.IDENTITY:
+        y = apply_block(model.output_block[0], model.output_block[1], y)
+    y = y + noise.y + model.offsets.output
     _check_finite(y, run.run_id)
     return dataclasses.replace(run, u=run.u + noise.u, y=y, r=None)
 

@@ -164,25 +164,29 @@ def test_discrete_updates_against_a_numpy_loop():
     np.testing.assert_allclose(y, expected, rtol=1e-13, atol=1e-13)
 
 
-def test_inputs_channels_offsets_and_delay_against_the_exact_discretisation():
-    """dx/dt = (-x + u + g c) / tau, y = x + r: u with an input offset and a delay of 2 samples,
-    a channel c and the reference r read by name. Linear, so RK4 is checked against the exact
-    ZOH discretisation (scipy.signal.cont2discrete): RK4's error per sub-step of h/tau = 0.01 is
-    (h/tau)^5 / 120 of the state, ~1e-12."""
+def test_inputs_channels_offsets_blocks_and_delay_against_the_exact_discretisation():
+    """dx/dt = (-x + u + g c) / tau, output x + r through a quadratic output block: u is the
+    command delayed by 2 samples plus an input offset, through an input saturation (as a plant
+    gets it), c a channel and r the reference, read by name. Linear between the blocks, so RK4 is
+    checked against the exact ZOH discretisation (scipy.signal.cont2discrete): RK4's error per
+    sub-step of h/tau = 0.01 is (h/tau)^5 / 120 of the state, ~1e-12."""
     fs, n, tau, g, offset = 10.0, 400, 1.5, 0.7, 0.25
     rng = np.random.default_rng(5)
     u, c, r = rng.normal(size=n), rng.normal(size=n), rng.normal(size=n)
     data = {"model": {"type": "equations", "states": {"x": 0.0}, "parameters": {"tau": tau, "g": g},
                       "derivatives": {"x": "(-x + u + g*c) / tau"}, "output": "x + r",
-                      "input_offset": offset, "delay": 2 / fs}, "simulation": {"substeps": 7}}
+                      "input_offset": offset, "delay": 2 / fs,
+                      "input_nonlinearity": {"type": "saturation", "lower": -0.8, "upper": 0.8},
+                      "output_nonlinearity": {"type": "polynomial", "coefficients": [0.0, 1.0, 0.1]}},
+            "simulation": {"substeps": 7}}
     run = Run("a", fs, "arbitrary", u, r=r, channels={"c": c})
     y = nlsid.Model.from_dict(data).simulate(Recording([run]))[0].y
-    drive = np.concatenate([[0.0, 0.0], (u + offset)[:-2]]) + g * c
+    drive = np.clip(np.concatenate([[0.0, 0.0], u[:-2]]) + offset, -0.8, 0.8) + g * c
     ad, bd, *_ = scipy.signal.cont2discrete((np.array([[-1 / tau]]), np.array([[1 / tau]]), np.eye(1),
                                              np.zeros((1, 1))), 1 / fs, method="zoh")
     x, expected = 0.0, np.empty(n)
     for k in range(n):
-        expected[k] = x + r[k]
+        expected[k] = (x + r[k]) + 0.1 * (x + r[k]) ** 2
         x = ad[0, 0] * x + bd[0, 0] * drive[k]
     np.testing.assert_allclose(y, expected, atol=1e-10)
 

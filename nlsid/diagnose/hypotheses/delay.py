@@ -17,7 +17,7 @@ def _estimate_delay(ctx: Context) -> Estimate | str:
     simulated exactly (:func:`nlsid.simulate.engine.timing`), then refined by the fit engine. Below
     one sample it is a converter skew, a nuisance estimated before any hypothesis
     (:mod:`nlsid.diagnose.nuisances`), not a cause. A discrete model has no values between samples:
-    its dead time is rounded to whole samples."""
+    its dead time is rounded to whole samples, as is that of a model written as equations."""
     ratios = bla_ratios(ctx)
     if not ratios:
         return "needs multisine runs (the BLA phase)"
@@ -35,18 +35,25 @@ def _estimate_delay(ctx: Context) -> Estimate | str:
     if samples < 1 - 3 * fs / math.sqrt(den):
         return f"the BLA phase shows no dead time of a sample or more (slope {samples:.2f} samples)"
     current = float(ctx.runner.data["model"].get("delay", 0.0))
-    if ctx.runner.data["model"].get("domain") == "discrete":
+    if _whole_samples(ctx.runner.data):
         whole = max(int(round(samples)), 1)
         return Estimate({"delay": current + whole / fs}, {"delay": 1 / math.sqrt(den)}, float("nan"),
-                        f"{whole} more samples from the BLA phase slope ({samples:.2f} before rounding: a discrete "
-                        "model has no values between samples)")
+                        f"{whole} more samples from the BLA phase slope ({samples:.2f} before rounding: the "
+                        "model's dead time is whole samples)")
     return Estimate({"delay": current + tau}, {"delay": 1 / math.sqrt(den)}, float("nan"),
                     f"{samples:.3f} more samples from the BLA phase slope")
 
 
+def _whole_samples(data: dict) -> bool:
+    """The model's dead time is whole samples: a discrete model, or one written as equations
+    (its u is the command delayed by whole samples, :mod:`nlsid.models.equations`)."""
+    return data["model"].get("domain") == "discrete" or data["model"].get("type") == "equations"
+
+
 def _delay_paths(data: dict) -> dict[str, str] | None:
-    """The fit engine refines a continuous model's dead time (a discrete one keeps whole samples)."""
-    return {} if data["model"].get("domain") == "discrete" else {"delay": "model.delay"}
+    """The fit engine refines a continuous model's dead time (a discrete one, or one written as
+    equations, keeps whole samples)."""
+    return {} if _whole_samples(data) else {"delay": "model.delay"}
 
 
 def _extend_delay(data: dict, values: dict) -> dict:

@@ -13,8 +13,8 @@ from nlsid.diagnose.simulation import LTI, ModelRunner
 
 def no_block(key: str) -> Callable[[ModelRunner], str | None]:
     def applies(runner: ModelRunner) -> str | None:
-        if runner.kind not in LTI + ("mass_spring_damper", "two_mass_stage"):
-            return "needs an LTI model or a mechanical template"
+        if runner.kind not in LTI + ("mass_spring_damper", "two_mass_stage", "equations"):
+            return "needs an LTI model, a mechanical template or a model written as equations"
         if runner.data["model"].get(key) is not None:
             return f"the model already has an {key}"
         return None
