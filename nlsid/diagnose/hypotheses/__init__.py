@@ -27,6 +27,15 @@ stribeck            as coulomb, with a break-away peak at     ``nonlinearities: 
                     low velocity                              (fs, fc, vs; delta = 2)
 lugre               as stribeck, with presliding: a stiff     ``nonlinearities: lugre`` (sigma0,
                     force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0)
+coulomb_feedback    as coulomb, for a transfer function       ``nonlinear_feedback`` around the
+                    model (its output read as position or     model (or model / s, ``output:
+                    velocity, whichever explains more)        velocity``) with ``coulomb`` (fc,
+                                                              the linear coefficients)
+quadratic_damping   odd distortion; damping grows with        ``nonlinearities: quadratic_damping``
+                    level; residual like the response to      (c2), or fed back around a transfer
+                    the force -v abs(v)                       function as coulomb_feedback
+cubic_damping       as quadratic_damping, force -v^3          ``nonlinearities: cubic_damping``
+                                                              (c3), or fed back likewise
 cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
                     level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
@@ -42,8 +51,14 @@ deadzone            odd distortion; BLA gain rises with       ``input_nonlineari
                     level; residual where abs(u) is small     (half width a: lower = -a, upper = a)
 backlash            odd distortion and a phase lag that       ``input_nonlinearity: backlash``
                     shrinks with level                        (width)
+actuator_polynomial odd and even distortion; residual like    ``input_nonlinearity: polynomial``
+                    the responses to u^2 and u^3 at the       [0, 1, a2, a3] (a2, a3; a
+                    plant input (Hammerstein)                 Hammerstein system)
 quadratic_output    even distortion                           ``output_nonlinearity: polynomial``
                                                               [0, 1, a2] (a2)
+output_saturation   the recorded output flat at a ceiling     ``output_nonlinearity: saturation``
+                    or floor (many samples at its extreme     (limit: the flat side's; a side
+                    value); not fitted without one            not flat far beyond the range)
 missing_resonance   BLA differs from the model around one     the model as a ``zpk`` with the
                     frequency, no distortion                  pole mode ``{frequency: fr, damping:
                                                               zeta}`` and its ``gain`` refined:
@@ -96,14 +111,16 @@ from __future__ import annotations
 from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
                                        output_blocks, resonance, stiffness)
 from nlsid.diagnose.hypotheses import wiener_hammerstein
+from nlsid.diagnose.hypotheses import actuator_polynomial, friction_feedback, nonlinear_damping, output_saturation
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
 __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 
 #: The hypotheses in the order they are tried (a family's simpler members first).
-LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + stiffness.HYPOTHESES + feedback.HYPOTHESES
-                                   + input_blocks.HYPOTHESES
-                                   + output_blocks.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
+LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + friction_feedback.HYPOTHESES + nonlinear_damping.HYPOTHESES
+                                   + stiffness.HYPOTHESES + feedback.HYPOTHESES
+                                   + input_blocks.HYPOTHESES + actuator_polynomial.HYPOTHESES
+                                   + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
                                    + linear_dynamics.HYPOTHESES
                                    + coupled_mode.HYPOTHESES + delay.HYPOTHESES)
 
