@@ -35,6 +35,7 @@ _TITLES = {
     "hammerstein": "Hammerstein system", "wiener_hammerstein": "Wiener-Hammerstein system",
     "lpl": "Parallel LPL (Wiener-Hammerstein) system",
     "nonlinear_feedback": "Nonlinear feedback around an LTI system",
+    "equations": "Model written as equations",
 }
 
 
@@ -182,6 +183,12 @@ def render_model(path: Path) -> Page:
 
     data, lines = load_yaml(path)
     config = validate_simulate_config(data, path, lines)
+    if config.model.type == "equations":
+        try:
+            model(config)  # the checks of nlsid simulate: open loop only, its expressions compile
+        except InputError as exc:
+            raise InputError(f"{path}: {exc.where}", exc.what) from None
+        return _equations_page(path, config)
     try:
         model(config)  # the checks of nlsid simulate: stability, structure in open loop only
         linear, nonlinear = _elements(config)
@@ -245,3 +252,36 @@ def render_model(path: Path) -> Page:
                             [[name, values["type"], _parameters(values)] for name, values in nonlinear]))
     return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
                 headline=headline, findings=findings, figures=figures, tables=tables, numbers=numbers)
+
+
+def _equations_page(path: Path, config) -> Page:
+    """The page of a model written as equations: no LTI element to draw, its equations as tables."""
+    m = config.model
+    time = "continuous" if m.derivatives is not None else "discrete"
+    symbol = "d{}/dt" if m.derivatives is not None else "{}[k+1]"
+    nonlinear = [(key, getattr(m, key).model_dump()) for key in ("input_nonlinearity", "output_nonlinearity")
+                 if getattr(m, key) is not None]
+    headline = (f"{_TITLES['equations']} ({time} time) in open loop: {len(m.states)} state"
+                f"{'s' if len(m.states) != 1 else ''}, {len(m.parameters)} parameter"
+                f"{'s' if len(m.parameters) != 1 else ''}")
+    if nonlinear:
+        headline += "; " + ", ".join(f"{values['type'].replace('_', ' ')} ({name})" for name, values in nonlinear)
+    bounds = {name: [None if v is None else float(v) for v in pair] for name, pair in m.bounds.items()}
+    rows = [[symbol.format(name), m.equations[name], number(m.states[name], ".6g"),
+             "[{}, {}]".format(*("-" if v is None else f"{v:g}" for v in bounds[name])) if name in bounds else "-"]
+            for name in m.states]
+    rows.append(["y", m.output, "-", "-"])
+    tables = [Table("Equations", ["quantity", "expression", "initial value", "bounds"], rows,
+                    note="u: the plant input (the command after delay, offsets and input block); r and the "
+                         "recording's channels by name (docs/configs.md, Models written as equations)."),
+              Table("Parameters", ["parameter", "value"], [[k, number(v, ".6g")] for k, v in m.parameters.items()])]
+    if nonlinear:
+        tables.append(Table("Nonlinear elements", ["element", "type", "parameters"],
+                            [[name, values["type"], _parameters(values)] for name, values in nonlinear]))
+    findings = [f"dead time {m.delay:g} s"] if m.delay else []
+    numbers = {"model": "equations", "closed_loop": False, "elements": [],
+               "nonlinear": [{"name": n, **v} for n, v in nonlinear],
+               "equations": {"time": time, "states": dict(m.states), "bounds": bounds,
+                             "parameters": dict(m.parameters), "expressions": dict(m.equations), "output": m.output}}
+    return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
+                headline=headline, findings=findings, figures=[], tables=tables, numbers=numbers)

@@ -273,3 +273,18 @@ def test_closed_loop_and_substeps_of_a_discrete_model_are_refused():
                 "simulation": {"substeps": 4}}
     with pytest.raises(InputError, match="simulation.substeps: a discrete-time model runs one step per sample"):
         nlsid.Model.from_dict(discrete).simulate(np.ones(8), fs=1.0)
+
+
+def test_report_page_of_an_equations_model(tmp_path, run_cli):
+    """nlsid report of the tanks' config: the equations as written, the initial values and bounds."""
+    config = _write(tmp_path, tanks_config(TRUE))
+    result = run_cli("report", config, "-o", tmp_path / "page.html", "--json")
+    assert result.exit_code == 0, result.stderr
+    numbers = result.json()["numbers"]
+    assert numbers["model"] == "equations" and numbers["elements"] == []
+    written = tanks_config(TRUE)["model"]
+    assert numbers["equations"]["expressions"] == written["derivatives"]
+    assert numbers["equations"]["output"] == written["output"]
+    assert numbers["equations"]["states"] == written["states"]
+    assert numbers["equations"]["bounds"] == {"x1": [0.0, 40.0], "x2": [0.0, 40.0]}
+    assert "x1max" in (tmp_path / "page.html").read_text()
