@@ -30,7 +30,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 from scipy.linalg.blas import dsyrk  # noqa: E402
 
-from nlsid.fit.pnlss import Record, global_vector, jacobian_blocks, simulate_record, with_vector  # noqa: E402
+from nlsid.fit.pnlss import global_vector, with_vector  # noqa: E402
+from nlsid.simulate.pnlss_runs import Record, jacobian_blocks, simulate_record  # noqa: E402
 from nlsid.models.pnlss import Pnlss, exponents  # noqa: E402
 
 

@@ -567,11 +567,31 @@ class EquationsConfig(_Offsets):
         return self
 
 
+class PnlssConfig(_Offsets):
+    """A polynomial nonlinear state-space model, discrete at ``fs`` (``docs/configs.md``, "PNLSS";
+    ``docs/pnlss.md``): x[t+1] = A x + B u + E zeta(x, u), y = C x + D u + F eta(x, u), zeta and
+    eta the monomials of the states (and of u, ``with_input``) of total degrees ``state_degrees``
+    and ``output_degrees``. E (n rows, one coefficient per monomial of zeta) and F (one per monomial
+    of eta) default to zeros; their sizes are checked when the model is built."""
+
+    type: Literal["pnlss"]
+    fs: Positive
+    A: list[list[float]]
+    B: list[float]
+    C: list[float]
+    D: float = 0.0
+    state_degrees: list[Annotated[int, Field(ge=2)]] = []
+    output_degrees: list[Annotated[int, Field(ge=2)]] = []
+    with_input: bool = True
+    E: Optional[list[list[float]]] = None
+    F: Optional[list[float]] = None
+
+
 ModelConfig = Annotated[
     Union[
         TransferFunctionPlant, ZPKPlant, StateSpacePlant, MassSpringDamperConfig, TwoMassStageConfig,
         NonlinearFeedbackConfig, WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
-        EquationsConfig,
+        EquationsConfig, PnlssConfig,
     ],
     Field(discriminator="type"),
 ]

@@ -207,6 +207,12 @@ STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
 
 def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equations]:
     """The plant, structure or equations model of a whole config."""
+    if config.model.type == "pnlss":
+        if config.closed_loop is not None:
+            raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not a pnlss model")
+        from nlsid.models.pnlss import build
+
+        return build(config.model)
     if config.model.type == "equations":
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not an equations model "

@@ -98,6 +98,8 @@ class Pnlss:
     state_degrees, output_degrees : total degrees of zeta and eta (empty: no terms).
     with_input : whether the monomials contain the input u (else the states only).
     input_offset, output_offset : the model runs on u + input_offset and records y + output_offset.
+    input_channels : (channel name, gain) pairs: measured channels added to the input
+        (u + input_offset + sum gain * channel), as in the other models of the config language.
     """
 
     A: np.ndarray
@@ -112,6 +114,7 @@ class Pnlss:
     with_input: bool = True
     input_offset: float = 0.0
     output_offset: float = 0.0
+    input_channels: tuple[tuple[str, float], ...] = ()
     state_exponents: np.ndarray = field(init=False, repr=False, compare=False)
     output_exponents: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -145,11 +148,11 @@ class Pnlss:
         """A copy with the named fields changed (arrays copied as float64)."""
         values = {name: getattr(self, name) for name in ("A", "B", "C", "D", "E", "F", "fs", "state_degrees",
                                                          "output_degrees", "with_input", "input_offset",
-                                                         "output_offset")}
+                                                         "output_offset", "input_channels")}
         values.update(changes)
         return Pnlss(**values)
 
-    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None, bound: float = math.inf) -> np.ndarray:
+    def simulate(self, u: np.ndarray, x0: np.ndarray | None = None, bound: float = 1e150) -> np.ndarray:
         """The output y for the input samples ``u`` from the state ``x0`` (default rest).
 
         Raises InputError if the state leaves ``bound`` (in absolute value) or becomes non-finite:
@@ -160,7 +163,7 @@ class Pnlss:
             raise InputError("model", f"the PNLSS simulation diverged at sample {diverged} (|x| > {bound:g} or not finite)")
         return y
 
-    def try_simulate(self, u: np.ndarray, x0: np.ndarray | None = None, bound: float = math.inf) -> tuple[np.ndarray, int]:
+    def try_simulate(self, u: np.ndarray, x0: np.ndarray | None = None, bound: float = 1e150) -> tuple[np.ndarray, int]:
         """(y, t): the output, and the first sample t whose next state left ``bound`` or was not
         finite (-1 if none; y after t is not computed)."""
         from nlsid.simulate.pnlss_kernels import simulate
@@ -173,7 +176,7 @@ class Pnlss:
         return y, int(t)
 
     def steady_state(self, u_period: np.ndarray, lead_periods: int, periods: int = 1,
-                     bound: float = math.inf) -> tuple[np.ndarray, int]:
+                     bound: float = 1e150) -> tuple[np.ndarray, int]:
         """(y, t) of :meth:`try_simulate` over ``periods`` periods of the periodic input
         ``u_period``, after ``lead_periods`` periods simulated ahead from rest and discarded."""
         u = np.tile(np.asarray(u_period, dtype=np.float64), lead_periods + periods)
@@ -271,3 +274,49 @@ def from_linear(ss: StateSpace, fs: float, state_degrees=(2, 3), output_degrees=
                   float(realisation.D), np.zeros((n, nz)), np.zeros(nh), float(fs), sd, od, bool(with_input),
                   float(input_offset), float(output_offset))
     return model, how
+
+
+def build(config, where: str = "model") -> Pnlss:
+    """The :class:`Pnlss` of a validated :class:`nlsid.io.model_config.PnlssConfig`, its matrix
+    shapes checked against the number of states and of monomials (an InputError names the key)."""
+    from nlsid.models.lti import from_matrices
+
+    ss = from_matrices(config.A, config.B, config.C, config.D, True, 0.0, where)
+    n = ss.order
+    sd = check_degrees(config.state_degrees, f"{where}.state_degrees")
+    od = check_degrees(config.output_degrees, f"{where}.output_degrees")
+    nz = exponents(n, sd, config.with_input).shape[0]
+    nh = exponents(n, od, config.with_input).shape[0]
+    if config.E is None:
+        E = np.zeros((n, nz))
+    else:
+        if len(config.E) != n or any(len(row) != nz for row in config.E):
+            raise InputError(f"{where}.E", f"expected {n} rows (one per state) of {nz} coefficients (one per monomial "
+                                           f"of degrees {list(sd)}: {', '.join(monomial_names(n, sd, config.with_input))}), "
+                                           f"got {len(config.E)} rows of lengths {[len(r) for r in config.E]}")
+        E = np.array(config.E, dtype=float).reshape(n, nz)
+    if config.F is None:
+        F = np.zeros(nh)
+    else:
+        if len(config.F) != nh:
+            raise InputError(f"{where}.F", f"expected {nh} coefficients (one per monomial of degrees {list(od)}: "
+                                           f"{', '.join(monomial_names(n, od, config.with_input))}), got {len(config.F)}")
+        F = np.array(config.F, dtype=float)
+    return Pnlss(np.array(ss.A, float), np.array(ss.B, float), np.array(ss.C, float), float(ss.D), E, F,
+                 float(config.fs), sd, od, bool(config.with_input), float(config.input_offset),
+                 float(config.output_offset), tuple((str(k), float(v)) for k, v in config.input_channels.items()))
+
+
+def to_config(model: Pnlss) -> dict:
+    """The ``model:`` section of a config (``docs/configs.md``) that :func:`build` makes ``model`` of."""
+    out = {"type": "pnlss", "fs": float(model.fs), "A": model.A.tolist(), "B": model.B.tolist(),
+           "C": model.C.tolist(), "D": float(model.D), "state_degrees": list(model.state_degrees),
+           "output_degrees": list(model.output_degrees), "with_input": bool(model.with_input),
+           "E": model.E.tolist(), "F": model.F.tolist()}
+    if model.input_offset:
+        out["input_offset"] = float(model.input_offset)
+    if model.output_offset:
+        out["output_offset"] = float(model.output_offset)
+    if model.input_channels:
+        out["input_channels"] = {name: float(gain) for name, gain in model.input_channels}
+    return out

@@ -13,9 +13,11 @@ import dataclasses
 
 from nlsid.io.run import Run
 from nlsid.models.equations import Equations
+from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
 from nlsid.simulate.initial_state import with_initial_state
+from nlsid.simulate.pnlss_runs import simulate_pnlss
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.structure_state import with_initial_states
 
@@ -30,6 +32,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     filters': :mod:`nlsid.simulate.structure_state`). A model written as equations runs from its
     written initial states in either case (:mod:`nlsid.models.equations`)."""
     noise = noise or Noise.zero(run.n_samples)
+    if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
+        return simulate_pnlss(model, run, substeps, noise, steady)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
         original, m = run, count * run.period

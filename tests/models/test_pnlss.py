@@ -12,7 +12,8 @@ from scipy import signal
 from scipy.linalg import solve_discrete_lyapunov
 
 from nlsid.errors import InputError
-from nlsid.fit.pnlss import Record, global_vector, jacobian_blocks, simulate_record, with_vector
+from nlsid.fit.pnlss import global_vector, with_vector
+from nlsid.simulate.pnlss_runs import Record, jacobian_blocks, simulate_record
 from nlsid.models.lti import StateSpace, from_transfer_function
 from nlsid.models.pnlss import Pnlss, balanced, check_degrees, exponents, from_linear, monomial_names
 
@@ -152,3 +153,37 @@ def test_exact_jacobian_equals_central_differences_periodic_record():
     fd = _central_differences(lambda th: simulate_record(with_vector(model, th), record, None, 1e6), theta)
     relative = np.linalg.norm(J - fd, axis=0) / np.linalg.norm(fd, axis=0)
     assert relative.max() < 1e-6, relative.max()
+
+
+def _config_model():
+    rng = np.random.default_rng(6)
+    A = np.array([[0.7, 0.2], [-0.2, 0.6]])
+    B, C = np.array([1.0, 0.5]), np.array([0.3, -1.0])
+    E, F = 0.02 * rng.standard_normal((2, 16)), 0.1 * rng.standard_normal(16)
+    config = {"model": {"type": "pnlss", "fs": 100.0, "A": A.tolist(), "B": B.tolist(), "C": C.tolist(), "D": 0.4,
+                        "state_degrees": [2, 3], "output_degrees": [2, 3], "E": E.tolist(), "F": F.tolist(),
+                        "output_offset": 0.25}}
+    return config, (A, B, C, 0.4, E, F)
+
+
+def test_config_model_simulates_as_the_plain_loop():
+    import nlsid
+
+    config, matrices = _config_model()
+    u = 0.3 * np.random.default_rng(7).standard_normal(400)
+    y = nlsid.Model.from_dict(config).simulate(u, fs=100.0)
+    np.testing.assert_allclose(y, _reference(*matrices, u) + 0.25, rtol=1e-12, atol=1e-12)
+
+
+def test_config_model_refuses_another_rate_and_wrong_sizes():
+    import nlsid
+
+    config, _ = _config_model()
+    with pytest.raises(InputError, match="model.fs.*100 Hz.*200 Hz"):
+        nlsid.Model.from_dict(config).simulate(np.zeros(10), fs=200.0)
+    config["model"]["F"] = config["model"]["F"][:-1]
+    with pytest.raises(InputError, match=r"model\.F.*16 coefficients"):
+        nlsid.Model.from_dict(config).simulate(np.zeros(10), fs=100.0)
+    config["model"]["state_degrees"] = [1, 3]
+    with pytest.raises(InputError, match="state_degrees"):
+        nlsid.Model.from_dict(config)

@@ -1,0 +1,245 @@
+"""A PNLSS model (:mod:`nlsid.models.pnlss`) on measured runs as they were measured, and the
+exact sensitivities of its output (``docs/pnlss.md``).
+
+* A periodic run: its steady-state periods, simulated in periodic steady state: its first steady
+  period repeated ahead as a lead-in (:func:`lead_periods`), whose output is discarded.
+* An arbitrary run: whole, from an initial state x0, fitted to its measured output over its first
+  :func:`transient_samples` (:func:`estimate_x0`: Gauss-Newton on x0 alone, with the x0 columns of
+  the exact sensitivities).
+
+:func:`jacobian_blocks` yields the Jacobian rows of a record in chunks (the kernel
+:func:`nlsid.simulate.pnlss_kernels.sensitivities` carries the state and its sensitivities from
+one chunk to the next), so a long record never holds its whole Jacobian.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+from nlsid.models.pnlss import Pnlss
+from nlsid.simulate.pnlss_kernels import sensitivities, simulate
+
+STEADY_TOLERANCE = 1e-6  # the linear part's slowest mode decays to this within the lead-in
+MAX_LEAD_PERIODS = 20
+CHUNK_BYTES = 32 * 2 ** 20  # Jacobian rows are formed in chunks of at most this size
+X0_ITERATIONS = 6
+DIVERGED = 1e150  # a state beyond this has diverged (as the other models' simulations)
+
+
+
+
+@dataclass(eq=False)
+class Record:
+    """A run prepared for the fit: ``u`` (steady part of a periodic run, or the whole arbitrary
+    record), the measured ``y`` over it, ``period`` (None: arbitrary, its initial state fitted)."""
+
+    run_id: str
+    u: np.ndarray
+    y: np.ndarray
+    period: int | None
+
+    @property
+    def arbitrary(self) -> bool:
+        return self.period is None
+
+
+def records(runs: Sequence[Run], where: str) -> list[Record]:
+    """The runs as :class:`Record`: a periodic run's steady-state periods (whole periods after its
+    transient periods), an arbitrary run whole; each needs a measured y."""
+    out = []
+    for run in runs:
+        if run.y is None:
+            raise InputError(f"{where}: run {run.run_id}", "has no measured output y")
+        if run.period is not None and run.n_periods >= 1:
+            start = run.transient_periods * run.period
+            stop = start + run.n_periods * run.period
+            out.append(Record(run.run_id, np.ascontiguousarray(run.u[start:stop], dtype=float),
+                              np.ascontiguousarray(run.y[start:stop], dtype=float), int(run.period)))
+        else:
+            out.append(Record(run.run_id, np.ascontiguousarray(run.u, dtype=float),
+                              np.ascontiguousarray(run.y, dtype=float), None))
+    return out
+
+
+def lead_periods(model: Pnlss, period: int) -> int:
+    """Periods ahead of a periodic record in which the linear part's slowest mode decays to
+    STEADY_TOLERANCE: ceil(ln(tol) / ln(rho) / period) for the spectral radius rho of A, at least
+    1 (the nonlinear part's transient) and at most MAX_LEAD_PERIODS."""
+    rho = model.spectral_radius()
+    if rho >= 1.0:
+        return MAX_LEAD_PERIODS
+    if rho <= 0.0:
+        return 1
+    samples = math.log(STEADY_TOLERANCE) / math.log(rho)
+    return int(min(MAX_LEAD_PERIODS, max(1, math.ceil(samples / period))))
+
+
+def driven_input(model: Pnlss, record: Record) -> tuple[np.ndarray, int]:
+    """The input the kernel runs on (lead-in ahead for a periodic record, input offset added) and
+    the lead samples to discard."""
+    if record.arbitrary:
+        return record.u + model.input_offset, 0
+    count = lead_periods(model, record.period)
+    u = np.concatenate([np.tile(record.u[:record.period], count), record.u])
+    return u + model.input_offset, count * record.period
+
+
+def simulate_record(model: Pnlss, record: Record, x0: np.ndarray | None, bound: float) -> np.ndarray | None:
+    """The simulated output over the record (None if it diverged): steady state for a periodic
+    record, from ``x0`` for an arbitrary one."""
+    u, lead = driven_input(model, record)
+    start = np.zeros(model.order) if x0 is None or not record.arbitrary else np.asarray(x0, dtype=float)
+    y = np.empty(u.shape[0])
+    if simulate(*model.kernel_matrices(), u, start, float(bound), y) >= 0:
+        return None
+    out = y[lead:]
+    out += model.output_offset
+    return out
+
+
+def _chunk_rows(columns: int) -> int:
+    return int(max(256, min(65536, CHUNK_BYTES // (8 * max(columns, 1)))))
+
+
+def jacobian_blocks(model: Pnlss, record: Record, x0: np.ndarray | None, bound: float, full: bool = True,
+                    samples: int | None = None):
+    """Yield (residual, J) chunks over the record's first ``samples`` (default all; lead-in rows
+    dropped): residual = y_sim - y and the Jacobian rows in the kernel's column layout
+    (:mod:`nlsid.simulate.pnlss_kernels`: x0, A, B, E, C, D, F; x0 alone if not ``full``).
+    Raises FloatingPointError if the simulation diverges."""
+    n = model.order
+    u, lead = driven_input(model, record)
+    if samples is not None:
+        u = u[:lead + samples]
+    matrices = model.kernel_matrices()
+    ps = n + (n * n + n + n * matrices[6].shape[0] if full else 0)
+    width = ps + (n + 1 + matrices[7].shape[0] if full else 0)
+    x = np.zeros(n) if x0 is None or not record.arbitrary else np.array(x0, dtype=float)
+    S = np.zeros((n, ps))
+    S[:, :n] = np.eye(n)
+    rows = _chunk_rows(width)
+    J = np.empty((min(rows, u.shape[0]), width))
+    y = np.empty(J.shape[0])
+    for start in range(0, u.shape[0], rows):
+        stop = min(start + rows, u.shape[0])
+        m = stop - start
+        t = sensitivities(*matrices, u[start:stop], x, S, full, float(bound), y[:m], J[:m])
+        if t >= 0:
+            raise FloatingPointError(f"diverged at sample {start + t}")
+        first = max(lead - start, 0)
+        if first >= m:
+            continue
+        measured = record.y[start + first - lead:stop - lead]
+        yield y[first:m] + model.output_offset - measured, J[first:m]
+
+
+def transient_samples(model: Pnlss, limit: int) -> int:
+    """Samples in which the linear part's slowest mode decays to STEADY_TOLERANCE (at least 10 n,
+    at most ``limit``): the part of a record that tells its initial state."""
+    rho = model.spectral_radius()
+    if rho >= 1.0:
+        return limit
+    samples = math.log(STEADY_TOLERANCE) / math.log(rho) if rho > 0 else 1.0
+    return int(min(limit, max(10 * model.order, math.ceil(samples))))
+
+
+def estimate_x0(model: Pnlss, record: Record, bound: float = DIVERGED, start: np.ndarray | None = None) -> np.ndarray | None:
+    """The initial state of an arbitrary record that fits its measured output best over its first
+    :func:`transient_samples` (Gauss-Newton on x0 alone, from ``start`` or rest; exact in one step
+    for a linear model); None for a periodic record or a divergence."""
+    if not record.arbitrary:
+        return None
+    n = model.order
+    length = transient_samples(model, record.y.size)
+    x0 = np.zeros(n) if start is None else np.array(start, dtype=float)
+    last = math.inf
+    for _ in range(X0_ITERATIONS):
+        H, g, cost = np.zeros((n, n)), np.zeros(n), 0.0
+        try:
+            for e, J in jacobian_blocks(model, record, x0, bound, full=False, samples=length):
+                H += J.T @ J
+                g += J.T @ e
+                cost += float(e @ e)
+        except FloatingPointError:
+            return None
+        if not cost < last * (1 - 1e-6):
+            break
+        last = cost
+        x0 = x0 + np.linalg.lstsq(H, -g, rcond=1e-12)[0]
+    return x0
+
+
+def rms_on(model: Pnlss, recs: Sequence[Record], bound: float, starts: dict | None = None) -> float:
+    """rms of the simulation error over the records (initial states fitted, each from its value in
+    ``starts`` by run id, which is updated; inf if one diverges)."""
+    total, count = 0.0, 0
+    starts = {} if starts is None else starts
+    for rec in recs:
+        x0 = estimate_x0(model, rec, bound, starts.get(rec.run_id))
+        if x0 is not None:
+            starts[rec.run_id] = x0
+        if rec.arbitrary and x0 is None:
+            return math.inf
+        y = simulate_record(model, rec, x0, bound)
+        if y is None:
+            return math.inf
+        total += float(np.sum((y - rec.y) ** 2))
+        count += rec.y.size
+    return math.sqrt(total / count) if count else math.inf
+
+
+def fitted_input(model: Pnlss, run: Run, process: np.ndarray | None = None) -> np.ndarray:
+    """The model's input on ``run`` before its own input offset: u + the measured channels of
+    ``model.input_channels`` times their gains (+ process noise); checks the sample rate."""
+    if abs(run.fs - model.fs) > 1e-9 * model.fs:
+        raise InputError("model.fs", f"the PNLSS model is discrete at {model.fs:g} Hz; run {run.run_id} is sampled "
+                                     f"at {run.fs:g} Hz")
+    u = np.array(run.u, dtype=float)
+    for name, gain in model.input_channels:
+        if name not in run.channels:
+            have = ", ".join(sorted(run.channels)) or "none"
+            raise InputError(f"model.input_channels.{name}", f"run {run.run_id} records no channel {name!r} "
+                                                             f"(its channels: {have})")
+        u += gain * run.channels[name]
+    if process is not None:
+        u += process
+    return u
+
+
+def simulate_measured(model: Pnlss, run: Run, steady: bool, process: np.ndarray | None = None) -> np.ndarray:
+    """The model's noise-free output on ``run`` (output offset included). ``steady`` (the run as
+    it was measured): a periodic run without transient periods in periodic steady state (every
+    period, after :func:`lead_periods` periods ahead); an arbitrary run with a measured y from the
+    initial state fitted to it (:func:`estimate_x0`). Otherwise from rest. Raises InputError if the
+    simulation diverges."""
+    u = fitted_input(model, run, process)
+    if steady and run.period is not None and not run.transient_periods and run.n_samples >= run.period:
+        count = lead_periods(model, run.period)
+        y, t = model.try_simulate(np.concatenate([np.tile(u[:run.period], count), u]), None, DIVERGED)
+        y = y[count * run.period:]
+    elif steady and run.period is None and run.y is not None:
+        record = Record(run.run_id, u, np.asarray(run.y, dtype=float), None)
+        x0 = estimate_x0(model, record, DIVERGED)
+        y, t = model.try_simulate(u, x0, DIVERGED)
+    else:
+        y, t = model.try_simulate(u, None, DIVERGED)
+    if t >= 0:
+        raise InputError("model", f"run {run.run_id}: the PNLSS simulation diverged at sample {t}")
+    return y
+
+
+def simulate_pnlss(model: Pnlss, run: Run, substeps: int | None, noise, steady: bool) -> Run:
+    """``run`` through the model (:func:`simulate_measured`), with the measurement noise ``noise``
+    (:class:`nlsid.simulate.noise.Noise`) added to u and y, its process noise to the input. One
+    step per sample: ``substeps`` must be None or 1."""
+    if substeps not in (None, 1):
+        raise InputError("simulation.substeps", "a discrete-time model runs one step per sample; remove substeps")
+    y = simulate_measured(model, run, steady, noise.process) + noise.y
+    return dataclasses.replace(run, u=run.u + noise.u, y=y, r=None)
