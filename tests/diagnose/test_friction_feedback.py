@@ -11,7 +11,8 @@ damping; a sensor offset, coloured noise):
   transfer function from force to velocity, gain s / (m s^2 + c s + k): named quadratic damping,
   c2 = 0.05 / gain, the output read as the velocity (the feedback around G / s);
 
-each extended model within 3 dB of the noise floor.
+each extended model within 3 dB of the noise floor; and the linear plant with its transfer function
+is nothing beyond noise.
 
 Measured when written: Coulomb 30.7 dB gain, 0.1 dB above the floor (cubic feedback and the
 dampings next, 22 dB above it); the damping 85 dB, 0.3 dB below the floor (the velocity is about
@@ -59,3 +60,9 @@ def test_quadratic_damping_is_fed_back_around_a_force_to_velocity_transfer_funct
     extended = result.final.extended["model"]
     assert extended["output"] == "velocity" and extended["linear"]["den"][-1] == 0.0  # around G / s
     assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+def test_a_linear_plant_gives_no_force_around_its_transfer_function():
+    result = diagnose(cases.TF, "model.yaml", cases.recording(8, cases.linear), "recording.h5")
+    assert result.verdict.status == "no_discrepancy", result.headline()
+    assert not result.chain
