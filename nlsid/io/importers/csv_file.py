@@ -228,8 +228,8 @@ def _header_index(path: Path, rows: list[tuple[int, list[str]]], delimiter: str 
     above, data = rows[top][1], rows[first][1]
     if (len(above) > width or any(data[len(above):])) or any(_number(c) is not None for c in above):
         return 0
-    higher = rows[top - 1][1]
-    if len(higher) == len(above) and not any(_number(c) is not None for c in higher):
+    higher = rows[top - 1][1]  # a line of the rows' width: preamble lines are often one cell, as a short header
+    if len(higher) == width and not any(_number(c) is not None for c in higher):
         raise InputError(f"{path}:{rows[top - 1][0]}", f"lines {rows[top - 1][0]} and {rows[top][0]} both look like the "
                                                        f"header ({width} cells split at {_delimiter_text(delimiter)}, no "
                                                        "numbers); pass --skip-rows N so that the header is the first "

@@ -110,3 +110,19 @@ def test_a_preamble_above_a_header_over_rows_ending_in_a_delimiter(run_cli, tmp_
     (run,) = read_runs(out)
     np.testing.assert_array_equal(run.u, s["u"])
     np.testing.assert_array_equal(run.y, s["y"])
+
+
+def test_one_cell_preamble_lines_above_a_one_cell_header(run_cli, tmp_path):
+    """``Axis1`` / ``Date: ...`` / ``u`` over rows ``u,``: the line just above the data is the
+    header (preamble lines of the header's one cell are not a second header)."""
+    s = signals(7)
+    path = tmp_path / "one.csv"
+    path.write_text("Axis1\nDate: 2024-05-01\n" + text_of("u", [s["u"]], end=","))
+    out = tmp_path / "rec.h5"
+    result = run_cli("import", path, "--fs", "1000", "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()
+    assert summary["ignored_columns"] == {str(path): [2]}
+    assert [line["line"] for line in summary["preamble_lines"][str(path)]] == [1, 2]
+    (run,) = read_runs(out)
+    np.testing.assert_array_equal(run.u, s["u"])
