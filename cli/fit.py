@@ -39,14 +39,24 @@ from .options import map_option, parse_map, split_options
               help="Start free force parameters (fc, fv, k3 of a mass_spring_damper) without a start: value at a "
                    "regression of the residual force instead of the config's value.")
 @click.option("--workers", type=click.IntRange(min=1), default=None, help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
+@click.option("--pnlss", is_flag=True,
+              help="Fit a polynomial nonlinear state-space model (docs/pnlss.md) to --data, starting from the linear "
+                   "--model (the BLA's fit); a --model of type pnlss is refined this way without the flag.")
+@click.option("--degrees", default="2,3", show_default=True, metavar="D1,D2,...",
+              help="PNLSS: total degrees of the state equation's monomials (3 or 3,5: odd only).")
+@click.option("--output-degrees", default=None, metavar="D1,D2,...",
+              help="PNLSS: total degrees of the output equation's monomials (default: --degrees).")
+@click.option("--states-only", is_flag=True, help="PNLSS: monomials of the states only (not of the input).")
+@click.option("--max-iterations", type=click.IntRange(min=0), default=100, show_default=True,
+              help="PNLSS: Levenberg-Marquardt iterations of the nonlinear stage at most.")
 @map_option
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")
 @force_option
 @json_option
 def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, validate_on,
-        estimation_range, validation_range, allow_overlap, fit_on, jacobian, start_estimate, workers, mapping, output,
-        force, as_json) -> None:
+        estimation_range, validation_range, allow_overlap, fit_on, jacobian, start_estimate, workers, pnlss, degrees,
+        output_degrees, states_only, max_iterations, mapping, output, force, as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
@@ -65,7 +75,26 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
       nlsid fit --model stage.yaml --data recording.h5 -o fitted.yaml
       nlsid fit --model stage.yaml --data long.h5 --estimation-range 0:60000 --validation-range 60000: -o fitted.yaml
       nlsid fit --model axis.yaml --data estimation.h5 --validate-on validation.h5 --fit-on u -o fitted.yaml
+      nlsid fit --pnlss --model model.yaml --data estimation.h5 --validate-on validation.h5 --degrees 2,3 -o pnlss.yaml
     """
+    pnlss_options = {"--degrees": degrees != "2,3", "--output-degrees": output_degrees is not None,
+                     "--states-only": states_only, "--max-iterations": max_iterations != 100}
+    if model_config is not None and data is not None and (pnlss or _is_pnlss(model_config)):
+        if bla_file is not None or order is not None:
+            raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
+        refused = [flag for flag, given in (("--estimation-range", estimation_range),
+                                            ("--validation-range", validation_range), ("--fit-on", fit_on != "y"),
+                                            ("--jacobian", jacobian != "differences"),
+                                            ("--start-estimate", start_estimate), ("--workers", workers is not None))
+                   if given]
+        if refused:
+            raise InputError(refused[0], "does not go with a PNLSS fit (--pnlss, or a --model of type pnlss)")
+        _fit_pnlss(model_config, data, list(validation), validate_on, allow_overlap, degrees, output_degrees,
+                   states_only, max_iterations, parse_map(mapping), output, force, as_json)
+        return
+    if pnlss or any(pnlss_options.values()):
+        flag = "--pnlss" if pnlss else next(f for f, given in pnlss_options.items() if given)
+        raise InputError(flag, "goes with a PNLSS fit: --pnlss --model MODEL.yaml --data FILE")
     if model_config is not None or data is not None:
         if bla_file is not None or order is not None:
             raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
@@ -89,7 +118,8 @@ FLAGS = {"order": "--order", "domain": "--domain", "delay": "--delay", "max_orde
          "b": "BLA_FILE", "model": "--model", "rec": "--data", "validate_on": "--validate-on",
          "validation": "--validation", "estimation_range": "--estimation-range",
          "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "fit_on": "--fit-on",
-         "jacobian": "--jacobian", "workers": "--workers", "free": "free"}
+         "jacobian": "--jacobian", "workers": "--workers", "free": "free", "degrees": "--degrees",
+         "output_degrees": "--output-degrees", "max_iterations": "--max-iterations"}
 
 
 def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
@@ -150,3 +180,48 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
     for signal, rms in fitted.signal_rms.items():
         if signal != fit_on:
             console.print(f"rms error of {signal}: estimation {rms['estimation']:.4g}, validation {rms['validation']:.4g}")
+
+
+def _is_pnlss(model_config) -> bool:
+    """Whether the config file's model is of type pnlss (a file that cannot be read: not; the fit
+    that reads it reports why)."""
+    from nlsid.io.config import load_yaml
+
+    try:
+        data, _ = load_yaml(model_config)
+    except InputError:
+        return False
+    model = data.get("model") if isinstance(data, dict) else None
+    return isinstance(model, dict) and model.get("type") == "pnlss"
+
+
+def _fit_pnlss(model_config, data, validation, validate_on, allow_overlap, degrees, output_degrees, states_only,
+               max_iterations, mapping, output, force, as_json) -> None:
+    from nlsid.io.atomic import check_writable
+    from nlsid.io.fit_file import report_path
+    from nlsid.io.provenance import provenance
+    from nlsid.stages.pnlss import fit_pnlss
+
+    check_writable(output, force)
+    check_writable(report_path(output), force)
+    result = fit_pnlss(model_config, data, validate_on=list(validate_on), validation=validation or None,
+                       degrees=degrees, output_degrees=output_degrees, with_input=not states_only,
+                       max_iterations=max_iterations, allow_overlap=allow_overlap, mapping=mapping, names=FLAGS)
+    result.write(output, force=force, provenance=provenance(config_paths=[model_config],
+                                                            input_paths=[data, *validate_on]))
+    if as_json:
+        emit_json({"output": output, "report": str(report_path(output)), **result.summary()})
+        return
+    fit_ = result.fit
+    console = settings().console
+    validation_rms = "none" if fit_.validation_rms is None else f"{fit_.validation_rms:.4g}"
+    linear = fit_.best_of("linear") or fit_.iterations[0]
+    linear_rms = "none" if linear.validation_rms is None else f"{linear.validation_rms:.4g}"
+    model = fit_.model
+    console.print(f"{output}: PNLSS (black box), {model.order} states, degrees {list(model.state_degrees)} / "
+                  f"{list(model.output_degrees)}, {model.n_parameters} coefficients")
+    console.print(f"rms error: estimation {fit_.estimation_rms:.4g}, validation {validation_rms} (linear: "
+                  f"{linear_rms}); {fit_.status}")
+    console.print(f"chosen: {fit_.reason}")
+    for note in fit_.notes:
+        console.print(f"note: {note}")

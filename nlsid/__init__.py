@@ -28,6 +28,8 @@ _FACE = {
     "TransferFunctionFit": "nlsid.stages.fit",
     "fit_model": "nlsid.stages.fit",
     "ModelFit": "nlsid.stages.fit",
+    "fit_pnlss": "nlsid.stages.pnlss",
+    "PnlssResult": "nlsid.stages.pnlss",
     "hosidf": "nlsid.stages.hosidf",
     "HosidfResult": "nlsid.stages.hosidf",
     "design": "nlsid.stages.design",
