@@ -4,10 +4,17 @@ One record of a matrix dataset is named by its index (``/daq/acc[1]``; a dataset
 brackets is taken whole first; :mod:`nlsid.io.importers.variables`). The other datasets are
 surveyed: sample-rate datasets (``fs``, ``Ts``, ...), scalars, and the ignored ones
 (``details["ignored_variables"]``).
+
+Attributes named as a sample rate or interval (:data:`nlsid.io.importers.source.RATE_NAME`,
+``INTERVAL_NAME``: ``fs``, ``Fs``, ``sample_rate``, ``Ts``, ``dt``, ``dt_ms``, ...) of the imported
+datasets, of the groups holding them and of the file (its root group) are rate variables too
+(:func:`rate_attributes`): where several give a rate, all of them and the rate datasets must agree.
+An attribute of text (a time stamp called ``ts``) is not a rate and is passed over.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -15,8 +22,9 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
-from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
-from nlsid.io.importers.variables import Leaf, check_pairing, record_of, split_index, survey
+from nlsid.io.importers.source import (INTERVAL_NAME, RATE_NAME, NotFound, RateVariable, Source, option, pick,
+                                      source_from)
+from nlsid.io.importers.variables import Leaf, check_pairing, record_of, shape_text, split_index, survey
 
 LISTED = 20
 
@@ -33,9 +41,62 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
         check_pairing(path, wanted, values)
         used = {key: wanted[key] for key in values}
         source = source_from(path, "hdf5", wanted, values, {"datasets": used})
-        with hdf5_damage(str(path)):  # the survey reads scalars and rate datasets
+        with hdf5_damage(str(path)):  # the survey reads scalars, rate datasets and rate attributes
             survey(source, "dataset", _leaves(handle), {key: _absolute(name) for key, name in used.items()}, _group_of)
+            attributes = rate_attributes(handle, path, [_dataset_path(handle, name) for name in used.values()])
+    source.rate_variables += [attribute.variable for attribute in attributes]
+    if attributes:
+        source.details["rate_attributes"] = {attribute.key: attribute.stored for attribute in attributes}
     return source
+
+
+@dataclass(frozen=True)
+class RateAttribute:
+    """An attribute named as a sample rate or interval: the rate variable it is (named for
+    messages ``attribute fs of group /daq of FILE``), its key in provenance (``/daq@fs``; ``/@fs``
+    for the file's), and its value as provenance keeps it (one finite number, else its shape and type)."""
+
+    variable: RateVariable
+    key: str
+    stored: float | str
+
+
+def _dataset_path(handle: h5py.File, name: str) -> str:
+    """The absolute path of the dataset ``name`` names (``/daq/acc`` for ``daq/acc[1]``)."""
+    base = name if isinstance(handle.get(name), h5py.Dataset) else split_index(name)[0]
+    return _absolute(base)
+
+
+def rate_attributes(handle: h5py.File, path: Path, datasets: list[str]) -> list[RateAttribute]:
+    """The attributes named as a sample rate or interval of the ``datasets`` (absolute paths),
+    then of the groups holding them, innermost first, up to the root group (the file's
+    attributes). Attributes that hold no real number (text, empty) are not rates."""
+    groups: list[str] = []
+    for name in datasets:
+        group = name
+        while group != "/":
+            group = _group_of(group) or "/"
+            if group not in groups:
+                groups.append(group)
+    groups.sort(key=lambda g: (g == "/", -g.count("/")))  # innermost first, the root last
+    found = []
+    for holder in list(dict.fromkeys(datasets)) + groups:
+        attrs = handle[holder].attrs
+        for name in attrs:
+            if not (RATE_NAME.match(name) or INTERVAL_NAME.match(name)):
+                continue
+            value = np.asarray(attrs[name])
+            if value.dtype.kind not in "biuf" or value.size == 0:
+                continue
+            if holder == "/":
+                label = f"file attribute {name} of {path}"
+            else:
+                label = f"attribute {name} of {'dataset' if holder in datasets else 'group'} {holder} of {path}"
+            first = float(value.ravel()[0])
+            stored = first if value.size == 1 and np.isfinite(first) else f"{shape_text(value.shape)} {value.dtype}"
+            found.append(RateAttribute(RateVariable(f"{holder.rstrip('/')}/{name}", label, value),
+                                       f"{holder}@{name}", stored))
+    return found
 
 
 def _absolute(name: str) -> str:
