@@ -24,11 +24,15 @@ def linear_paths(data: dict) -> dict[str, str]:
     differs from it in two ways, e.g. a 5 % mass error and Coulomb friction): the masses, dampings
     and stiffnesses of a mechanical template that are not zero (a zero has no sign to keep and is
     a structural choice: a free mass has no spring). The actuator gain is held: with the masses,
-    dampings and stiffnesses free it only rescales them. Name -> key path; empty for other models.
+    dampings and stiffnesses free it only rescales them. Of a model written as equations, its
+    nonzero ``parameters`` (named ``parameter NAME``). Name -> key path; empty for other models.
     """
     model = data["model"]
     if model.get("type") == "transfer_function":
         return coefficient_paths(data)
+    if model.get("type") == "equations":  # the parameters of the user's equations, named apart from a block's
+        return {f"parameter {k}": f"model.parameters.{k}" for k, v in (model.get("parameters") or {}).items()
+                if float(v) != 0.0}
     keys = LINEAR_MECHANICS.get(model.get("type"), ())
     return {k: f"model.{k}" for k in keys if float(model.get(k, 0.0)) != 0.0}
 
