@@ -26,6 +26,8 @@ from nlsid.diagnose.hypotheses.linear_dynamics import is_coefficient
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import BUDGET_ABOVE, BUDGET_SAMPLES, ESTIMATION, VALIDATION, Budget, assign, budgeted
+from nlsid.diagnose.yardstick import FILE as BLACK_BOX
+from nlsid.diagnose.yardstick import Yardstick, fit_yardstick
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
@@ -143,6 +145,7 @@ class Diagnosis:
     budget: Budget | None = None  # the estimation parts the hypotheses were fitted on (split.budgeted)
     leading: Outcome | None = None  # without a named cause: the best hypothesis that lowers the error
     validation_samples: int = 0  # the steady-state samples of the validation runs the scores are of
+    yardstick: Yardstick | None = None  # the black-box model fitted to the same estimation data
 
     @property
     def final(self) -> Outcome | None:
@@ -184,13 +187,24 @@ class Diagnosis:
                                     for i, o in enumerate(self.chain))
             final = self.final_score()
             several = len(self.chain) > 1
-            if status == rules.PARTLY_EXPLAINED:
+            if status == rules.PARTLY_EXPLAINED and rules.partly(final.above_floor_db, final.p_above_noise):
                 return (f"Cause{'s' if several else ''} in part: {causes} explain{'' if several else 's'} "
                         f"{final.gain_db:.1f} dB of the validation error; {final.above_floor_db:.1f} dB remain above "
                         f"the noise floor (p = {final.p_above_noise:.2g}): a further effect, outside the library or "
-                        "richer than the named cause, is left")
+                        f"richer than the named cause, is left{self._versus_yardstick(final)}")
+            if status == rules.PARTLY_EXPLAINED:
+                return (f"Cause{'s' if several else ''} in part: {causes} explain{'' if several else 's'} "
+                        f"{final.gain_db:.1f} dB of the validation error, {versus_floor(final)}"
+                        f"{self._versus_yardstick(final)}")
             return (f"Cause{'s' if several else ''}: {causes}; the extended model's validation error is "
-                    f"{gain_text(final)}, {versus_floor(final)}")
+                    f"{gain_text(final)}, {versus_floor(final)}{self._versus_yardstick(final)}")
+        if status == rules.OUTSIDE_LIBRARY:
+            y, b = self.yardstick.score, self.baseline
+            db = 10 * math.log10(rules.ratio(b.error_rms ** 2, y.error_rms ** 2))
+            return (f"A nonlinearity outside the library: no hypothesis of the library lowers the validation error "
+                    f"significantly, but a black-box state-space model does, by {db:.1f} dB ({y.error_rms:.3g} rms, "
+                    f"{versus_floor(y)}); it is written as the extended model, labelled black-box, not a physical "
+                    f"cause{self._leading_text()}")
         if ev.noise_zero:
             seen = f"the simulation error is {ev.error_rms:.3g} rms against a zero noise floor: noise-free data"
         elif not ev.overall.noise_known:
@@ -249,6 +263,66 @@ class Diagnosis:
             extent = "unknown"
         return {"extent": extent, "gain_db": final.gain_db, "above_floor_db": final.above_floor_db}
 
+    def yardstick_ahead(self, other: Score | None) -> bool:
+        """The yardstick's validation error power below ``other``'s by more than the verdict's F*
+        (:mod:`nlsid.diagnose.verdict`, rule 2): a black-box model does significantly better."""
+        y = self.yardstick
+        if other is None or y is None or not y.fitted:
+            return False
+        return rules.ratio(other.error_rms ** 2, y.score.error_rms ** 2) > self.verdict.threshold
+
+    def _versus_yardstick(self, other: Score) -> str:
+        """The named cause against the yardstick, in words for the headline ("" when not fitted)."""
+        y = self.yardstick
+        if y is None or not y.fitted:
+            return ""
+        db = 10 * math.log10(rules.ratio(other.error_rms ** 2, y.score.error_rms ** 2))
+        if self.yardstick_ahead(other):
+            return (f"; a black-box state-space model reaches {y.score.error_rms:.3g} rms, {db:.1f} dB lower: an effect "
+                    f"outside the library remains")
+        return f"; the named cause reaches the black-box level ({y.score.error_rms:.3g} rms, {db:+.1f} dB)"
+
+    def models(self) -> list[dict]:
+        """The model files the folder holds with their validation errors (``summary.json``
+        ``models``): ``file``, ``kind`` (``extended``: the named causes, physical; ``black_box``:
+        the yardstick, in ``black_box_model.yaml`` and, with the status ``outside_library``, in
+        ``extended_model.yaml`` too; ``candidate``: the leading candidate, not significant),
+        ``error_rms``, ``gain_db`` (over the user's model)."""
+        out = []
+        final = self.final_score()
+        y = self.yardstick
+        if final is not None:
+            out.append({"file": EXTENDED, "kind": "extended", "error_rms": final.error_rms, "gain_db": final.gain_db})
+        if y is not None and y.fitted:
+            out.append({"file": BLACK_BOX, "kind": "black_box", "error_rms": y.score.error_rms,
+                        "gain_db": y.score.gain_db})
+            if self.verdict.status == rules.OUTSIDE_LIBRARY:
+                out.append({"file": EXTENDED, "kind": "black_box", "error_rms": y.score.error_rms,
+                            "gain_db": y.score.gain_db})
+        if self.leading is not None:
+            out.append({"file": CANDIDATE, "kind": "candidate", "error_rms": self.leading.score.error_rms,
+                        "gain_db": self.leading.score.gain_db})
+        return out
+
+    def best_model(self) -> str | None:
+        """The file of :meth:`models` with the lowest validation error (the physical extension on a
+        tie) among those significantly better than the user's model with its nuisances (the
+        verdict's F rule against the baseline); None when none is: the user's model is as good."""
+        base = self.baseline.error_rms ** 2 if self.baseline is not None else math.inf
+        better = [m for m in self.models() if rules.ratio(base, m["error_rms"] ** 2) > self.verdict.threshold]
+        better.sort(key=lambda m: (m["error_rms"], m["file"] != EXTENDED))
+        return better[0]["file"] if better else None
+
+    def _yardstick_finding(self) -> str:
+        y = self.yardstick
+        if not y.fitted:
+            return f"black-box yardstick {y.reason}"
+        fit = y.fit
+        gain = f"{y.score.gain_db:+.1f} dB" if math.isfinite(y.score.gain_db) else "an exact match"
+        return (f"black-box yardstick (PNLSS, {fit.model.order} states, degrees {list(fit.model.state_degrees)}, "
+                f"{fit.model.n_parameters} parameters; {y.early_stopping}): validation gain "
+                f"{gain}, {versus_floor(y.score)}")
+
     def moved_nuisances(self) -> list[dict]:
         """The nuisances that moved by more than :data:`MOVED` standard errors between the user's
         model (fitted first) and the final extended model, or the leading candidate's
@@ -288,6 +362,8 @@ class Diagnosis:
             out.append(budget_note(self.budget, self.final is not None))
         if self.accuracy is not None:
             out.append(f"{'extended' if self.final else 'the'} model " + self.accuracy.note())
+        if self.yardstick is not None:
+            out.append(self._yardstick_finding())
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
             gain = f"{o.score.gain_db:+.1f} dB" if math.isfinite(o.score.gain_db) else "error zero within numerical precision"
@@ -353,7 +429,9 @@ class Diagnosis:
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "nuisances": {**self.nuisances.summary(), "moved": self.moved_nuisances()},
-            "explanation": self.explanation(), "leading": self.leading_summary(), "baseline": self.baseline.summary() if self.baseline else None,
+            "explanation": self.explanation(), "leading": self.leading_summary(),
+            "yardstick": self.yardstick.summary() if self.yardstick is not None else None,
+            "models": self.models(), "best_model": self.best_model(), "baseline": self.baseline.summary() if self.baseline else None,
             "chain": self._chain_summary(), "gain": gain, **self._samples(),
             "simulation_accuracy": None if self.accuracy is None else {**dataclasses.asdict(self.accuracy),
                                                                          "sufficient": self.accuracy.sufficient},
@@ -362,6 +440,7 @@ class Diagnosis:
 
 NOISE_UNKNOWN = "the runs have no two periods to separate noise from the rest"
 CANDIDATE = "candidate_model.yaml"  # the leading candidate's model (Diagnosis.leading), as the stage writes it
+EXTENDED = "extended_model.yaml"    # the named causes' model (or the black box, status outside_library)
 
 
 def budget_note(budget: Budget, refined: bool) -> str:
@@ -628,19 +707,44 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
+    first.yardstick = _yardstick(first, data, source, runs, roles, budget)
+    step("yardstick")
     judge_extent(first)
     return first
+
+
+def _yardstick(first: Diagnosis, data: dict, source: str, runs: list[Run], roles: dict[str, str],
+               budget: Budget | None) -> Yardstick:
+    """The black-box model (:mod:`nlsid.diagnose.yardstick`) fitted to the estimation parts the
+    hypotheses saw, with the sensor offset the nuisances found, and scored on the validation runs."""
+    ev = first.evidence
+    if ev.exact or ev.constant_output:
+        return Yardstick("not fitted: " + ("the model matches the noise-free data exactly" if ev.exact
+                                           else "the measured output is constant"))
+    by_id = {run.run_id: run for run in runs}
+    est_runs = [by_id[res.run_id] for res in ev.residuals if res.role == ESTIMATION]
+    val = [res for res in ev.residuals if res.role == VALIDATION]
+    fit_runs = budget.of(est_runs) if budget is not None else est_runs
+    offset = first.nuisances.values.get("output_offset", float(data["model"].get("output_offset", 0.0)))
+    return fit_yardstick(ModelRunner.from_data(data, source), fit_runs, [by_id[res.run_id] for res in val], val,
+                         offset)
 
 
 def judge_extent(first: Diagnosis) -> None:
     """How much the verdict explains (:mod:`nlsid.diagnose.verdict`): a named cause whose final
     model stays significantly above the floor makes the status ``partly_explained``; without a
     named cause, the best-scored hypothesis is the leading candidate when its gain over the
-    baseline is suggestive (:func:`nlsid.diagnose.verdict.suggestive`)."""
+    baseline is suggestive (:func:`nlsid.diagnose.verdict.suggestive`). The yardstick decides
+    too: a named cause's final model that it beats significantly (the F rule) is partly
+    explained, whatever the floor; without a named cause, a yardstick that beats the baseline
+    significantly makes the status ``outside_library``."""
     status = first.verdict.status
     final = first.final_score()
-    if status == rules.EXPLAINED and final is not None and rules.partly(final.above_floor_db, final.p_above_noise):
+    if status == rules.EXPLAINED and final is not None and (rules.partly(final.above_floor_db, final.p_above_noise)
+                                                            or first.yardstick_ahead(final)):
         first.verdict = dataclasses.replace(first.verdict, status=rules.PARTLY_EXPLAINED)
+    if status in (rules.UNEXPLAINED, rules.UNDETERMINED) and first.yardstick_ahead(first.baseline):
+        first.verdict = dataclasses.replace(first.verdict, status=rules.OUTSIDE_LIBRARY)
     if status in (rules.UNEXPLAINED, rules.UNDETERMINED) and first.baseline is not None:
         base = first.baseline.error_rms ** 2
         better = [o for o in first.outcomes if o.score is not None and o.estimate is not None

@@ -57,6 +57,7 @@ ALPHA = 0.001
 NO_DISCREPANCY, EXPLAINED, AMBIGUOUS, UNEXPLAINED = "no_discrepancy", "explained", "ambiguous", "unexplained"
 UNDETERMINED = "undetermined"  # no noise level to judge the error by, and no hypothesis significantly better
 PARTLY_EXPLAINED = "partly_explained"  # a cause named, and significantly more error left than noise
+OUTSIDE_LIBRARY = "outside_library"  # no cause named, but a black-box model lowers the error significantly
 NAMED = (EXPLAINED, PARTLY_EXPLAINED)  # the statuses with a named cause (a chain and an extended model)
 LEAD_ALPHA = 0.1  # a not significant gain this unlikely under the F rule's null still makes a leading candidate
 REMAINS_DB = 1.0  # an excess over the noise floor below this is not called a remainder (module docstring)

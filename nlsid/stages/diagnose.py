@@ -48,7 +48,8 @@ class DiagnosisResult:
         A ``validate_on`` recording that is the diagnosed one was accepted.
     other_models : dict
         Further model configs the folder holds, file name -> YAML text: ``candidate_model.yaml``
-        (the leading candidate where no cause is named, marked as not significant).
+        (the leading candidate where no cause is named, marked as not significant) and
+        ``black_box_model.yaml`` (the yardstick: :mod:`nlsid.diagnose.yardstick`).
     """
 
     diagnosis: Diagnosis
@@ -222,11 +223,12 @@ class DiagnosisInputs:
         hypothesis."""
         from nlsid.diagnose.hypotheses import LIBRARY
 
-        return len(LIBRARY) + 2
+        return len(LIBRARY) + 3
 
     def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
         """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
-        from nlsid.diagnose.diagnosis import CANDIDATE
+        from nlsid.diagnose import verdict as rules
+        from nlsid.diagnose.diagnosis import BLACK_BOX, CANDIDATE
         from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
         from nlsid.io.diagnosis_file import extended_yaml
         from nlsid.io.units import common_units
@@ -240,6 +242,11 @@ class DiagnosisInputs:
         final = result.final
         extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
         others = {}
+        yardstick = result.yardstick
+        if yardstick is not None and yardstick.fitted:
+            others[BLACK_BOX] = extended_yaml(yardstick.config, yardstick.header(self.model_source))
+            if result.verdict.status == rules.OUTSIDE_LIBRARY:
+                extended = others[BLACK_BOX]
         if result.leading is not None:
             others[CANDIDATE] = extended_yaml(result.leading.extended, result.candidate_header())
         units = common_units(run.units for run in [*self.runs, *self.extra])

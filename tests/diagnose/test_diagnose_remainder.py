@@ -136,3 +136,23 @@ def test_a_cause_outside_the_library_leaves_the_verdict_partly_explained():
     explanation = result.summary()["explanation"]
     assert explanation["extent"] == "partial" and explanation["above_floor_db"] > 10
     assert "remain above the noise floor" in result.headline()
+    # the yardstick: the force factor is a product of state and input, which the black-box model's
+    # degree-2 monomials hold, so it gets significantly closer than the named cause
+    assert result.yardstick.fitted and result.yardstick_ahead(result.final_score()), result.headline()
+    assert "an effect outside the library remains" in result.headline()
+    summary = result.summary()
+    assert summary["best_model"] == "black_box_model.yaml"
+    assert {m["file"] for m in summary["models"]} == {"extended_model.yaml", "black_box_model.yaml"}
+
+
+def test_on_a_correct_linear_model_the_yardstick_gains_nothing_significant():
+    """The true plant is the user's linear model (exact ZOH response, coloured noise, an offset):
+    no discrepancy, no cause, and the black-box model, fitted to the same data, is not
+    significantly better than the model with its nuisances."""
+    from nlsid.diagnose.diagnosis import diagnose
+
+    runs = effect_cases.recording(5, effect_cases.linear)
+    result = diagnose(effect_cases.MSD, "msd", runs, "linear")
+    assert result.verdict.status == rules.NO_DISCREPANCY and not result.chain, result.headline()
+    assert result.yardstick.fitted and not result.yardstick_ahead(result.baseline)
+    assert result.summary()["best_model"] is None  # no written model is significantly better than the user's

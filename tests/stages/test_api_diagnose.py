@@ -107,7 +107,7 @@ def test_face_and_command_line_write_the_same_folder(case, run_cli, tmp_path):
     d.write(tmp_path / "face")
     files = sorted(p.name for p in (tmp_path / "cli").iterdir())
     assert files == sorted(p.name for p in (tmp_path / "face").iterdir()) == [
-        "extended_model.yaml", "results.h5", "summary.json"]
+        "black_box_model.yaml", "extended_model.yaml", "results.h5", "summary.json"]
     first, second = (json.loads((tmp_path / name / "summary.json").read_text()) for name in ("cli", "face"))
     assert first.pop("provenance")["inputs"] == second.pop("provenance")["inputs"]
     assert first == second
@@ -210,7 +210,7 @@ def test_validate_on_a_second_recording(case):
 
 def test_progress_is_called_after_each_step(case):
     """Once after the evidence, once after the nuisances, once per hypothesis scored (the sample's
-    diagnosis needs one round: the first cause leaves the noise floor)."""
+    diagnosis needs one round: the first cause leaves the noise floor), once after the yardstick."""
     _, _, d, steps = case
     scored = sum(o.score is not None for o in d.diagnosis.outcomes)
-    assert scored >= 1 and steps == 2 + scored
+    assert scored >= 1 and steps == 3 + scored

@@ -38,6 +38,10 @@ cubic_damping       as quadratic_damping, force -v^3          ``nonlinearities: 
                                                               (c3), or fed back likewise
 cubic_stiffness     odd distortion; the resonance moves with  ``nonlinearities: cubic_stiffness``
                     level; residual force cubic in position   (k3; > 0 hardening, < 0 softening)
+hysteresis          odd distortion; the resonance and the     ``nonlinearities: bouc_wen`` (k,
+                    damping move with level; residual force   beta, gamma; A = n = 1), the
+                    depends on the path since the last        elastic part the model's own
+                    reversal (a loop growing with the stroke) stiffness
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
                     function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
                                                               with the linear coefficients)
@@ -111,6 +115,7 @@ from __future__ import annotations
 from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
                                        output_blocks, resonance, stiffness)
 from nlsid.diagnose.hypotheses import wiener_hammerstein
+from nlsid.diagnose.hypotheses import hysteresis
 from nlsid.diagnose.hypotheses import actuator_polynomial, friction_feedback, nonlinear_damping, output_saturation
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
@@ -118,7 +123,7 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 
 #: The hypotheses in the order they are tried (a family's simpler members first).
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + friction_feedback.HYPOTHESES + nonlinear_damping.HYPOTHESES
-                                   + stiffness.HYPOTHESES + feedback.HYPOTHESES
+                                   + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES + actuator_polynomial.HYPOTHESES
                                    + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
                                    + linear_dynamics.HYPOTHESES
