@@ -4,7 +4,7 @@ fourth-order Runge-Kutta method on a fine fixed grid, the input held over each s
 
 - Bouc-Wen on a mass-spring-damper (:func:`bouc_wen_response`): state (p, v, z),
 
-      m p'' + c p' + k p = gain u - kh z,   z' = A v - beta |v| |z|^(n-1) z - gamma v |z|^n,
+      m p'' + c p' + k p = gain u - kh z - k3 p^3,   z' = A v - beta |v| |z|^(n-1) z - gamma v |z|^n,
 
   the classical alpha k0 p + (1 - alpha) k0 z with k = alpha k0, kh = (1 - alpha) k0 (Wen 1976).
   The right-hand side is continuous with kinks (|v|, |z|) where v or z changes sign: there RK4 is
@@ -31,14 +31,14 @@ BISECTIONS = 60
 
 
 @numba.njit(cache=False)
-def _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n):
+def _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n, k3):
     size = abs(z) ** n
     dz = a * v - beta * abs(v) * math.copysign(size, z) - gamma * v * size
-    return (drive - c * v - k * p - kh * z) / m, dz
+    return (drive - c * v - k * p - k3 * p**3 - kh * z) / m, dz
 
 
 @numba.njit(cache=False)
-def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n):
+def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n, k3):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
     for r in range(U.shape[0]):
@@ -47,13 +47,13 @@ def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n):
             Y[r, i] = p
             drive = gain * U[r, i]
             for _ in range(substeps):
-                a1, d1 = _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n)
+                a1, d1 = _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n, k3)
                 p2, v2, z2 = p + 0.5 * h * v, v + 0.5 * h * a1, z + 0.5 * h * d1
-                a2, d2 = _bw_rates(p2, v2, z2, drive, m, c, k, kh, a, beta, gamma, n)
+                a2, d2 = _bw_rates(p2, v2, z2, drive, m, c, k, kh, a, beta, gamma, n, k3)
                 p3, v3, z3 = p + 0.5 * h * v2, v + 0.5 * h * a2, z + 0.5 * h * d2
-                a3, d3 = _bw_rates(p3, v3, z3, drive, m, c, k, kh, a, beta, gamma, n)
+                a3, d3 = _bw_rates(p3, v3, z3, drive, m, c, k, kh, a, beta, gamma, n, k3)
                 p4, v4, z4 = p + h * v3, v + h * a3, z + h * d3
-                a4, d4 = _bw_rates(p4, v4, z4, drive, m, c, k, kh, a, beta, gamma, n)
+                a4, d4 = _bw_rates(p4, v4, z4, drive, m, c, k, kh, a, beta, gamma, n, k3)
                 p += h / 6 * (v + 2 * v2 + 2 * v3 + v4)
                 v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
                 z += h / 6 * (d1 + 2 * d2 + 2 * d3 + d4)
@@ -150,10 +150,13 @@ def _inputs(U: np.ndarray) -> np.ndarray:
 
 
 def bouc_wen_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 32) -> np.ndarray:
-    """Sampled positions (runs x samples) of a mass_spring_damper with one ``bouc_wen`` force
-    (keys k, A, beta, gamma, n as docs/configs.md) for held inputs U, from rest."""
-    (f,) = model["nonlinearities"]
-    law = [float(f["k"]), float(f.get("A", 1.0)), float(f["beta"]), float(f.get("gamma", 0.0)), float(f.get("n", 1.0))]
+    """Sampled positions (runs x samples) of a mass_spring_damper with at most one ``bouc_wen``
+    force (keys k, A, beta, gamma, n as docs/configs.md) and at most one ``cubic_stiffness`` (k3 p^3
+    against the motion) for held inputs U, from rest."""
+    forces = {f["type"]: f for f in model["nonlinearities"]}
+    f = forces.get("bouc_wen", {"k": 0.0, "beta": 1.0})
+    law = [float(f["k"]), float(f.get("A", 1.0)), float(f["beta"]), float(f.get("gamma", 0.0)), float(f.get("n", 1.0)),
+           float(forces.get("cubic_stiffness", {"k3": 0.0})["k3"])]
     return _bouc_wen_runs(_inputs(U), float(fs_hz), int(substeps), *_mechanics(model), *law)
 
 
