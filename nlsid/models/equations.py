@@ -51,11 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.models.blocks import encode
 from nlsid.models.expressions import comparison_source, comparisons, parse, source
 
 DEFAULT_SUBSTEPS = 10  # RK4 sub-steps per sample of a continuous equations model (nlsid.simulate.engine's default)
 MAX_SWITCHES = 8       # switches located per sub-step at most (kernel_source)
 LOCATE_HALVINGS = 44   # bisection halvings locating a switch: to 2^-44 of the remaining sub-step
+KERNEL_FORMAT = 2      # in the cached source's first line: a new format (or new compile options) gets new files
 RESERVED = ("u", "r")
 
 _KERNELS: dict[str, object] = {}  # kernel source -> compiled kernel
@@ -82,8 +84,8 @@ class Equations:
     kernel: object
     offsets: object
     delay: float = 0.0
-    input_block: tuple = ()   # (kind, parameters) of nlsid.models.blocks; () is the identity
-    output_block: tuple = ()
+    input_block: tuple = field(default_factory=lambda: encode(None))   # (kind, parameters) of nlsid.models.blocks
+    output_block: tuple = field(default_factory=lambda: encode(None))
     columns: dict = field(default_factory=dict)  # input name -> the column of its first use in its expression (key, column)
 
 
@@ -187,15 +189,15 @@ def _source_module(text: str):
     Returns (namespace, cacheable)."""
     from nlsid.simulate.jit import CACHING
 
-    header = "import math\n\nimport numpy as np\n\n\n"
+    header = f"# nlsid equations kernel, format {KERNEL_FORMAT}\nimport math\n\nimport numpy as np\n\n\n"
     if not CACHING:
         namespace: dict = {}
         exec(compile(header + text, "<nlsid equations>", "exec"), namespace)  # noqa: S102 (from a checked tree)
         return namespace, False
-    digest = hashlib.sha256(text.encode()).hexdigest()[:32]
+    content = header + text
+    digest = hashlib.sha256(content.encode()).hexdigest()[:32]
     folder = Path(os.environ["NUMBA_CACHE_DIR"]) / "nlsid_equations"
     path = folder / f"kernel_{digest}.py"
-    content = header + text
     try:
         if not path.is_file() or path.read_text() != content:
             folder.mkdir(parents=True, exist_ok=True)
@@ -234,7 +236,7 @@ def compile_kernel(text: str):
             namespace[name] = njit(**options)(namespace[name])
         a1, a2 = "float64[::1]", "float64[:, ::1]"
         signature = f"void({a1}, {a1}, {a1}, {a1}, {a2}, int64, float64, {a1}, int64[::1])"
-        kernel = njit(signature, **options)(namespace["run"])
+        kernel = njit(signature, nogil=True, **options)(namespace["run"])  # threads run runs in parallel
         _KERNELS[text] = kernel
         return kernel
 
@@ -243,8 +245,6 @@ def build(config, offsets, where: str = "model") -> Equations:
     """The :class:`Equations` of a validated :class:`nlsid.io.model_config.EquationsConfig`
     (its expressions checked again with their keys, and compiled); ``offsets`` its
     :class:`nlsid.models.from_config.Offsets`."""
-    from nlsid.models.blocks import encode
-
     states, parameters = list(config.states), list(config.parameters)
     section = config.section
     texts = [(f"{where}.{section}.{name}", config.equations[name]) for name in states]
