@@ -134,17 +134,25 @@ def _error_table(summary: dict, units: Units) -> Table:
     original, gain = summary["original"], summary.get("gain")
     rows = [["original model", number(original["error_rms"], ".4g"), number(original["error_db"], ".1f"),
              floor_text(original)]]
+    best = summary.get("best_model")
     if gain:
         ext = gain["extended"]
-        rows.append(["extended model", number(ext["error_rms"], ".4g"), number(ext["error_db"], ".1f"),
-                     floor_text(ext)])
+        label = "extended model (named causes)" + (", best" if best == "extended_model.yaml" else "")
+        rows.append([label, number(ext["error_rms"], ".4g"), number(ext["error_db"], ".1f"), floor_text(ext)])
+    yardstick = summary.get("yardstick") or {}
+    if yardstick.get("fitted"):
+        val = yardstick["validation"]
+        label = "black-box yardstick (PNLSS)" + (", best" if best == "black_box_model.yaml" else "")
+        rows.append([label, number(val["error_rms"], ".4g"), number(val["error_db"], ".1f"), floor_text(val)])
     floor = gain["extended"] if gain else original
     rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "the floor"])
     return Table("Validation error", ["model", units.label("rms", "y"), f"level ({units.level_db('y')})",
                                       "vs noise floor"], rows,
                  note="Mean steady-state period of the validation runs, without its mean value. Each model's "
                       "floor is the noise in its own residual (period-to-period variance over P): the error "
-                      "the true model would show. The floor row is the best model's.")
+                      "the true model would show. The floor row is the best model's. The black-box yardstick is "
+                      "fitted to the same estimation data: what a flexible model reaches, beside what the named "
+                      "causes reach; \"best\" marks summary.json's best_model.")
 
 
 def _values(step: dict) -> str:
@@ -177,7 +185,8 @@ def render_diagnosis(path: Path) -> Page:
 
     summary, arrays = read_diagnosis(path)
     units = units_of(summary.get("units"))
-    keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain")
+    keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain", "explanation", "yardstick",
+            "best_model")
     return Page(kind="Model diagnosis", title=f"Diagnosis of {Path(summary['model']).name}", source=str(path),
                 headline=summary["headline"], findings=list(summary["findings"]), figures=_figures(arrays, units),
                 tables=_tables(summary, units), provenance=summary.get("provenance", {}),

@@ -122,7 +122,7 @@ def test_a_leading_candidate_is_named_with_the_data_that_would_decide_it():
     assert diagnosis.candidate_header()[0].startswith("Leading candidate") and "NOT" in diagnosis.candidate_header()[0]
 
 
-def test_a_cause_outside_the_library_leaves_the_verdict_partly_explained():
+def test_a_cause_outside_the_library_leaves_the_verdict_partly_explained(tmp_path):
     """The cubic spring is named (its k3 within 10 % of the truth: the position-dependent force
     factor biases it), and the force factor, which no family holds, leaves the final model far
     above the floor: the status says "partly explained" and the headline how much remains."""
@@ -143,6 +143,30 @@ def test_a_cause_outside_the_library_leaves_the_verdict_partly_explained():
     summary = result.summary()
     assert summary["best_model"] == "black_box_model.yaml"
     assert {m["file"] for m in summary["models"]} == {"extended_model.yaml", "black_box_model.yaml"}
+    check_written(result, tmp_path)
+
+
+def check_written(result, folder):
+    """The folder holds both models, the black box simulates as its score says, and the report's
+    validation table shows the named causes and the yardstick side by side."""
+    import yaml
+
+    from nlsid.diagnose.diagnosis import EXTENDED
+    from nlsid.diagnose.yardstick import FILE
+    from nlsid.report.render_diagnosis import render_diagnosis
+    from nlsid.stages.diagnose import DiagnosisResult
+
+    from nlsid.io.diagnosis_file import extended_yaml
+
+    extended = extended_yaml(result.final.extended, result.extended_header())
+    black_box = {FILE: extended_yaml(result.yardstick.config, result.yardstick.header("msd"))}
+    DiagnosisResult(result, extended, {}, other_models=black_box).write(folder / "d", provenance={})
+    assert sorted(p.name for p in (folder / "d").iterdir()) == sorted([EXTENDED, FILE, "results.h5", "summary.json"])
+    assert yaml.safe_load((folder / "d" / FILE).read_text())["model"]["type"] == "pnlss"
+    table = next(t for t in render_diagnosis(folder / "d").tables if t.caption == "Validation error")
+    rows = {row[0]: row for row in table.rows}
+    assert rows["black-box yardstick (PNLSS), best"][1] == f"{result.yardstick.score.error_rms:.4g}"
+    assert rows["extended model (named causes)"][1] == f"{result.final_score().error_rms:.4g}"
 
 
 def test_on_a_correct_linear_model_the_yardstick_gains_nothing_significant():
