@@ -16,8 +16,10 @@ Hairer, Norsett and Wanner 1993, Solving ODEs I, Sec. II.1):
 B the projection onto the ``bounds`` (each state clipped into [lower, upper]). Clipping the
 stages as well as the step keeps every evaluation of f inside the bounds, so that a law such as
 Torricelli's sqrt(x) is never evaluated below a bound at 0 (a level cannot go below its tank's
-floor). The error is of order h^4 where f is smooth along the solution, of order h where f
-switches (a ``where`` or ``min`` changing branch within a sub-step) or the solution meets a bound;
+floor). The comparisons and signs of f, where its value jumps, hold their value over a step and
+their switches are located (:func:`kernel_source`), so the error is of order h^4 where f is
+smooth between the switches; it is lower across a corner of ``min``, ``max``, ``abs`` or ``clip``
+(f continuous, its slope not), and of order h where the solution meets a bound.
 :mod:`nlsid.diagnose.accuracy` measures it by the change of the output from M to 2M and 4M
 sub-steps, as for the other models with sub-steps.
 
@@ -57,7 +59,7 @@ from nlsid.models.expressions import comparison_source, comparisons, parse, sour
 DEFAULT_SUBSTEPS = 10  # RK4 sub-steps per sample of a continuous equations model (nlsid.simulate.engine's default)
 MAX_SWITCHES = 8       # switches located per sub-step at most (kernel_source)
 LOCATE_HALVINGS = 44   # bisection halvings locating a switch: to 2^-44 of the remaining sub-step
-KERNEL_FORMAT = 2      # in the cached source's first line: a new format (or new compile options) gets new files
+KERNEL_FORMAT = 3      # in the cached source's first line: a new format (or new compile options) gets new files
 RESERVED = ("u", "r")
 
 _KERNELS: dict[str, object] = {}  # kernel source -> compiled kernel
@@ -138,7 +140,7 @@ def kernel_source(equations: list, output, names: tuple, discrete: bool) -> str:
     it writes (sample, expression index) into ``fail`` (the output's index is the number of
     states) and returns.
 
-    A continuous model's comparisons are switches (:func:`nlsid.models.expressions.comparisons`):
+    A continuous model's comparisons and signs are switches (:func:`nlsid.models.expressions.comparisons`):
     their values (modes) are held over each RK4 step, so that the step integrates a smooth field;
     where a mode differs at the step's end, the step is shortened by bisection to just past the
     first switch (LOCATE_HALVINGS halvings) and the rest of the sub-step continues from there with

@@ -243,6 +243,8 @@ def _emit(node: ast.AST, variables: dict, modes: dict) -> str:
         left, right = _emit(node.left, variables, modes), _emit(node.comparators[0], variables, modes)
         return f"(1.0 if {left} {op} {right} else 0.0)"
     name = node.func.id
+    if id(node) in modes:
+        return modes[id(node)]
     args = [_emit(a, variables, modes) for a in node.args]
     if name == "where":
         return f"({args[1]} if {args[0]} != 0.0 else {args[2]})"
@@ -261,19 +263,23 @@ def source(expression: Expression, variables: dict, modes: dict | None = None) -
     """Python source of ``expression`` with each name replaced by ``variables[name]`` (an
     expression such as ``x[0]``); it needs ``math`` and ``np`` (numpy) in its namespace. A
     comparison is a conditional giving 1.0 or 0.0, ``where`` a conditional that evaluates only the
-    branch taken. ``modes`` (``id`` of a comparison node of :func:`comparisons` -> source) replaces
-    a comparison by a value held elsewhere (its mode, frozen over an integration step)."""
+    branch taken. ``modes`` (``id`` of a node of :func:`comparisons` -> source) replaces a
+    comparison or a sign by a value held elsewhere (its mode, frozen over an integration step)."""
     return _emit(expression.tree.body, variables, modes or {})
 
 
-def comparisons(expression: Expression) -> list[ast.Compare]:
-    """The comparisons of ``expression`` in the order of its text: the places where its value may
-    jump as the states move (the switching functions of :mod:`nlsid.models.equations`)."""
-    found = [node for node in ast.walk(expression.tree) if isinstance(node, ast.Compare)]
+def _jumps(node: ast.AST) -> bool:
+    return isinstance(node, ast.Compare) or (isinstance(node, ast.Call) and node.func.id == "sign")
+
+
+def comparisons(expression: Expression) -> list[ast.AST]:
+    """The comparisons and ``sign`` calls of ``expression`` in the order of its text: the places
+    where its value jumps as the states move (the switches of :mod:`nlsid.models.equations`)."""
+    found = [node for node in ast.walk(expression.tree) if _jumps(node)]
     return sorted(found, key=lambda node: node.col_offset)
 
 
-def comparison_source(node: ast.Compare, variables: dict) -> str:
-    """Python source of one comparison node's value now (1.0 or 0.0), its operands evaluated as
-    :func:`source` does."""
+def comparison_source(node: ast.AST, variables: dict) -> str:
+    """Python source of the value now of one node of :func:`comparisons` (a comparison's 1.0 or
+    0.0, a sign's -1.0, 0.0 or 1.0), its operands evaluated as :func:`source` does."""
     return _emit(node, variables, {})
