@@ -75,6 +75,11 @@ class Equations:
     expression in messages: the state equations' keys, then the output's.
     """
 
+    @property
+    def kernel(self):
+        """The compiled kernel (:func:`compile_kernel`; compiled on first use, then shared)."""
+        return compile_kernel(self.source)
+
     states: tuple[str, ...]
     x0: np.ndarray
     parameters: np.ndarray
@@ -83,7 +88,7 @@ class Equations:
     discrete: bool
     inputs: tuple[str, ...]
     keys: tuple[str, ...]
-    kernel: object
+    source: str   # the kernel's Python source (kernel_source), compiled when the model first runs
     offsets: object
     delay: float = 0.0
     input_block: tuple = field(default_factory=lambda: encode(None))   # (kind, parameters) of nlsid.models.blocks
@@ -245,8 +250,8 @@ def compile_kernel(text: str):
 
 def build(config, offsets, where: str = "model") -> Equations:
     """The :class:`Equations` of a validated :class:`nlsid.io.model_config.EquationsConfig`
-    (its expressions checked again with their keys, and compiled); ``offsets`` its
-    :class:`nlsid.models.from_config.Offsets`."""
+    (its expressions checked again with their keys and written into the kernel's source, which is
+    compiled when the model first runs); ``offsets`` its :class:`nlsid.models.from_config.Offsets`."""
     states, parameters = list(config.states), list(config.parameters)
     section = config.section
     texts = [(f"{where}.{section}.{name}", config.equations[name]) for name in states]
@@ -267,7 +272,7 @@ def build(config, offsets, where: str = "model") -> Equations:
     return Equations(tuple(states), np.array([config.states[n] for n in states], dtype=np.float64),
                      np.array([config.parameters[n] for n in parameters], dtype=np.float64), lower, upper,
                      config.updates is not None, tuple(inputs), tuple(key for key, _ in texts),
-                     compile_kernel(text), offsets, config.delay, encode(config.input_nonlinearity),
+                     text, offsets, config.delay, encode(config.input_nonlinearity),
                      encode(config.output_nonlinearity), columns)
 
 

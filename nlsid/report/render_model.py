@@ -185,7 +185,7 @@ def render_model(path: Path) -> Page:
     config = validate_simulate_config(data, path, lines)
     if config.model.type == "equations":
         try:
-            model(config)  # the checks of nlsid simulate: open loop only, its expressions compile
+            model(config)  # the checks of nlsid simulate: open loop only, its expressions and names
         except InputError as exc:
             raise InputError(f"{path}: {exc.where}", exc.what) from None
         return _equations_page(path, config)

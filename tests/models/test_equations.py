@@ -273,12 +273,17 @@ def test_inconsistent_models_are_refused(change, fragment):
 
 
 def test_a_value_that_is_not_finite_names_its_expression():
-    data = {"model": {"type": "equations", "states": {"x": 1.0}, "parameters": {"a": 2.0},
-                      "derivatives": {"x": "-a * x / (x - 1)"}, "output": "x"}}
+    """The tanks without their bounds and without inflow: the upper tank drains to 0 in finite
+    time (Torricelli, 2 sqrt(6) / 0.08 = 61 s), and a Runge-Kutta stage beyond it takes the root of
+    a negative level: the simulation stops naming x1's derivative and the sample."""
+    data = tanks_config(TRUE)
+    del data["model"]["bounds"]
     with pytest.raises(InputError) as info:
-        nlsid.Model.from_dict(data).simulate(np.zeros(10), fs=1.0)
-    assert info.value.where == "model.derivatives.x"
-    assert "not finite at sample 0" in info.value.what and "division by zero" in info.value.what
+        nlsid.Model.from_dict(data).simulate(np.zeros(40), fs=FS)
+    assert info.value.where == "model.derivatives.x1"
+    sample = int(info.value.what.split("not finite at sample ")[1].split(" ")[0])
+    assert sample == math.floor(2 * math.sqrt(6.0) / 0.08 * FS)  # the sample in which the tank runs dry
+    assert "the root or logarithm of a negative number" in info.value.what
 
 
 def test_closed_loop_and_substeps_of_a_discrete_model_are_refused():
