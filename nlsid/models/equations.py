@@ -28,13 +28,15 @@ Discrete time (``updates``): x[k+1] = B(f(x[k], p, w[k])), y[k] = g(x[k], p, w[k
 The name ``u`` is the plant input as a plant gets it, f_in(u[k - d] + input_offset + sum gain *
 channel + process noise): the command delayed by ``delay`` (d whole samples, zero before the
 record) through the ``input_nonlinearity`` f_in (identity without one); ``r`` and the channels are
-read as recorded. The recorded y is f_out(g) + output_offset, f_out the ``output_nonlinearity``. The states start at their written initial values on every run (no lead-in, no initial
-state fitted: free them with ``fit --model``, ``model.states.NAME``).
+read as recorded. The recorded y is f_out(g) + output_offset, f_out the ``output_nonlinearity``.
+The states start at their written initial values on every run (no lead-in, no initial state
+fitted: free them with ``fit --model``, ``model.states.NAME``).
 
 Compilation: the checked expressions (:mod:`nlsid.models.expressions`) are written into the
-Python source of one kernel per model (the loop above with f and g inlined), which numba
-compiles once per source text; a fit changes only the numbers (parameters, initial values,
-bounds), so its thousands of simulations share one compilation. A value that is not finite (a
+Python source of one kernel per model (the loop above, f and g written out in it), which numba
+compiles when the model first runs, once per source text in a process, and keeps in its disk
+cache for the next (:func:`compile_kernel`); a fit changes only the numbers (parameters, initial
+values, bounds), so its thousands of simulations share one compilation. A value that is not finite (a
 division by zero, the root or logarithm of a negative number, an overflow) stops the simulation
 with an :class:`~nlsid.errors.InputError` naming the expression's key and the sample.
 """
@@ -91,9 +93,9 @@ class Equations:
     source: str   # the kernel's Python source (kernel_source), compiled when the model first runs
     offsets: object
     delay: float = 0.0
-    input_block: tuple = field(default_factory=lambda: encode(None))   # (kind, parameters) of nlsid.models.blocks
+    input_block: tuple = field(default_factory=lambda: encode(None))  # (kind, parameters): nlsid.models.blocks
     output_block: tuple = field(default_factory=lambda: encode(None))
-    columns: dict = field(default_factory=dict)  # input name -> the column of its first use in its expression (key, column)
+    columns: dict = field(default_factory=dict)  # input name -> (key, column) of its first use
 
 
 def _variables(states, parameters, inputs, state_array: str = "x") -> dict[str, str]:
@@ -145,13 +147,13 @@ def kernel_source(equations: list, output, names: tuple, discrete: bool) -> str:
     it writes (sample, expression index) into ``fail`` (the output's index is the number of
     states) and returns.
 
-    A continuous model's comparisons and signs are switches (:func:`nlsid.models.expressions.comparisons`):
-    their values (modes) are held over each RK4 step, so that the step integrates a smooth field;
-    where a mode differs at the step's end, the step is shortened by bisection to just past the
-    first switch (LOCATE_HALVINGS halvings) and the rest of the sub-step continues from there with
-    the new modes, at most MAX_SWITCHES times per sub-step (then the rest runs with the modes at
-    its start: a state sliding along a switch, e.g. where(x > 0, -1, 1) at x = 0, would otherwise
-    switch without end)."""
+    A continuous model's comparisons and signs are switches
+    (:func:`nlsid.models.expressions.comparisons`): their values (modes) are held over each RK4
+    step, so that the step integrates a smooth field; where a mode differs at the step's end, the
+    step is shortened by bisection to just past the first switch (LOCATE_HALVINGS halvings) and
+    the rest of the sub-step continues from there with the new modes, at most MAX_SWITCHES times
+    per sub-step (then the rest runs with the modes at its start: a state sliding along a switch,
+    e.g. where(x > 0, -1, 1) at x = 0, would otherwise switch without end)."""
     switches = [] if discrete else [node for e in equations for node in comparisons(e)]
     lines = _functions(equations, output, names, switches)
     lines += ["def run(x0, p, lower, upper, w, m, h, y, fail):",
@@ -161,7 +163,8 @@ def kernel_source(equations: list, output, names: tuple, discrete: bool) -> str:
               f"    md = np.zeros({len(switches)})", f"    m2 = np.zeros({len(switches)})",
               "    for k in range(w.shape[0]):",
               f"        v = {source(output, _variables(*names))}",
-              "        if not math.isfinite(v):", "            fail[0] = k", "            fail[1] = ns", "            return",
+              "        if not math.isfinite(v):", "            fail[0] = k", "            fail[1] = ns",
+              "            return",
               "        y[k] = v"]
     failed = ["if i >= 0:", "    fail[0] = k", "    fail[1] = i", "    return"]
     if discrete:  # comparisons evaluated as they stand: no steps between the samples

@@ -232,7 +232,8 @@ def _emit(node: ast.AST, variables: dict, modes: dict) -> str:
     if isinstance(node, ast.Name):
         return variables[node.id]
     if isinstance(node, ast.BinOp):
-        return f"({_emit(node.left, variables, modes)} {OPERATORS[type(node.op)]} {_emit(node.right, variables, modes)})"
+        left, right = _emit(node.left, variables, modes), _emit(node.right, variables, modes)
+        return f"({left} {OPERATORS[type(node.op)]} {right})"
     if isinstance(node, ast.UnaryOp):
         sign = "-" if isinstance(node.op, ast.USub) else "+"
         return f"{sign}({_emit(node.operand, variables, modes)})"

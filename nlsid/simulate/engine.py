@@ -276,7 +276,8 @@ def simulate_equations(model: equations.Equations, run: Run, substeps: int | Non
     recorded y = f_out(output) + output offset + output noise."""
     d = delay_samples(model.delay, run.fs, "model.delay")
     if d >= run.n_samples:
-        raise InputError("model.delay", f"dead time of {d} samples is not shorter than the record ({run.n_samples} samples)")
+        raise InputError("model.delay", f"dead time of {d} samples is not shorter than the record "
+                                        f"({run.n_samples} samples)")
     command = np.concatenate([np.zeros(d), run.u[:run.n_samples - d]])
     plant_input = command + plant_input_terms(model.offsets, run, noise.process)
     if model.input_block[0] != blocks.IDENTITY:
