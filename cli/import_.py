@@ -83,7 +83,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
     summary = {
         "output": output, "source": sources[0], "sources": list(sources), "format": imported.source.format, "fs": imported.fs,
         "fs_from": imported.fs_from, "signals": sorted(set(imported.source.arrays) & {"u", "y", "r"}),
-        "channels": sorted(options.channels), "records": imported.records,
+        "channels": sorted({name for run in imported.runs for name in run.channels}), "records": imported.records,
         "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
         "notes": imported.notes, "units": _run_units(imported.runs),
         **_csv_layout(imported.sources or [imported.source]),

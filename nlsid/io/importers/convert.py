@@ -135,13 +135,17 @@ def read_source(path: Path, options: ImportOptions, every_signal_optional: bool 
         if source.fs is not None:
             source.details["overridden_fs"] = {"value": source.fs, "from": source.fs_from}
         source.fs, source.fs_from = options.fs, "--fs"
-    source.units.update({_unit_key(name, source): unit for name, unit in options.units.items()})
+    for name, unit in options.units.items():
+        source.units.update({key: unit for key in _unit_keys(name, source)})
     return source
 
 
-def _unit_key(name: str, source: Source) -> str:
-    """The signal key of a ``--unit NAME=UNIT``: u, y, r, or ``channels.NAME``."""
-    return name if name in ("u", "y", "r") else CHANNEL_KEY + name
+def _unit_keys(name: str, source: Source) -> list[str]:
+    """The signal keys of a ``--unit NAME=UNIT``: u, y, r, or ``channels.NAME`` (the channel of each
+    record, when NAME was given a matrix)."""
+    if name in ("u", "y", "r"):
+        return [name]
+    return [CHANNEL_KEY + part for part in source.split_channels.get(name, [name])]
 
 
 def check_units(units: dict[str, str], options: ImportOptions) -> None:
@@ -193,14 +197,17 @@ def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions)
 
 def _read_records(paths: list[Path], options: ImportOptions) -> tuple[Imported, list[Record], dict[str, str]]:
     """The records of every file, cropped and decimated as asked, with the file each came from."""
-    notes: list[str] = []
     if len(paths) == 1:
         sources = groups = [read_source(paths[0], options)]
     else:
         distinct_paths(paths)
         sources = [read_source(path, options, every_signal_optional=True) for path in paths]
+    notes = [note for source in sources for note in source.notes]
+    if len(paths) > 1:
         if spread(sources):
-            merged, notes = merge(sources)
+            merged, joined = merge(sources)
+            merged.split_channels = {k: v for source in sources for k, v in source.split_channels.items()}
+            notes += joined
             groups = [merged]
         else:
             groups = sources

@@ -24,7 +24,8 @@ from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
 from nlsid.io.importers.source import (INTERVAL_NAME, RATE_NAME, NotFound, RateVariable, Source, option, pick,
                                       source_from)
-from nlsid.io.importers.variables import Leaf, check_pairing, record_of, shape_text, split_index, survey
+from nlsid.io.importers.variables import (Leaf, check_pairing, matrix_channels, record_of, shape_text, split_index,
+                                         survey)
 
 LISTED = 20
 
@@ -38,9 +39,11 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
         raise InputError(str(path), f"cannot open as HDF5 ({' '.join(str(exc).split())})") from None
     with handle:
         values = pick(wanted, optional, lambda key, name: _selected(handle, name, f"{path}: {option(key, name)}"))
+        wanted, values, split, notes = matrix_channels(wanted, values, lambda key, name: f"{path}: {option(key, name)}")
         check_pairing(path, wanted, values)
         used = {key: wanted[key] for key in values}
         source = source_from(path, "hdf5", wanted, values, {"datasets": used})
+        source.split_channels, source.notes = split, notes
         with hdf5_damage(str(path)):  # the survey reads scalars, rate datasets and rate attributes
             survey(source, "dataset", _leaves(handle), {key: _absolute(name) for key, name in used.items()}, _group_of)
             attributes = rate_attributes(handle, path, [_dataset_path(handle, name) for name in used.values()])

@@ -19,7 +19,7 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
 from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
-from nlsid.io.importers.variables import Leaf, check_pairing, record_of, split_index, survey
+from nlsid.io.importers.variables import Leaf, check_pairing, matrix_channels, record_of, split_index, survey
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
 
@@ -43,10 +43,13 @@ def _struct_of(name: str) -> str:
 
 
 def _source(path: Path, version: str, wanted: dict[str, str], values: dict[str, np.ndarray], leaves: list[Leaf]) -> Source:
-    """The Source of the values read, with the file's other variables surveyed."""
+    """The Source of the values read (a channel's matrix as one channel per record), with the
+    file's other variables surveyed."""
+    wanted, values, split, notes = matrix_channels(wanted, values, lambda key, name: f"{path}: {option(key, name)}")
     check_pairing(path, wanted, values)
     used = {key: wanted[key] for key in values}
     source = source_from(path, f"mat v{version}", wanted, values, {"variables": used})
+    source.split_channels, source.notes = split, notes
     survey(source, "variable", leaves, used, _struct_of)
     return source
 

@@ -79,7 +79,9 @@ class Source:
     ``units`` the unit of a signal where the file or the user gives one (signal key -> unit text).
     ``rate_variables``: the file's sample-rate variables, used when neither ``fs`` nor a time vector
     is given (checked against the time vector when there is one); ``scalars``: its numeric scalars
-    by name, listed when no sample rate is found."""
+    by name, listed when no sample rate is found. ``split_channels``: a channel given a matrix,
+    imported as one channel per record (name -> the records' channel names); ``notes``: what the
+    reader did that the user should read (one line each)."""
 
     path: str
     format: str
@@ -93,6 +95,8 @@ class Source:
     units: dict[str, str] = field(default_factory=dict)
     rate_variables: list[RateVariable] = field(default_factory=list)
     scalars: dict[str, float] = field(default_factory=dict)
+    split_channels: dict[str, list[str]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

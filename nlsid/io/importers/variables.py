@@ -3,8 +3,11 @@
 - ``NAME[i]`` names record ``i`` (from 0) of a matrix variable: the slice across the axis along
   which time runs (the longer one, as :func:`nlsid.io.importers.source.as_matrix` decides), so row
   1 of a 3 x N ``Acceleration`` is ``Acceleration[1]``, and column 1 of an N x 3 one too.
+- A channel given a matrix of several records, beside u, y, r of one record each, becomes one
+  channel per record, ``NAME_0``, ``NAME_1``, ... (:func:`matrix_channels`).
 - Signals whose matrices differ in shape do not pair into records: they are refused with the
-  ``NAME[i]`` options that pick one record (:func:`check_pairing`).
+  ``NAME[i]`` options that pick one record (:func:`check_pairing`); a matrix as u, y or r beside
+  signals of another shape would be several inputs or outputs, which a recording does not hold.
 - Every other variable of the file is surveyed (:func:`survey`): one named as a sample rate or
   interval (:data:`nlsid.io.importers.source.RATE_NAME`, ``INTERVAL_NAME``) is a rate variable of
   the source; numeric scalars are kept to be listed when no sample rate is found; the rest, and the
@@ -22,6 +25,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.importers.source import INTERVAL_NAME, RATE_NAME, RateVariable, Source, option, time_axis
+from nlsid.io.run import CHANNEL_KEY, check_channel_name
 
 INDEXED = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")
 LISTED_IGNORED = 500  # a logger file can hold thousands of datasets: the rest are counted
@@ -68,9 +72,54 @@ def _records_samples(dims: tuple[int, ...]) -> tuple[int, int] | None:
     return None  # as_matrix says what is wrong with it
 
 
+def matrix_channels(names: dict[str, str], values: dict[str, np.ndarray],
+                    where: Callable[[str, str], str]) -> tuple[dict[str, str], dict[str, np.ndarray], dict[str, list[str]],
+                                                               list[str]]:
+    """A channel given a matrix of several records, beside u, y, r of one record each, as one
+    channel per record: ``--channel acc=Acceleration`` of a 3 x N ``Acceleration`` gives the
+    channels ``acc_0``, ``acc_1``, ``acc_2`` (record ``i`` as ``Acceleration[i]`` picks it).
+
+    Where u, y or r hold several records (realizations side by side), a channel of their shape
+    stays their records, and one of another shape is left to :func:`check_pairing`, which refuses
+    it. Returns the names and values with each such channel replaced by its records, the channels
+    split (name -> the names of its records' channels), and one note per channel split. A record's channel name must be free: a ``--channel acc_1=...`` beside it is
+    refused. ``where(key, name)`` names the option for messages.
+    """
+    signals = [_records_samples(np.shape(values[key])) for key in values if key in ("u", "y", "r")]
+    if any(shape is None or shape[0] > 1 for shape in signals):
+        return names, values, {}, []
+    names, values, split, notes = dict(names), dict(values), {}, []
+    for key in [k for k in values if k.startswith(CHANNEL_KEY)]:
+        shape = _records_samples(np.shape(values[key]))
+        if shape is None or shape[0] == 1 or split_index(names[key])[1] is not None:
+            continue
+        records, samples = shape
+        channel, source = key[len(CHANNEL_KEY):], names[key]
+        parts = [f"{channel}_{i}" for i in range(records)]
+        for part in parts:
+            check_channel_name(part, where(key, source))
+            if CHANNEL_KEY + part in names:
+                raise InputError(where(key, source), f"{source} is {shape_text(np.shape(values[key]))} ({records} "
+                                                     f"records of {samples} samples), imported as the channels "
+                                                     f"{parts[0]} .. {parts[-1]}, but a channel {part} is given too; "
+                                                     f"rename one of them")
+        matrix = values.pop(key)
+        del names[key]
+        split[channel] = parts
+        for i, part in enumerate(parts):
+            names[CHANNEL_KEY + part] = f"{source}[{i}]"
+            values[CHANNEL_KEY + part] = record_of(matrix, i, source, where(key, source))
+        notes.append(f"{where(key, source)}: {source} is {shape_text(np.shape(matrix))}, {records} records of "
+                     f"{samples} samples (time along the longer axis): imported as {records} channels "
+                     f"{', '.join(f'{part} = {source}[{i}]' for i, part in enumerate(parts))}")
+    return names, values, split, notes
+
+
 def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarray]) -> None:
     """Refuse signals that are matrices of several records unless every signal has the same shape
-    (records side by side); say how to pick one record of each matrix with ``NAME[i]``."""
+    (records side by side); say how to pick one record of each matrix with ``NAME[i]``, or to
+    import it as channels. A matrix given as u, y or r beside signals of another shape would be
+    several inputs or outputs (MIMO), which the recordings do not hold."""
     shapes = {}
     for key, value in values.items():
         if key == "time":
@@ -84,7 +133,9 @@ def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarra
     detail = ", ".join(f"{path}:{names[key]} is {samples} samples x {records} record(s)"
                        for key, (records, samples) in shapes.items())
     hints = [_pick_hint(key, names[key], records) for key, (records, _) in shapes.items() if records > 1]
-    raise InputError(str(path), f"matrices of inconsistent size: {detail}; name one record (from 0, across the "
+    mimo = [option(key, names[key]) for key, (records, _) in shapes.items() if records > 1 and key in ("u", "y", "r")]
+    why = (f"{' and '.join(mimo)}: several inputs or outputs (MIMO) are not supported yet; " if mimo else "")
+    raise InputError(str(path), f"matrices of inconsistent size: {detail}; {why}name one record (from 0, across the "
                                 f"shorter axis) of a matrix: {'; '.join(hints)}")
 
 
@@ -93,7 +144,8 @@ def _pick_hint(key: str, name: str, records: int) -> str:
     leaf = leaf if not leaf[0].isdigit() else f"c{leaf}"
     others = " ".join(f"--channel {leaf}_{i}={name}[{i}]" for i in range(1, min(records, LISTED_RECORDS + 1)))
     more = " ..." if records > LISTED_RECORDS + 1 else ""
-    return f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more})"
+    return (f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more}; "
+            f"or all of them as channels {leaf}_0 .. {leaf}_{records - 1}: --channel {leaf}={name})")
 
 
 @dataclass(frozen=True)

@@ -236,15 +236,17 @@ def test_matrix_signal_with_a_vector_input_is_refused_with_the_choice(run_cli, t
     result = run_cli("import", source, "--u", "Force", "--y", "Acceleration", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "matrices of inconsistent size",
                    f"bench.mat:Force is {N} samples x 1 record(s)", f"bench.mat:Acceleration is {N} samples x 3 record(s)",
+                   "--y Acceleration: several inputs or outputs (MIMO) are not supported yet",
+                   "all of them as channels Acceleration_0 .. Acceleration_2: --channel Acceleration=Acceleration",
                    "--y Acceleration[0]", "--channel Acceleration_1=Acceleration[1]",
                    "--channel Acceleration_2=Acceleration[2]")
 
 
-def test_hdf5_channel_matrix_with_vector_signals_is_refused(run_cli, tmp_path):
+def test_hdf5_channel_matrix_beside_realizations_of_another_count_is_refused(run_cli, tmp_path):
     source = tmp_path / "daq.h5"
     with h5py.File(source, "w") as handle:
-        handle["u"] = noise(34)
-        handle["y"] = noise(35)
+        handle["u"] = noise(34, 2, N)  # two realizations side by side
+        handle["y"] = noise(35, 2, N)
         handle["daq/acc"] = noise(36, N, 6)  # time down the rows: 6 records
     result = run_cli("import", source, "--channel", "a=/daq/acc", "--fs", "10", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "/daq/acc is 600 samples x 6 record(s)", "--channel a=/daq/acc[0]",
