@@ -209,7 +209,9 @@ def parse(text, where: str) -> Expression:
     Raises
     ------
     nlsid.errors.InputError
-        ``where: column C: what was expected`` for the first place the text leaves the language.
+        ``where: column C: what was expected`` for the first place the text leaves the language;
+        an expression nested deeper than Python's parser and compiler take (a few hundred
+        operations in one chain) is refused as such.
     """
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
         raise InputError(where, f"expected an expression (a text or a number), got {type(text).__name__}")
@@ -219,10 +221,21 @@ def parse(text, where: str) -> Expression:
         raise InputError(problem.where, one_line(problem.what))
     try:
         tree = ast.parse(f"({line})", mode="eval")  # in brackets: leading blanks are no indent
+        names: dict = {}
+        _check(tree.body, where, names)
+        code = source(Expression(str(text), where, tree, names), {name: "v" for name in names})
     except SyntaxError as exc:  # what the token scan let through: Python's own words and place
         raise _error(where, max((exc.offset or 2) - 1, 1), f"{exc.msg}; expected {_LANGUAGE}") from None
-    names: dict = {}
-    _check(tree.body, where, names)
+    except RecursionError:
+        code = None
+    if code is not None:
+        try:  # the source written from it brackets every operation: it must compile as well
+            compile(code, "<expression>", "eval")
+        except (SyntaxError, RecursionError, MemoryError):
+            code = None
+    if code is None:
+        raise InputError(where, f"the expression nests too deeply ({len(line)} characters); split it over "
+                                "more states or parameters")
     return Expression(str(text), where, tree, names)
 
 

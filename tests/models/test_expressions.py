@@ -104,3 +104,13 @@ def test_no_call_ever_reaches_python():
     for called in ("math.exp(", "min(", "abs(", "np.sign(", "max(", "math.log("):
         assert called in code
     assert "eval" not in code and "import" not in code and "__" not in code
+
+
+@pytest.mark.parametrize("text", ["x1 + " * 5000 + "x1", "-" * 5000 + "x1", "x1 * " * 300 + "x1"])
+def test_too_deep_a_nesting_is_refused_not_crashed(text):
+    with pytest.raises(InputError, match="the expression nests too deeply"):
+        parse(text, KEY)
+
+
+def test_a_long_flat_sum_is_taken():
+    assert parse("x1 + " * 150 + "x1", KEY).names == {"x1": 1}
