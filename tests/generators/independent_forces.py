@@ -11,10 +11,11 @@ fourth-order Runge-Kutta method on a fine fixed grid, the input held over each s
   of second order, so the step is checked by halving (tests/diagnose/test_hysteresis.py).
 - End stops on a mass-spring-damper (:func:`end_stop_response`): beyond ``upper`` the force
   max(0, ks (p - upper) + cs v) acts against the motion (below ``lower`` its mirror image). The
-  force jumps by cs v where the mass reaches a stop, so the contact instants are located: a step
-  that would cross an edge from outside is bisected on its length (60 halvings) and the rest of
-  it taken in contact. Leaving a stop the force has fallen to zero already (ks d + cs v <= 0
-  before d = 0 with v < 0 at an upper stop), a kink that needs no location.
+  force jumps by cs v where the mass reaches a stop and has a kink where the damper's pull would
+  begin (leaving, the force falls to zero before the edge), so the contact is a mode, frozen over
+  each step (the spring and damper linear in it: RK4 of fourth order), and its changes are
+  located: a step that ends in another mode is bisected on its length (60 halvings) to the
+  instant of the change, and the rest of it taken in the new mode.
 - A two-mass stage with a cubic spring in its coupling (:func:`joint_response`): state
   (p1, v1, p2, v2), k (p1 - p2) + k3 (p1 - p2)^3 + c (v1 - v2) between the masses; smooth, so RK4
   is of fourth order.
@@ -62,11 +63,13 @@ def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n, k3)
 
 @numba.njit(cache=False)
 def _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching):
+    """The acceleration with the stop ``touching`` (+1 upper, -1 lower, 0 none) pushing as a
+    spring and damper (the mode frozen: no cut at zero within a step)."""
     force = 0.0
     if touching > 0:
-        force = max(0.0, ks * (p - upper) + cs * v)
+        force = ks * (p - upper) + cs * v
     elif touching < 0:
-        force = min(0.0, ks * (p - lower) + cs * v)
+        force = ks * (p - lower) + cs * v
     return (drive - c * v - k * p - force) / m
 
 
@@ -83,8 +86,13 @@ def _stop_rk4(p, v, tau, drive, m, c, k, upper, lower, ks, cs, touching):
 
 
 @numba.njit(cache=False)
-def _side(p, upper, lower):
-    return 1 if p > upper else (-1 if p < lower else 0)
+def _touching(p, v, upper, lower, ks, cs):
+    """The stop that pushes at (p, v): beyond its edge with ks d + cs v pushing back; else 0."""
+    if p > upper and ks * (p - upper) + cs * v > 0.0:
+        return 1
+    if p < lower and ks * (p - lower) + cs * v < 0.0:
+        return -1
+    return 0
 
 
 @numba.njit(cache=False)
@@ -93,25 +101,28 @@ def _end_stop_runs(U, fs_hz, substeps, m, c, k, gain, upper, lower, ks, cs):
     Y = np.empty_like(U)
     for r in range(U.shape[0]):
         p = v = 0.0
+        touching = 0
         for i in range(U.shape[1]):
             Y[r, i] = p
             drive = gain * U[r, i]
             for _ in range(substeps):
-                touching = _side(p, upper, lower)
-                p1, v1 = _stop_rk4(p, v, h, drive, m, c, k, upper, lower, ks, cs, touching)
-                if touching != 0 or _side(p1, upper, lower) == 0:
-                    p, v = p1, v1
-                    continue
-                lo, hi = 0.0, h  # entering a stop within the step: its instant by bisection
-                for _ in range(BISECTIONS):
-                    mid = 0.5 * (lo + hi)
-                    if _side(_stop_rk4(p, v, mid, drive, m, c, k, upper, lower, ks, cs, 0)[0], upper, lower) == 0:
-                        lo = mid
-                    else:
-                        hi = mid
-                p, v = _stop_rk4(p, v, hi, drive, m, c, k, upper, lower, ks, cs, 0)
-                touching = _side(p, upper, lower)
-                p, v = _stop_rk4(p, v, h - hi, drive, m, c, k, upper, lower, ks, cs, touching)
+                left = h
+                while left > 0.0:
+                    p1, v1 = _stop_rk4(p, v, left, drive, m, c, k, upper, lower, ks, cs, touching)
+                    if _touching(p1, v1, upper, lower, ks, cs) == touching:
+                        p, v, left = p1, v1, 0.0
+                        break
+                    lo, hi = 0.0, left  # the contact begins or ends within the step: its instant by bisection
+                    for _ in range(BISECTIONS):
+                        mid = 0.5 * (lo + hi)
+                        pm, vm = _stop_rk4(p, v, mid, drive, m, c, k, upper, lower, ks, cs, touching)
+                        if _touching(pm, vm, upper, lower, ks, cs) == touching:
+                            lo = mid
+                        else:
+                            hi = mid
+                    p, v = _stop_rk4(p, v, hi, drive, m, c, k, upper, lower, ks, cs, touching)
+                    touching = _touching(p, v, upper, lower, ks, cs)
+                    left -= hi
     return Y
 
 
@@ -170,10 +181,10 @@ def end_stop_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 
 
 
 def joint_response(model: dict, U: np.ndarray, fs_hz: float, substeps: int = 16) -> np.ndarray:
-    """Sampled positions (runs x samples) of a two_mass_stage (output_at motor or load) with a
-    cubic spring k3 in its coupling (``cubic_stiffness`` at ``joint``) for held inputs U, from rest."""
+    """Sampled outputs (runs x samples) of a two_mass_stage (the position or velocity of the motor or
+    the load, its ``output`` and ``output_at``) with a cubic spring k3 in its coupling (``cubic_stiffness`` at ``joint``) for held inputs U, from rest."""
     (f,) = model["nonlinearities"]
     keys = ("motor_mass", "load_mass", "stiffness", "damping", "motor_damping", "load_damping", "gain")
     values = [float(model.get(key, 1.0 if key == "gain" else 0.0)) for key in keys]
-    at = 0 if model.get("output_at", "load") == "motor" else 2
+    at = (0 if model.get("output_at", "load") == "motor" else 2) + (model.get("output", "position") == "velocity")
     return _joint_runs(_inputs(U), float(fs_hz), int(substeps), *values, float(f["k3"]), at)
