@@ -165,6 +165,25 @@ def test_fit_recovers_the_tank_parameters_within_their_standard_errors():
     assert fit.fitted.validation_rms == pytest.approx(sigma, rel=0.1)  # the held-out run at the noise
 
 
+def test_fit_reads_the_recorded_reference():
+    """fit --model of a discrete model that reads r (a setpoint the output follows, x[k+1] =
+    x + g (r - x) + b u): the fit keeps the recorded r for it and recovers g and b exactly from
+    noise-free data generated here."""
+    rng = np.random.default_rng(4)
+    runs = []
+    for i in range(2):
+        u, r = rng.normal(size=200), np.repeat(rng.normal(size=20), 10)
+        x, y = 0.0, np.empty(200)
+        for k in range(200):
+            y[k] = x
+            x = x + 0.3 * (r[k] - x) + 0.5 * u[k]
+        runs.append(Run(f"r{i}", 10.0, "arbitrary", u, y, r=r))
+    data = {"model": {"type": "equations", "states": {"x": 0.0}, "parameters": {"g": 0.2, "b": 0.6},
+                      "updates": {"x": "x + g*(r - x) + b*u"}, "output": "x"}}
+    fit = nlsid.fit_model(data, Recording(runs), free={"model.parameters.g": {}, "model.parameters.b": {}})
+    np.testing.assert_allclose(fit.fitted.values, [0.3, 0.5], rtol=1e-6)
+
+
 def test_discrete_updates_against_a_numpy_loop():
     """x[k+1] = clip(a x1 + b tanh(u) + where(x1 > 1, -c, 0), -2, 2), a second state its running
     sum, y = x1^2 + 0.5 x2 + u: the model's output against the same recursion written here."""
