@@ -33,7 +33,11 @@ four steps; every step states how sure it is.
    change of content ``D ~ 2 N var(x)``. The noise level is the smallest over ``phi`` of the median of
    ``min(D_{j-1}, D_j, D_{j+1})``; a comparison is *same* below the geometric mean ``cap`` of the two
    levels. The record is periodic only if the signal level is at least ``PERIODIC_SNR`` times the
-   noise level. The phase ``phi`` (where periods start) minimises ``sum_j min(D_j(phi), cap)``: at a
+   noise level, or at least ``MIN_PERIODIC_SNR`` times where a noise-only comparison's relative
+   spread ``sqrt(2/nu)`` (``nu`` its degrees of freedom, from the spectrum of the slot differences:
+   ``N`` for white noise) puts the cap ``SEPARATION_SIGMAS`` standard deviations from both levels
+   (:func:`comparison_dof`): an excitation 6 dB above white noise over a period of thousands of
+   samples is periodic beyond doubt. The phase ``phi`` (where periods start) minimises ``sum_j min(D_j(phi), cap)``: at a
    wrong phase each change of content spills into a second comparison. Moving ``phi`` by one sample
    trades one noise sample for one changed sample per boundary, so with ``B`` boundaries the phase is
    wrong with probability about ``(0.64 / sqrt(SNR))^B`` (one boundary at 40 dB: 0.6 %). Runs of slots
@@ -71,6 +75,10 @@ import numpy as np
 
 SINE_POWER_FRACTION = 0.99
 PERIODIC_SNR = 10.0
+MIN_PERIODIC_SNR = 2.0  # 3 dB: below PERIODIC_SNR only where the comparisons' spread is shown small
+SEPARATION_SIGMAS = 6.0
+DOF_PAIRS = 32
+HUM_CONTRAST = 10.0
 CANDIDATE_LAGS = 64
 DIVISOR_TOLERANCE = 1.25
 DESCENT_STEPS = 16
@@ -80,6 +88,7 @@ NUMERIC_FLOOR = 1e-10
 CHI2_1_999 = 10.83
 MEASURED_LINE_SNR = 100.0  # 20 dB: how far a line of a measured input must stand above the noise of its estimate
 MAINS_HZ = (50.0, 60.0)
+MAINS_TOLERANCE = 0.005  # relative deviation of the grid frequency (European grids: +-0.2 Hz normally)
 LINE_CONTRAST = 0.1  # -20 dB: a measured input's excited line has at least this amplitude of the strongest near it
 NEAR_RATIO = 4.0  # "near": within two octaves, or NEAR_LINES lines
 NEAR_LINES = 4
@@ -368,7 +377,7 @@ def compare_slots(x: np.ndarray, period: int) -> Slots | None:
     signal = 2 * period * float(np.var(x))
     compared = ~np.all(np.isnan(neighbours), axis=1)  # phases whose second slot fits in the record
     noise = max(float(np.min(np.nanmedian(neighbours[compared], axis=1))), 2 * period * NUMERIC_FLOOR**2 * signal)
-    if signal < PERIODIC_SNR * noise:
+    if signal < MIN_PERIODIC_SNR * noise:
         return None
     cap = math.sqrt(noise * signal)
     valid0 = ~np.isnan(diffs[0])
@@ -379,7 +388,55 @@ def compare_slots(x: np.ndarray, period: int) -> Slots | None:
     phase = 0 if np.all(diffs[0][valid0] <= cap) else int(order[0])
     margin = float(cost[order[1]] - cost[order[0]]) if phase and cost.size > 1 else math.inf
     row = diffs[phase]
-    return Slots(phase=phase, same=row[~np.isnan(row)] <= cap, phase_margin=margin)
+    same = row[~np.isnan(row)] <= cap
+    if signal < PERIODIC_SNR * noise and not _separated(x, period, phase, same, signal / noise):
+        return None
+    return Slots(phase=phase, same=same, phase_margin=margin)
+
+
+def comparison_dof(x: np.ndarray, period: int, phase: int, same: np.ndarray) -> float:
+    """Degrees of freedom ``nu`` of a noise-only slot comparison ``D = sum_n e(n)^2``, ``e`` the
+    difference of two slots that repeat (``same``, at most ``DOF_PAIRS`` of them).
+
+    For stationary Gaussian ``e`` with DFT ``E(k)``, ``D = (1/N) sum_k |E(k)|^2`` is a weighted sum of
+    independent exponentials (chi-square with 1 degree of freedom at DC and Nyquist), so
+    ``nu = 2 (E D)^2 / var D = 2 (sum_k a_k m_k)^2 / sum_k b_k m_k^2`` with ``m_k = E|E(k)|^2``
+    estimated by the mean over the pairs, ``a_k`` = 2 (1 at DC and Nyquist) and ``b_k`` = 4 (2):
+    ``nu = N`` for white noise, fewer for coloured noise. A line standing ``HUM_CONTRAST`` times
+    above the median of the ``2 SMOOTH_BINS + 1`` lines around it (mains hum that is not periodic
+    in the period, so it differs from slot to slot) is a deterministic part ``d_k`` over a random
+    ``r_k`` (that median): it adds ``b_k (r_k^2 + 2 d_k r_k)`` to the variance (a non-central
+    square), not ``b_k m_k^2``. The estimate's own scatter makes ``nu`` low by up to a factor 2
+    (one pair): on the safe side.
+    """
+    from scipy.ndimage import median_filter
+
+    starts = phase + period * np.flatnonzero(same)[:DOF_PAIRS]
+    if starts.size == 0:
+        return 0.0
+    pairs = np.stack([x[s + period:s + 2 * period] - x[s:s + period] for s in starts])
+    m = np.mean(np.abs(np.fft.rfft(pairs, axis=1)) ** 2, axis=0)
+    a = np.full(m.size, 2.0)
+    a[0] = 1.0
+    if period % 2 == 0:
+        a[-1] = 1.0
+    around = median_filter(m, size=2 * SMOOTH_BINS + 1, mode="nearest")
+    random = np.where(m > HUM_CONTRAST * around, around, m)
+    total = float(np.sum(a * m))
+    spread = float(np.sum(2 * a * (random**2 + 2 * (m - random) * random)))
+    return 2 * total * total / spread if spread > 0 else math.inf
+
+
+def _separated(x: np.ndarray, period: int, phase: int, same: np.ndarray, ratio: float) -> bool:
+    """Whether comparisons across a change of content (mean ``ratio`` times the noise level) and
+    noise-only ones are told apart by the cap between them, their geometric mean, at
+    ``SEPARATION_SIGMAS`` standard deviations: a noise-only comparison has relative spread
+    ``sqrt(2 / nu)`` (:func:`comparison_dof`), and the nearer side of the cap is the change's,
+    ``(1 - 1/sqrt(ratio))`` of its mean away (the change's spread taken as the noise's). This is
+    how a record below ``PERIODIC_SNR`` (down to ``MIN_PERIODIC_SNR``) is periodic: a long period
+    of white noise has many degrees of freedom, filtered noise few."""
+    nu = comparison_dof(x, period, phase, same)
+    return (1 - 1 / math.sqrt(ratio)) * math.sqrt(nu / 2) >= SEPARATION_SIGMAS
 
 
 def realizations_of(slots: Slots) -> list[tuple[int, int, int]]:
@@ -558,7 +615,8 @@ def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> No
     how = "the given period" if given else "the best lag"
     result.notes.append(
         f"not periodic: at {how} of {lag} samples the period-to-period difference keeps {residual:.1f} dB "
-        f"of the input power (periodic needs below {-db(PERIODIC_SNR):.0f} dB)")
+        f"of the input power (periodic needs below {-db(PERIODIC_SNR):.0f} dB, or below {-db(MIN_PERIODIC_SNR):.0f} "
+        "dB where the period-to-period noise is white enough to be told from a change of content)")
 
 
 def swept_sine(x: np.ndarray, fs: float) -> tuple[float, float] | None:
@@ -710,8 +768,9 @@ def _measured_lines(excited: list[np.ndarray], tests: list[np.ndarray], amplitud
         more = " ..." if len(mains) > 8 else ""
         result.notes.append(f"mains line(s) seen in the measured input at "
                             f"{', '.join(f'{k * resolution:.4g}' for k in mains[:8])}{more} Hz (bins "
-                            f"{', '.join(map(str, mains[:8]))}{more}), weaker than the excited lines around them: "
-                            "not counted as excited (record the reference r to have them counted)")
+                            f"{', '.join(map(str, mains[:8]))}{more}), standing out of the noise but not at the "
+                            "level of the excited lines around them, or off their grid: not counted as excited "
+                            "(record the reference r to have them counted)")
         excited = [np.setdiff1d(bins, mains) for bins in excited]
     level = [bins[at_design_level(bins, a)] for bins, a in zip(excited, amplitudes)]
     below = sum(b.size - kept.size for b, kept in zip(excited, level))
@@ -779,36 +838,55 @@ def near_maximum(bins: np.ndarray, amplitudes: np.ndarray) -> np.ndarray:
 def mains_lines(bins: np.ndarray, amplitudes: np.ndarray, resolution: float) -> np.ndarray:
     """The lines of ``bins`` that are mains hum, not excitation.
 
-    A candidate lies within one bin (``resolution`` Hz) of a multiple of 50 or 60 Hz. Hum adds a
-    line there that stands out of the floor around it but is usually weaker than the excitation; a
-    designed line on the same bin has the level of the excited lines around it, and a distortion
-    line is part of the floor. So a candidate is mains when its amplitude (``amplitudes`` of lines
-    ``1 ..``) is below half the median amplitude of the 8 nearest lines of ``bins`` that are not
-    candidates and are at the design's level (:func:`at_design_level`), and at least 4 times
-    (12 dB) the median amplitude of the other lines within 8 bins of it that are not at that level.
-    Harmonics count only with their fundamental (50 or 60 Hz itself), as hum has it.
+    A candidate lies within one bin (``resolution`` Hz) plus ``MAINS_TOLERANCE`` (the grid's
+    frequency deviation, 0.5 %) of a multiple ``h f0`` of 50 or 60 Hz. Hum adds a line there that
+    stands out of the floor around it; a designed line on the same bin has the level of the excited
+    lines around it and sits on their grid, and a distortion line is part of the floor. With
+    ``design`` the lines of ``bins`` at the design's level (:func:`at_design_level`) that are not
+    candidates, a candidate is mains when, against the median amplitude ``a_d`` of its 8 nearest
+    ``design`` lines (``amplitudes`` of lines ``1 ..``):
+
+    - it is above ``2 a_d`` (hum stronger than the excitation, on a designed line or beside it), or
+    - it stands at least 4 times (12 dB) above the median amplitude of the other lines within 8
+      bins that are not at the design's level, and it is below ``a_d / 2`` (weaker than the
+      excitation) or off the design's grid (odd multiples of the design lines' common base when
+      they are all odd, else multiples of it, from the lowest design line to the highest).
+
+    Harmonics count only with their fundamental (``f0`` itself), as hum has it. Record the
+    reference r to have a designed line at a mains frequency counted whatever its level.
     """
     freqs = bins * resolution
     harmonics = {f0: np.maximum(np.round(freqs / f0), 1) for f0 in MAINS_HZ}
-    near = {f0: np.abs(freqs - h * f0) < resolution for f0, h in harmonics.items()}
+    near = {f0: np.abs(freqs - h * f0) < resolution + MAINS_TOLERANCE * h * f0 for f0, h in harmonics.items()}
     candidate = np.logical_or.reduce(list(near.values()))
-    design = bins[at_design_level(bins, amplitudes)]
+    level_ok = at_design_level(bins, amplitudes)
+    design = bins[level_ok]
     others = np.setdiff1d(design, bins[candidate])
     if others.size == 0:
         return np.array([], dtype=np.int64)
+    base = int(np.gcd.reduce(others))
+    odd = bool(np.all((others // base) % 2 == 1))
 
     def hum(k: int) -> bool:
         nearest = others[np.argsort(np.abs(others - k), kind="stable")[:8]]
+        typical = float(np.median(amplitudes[nearest - 1]))
+        level = amplitudes[k - 1]
+        if level > 2 * typical:
+            return True
         around = np.arange(max(k - 8, 1), min(k + 8, amplitudes.size) + 1)
         floor = np.setdiff1d(around, np.append(design, k))
-        level = amplitudes[k - 1]
-        return bool(level < 0.5 * np.median(amplitudes[nearest - 1])
-                    and floor.size and level >= 4 * np.median(amplitudes[floor - 1]))
+        if not floor.size or level < 4 * np.median(amplitudes[floor - 1]):
+            return False
+        # the band of the design lines, widened by the candidates' window that took lines out of it
+        reach = 2 * (1 + MAINS_TOLERANCE * k) + 2 * base
+        on_grid = k % base == 0 and (not odd or (k // base) % 2 == 1) and others[0] - reach <= k <= others[-1] + reach
+        return bool(level < 0.5 * typical or not on_grid)
 
     mains: set[int] = set()
     for f0 in MAINS_HZ:
         lines = [int(k) for k in bins[near[f0]] if hum(int(k))]
-        if any(abs(k * resolution - f0) < resolution for k in lines):  # the fundamental shows: a family of hum
+        # the fundamental shows: a family of hum
+        if any(abs(k * resolution - f0) < resolution + MAINS_TOLERANCE * f0 for k in lines):
             mains.update(lines)
     return np.array(sorted(mains), dtype=np.int64)
 
