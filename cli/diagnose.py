@@ -29,12 +29,14 @@ from .options import map_option, parse_map, split_options
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
 @map_option
+@click.option("--no-yardstick", "no_yardstick", is_flag=True,
+              help="Skip the black-box yardstick (faster; the status then rests on the noise floor alone).")
 @force_option
 @json_option
 def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
              fail_if_distortion_above: float | None, validate_on: tuple[str, ...], estimation_range: str | None,
              validation_range: str | None, allow_overlap: bool, workers: int | None, mapping: tuple[str, ...],
-             force: bool, as_json: bool) -> None:
+             no_yardstick: bool, force: bool, as_json: bool) -> None:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -57,7 +59,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     from nlsid.stages.diagnose import diagnosis_inputs
 
     inputs = diagnosis_inputs(model_path, data_path, list(validate_on), estimation_range, validation_range,
-                              allow_overlap, workers, parse_map(mapping), names=FLAGS)
+                              allow_overlap, workers, parse_map(mapping), False if no_yardstick else None, names=FLAGS)
     with progress("diagnose", inputs.steps) as step:  # evidence, nuisances, each hypothesis
         result = inputs.run(progress=step)
     summary = result.summary()
@@ -73,7 +75,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
 #: the face's arguments -> this command's flags, for its messages
 FLAGS = {"model": "--model", "rec": "--data", "validate_on": "--validate-on", "estimation_range": "--estimation-range",
          "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "workers": "--workers",
-         "mapping": "--map"}
+         "mapping": "--map", "yardstick": "--no-yardstick"}
 
 
 def _print(result, output: str) -> None:

@@ -659,13 +659,15 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
 
 
 MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits the whole library)
+YARDSTICK = True  # whether diagnose() fits the black-box yardstick when its caller does not say
 
 
 @blas_in_one_thread
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
              step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
              estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
-             estimation_budget: int | None = BUDGET_SAMPLES, budget_above: int = BUDGET_ABOVE) -> Diagnosis:
+             estimation_budget: int | None = BUDGET_SAMPLES, budget_above: int = BUDGET_ABOVE,
+             yardstick: bool | None = None) -> Diagnosis:
     """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``);
     ``validate_on`` (runs of further recordings) and the ranges: :func:`nlsid.diagnose.split.assign`.
 
@@ -682,6 +684,10 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     on where those records hold more than ``budget_above`` (:func:`nlsid.diagnose.split.budgeted`);
     the final model is then refined once more on all of them (:func:`_refine_on_all`). None: every
     fit on all of them.
+
+    ``yardstick``: fit the black-box model of :mod:`nlsid.diagnose.yardstick` after the chain
+    (None: :data:`YARDSTICK`, True); without it the status rests on the noise floor alone (never
+    ``outside_library``) and ``summary.json`` ``yardstick`` says it was not asked for.
     """
     step = step or (lambda name: None)
     ModelRunner.from_data(data, source)  # the model is valid before the data are looked at
@@ -707,7 +713,9 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
-    first.yardstick = _yardstick(first, data, source, runs, roles, budget)
+    wanted = YARDSTICK if yardstick is None else yardstick
+    first.yardstick = (_yardstick(first, data, source, runs, roles, budget) if wanted
+                       else Yardstick("not fitted: not asked for (--no-yardstick)"))
     step("yardstick")
     judge_extent(first)
     return first

@@ -216,6 +216,7 @@ class DiagnosisInputs:
     inputs: list[str]
     allow_overlap: bool
     workers: int | None
+    yardstick: bool | None = None
 
     @property
     def steps(self) -> int:
@@ -238,7 +239,7 @@ class DiagnosisInputs:
         with default_threads(self.workers):
             result = run_diagnosis(self.config, self.model_source, self.runs, self.where, step=lambda name: tick(),
                                    validate_on=self.extra, estimation_range=self.estimation,
-                                   validation_range=self.validation)
+                                   validation_range=self.validation, yardstick=self.yardstick)
         final = result.final
         extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
         others = {}
@@ -278,7 +279,7 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
 
 def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
                      validation_range=None, allow_overlap: bool = False, workers: int | None = None,
-                     mapping: Mapping[str, str] | None = None, *,
+                     mapping: Mapping[str, str] | None = None, yardstick: bool | None = None, *,
                      names: Mapping[str, str] | None = None) -> DiagnosisInputs:
     """The arguments of :func:`diagnose` checked and read, in the order the command line checks them:
     the model, the ranges, the overlap of ``validate_on`` with ``rec``, the recordings."""
@@ -290,14 +291,16 @@ def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None
         raise InputError(name("mapping"), f"expected signal -> topic/field (a dict), got {type(mapping).__name__}")
     config, source, configs = _model_config(model, name)
     data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
+    if yardstick is not None and not isinstance(yardstick, bool):
+        raise InputError(name("yardstick"), f"expected True, False or None, got {yardstick!r}")
     return DiagnosisInputs(config, source, data.runs, data.where, data.extra_runs, data.estimation, data.validation,
-                           configs, data.inputs, bool(allow_overlap), workers)
+                           configs, data.inputs, bool(allow_overlap), workers, yardstick)
 
 
 def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
              validation_range=None, allow_overlap: bool = False, workers: int | None = None,
-             mapping: Mapping[str, str] | None = None, progress: Callable[[], None] | None = None, *,
-             names: Mapping[str, str] | None = None) -> DiagnosisResult:
+             mapping: Mapping[str, str] | None = None, progress: Callable[[], None] | None = None,
+             yardstick: bool | None = None, *, names: Mapping[str, str] | None = None) -> DiagnosisResult:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -328,7 +331,12 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
         Signals of a foreign MCAP log (``u``/``y``/``r`` -> topic/field).
     progress : callable, optional
         Called without arguments after each step: the evidence, the nuisances, each hypothesis
-        scored (a hypothesis that cannot apply is passed without a call), in every round.
+        scored (a hypothesis that cannot apply is passed without a call), in every round, and the
+        yardstick.
+    yardstick : bool, optional
+        Fit the black-box yardstick (:mod:`nlsid.diagnose.yardstick`; default True): how much of
+        the error a flexible model reaches beside the named causes. False saves its fit (seconds
+        to minutes); the status then rests on the noise floor alone.
     names : dict, optional
         Argument -> how the caller calls it in messages (the command line passes its flags).
 
@@ -352,4 +360,4 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
     nlsid.errors.InputError: validation_range: needs estimation_range (the samples of each run to fit on)
     """
     return diagnosis_inputs(model, rec, validate_on, estimation_range, validation_range, allow_overlap, workers,
-                            mapping, names=names).run(progress)
+                            mapping, yardstick, names=names).run(progress)

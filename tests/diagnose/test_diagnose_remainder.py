@@ -24,6 +24,8 @@ from generators import effect_cases
 from nlsid.diagnose import nuisances
 from nlsid.diagnose import verdict as rules
 
+pytestmark = pytest.mark.yardstick
+
 K3, B = 2e4, 0.2  # N/m^3; 1/m: the force factor changes by 20 % over 1 m (outputs of about 0.35 m rms)
 
 
