@@ -10,11 +10,18 @@ Attributes named as a sample rate or interval (:data:`nlsid.io.importers.source.
 datasets, of the groups holding them and of the file (its root group) are rate variables too
 (:func:`rate_attributes`): where several give a rate, all of them and the rate datasets must agree.
 An attribute of text (a time stamp called ``ts``) is not a rate and is passed over.
+
+A rate's unit may be given apart from its name: an attribute ``units`` (or ``unit``) of a rate
+dataset, or an attribute ``NAME_units`` (``NAME_unit``, ``NAMEUnits``) beside a rate attribute
+``NAME`` (``fs`` with ``fs_units = "kHz"``): Hz, kHz, MHz for a rate; s, ms, us for an interval
+(:data:`nlsid.io.importers.source.RATE_UNITS`, ``INTERVAL_UNITS``). It is applied, stated where the
+rate is named (``fs_from``), kept in ``details["rate_units"]``, and an unknown one is refused.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -28,6 +35,7 @@ from nlsid.io.importers.variables import (Leaf, check_pairing, matrix_channels, 
                                          survey)
 
 LISTED = 20
+UNIT_ATTRIBUTE = re.compile(r"^units?$", re.IGNORECASE)  # the unit of a rate dataset, as an attribute of it
 
 
 def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set[str]) -> Source:
@@ -46,11 +54,38 @@ def read_hdf5(path: Path, names: dict[str, str], time: str | None, optional: set
         source.split_channels, source.notes = split, notes
         with hdf5_damage(str(path)):  # the survey reads scalars, rate datasets and rate attributes
             survey(source, "dataset", _leaves(handle), {key: _absolute(name) for key, name in used.items()}, _group_of)
+            source.rate_variables = [_with_unit(variable, handle[variable.name].attrs, UNIT_ATTRIBUTE, "its attribute")
+                                     for variable in source.rate_variables]
             attributes = rate_attributes(handle, path, [_dataset_path(handle, name) for name in used.values()])
     source.rate_variables += [attribute.variable for attribute in attributes]
     if attributes:
         source.details["rate_attributes"] = {attribute.key: attribute.stored for attribute in attributes}
+    units = {variable.name: variable.unit for variable in source.rate_variables[:len(source.rate_variables)
+                                                                               - len(attributes)]
+             if variable.unit is not None}
+    units.update({attribute.key: attribute.variable.unit for attribute in attributes
+                  if attribute.variable.unit is not None})
+    if units:
+        source.details["rate_units"] = units
     return source
+
+
+def _with_unit(variable: RateVariable, attrs: h5py.AttributeManager, pattern: re.Pattern, where: str) -> RateVariable:
+    """``variable`` with the unit that an attribute of ``attrs`` matching ``pattern`` gives it (the
+    first such attribute; ``where`` says whose, for messages)."""
+    for name in attrs:
+        if pattern.match(name):
+            return replace(variable, unit=_text(attrs[name]), unit_from=f"{where} {name}")
+    return variable
+
+
+def _text(value: object) -> str:
+    """An attribute's value as text (h5py gives bytes, str or arrays of them); anything else as printed."""
+    if isinstance(value, np.ndarray) and value.size == 1:
+        value = value.ravel()[0]
+    if isinstance(value, bytes):
+        return value.decode("utf-8", errors="replace")
+    return value if isinstance(value, str) else repr(value)
 
 
 @dataclass(frozen=True)
@@ -97,8 +132,9 @@ def rate_attributes(handle: h5py.File, path: Path, datasets: list[str]) -> list[
                 label = f"attribute {name} of {'dataset' if holder in datasets else 'group'} {holder} of {path}"
             first = float(value.ravel()[0])
             stored = first if value.size == 1 and np.isfinite(first) else f"{shape_text(value.shape)} {value.dtype}"
-            found.append(RateAttribute(RateVariable(f"{holder.rstrip('/')}/{name}", label, value),
-                                       f"{holder}@{name}", stored))
+            variable = _with_unit(RateVariable(f"{holder.rstrip('/')}/{name}", label, value), attrs,
+                                  re.compile(rf"^{re.escape(name)}[_ ]?units?$", re.IGNORECASE), "attribute")
+            found.append(RateAttribute(variable, f"{holder}@{name}", stored))
     return found
 
 

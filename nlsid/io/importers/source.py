@@ -37,6 +37,12 @@ INTERVAL_NAME = re.compile(r"^(?:ts|dt|tsamp|tsample|sampl(?:e|ing)_?(?:time|int
                            r"(?:_(?P<unit>s|ms|us))?$", re.IGNORECASE)
 RATE_SCALE = {None: 1.0, "hz": 1.0, "khz": 1e3, "mhz": 1e6}
 INTERVAL_SCALE = {None: 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6}
+# Units a separate attribute may give a rate or an interval (HDF5 ``units``, ``fs_units``), as written;
+# the case of M/m matters (MHz, not millihertz), so no lower-case "mhz".
+RATE_UNITS = {"Hz": 1.0, "hz": 1.0, "HZ": 1.0, "1/s": 1.0, "s^-1": 1.0, "kHz": 1e3, "khz": 1e3, "KHz": 1e3,
+              "KHZ": 1e3, "MHz": 1e6, "MHZ": 1e6}
+INTERVAL_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6,
+                  "usec": 1e-6, "\u00b5s": 1e-6, "\u03bcs": 1e-6}
 LISTED_SCALARS = 10
 
 
@@ -66,11 +72,15 @@ def pick(wanted: dict[str, str], optional: set[str], read: Callable[[str, str], 
 @dataclass(frozen=True)
 class RateVariable:
     """A variable of the file whose name says it holds the sample rate or interval (``RATE_NAME``,
-    ``INTERVAL_NAME``): ``name`` in the file, ``label`` for messages (``variable Fs of FILE``)."""
+    ``INTERVAL_NAME``): ``name`` in the file, ``label`` for messages (``variable Fs of FILE``).
+    ``unit``: the unit a separate attribute gives it (``units = "kHz"`` on a rate dataset,
+    ``fs_units`` beside an attribute ``fs``), named by ``unit_from``; None: the unit of its name."""
 
     name: str
     label: str
     value: np.ndarray
+    unit: str | None = None
+    unit_from: str | None = None
 
 
 @dataclass
@@ -164,9 +174,25 @@ def rate_of(variable: RateVariable) -> float:
     if not np.isfinite(value) or value <= 0:
         raise InputError(variable.label, f"sample {'rate' if rate else 'interval'} {value:g}: expected a finite "
                                          "number > 0; pass --fs HZ")
-    if rate:
-        return value * RATE_SCALE[(rate.group("unit") or "hz").lower()]
-    return 1.0 / (value * INTERVAL_SCALE[(interval.group("unit") or "s").lower()])
+    named = (rate or interval).group("unit")
+    scale = (RATE_SCALE if rate else INTERVAL_SCALE)[(named or None) and named.lower()]
+    if variable.unit is not None:
+        scale = _unit_scale(variable, bool(rate), named, scale)
+    return value * scale if rate else 1.0 / (value * scale)
+
+
+def _unit_scale(variable: RateVariable, rate: bool, named: str | None, scale: float) -> float:
+    """The scale of the unit an attribute gives a rate variable: the variable's rate in Hz is its
+    value times it (an interval: in s); it must agree with a unit in the variable's name."""
+    units = RATE_UNITS if rate else INTERVAL_UNITS
+    given = variable.unit.strip()
+    if given not in units:
+        expected = "Hz, kHz, MHz (or 1/s)" if rate else "s, ms, us (or \u00b5s, sec, msec, usec)"
+        raise InputError(variable.label, f"unit {variable.unit!r} ({variable.unit_from}) is not a unit of a sample "
+                                         f"{'rate' if rate else 'interval'}: expected {expected}; pass --fs HZ")
+    if named is not None and units[given] != scale:
+        raise InputError(variable.label, f"is named in {named} but {variable.unit_from} says {given}; pass --fs HZ")
+    return units[given]
 
 
 def file_rate(source: Source) -> tuple[float, str] | None:
@@ -179,9 +205,14 @@ def file_rate(source: Source) -> tuple[float, str] | None:
     fs, first = found[0]
     for other_fs, other in found[1:]:
         if abs(other_fs / fs - 1) > REL_TOL:
-            raise InputError(source.path, f"the {first.label} says {fs:.9g} Hz but the {other.label} gives "
+            raise InputError(source.path, f"the {stated(first)} says {fs:.9g} Hz but the {stated(other)} gives "
                                           f"{other_fs:.9g} Hz (they must agree within {REL_TOL:g}); pass --fs HZ")
-    return fs, first.label
+    return fs, stated(first)
+
+
+def stated(variable: RateVariable) -> str:
+    """A rate variable as ``fs_from`` names it: its label, and the unit an attribute gave it."""
+    return variable.label if variable.unit is None else f"{variable.label}, in {variable.unit} ({variable.unit_from})"
 
 
 def sample_rate(time: np.ndarray, where: str) -> float:
