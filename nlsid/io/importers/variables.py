@@ -132,20 +132,22 @@ def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarra
         return
     detail = ", ".join(f"{path}:{names[key]} is {samples} samples x {records} record(s)"
                        for key, (records, samples) in shapes.items())
-    hints = [_pick_hint(key, names[key], records) for key, (records, _) in shapes.items() if records > 1]
+    # every record as a channel is a way out where the other signals hold one record each
+    single = {key: all(shapes[k][0] == 1 for k in ("u", "y", "r") if k in shapes and k != key) for key in shapes}
+    hints = [_pick_hint(key, names[key], records, single[key]) for key, (records, _) in shapes.items() if records > 1]
     mimo = [option(key, names[key]) for key, (records, _) in shapes.items() if records > 1 and key in ("u", "y", "r")]
     why = (f"{' and '.join(mimo)}: several inputs or outputs (MIMO) are not supported yet; " if mimo else "")
     raise InputError(str(path), f"matrices of inconsistent size: {detail}; {why}name one record (from 0, across the "
                                 f"shorter axis) of a matrix: {'; '.join(hints)}")
 
 
-def _pick_hint(key: str, name: str, records: int) -> str:
+def _pick_hint(key: str, name: str, records: int, as_channels: bool) -> str:
     leaf = re.sub(r"\W", "_", re.split(r"[./]", name)[-1]) or "c"
     leaf = leaf if not leaf[0].isdigit() else f"c{leaf}"
     others = " ".join(f"--channel {leaf}_{i}={name}[{i}]" for i in range(1, min(records, LISTED_RECORDS + 1)))
     more = " ..." if records > LISTED_RECORDS + 1 else ""
-    return (f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more}; "
-            f"or all of them as channels {leaf}_0 .. {leaf}_{records - 1}: --channel {leaf}={name})")
+    whole = f"; or all of them as channels {leaf}_0 .. {leaf}_{records - 1}: --channel {leaf}={name}" if as_channels else ""
+    return f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more}{whole})"
 
 
 @dataclass(frozen=True)

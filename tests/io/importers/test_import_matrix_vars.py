@@ -251,6 +251,7 @@ def test_hdf5_channel_matrix_beside_realizations_of_another_count_is_refused(run
     result = run_cli("import", source, "--channel", "a=/daq/acc", "--fs", "10", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "/daq/acc is 600 samples x 6 record(s)", "--channel a=/daq/acc[0]",
                    "(records 0..5;", "--channel acc_3=/daq/acc[3] ...")
+    assert "all of them as channels" not in result.stderr  # not beside realizations of u and y
 
 
 def test_matrices_of_one_shape_stay_records_side_by_side(run_cli, tmp_path):
