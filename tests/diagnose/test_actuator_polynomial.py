@@ -12,7 +12,8 @@ input, Runge-Kutta for the cubic spring; a sensor offset, coloured noise at -50 
 
 Measured when written: the polynomial 42.9 dB gain, 0.7 dB below the floor (input saturation next,
 31.7 dB above it); the cubic spring 55.9 dB, 0.3 dB below the floor (the polynomial then not
-fitted: the spring reaches the floor with fewer parameters).
+fitted: the spring reaches the floor with fewer parameters); the quadratic sensor 41.3 dB, 0.4 dB
+below the floor, a2 = 0.30005 +- 0.00013 (the polynomial likewise not fitted).
 """
 
 from __future__ import annotations
