@@ -31,7 +31,9 @@ import math
 import numpy as np
 import pytest
 from scipy import signal, stats
+from scipy.io import savemat
 
+from nlsid.io.recording import read_runs
 from nlsid.signals.inference import infer_excitation
 
 FS = 1000.0
@@ -141,3 +143,20 @@ def test_noise_too_coloured_to_tell_from_a_change_is_not_periodic():
     inf = infer_excitation(u, FS, measured=True)
     assert inf.kind == "arbitrary"
     assert any("white enough to be told from a change of content" in note for note in inf.notes), inf.notes
+
+
+def test_the_import_writes_the_lines_and_bla_accepts_it(run_cli, tmp_path):
+    u, _, bins, _ = noisy_force(2, 4000)
+    y = signal.lfilter([0.2, 0.1], [1.0, -0.9, 0.3], u)  # a measured output: u through a stable filter
+    source = tmp_path / "force.mat"
+    savemat(source, {"u": u, "y": y, "fs": FS})
+    out = tmp_path / "rec.h5"
+    result = run_cli("import", source, "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    (record,) = result.json()["records"]
+    assert record["inferred_from"] == "u" and record["inference"]["measures"]["mains_bins"] == [200, 600]
+    (run,) = read_runs(out)
+    assert (run.kind, run.period) == ("multisine", 4000)
+    np.testing.assert_array_equal(run.excited_bins, bins)
+    bla = run_cli("bla", out, "-o", tmp_path / "bla.h5", "--json")
+    assert bla.exit_code == 0, bla.stderr
