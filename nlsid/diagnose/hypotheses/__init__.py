@@ -46,6 +46,10 @@ end_stops           distortion at the largest levels only;    ``nonlinearities: 
                     residual force where the position is      cs, upper_stop and/or lower_stop:
                     beyond an edge (contact)                  the keys stiffness, damping,
                                                               upper, lower)
+cubic_joint         odd distortion around the flexible mode   ``nonlinearities: cubic_stiffness``
+                    of a two_mass_stage; residual like the    with ``at: joint`` (k3: k3 (p1 -
+                    sensitivity to a cubic spring between     p2)^3 in the coupling, with the
+                    the masses                                mechanics)
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
                     function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
                                                               with the linear coefficients)
@@ -119,7 +123,7 @@ from __future__ import annotations
 from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
                                        output_blocks, resonance, stiffness)
 from nlsid.diagnose.hypotheses import wiener_hammerstein
-from nlsid.diagnose.hypotheses import end_stops, hysteresis
+from nlsid.diagnose.hypotheses import end_stops, hysteresis, joint
 from nlsid.diagnose.hypotheses import actuator_polynomial, friction_feedback, nonlinear_damping, output_saturation
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
@@ -127,7 +131,7 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 
 #: The hypotheses in the order they are tried (a family's simpler members first).
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + friction_feedback.HYPOTHESES + nonlinear_damping.HYPOTHESES
-                                   + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + end_stops.HYPOTHESES + feedback.HYPOTHESES
+                                   + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + end_stops.HYPOTHESES + joint.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES + actuator_polynomial.HYPOTHESES
                                    + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
                                    + linear_dynamics.HYPOTHESES
