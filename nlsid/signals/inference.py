@@ -366,10 +366,10 @@ def slot_differences(x: np.ndarray, period: int) -> np.ndarray:
     return np.where(valid, cum[clipped[:, 1:]] - cum[clipped[:, :-1]], np.nan)
 
 
-def compare_slots(x: np.ndarray, period: int) -> Slots | None:
-    """Phase and same/different comparisons of the slots (step 2); None if not periodic."""
-    if x.size < 2 * period:
-        return None
+def slot_levels(x: np.ndarray, period: int) -> tuple[np.ndarray, float, float]:
+    """The slot comparisons ``D[phi, j]`` (:func:`slot_differences`), the noise level (the smallest
+    over ``phi`` of the median of ``min(D_{j-1}, D_j, D_{j+1})``) and the level of a change of
+    content ``2 N var(x)`` (step 2); ``x`` holds two slots at least."""
     diffs = slot_differences(x, period)
     neighbours = diffs.copy()
     neighbours[:, 1:] = np.fmin(neighbours[:, 1:], diffs[:, :-1])
@@ -377,6 +377,14 @@ def compare_slots(x: np.ndarray, period: int) -> Slots | None:
     signal = 2 * period * float(np.var(x))
     compared = ~np.all(np.isnan(neighbours), axis=1)  # phases whose second slot fits in the record
     noise = max(float(np.min(np.nanmedian(neighbours[compared], axis=1))), 2 * period * NUMERIC_FLOOR**2 * signal)
+    return diffs, noise, signal
+
+
+def compare_slots(x: np.ndarray, period: int) -> Slots | None:
+    """Phase and same/different comparisons of the slots (step 2); None if not periodic."""
+    if x.size < 2 * period:
+        return None
+    diffs, noise, signal = slot_levels(x, period)
     if signal < MIN_PERIODIC_SNR * noise:
         return None
     cap = math.sqrt(noise * signal)
@@ -613,10 +621,29 @@ def _not_periodic(x: np.ndarray, lag: int, result: Inference, given: bool) -> No
         result.notes.append(sweep)
         return
     how = "the given period" if given else "the best lag"
+    difference, reason = residual, ""
+    if x.size >= 2 * lag:  # the level step 2 compares: the median slot difference, against a change
+        diffs, noise, signal = slot_levels(x, lag)
+        difference, reason = db(noise / signal), _dof_reason(x, lag, diffs, noise, signal)
     result.notes.append(
-        f"not periodic: at {how} of {lag} samples the period-to-period difference keeps {residual:.1f} dB "
+        f"not periodic: at {how} of {lag} samples the period-to-period difference keeps {difference:.1f} dB "
         f"of the input power (periodic needs below {-db(PERIODIC_SNR):.0f} dB, or below {-db(MIN_PERIODIC_SNR):.0f} "
-        "dB where the period-to-period noise is white enough to be told from a change of content)")
+        f"dB where the period-to-period noise is white enough to be told from a change of content){reason}")
+
+
+def _dof_reason(x: np.ndarray, lag: int, diffs: np.ndarray, noise: float, signal: float) -> str:
+    """Why slots whose level ratio lies between ``MIN_PERIODIC_SNR`` and ``PERIODIC_SNR`` did not
+    count as repeating: the degrees of freedom of their noise, and how many the ratio needs
+    (:func:`_separated`); "" for other records."""
+    ratio = signal / noise
+    if not MIN_PERIODIC_SNR <= ratio < PERIODIC_SNR:
+        return ""
+    row = diffs[0][~np.isnan(diffs[0])]
+    nu = comparison_dof(x, lag, 0, row <= math.sqrt(noise * signal))
+    needed = 2 * (SEPARATION_SIGMAS / (1 - 1 / math.sqrt(ratio))) ** 2
+    return (f"; the noise between periods has {nu:.0f} degrees of freedom over a period, fewer than the "
+            f"{needed:.0f} that tell it from a change of content at {SEPARATION_SIGMAS:.0f} standard deviations "
+            "(coloured noise, or a short period)")
 
 
 def swept_sine(x: np.ndarray, fs: float) -> tuple[float, float] | None:

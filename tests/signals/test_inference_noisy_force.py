@@ -142,7 +142,8 @@ def test_noise_too_coloured_to_tell_from_a_change_is_not_periodic():
     u = np.tile(one, periods) + 0.5 * wander / wander.std()
     inf = infer_excitation(u, FS, measured=True)
     assert inf.kind == "arbitrary"
-    assert any("white enough to be told from a change of content" in note for note in inf.notes), inf.notes
+    assert any("white enough to be told from a change of content" in note
+               and "degrees of freedom over a period, fewer than the" in note for note in inf.notes), inf.notes
 
 
 def test_the_import_writes_the_lines_and_bla_accepts_it(run_cli, tmp_path):
