@@ -214,12 +214,19 @@ class _SidedFriction(FiniteModel):
     @model_validator(mode="after")
     def _sides(self):
         for name, required in self.SIDED:
+            if name == "fs" and getattr(self, "peak", None) is not None:  # fs = fc + peak
+                if any(getattr(self, "fs" + suffix) is not None for suffix in ("", "_pos", "_neg")):
+                    raise ValueError("give fs (or fs_pos and fs_neg) or peak, not both")
+                continue
             _check_sides(self, name, required)
         return self
 
     def sides(self, name: str) -> tuple[float, float]:
         """(value for v > 0, value for v < 0) of a sided quantity: the symmetric key for both
-        directions, else its ``_pos`` and ``_neg`` keys; 0 for an optional quantity not given."""
+        directions, else its ``_pos`` and ``_neg`` keys; 0 for an optional quantity not given. The
+        break-away fs given as ``peak`` is fc + peak on each side."""
+        if name == "fs" and getattr(self, "peak", None) is not None:
+            return tuple(level + float(self.peak) for level in self.sides("fc"))
         sym = getattr(self, name)
         if sym is not None:
             return float(sym), float(sym)
@@ -236,11 +243,13 @@ class _Levels(FiniteModel):
 
 
 class _BreakAway(FiniteModel):
-    """Stribeck's break-away force, symmetric or per direction."""
+    """Stribeck's break-away force, symmetric or per direction, or as its excess over the sliding
+    level, ``peak`` = fs - fc >= 0 on both sides (a break-away that cannot fall below sliding)."""
 
     fs: Optional[Positive] = None
     fs_pos: Optional[Positive] = None
     fs_neg: Optional[Positive] = None
+    peak: Optional[NonNegative] = None
 
 
 class _Viscous(FiniteModel):

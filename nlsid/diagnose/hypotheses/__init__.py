@@ -24,9 +24,11 @@ name                signature                                 extension (paramet
 coulomb             odd distortion; BLA gain rises with       ``nonlinearities: coulomb`` (fc)
                     level; residual force jumps at v = 0
 stribeck            as coulomb, with a break-away peak at     ``nonlinearities: stribeck``
-                    low velocity                              (fs, fc, vs; delta = 2)
+                    low velocity                              (fs, fc, vs; delta = 2; fs refined
+                                                              as peak = fs - fc > 0)
 lugre               as stribeck, with presliding: a stiff     ``nonlinearities: lugre`` (sigma0,
-                    force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0)
+                    force after each velocity reversal        fc, fs, vs; sigma1 = sigma2 = 0;
+                                                              fs refined as peak)
 coulomb_feedback    as coulomb, for a transfer function       ``nonlinear_feedback`` around the
                     model (its output read as position or     model (or model / s, ``output:
                     velocity, whichever explains more)        velocity``) with ``coulomb`` (fc,

@@ -1,6 +1,13 @@
 """Friction, one family of nested laws: Coulomb (fc) in Stribeck (fs = fc) in LuGre (sigma0 to
 infinity). The verdict names the richer law only when it is significantly better, and each richer
-law starts from the simpler one's fit."""
+law starts from the simpler one's fit.
+
+The break-away force of a Stribeck or LuGre law is refined as its excess over the sliding level,
+``peak`` = fs - fc (the config key, :mod:`nlsid.io.model_config`), which the refinement keeps
+positive as it keeps every parameter's sign: a break-away below the sliding force is not a
+Stribeck peak, and refined as fs and fc the Stribeck law reached one on LuGre presliding (fs near 0
+under fc, a curve that falls to zero at standstill and mimics the bristles' soft start), which the
+start grid excludes. The estimates report fs = fc + peak (``derive``)."""
 
 from __future__ import annotations
 
@@ -20,7 +27,10 @@ STRIBECK_DELTA = 2.0
 
 STRIBECK_START_RATIO = 1.5  # fs / fc at the start of the fit when the signature shows no break-away peak
 
-LUGRE_DEFLECTIONS = (1e-1, 1e-2, 1e-3, 1e-4)  # fs / sigma0 over the rms position, LuGre start grid
+# fs / sigma0 over the rms position, LuGre's start grid: from bristles as soft as the motion (presliding
+# of tens of micrometres under strokes of a tenth of a millimetre) to stiff ones, half a decade apart
+LUGRE_DEFLECTIONS = (1.0, 0.3, 0.1, 0.03, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4)
+LUGRE_PEAK, LUGRE_VS = 1.5, 0.1  # the second level set of LuGre's start: fs / fc, vs over the rms velocity
 
 STRIBECK_GRID = 25         # Stribeck velocities tried for the start values (a factor 1.21 apart)
 
@@ -174,32 +184,70 @@ def _estimate_stribeck(ctx: Context) -> Estimate | str:
 
 def _estimate_lugre(ctx: Context) -> Estimate | str:
     """LuGre start values: the levels and the Stribeck velocity of the fitted Stribeck hypothesis
-    (LuGre's steady-state friction is that Stribeck curve with delta = 2), and the bristle
+    (LuGre's steady-state friction is that Stribeck curve with delta = 2), or, where that fit
+    found no peak (presliding, which the Stribeck law cannot follow, leaves it at Coulomb's),
+    its fc with a break-away LUGRE_PEAK fc at LUGRE_VS of the rms velocity; and the bristle
     stiffness sigma0 from a log grid by the simulation error of the estimation runs: sigma0 such
-    that the presliding deflection fs / sigma0 is 10^-1 .. 10^-4 of the model's rms position (the
-    LuGre law reduces to Stribeck's when it is far smaller than the motion), with the linear
-    mechanics the Stribeck fit refined, which start LuGre's refinement too. The bristle damping
+    that the presliding deflection fs / sigma0 is 1 .. 10^-4 of the model's rms position, half a
+    decade apart (:data:`LUGRE_DEFLECTIONS`: soft bristles, whose presliding is a good part of the
+    motion, as well as stiff ones; the LuGre law reduces to Stribeck's when it is far smaller than
+    the motion, and the refinement moves sigma0 by three decades at most), the pair of level set
+    and sigma0 of least error, with the linear mechanics the Stribeck fit refined, which start
+    LuGre's refinement too. The bristle damping
     sigma1 and the viscous sigma2 are 0 (viscous damping is the model's own)."""
     stribeck = ctx.fitted.get("stribeck")
     if stribeck is None:
         return "needs the Stribeck hypothesis's estimate to start from"
     if needs(ctx, "position"):
         return needs(ctx, "position")
+    if needs(ctx, "velocity"):
+        return needs(ctx, "velocity")
     position = np.concatenate([s["position"] for s in ctx.internal])
-    levels = {k: stribeck.values[k] for k in ("fc", "fs", "vs")}
+    fitted = {k: stribeck.values[k] for k in ("fc", "fs", "vs")}
+    speed = float(np.sqrt(np.mean(np.concatenate([s["velocity"] for s in ctx.internal]) ** 2)))
+    peaked = {"fc": fitted["fc"], "fs": LUGRE_PEAK * fitted["fc"], "vs": LUGRE_VS * speed}
     spread = float(np.std(position))
-    grid = [levels["fs"] / (spread * ratio) for ratio in LUGRE_DEFLECTIONS]
     mechanics = _nested_start(ctx, "stribeck")
     base = _with_keys(ctx.runner.data, mechanics)
-    costs = [ctx.simulation_rss(LUGRE.extend(base, {"sigma0": sigma0, **levels})) for sigma0 in grid]
-    sigma0 = grid[int(np.argmin(costs))]
-    return Estimate({"sigma0": sigma0, **levels}, {"sigma0": float("nan"), **{k: stribeck.std[k] for k in levels}},
+    options = [(levels, levels["fs"] / (spread * ratio)) for levels in (fitted, peaked) for ratio in LUGRE_DEFLECTIONS]
+    costs = [ctx.simulation_rss(LUGRE.extend(base, {"sigma0": sigma0, **levels})) for levels, sigma0 in options]
+    levels, sigma0 = options[int(np.argmin(costs))]
+    std = {k: stribeck.std[k] if levels is fitted else float("nan") for k in levels}
+    origin = ("the Stribeck fit's" if levels is fitted else
+              f"fc from the Stribeck fit, fs = {LUGRE_PEAK:g} fc, vs = {LUGRE_VS:g} x the rms velocity")
+    return Estimate({"sigma0": sigma0, **levels}, {"sigma0": float("nan"), **std},
                     explained_db(float(np.sum(ctx.target() ** 2)), min(costs)),
-                    "levels and mechanics from the Stribeck fit; sigma0 on a grid of presliding deflections",
+                    f"levels {origin}, mechanics from the Stribeck fit; sigma0 on a grid of presliding deflections",
                     starts=mechanics or None)
 
+def _as_peak(values: dict) -> dict:
+    """The levels with the break-away as its excess over sliding, ``peak`` = fs - fc, in place of fs."""
+    out = dict(values)
+    if "fs" in out:
+        out["peak"] = out.pop("fs") - out["fc"]
+    return out
+
+
+def _peaked(estimate: Estimate | str) -> Estimate | str:
+    """A Stribeck or LuGre start (fs > fc) with ``peak`` = fs - fc beside fs: the parameter refined
+    (:func:`_break_away`)."""
+    if isinstance(estimate, str):
+        return estimate
+    values = {**estimate.values, "peak": estimate.values["fs"] - estimate.values["fc"]}
+    return dataclasses.replace(estimate, values=values, std={**estimate.std, "peak": float("nan")})
+
+
+def _break_away(fitted: dict, starts: dict, model: dict) -> dict:
+    """fs = fc + peak of the fitted law."""
+    return {"fs": fitted["fc"] + fitted["peak"]}
+
+
 def _extend_stribeck(data: dict, values: dict) -> dict:
-    return add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, values)
+    return add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, _as_peak(values))
+
+
+def _extend_lugre(data: dict, values: dict) -> dict:
+    return add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0})(data, _as_peak(values))
 
 
 COULOMB = Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
@@ -207,9 +255,10 @@ COULOMB = Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
                mechanical, _estimate_coulomb, add_force({"type": "coulomb"}), ("fc",), force_paths(("fc",)))
 STRIBECK = Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
                "as Coulomb friction, with a break-away peak at low velocity",
-               mechanical, _estimate_stribeck, _extend_stribeck, ("fs", "fc", "vs"), force_paths(("fs", "fc", "vs")))
+               mechanical, lambda ctx: _peaked(_estimate_stribeck(ctx)), _extend_stribeck, ("peak", "fc", "vs"),
+               force_paths(("peak", "fc", "vs")), derive=_break_away)
 LUGRE = Hypothesis("lugre", "LuGre friction", "friction", "sigma0", "N/m",
                "as Stribeck friction, with presliding: a stiff friction force (bristles) after each velocity "
-               "reversal", mechanical, _estimate_lugre, add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0}),
-               ("sigma0", "fc", "fs", "vs"), force_paths(("sigma0", "fc", "fs", "vs")))
+               "reversal", mechanical, lambda ctx: _peaked(_estimate_lugre(ctx)), _extend_lugre,
+               ("sigma0", "fc", "peak", "vs"), force_paths(("sigma0", "fc", "peak", "vs")), derive=_break_away)
 HYPOTHESES = (COULOMB, STRIBECK, LUGRE)
