@@ -37,10 +37,10 @@ four steps; every step states how sure it is.
    spread ``sqrt(2/nu)`` (``nu`` its degrees of freedom, from the spectrum of the slot differences:
    ``N`` for white noise) puts the cap ``SEPARATION_SIGMAS`` standard deviations from both levels
    (:func:`comparison_dof`): an excitation 6 dB above white noise over a period of thousands of
-   samples is periodic beyond doubt. The phase ``phi`` (where periods start) minimises ``sum_j min(D_j(phi), cap)``: at a
-   wrong phase each change of content spills into a second comparison. Moving ``phi`` by one sample
-   trades one noise sample for one changed sample per boundary, so with ``B`` boundaries the phase is
-   wrong with probability about ``(0.64 / sqrt(SNR))^B`` (one boundary at 40 dB: 0.6 %). Runs of slots
+   samples is periodic beyond doubt. The phase ``phi`` (where periods start) minimises
+   ``sum_j min(D_j(phi), cap)``: at a wrong phase each change of content spills into a second
+   comparison. Moving ``phi`` by one sample trades one noise sample for one changed sample per
+   boundary, so with ``B`` boundaries the phase is wrong with probability about ``(0.64 / sqrt(SNR))^B`` (one boundary at 40 dB: 0.6 %). Runs of slots
    joined by *same* comparisons and at least two long are realizations; single slots before one
    (a lead-in, or a transition) become its transient periods; the ``phi`` leading samples and the
    samples after the last whole slot are dropped. All realizations share the phase: they hold whole

@@ -17,11 +17,12 @@ sample: white plus coloured, from the filter's exact response), so 2T, with T th
 P |mean X|^2 / s^2, is non-central chi-square with 2 degrees of freedom and non-centrality
 lambda_k = 2 P (A^2 / 4) N / S(k) (its variance s^2 estimated over 2 x 15 x 17 = 510 degrees of
 freedom, within 25 % except with probability far below 1e-9). The weakest line has lambda > 500
-here (510 at N = 4000, in the coloured noise's band), and a line with T above 100 (the 20 dB a measured input's line needs, more than the F
-threshold of about 16) counts whatever its neighbours: the probability that any of the ~270 lines
-falls below 1.25 x 100 is computed in ``miss_bound`` (3.5e-10) and asserted below 1e-6.
-Unexcited lines pass the F threshold with family-wise probability 1e-3, and even then are off the
-odd grid of the 20 dB lines, so they do not count.
+here (510 at N = 4000, in the coloured noise's band), and a line with T above 100 (the 20 dB a
+measured input's line needs, more than the F threshold of about 16) counts whatever its
+neighbours: the probability that any of the ~270 lines falls below 1.25 x 100 is computed in
+``miss_bound`` (3.5e-10) and asserted below 1e-6. Unexcited lines pass the F threshold with
+family-wise probability 1e-3, and even then are off the odd grid of the 20 dB lines, so they do
+not count.
 """
 
 from __future__ import annotations

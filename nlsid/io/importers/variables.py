@@ -72,9 +72,10 @@ def _records_samples(dims: tuple[int, ...]) -> tuple[int, int] | None:
     return None  # as_matrix says what is wrong with it
 
 
-def matrix_channels(names: dict[str, str], values: dict[str, np.ndarray],
-                    where: Callable[[str, str], str]) -> tuple[dict[str, str], dict[str, np.ndarray], dict[str, list[str]],
-                                                               list[str]]:
+Split = tuple[dict[str, str], dict[str, np.ndarray], dict[str, list[str]], list[str]]
+
+
+def matrix_channels(names: dict[str, str], values: dict[str, np.ndarray], where: Callable[[str, str], str]) -> Split:
     """A channel given a matrix of several records, beside u, y, r of one record each, as one
     channel per record: ``--channel acc=Acceleration`` of a 3 x N ``Acceleration`` gives the
     channels ``acc_0``, ``acc_1``, ``acc_2`` (record ``i`` as ``Acceleration[i]`` picks it).
@@ -82,8 +83,9 @@ def matrix_channels(names: dict[str, str], values: dict[str, np.ndarray],
     Where u, y or r hold several records (realizations side by side), a channel of their shape
     stays their records, and one of another shape is left to :func:`check_pairing`, which refuses
     it. Returns the names and values with each such channel replaced by its records, the channels
-    split (name -> the names of its records' channels), and one note per channel split. A record's channel name must be free: a ``--channel acc_1=...`` beside it is
-    refused. ``where(key, name)`` names the option for messages.
+    split (name -> the names of its records' channels), and one note per channel split. A record's
+    channel name must be free: a ``--channel acc_1=...`` beside it is refused. ``where(key, name)``
+    names the option for messages.
     """
     signals = [_records_samples(np.shape(values[key])) for key in values if key in ("u", "y", "r")]
     if any(shape is None or shape[0] > 1 for shape in signals):
@@ -146,7 +148,8 @@ def _pick_hint(key: str, name: str, records: int, as_channels: bool) -> str:
     leaf = leaf if not leaf[0].isdigit() else f"c{leaf}"
     others = " ".join(f"--channel {leaf}_{i}={name}[{i}]" for i in range(1, min(records, LISTED_RECORDS + 1)))
     more = " ..." if records > LISTED_RECORDS + 1 else ""
-    whole = f"; or all of them as channels {leaf}_0 .. {leaf}_{records - 1}: --channel {leaf}={name}" if as_channels else ""
+    whole = (f"; or all of them as channels {leaf}_0 .. {leaf}_{records - 1}: --channel {leaf}={name}"
+             if as_channels else "")
     return f"{option(key, f'{name}[0]')} (records 0..{records - 1}; the others as channels: {others}{more}{whole})"
 
 

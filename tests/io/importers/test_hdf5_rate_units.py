@@ -20,7 +20,8 @@ from nlsid.io.hdf5_recording import HDF5Recording
 N = 300
 
 
-def write(path: Path, attributes: dict[str, dict[str, object]], datasets: dict[str, tuple[object, dict]] | None = None) -> None:
+def write(path: Path, attributes: dict[str, dict[str, object]],
+          datasets: dict[str, tuple[object, dict]] | None = None) -> None:
     """/daq/u and /daq/y (noise), ``datasets`` (path -> (value, its attributes)) and ``attributes``
     (object path -> {name: value})."""
     rng = np.random.default_rng(11)
@@ -82,7 +83,8 @@ def test_a_rate_without_a_unit_attribute_stays_in_hz(run_cli, tmp_path):
     ({"/daq": {"fs": 2.5, "fs_units": "furlongs"}}, None,
      ["attribute fs of group /daq of", "unit 'furlongs' (attribute fs_units) is not a unit of a sample rate",
       "Hz, kHz", "MHz"]),
-    ({"/daq": {"fs": 2.5, "fs_units": "mhz"}}, None, ["unit 'mhz' (attribute fs_units) is not a unit of a sample rate"]),
+    ({"/daq": {"fs": 2.5, "fs_units": "mhz"}}, None,
+     ["unit 'mhz' (attribute fs_units) is not a unit of a sample rate"]),
     ({}, {"/daq/Ts": (0.5, {"units": "kHz"})},
      ["dataset /daq/Ts of", "unit 'kHz' (its attribute units) is not a unit of a sample interval", "ms"]),
     ({}, {"/daq/fs_kHz": (2.0, {"units": "Hz"})},
