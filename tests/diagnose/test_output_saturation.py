@@ -6,12 +6,15 @@ floor) on signals built here, and the diagnosis of records from tests/generators
   output saturation, its ceiling within 4 standard errors of the truth (0.6 less the sensor
   offset, in the model's units before the offset), the extended model within 3 dB of the noise
   floor;
+- a range on both sides (-0.5 .. 0.7) with the plant's transfer function as the model: both
+  limits within 4 standard errors;
 - its neighbour, an actuator that saturates at +-1.2 (the plant smooths the clipped input: no
   flat output), is named input saturation, and sensor saturation does not apply;
 - the same plant without an effect (offsets, coloured noise) is nothing beyond noise.
 
 Measured when written: sensor saturation 42.1 dB gain, 0.4 dB below the floor, ceiling 0.598 +-
-1.1e-4; actuator saturation 42.0 dB, 0.6 dB above the floor (the polynomial next best, 12.6 dB).
+1.1e-4; both sides 43.7 dB, 0.2 dB below the floor, 0.69799 +- 1.2e-4 and -0.50201 +- 1.0e-4;
+actuator saturation 42.0 dB, 0.6 dB above the floor (the polynomial next best, 12.6 dB).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from nlsid.diagnose.diagnosis import diagnose
 from nlsid.diagnose.hypotheses.output_saturation import FLAT_SHARE, flat_sides
 
 CEILING = 0.6
+FLOOR, RANGE_TOP = -0.5, 0.7  # a sensor range clipping 9.5 % and 4.7 % of the samples
 
 
 def outcome(result, name):
@@ -54,6 +58,17 @@ def test_a_sensor_that_tops_out_is_named_output_saturation():
     est = result.winner.estimate
     assert cases.within(est.values["limit"], CEILING - cases.OFFSET, est.std["limit"]), (est.values, est.std)
     assert result.winner.qualifier() == "ceiling"
+    assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+
+
+def test_a_sensor_range_on_both_sides_around_a_transfer_function():
+    runs = cases.recording(11, cases.linear, sensor=lambda y: np.clip(y, FLOOR, RANGE_TOP))
+    result = diagnose(cases.TF, "model.yaml", runs, "recording.h5")
+    assert result.verdict.winner == "output_saturation", result.headline()
+    est = result.winner.estimate
+    assert cases.within(est.values["limit"], RANGE_TOP - cases.OFFSET, est.std["limit"]), (est.values, est.std)
+    assert cases.within(est.values["floor"], FLOOR - cases.OFFSET, est.std["floor"]), (est.values, est.std)
+    assert result.winner.qualifier() == "ceiling and floor"
     assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
 
 
