@@ -21,6 +21,10 @@ exactly as the hypotheses are (:mod:`nlsid.diagnose.gain`), so its error is comp
 named cause's: where the final extended model's error power exceeds the yardstick's by more than
 the verdict's F* (:mod:`nlsid.diagnose.verdict`), an effect outside the library remains.
 
+Its size is held to what an iteration can afford (:func:`affordable`, :data:`WORK`): the extra
+state and then the quadratic terms are left out for larger models or records, and a model too
+large even then is not fitted (stated).
+
 Not fitted (the reason stated) in closed loop (the yardstick models the plant from the recorded
 u, while the diagnosis simulates the loop from r: their errors would not compare), for a model
 without a linear part to start from (an ``equations`` model), and for noise-free data that the
@@ -43,6 +47,8 @@ from nlsid.models.lti import StateSpace
 DEGREES = (2, 3)       # total degrees of the monomials in the state and the output equation
 MAX_ITERATIONS = 200   # accepted iterations of the nonlinear stage at most
 EXTRA_STATES = 1       # states beyond the user's model's, each started as a delay of the input
+WORK = 3e9             # samples x parameters^2 of an iteration's normal matrix at most (about 1 s here)
+SHAPES = ((EXTRA_STATES, DEGREES), (0, DEGREES), (0, (3,)))  # (extra states, degrees), tried in this order
 LINEAR_ITERATIONS = 20
 PATIENCE = 40          # iterates without a lower early-stopping error before the fit stops
 FILE = "black_box_model.yaml"
@@ -154,6 +160,22 @@ def _holdout(fit_runs: list[Run], val_runs: list[Run]) -> tuple[list[Run], list[
                                       "hold one out): its validation error is slightly optimistic")
 
 
+def affordable(order: int, samples: int) -> tuple[int, tuple[int, ...]] | None:
+    """The richest shape of :data:`SHAPES` (extra states, monomial degrees) whose Levenberg-
+    Marquardt iteration stays within :data:`WORK` (its normal matrix costs samples x parameters^2),
+    or None: a polynomial in every state is then too large (an LFR form, whose nonlinearity acts
+    on a few linear combinations of the states, is what such orders need)."""
+    from nlsid.models.pnlss import exponents
+
+    for extra, degrees in SHAPES:
+        n = order + extra
+        terms = exponents(n, degrees, True).shape[0]
+        parameters = n * n + 2 * n + 1 + (n + 1) * terms
+        if samples * parameters ** 2 <= WORK:
+            return extra, degrees
+    return None
+
+
 def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run], val: list,
                   output_offset: float = 0.0) -> Yardstick:
     """Fit and score the yardstick (module docstring). ``fit_runs``: the estimation parts the
@@ -168,9 +190,18 @@ def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run],
     start = linear_start(runner)
     if isinstance(start, str):
         return Yardstick(f"not fitted: {start}")
+    samples = sum(run.n_samples for run in fit_runs)
     try:
         model, _ = from_linear(start, fit_runs[0].fs, DEGREES, DEGREES, True, output_offset=output_offset)
-        model = with_delay_states(model, EXTRA_STATES)
+        shape = affordable(model.order, samples)
+        if shape is None:
+            return Yardstick(f"not fitted: a polynomial state-space model of {model.order} states on {samples} samples "
+                             f"costs more than {WORK:.0e} samples x parameters^2 per iteration even with cubic terms "
+                             "alone (a form with the nonlinearity on a few state combinations is not built yet)")
+        extra, degrees = shape
+        if degrees != DEGREES:
+            model, _ = from_linear(start, fit_runs[0].fs, degrees, degrees, True, output_offset=output_offset)
+        model = with_delay_states(model, extra) if extra else model
         own, early, rule = _holdout(fit_runs, val_runs)
         fit = fit_pnlss(model, own, early, max_iterations=MAX_ITERATIONS, linear_iterations=LINEAR_ITERATIONS,
                         patience=PATIENCE)
