@@ -63,6 +63,18 @@ def branches_from_model(model, fs: float) -> list[Branch]:
     raise InputError("model.type", f"analytic HOSIDFs need a wiener, hammerstein, wiener_hammerstein or lpl model, got '{kind}'")
 
 
+def branches_from_data(data: dict, fs: float, source: str = "model") -> list[Branch]:
+    """The LPL branches of a model config given as plain data (a loaded YAML, or
+    :meth:`nlsid.Model.to_dict`); errors name ``source`` and the key."""
+    from nlsid.io.model_config import validate_simulate_config
+
+    config = validate_simulate_config(data, source, {})
+    try:
+        return branches_from_model(config.model, fs)
+    except InputError as exc:
+        raise InputError(f"{source}: {exc.where}", exc.what) from None
+
+
 def branches_from_config(path: str | os.PathLike, fs: float) -> list[Branch]:
     """Load a model config file and return its LPL branches; errors name the file and key."""
     from nlsid.io.config import load_config

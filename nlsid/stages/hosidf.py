@@ -44,7 +44,7 @@ DPI = 110
 
 
 def check_options(harmonics: int, variance: str = "both", input: str = "auto", sweep: str | None = None,
-                  model: str | os.PathLike | None = None, names: Mapping[str, str] | None = None) -> None:
+                  model=None, names: Mapping[str, str] | None = None) -> None:
     """The options of :func:`hosidf`, checked; ``names`` maps an argument to how the caller calls it
     (``{"harmonics": "--harmonics"}`` on the command line)."""
     names = names or {}
@@ -67,6 +67,9 @@ def check_options(harmonics: int, variance: str = "both", input: str = "auto", s
     if sweep is not None and model is not None:
         raise InputError(name("model"),
                          f"analytic HOSIDFs apply to a frequency x amplitude grid, not to {name('sweep')}")
+    if model is not None and not (isinstance(model, (str, os.PathLike, Mapping)) or hasattr(model, "to_dict")):
+        raise InputError(name("model"), "expected a Model (nlsid.Model), a model config's path or its dict, got "
+                                        f"{type(model).__name__}")
 
 
 @dataclass
@@ -368,8 +371,18 @@ def _analytic(branches, grid: HOSIDFGrid) -> np.ndarray:
     return out
 
 
+def _model_branches(model, fs: float) -> list:
+    """The LPL branches of ``model``: a config path, a dict, or a :class:`nlsid.Model`."""
+    from nlsid.analysis.hosidf_model import branches_from_config, branches_from_data
+
+    if isinstance(model, (str, os.PathLike)):
+        return branches_from_config(model, fs)
+    data = model.to_dict() if hasattr(model, "to_dict") else dict(model)
+    return branches_from_data(data, fs)
+
+
 def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, choice: str, parameter: str | None,
-             model: str | os.PathLike | None, on_run: Callable | None) -> HosidfResult:
+             model, on_run: Callable | None) -> HosidfResult:
     from nlsid.analysis.hosidf import measured_hosidf, run_spectra
     from nlsid.analysis.linearity_cost import sweep as linearity_sweep
     from nlsid.io.feeds import hosidf_input, no_sine_runs
@@ -386,9 +399,7 @@ def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, ch
     if parameter is None:
         branches = None
         if model is not None:
-            from nlsid.analysis.hosidf_model import branches_from_config
-
-            branches = branches_from_config(model, first.fs)
+            branches = _model_branches(model, first.fs)
         grid = measured_hosidf(sines, harmonics, variance, signal, source)
         first_run = (first.periods("y"), run_spectra(first, harmonics, signal, source), first.fs)
         if branches is not None:
@@ -400,12 +411,13 @@ def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, ch
         warnings.append(f"skipped {len(skipped)} runs that are not single sines ({', '.join(skipped[:5])}"
                         f"{', ...' if len(skipped) > 5 else ''})")
     return HosidfResult(harmonics, signal, common_units(units_seen), source, grid=grid, sweep=result,
-                        analytic=analytic, warnings=warnings, configs=[str(model)] if model is not None else [],
+                        analytic=analytic, warnings=warnings,
+                        configs=[str(model)] if isinstance(model, (str, os.PathLike)) else [],
                         first_run=first_run)
 
 
 def hosidf(recording: Recording | str | os.PathLike, harmonics: int = 5, variance: str = "both", input: str = "auto",
-           sweep: str | None = None, model: str | os.PathLike | None = None, mapping: Mapping[str, str] | None = None,
+           sweep: str | None = None, model=None, mapping: Mapping[str, str] | None = None,
            on_run: Callable | None = None) -> HosidfResult:
     """Higher Order Sinusoidal Input Describing Functions of the single-sine runs of a recording.
 
@@ -431,9 +443,10 @@ def hosidf(recording: Recording | str | os.PathLike, harmonics: int = 5, varianc
     sweep : str, optional
         A run parameter (``run.params``, e.g. ``"K_fc"``): the linearity cost per value of it,
         over runs of one tone, instead of the grid.
-    model : path, optional
-        A model config of polynomial blocks (wiener, hammerstein, wiener_hammerstein, lpl): its
-        analytic HOSIDFs (seed 002 Lemma 2) beside the measured ones; not with ``sweep``.
+    model : Model, path or dict, optional
+        A model of polynomial blocks (wiener, hammerstein, wiener_hammerstein, lpl): a
+        :class:`nlsid.Model`, its config file or the loaded dict; its analytic HOSIDFs (seed 002
+        Lemma 2) beside the measured ones; not with ``sweep``.
     mapping : dict, optional
         Signals of a foreign MCAP log (``read``).
     on_run : callable, optional

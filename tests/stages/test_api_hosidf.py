@@ -77,6 +77,13 @@ def test_the_analytic_hosidfs_of_a_model_config(tmp_path):
     np.testing.assert_allclose(h.analytic[:, :, 3], np.full((2, 3), A3 / 4), rtol=1e-12)
     assert np.abs(h.analytic[:, :, 2]).max() < 1e-12
     assert h.configs == [str(config)]
+    # the same model in memory (a Model, or its dict): the same closed form, no config file named
+    for model in (nlsid.Model.from_yaml(config), nlsid.Model.from_yaml(config).to_dict()):
+        again = nlsid.hosidf(grid_recording(), harmonics=3, model=model)
+        np.testing.assert_allclose(again.analytic[:, :, 3], np.full((2, 3), A3 / 4), rtol=1e-12)
+        assert again.configs == []
+    with pytest.raises(nlsid.InputError, match="model: expected a Model"):
+        nlsid.hosidf(grid_recording(), harmonics=3, model=3.0)
 
 
 def test_noisy_cubic_within_its_measured_and_its_theoretical_variance():
