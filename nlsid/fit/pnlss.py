@@ -24,7 +24,8 @@ theta = the coefficients of A, B, C, D, E, F and the initial state of each arbit
   on validation data): every accepted iterate is simulated on the validation runs (their initial
   states fitted to their output, arbitrary ones; periodic ones in steady state) and the iterate
   with the lowest validation rms is the result, the linear iterates and the start included; the
-  fit stops after PATIENCE iterates without a lower one. Without validation runs the result is the
+  fit stops after ``patience`` iterates without a lower one in which the estimation error fell by
+  less than PROGRESS (overfitting, not a plateau: :func:`_overfitting`). Without validation runs the result is the
   last iterate (the lowest estimation error).
 """
 
@@ -48,6 +49,7 @@ MU_START = 1e-3
 MU_MAX = 1e12
 MAX_REJECTED = 14        # rejected trials per iteration before the fit stops (mu grows 10x per trial)
 CONVERGED = 1e-10        # relative cost decrease below which an accepted step ends the stage
+PROGRESS = 0.01          # early stopping needs the estimation rms to fall less than this over the patience
 
 
 @dataclass
@@ -186,46 +188,72 @@ class _Problem:
         return with_vector(base, theta), x0s
 
     def cost(self, model: Pnlss, x0s: list) -> float:
-        total = 0.0
-        for rec, x0 in zip(self.records, x0s):
+        """Sum of squared simulation errors over the records (inf if one diverges)."""
+        def one(item) -> float:
+            rec, x0 = item
             y = simulate_record(model, rec, x0, self.bound)
             if y is None:
                 return math.inf
             e = y - rec.y
-            total += float(e @ e)
+            return float(e @ e)
+
+        total = sum(in_threads(one, list(zip(self.records, x0s))))
         return total if math.isfinite(total) else math.inf
 
+    def _columns(self, model: Pnlss, i: int) -> tuple:
+        """The kernel columns taken from record i's Jacobian (None: all, in kernel order) and their
+        places in the LM parameter vector (x0 of an arbitrary record after the global ones)."""
+        n = model.order
+        every = self.active.size == global_vector(model).size
+        if self.records[i].arbitrary:
+            k = self.arbitrary.index(i)
+            x_cols = self.active.size + k * n + np.arange(n)
+            columns = None if every else np.concatenate([np.arange(n), n + self.active])
+            return columns, np.concatenate([x_cols, np.arange(self.active.size)])
+        return (slice(n, None) if every else n + self.active), np.arange(self.active.size)
+
     def normal_equations(self, model: Pnlss, x0s: list) -> tuple[np.ndarray, np.ndarray, float]:
+        """H = J'J, g = J'e and the cost e'e over the records (one thread per record), J in the LM
+        parameter order."""
         from scipy.linalg.blas import dsyrk
 
         clock = time.perf_counter()
-        n = model.order
-        p = self.size(model)
-        H, g, cost = np.zeros((p, p)), np.zeros(p), 0.0
-        every = self.active.size == global_vector(model).size
-        for i, (rec, x0) in enumerate(zip(self.records, x0s)):
-            # kernel columns taken, and their places in the LM parameter vector
-            if rec.arbitrary:
-                k = self.arbitrary.index(i)
-                x_cols = self.active.size + k * n + np.arange(n)
-                columns = None if every else np.concatenate([np.arange(n), n + self.active])
-                index = np.concatenate([x_cols, np.arange(self.active.size)])
-            else:
-                columns = slice(n, None) if every else n + self.active
-                index = np.arange(self.active.size)
-            block = np.zeros((index.size, index.size))
-            gb = np.zeros(index.size)
-            for e, J in jacobian_blocks(model, rec, x0, self.bound):
+
+        def one(i: int):
+            columns, index = self._columns(model, i)
+            block, gb, cost, work = np.zeros((index.size, index.size)), np.zeros(index.size), 0.0, 0
+            for e, J in jacobian_blocks(model, self.records[i], x0s[i], self.bound):
                 Jc = J if columns is None else np.ascontiguousarray(J[:, columns])
                 block += dsyrk(1.0, Jc.T, trans=0, lower=0)  # J'J, upper triangle; Jc.T is Fortran-ordered
                 gb += Jc.T @ e
                 cost += float(e @ e)
-                self.jacobian_work += Jc.shape[0] * Jc.shape[1]
-            block = np.triu(block) + np.triu(block, 1).T
+                work += Jc.shape[0] * Jc.shape[1]
+            return index, np.triu(block) + np.triu(block, 1).T, gb, cost, work
+
+        p = self.size(model)
+        H, g, cost = np.zeros((p, p)), np.zeros(p), 0.0
+        for index, block, gb, part, work in in_threads(one, range(len(self.records))):
             H[np.ix_(index, index)] += block
             g[index] += gb
+            cost += part
+            self.jacobian_work += work
         self.jacobian_seconds += time.perf_counter() - clock
         return H, g, cost
+
+
+def in_threads(function, items) -> list:
+    """[function(item) for item in items], in :func:`nlsid.simulate.threads.thread_count` threads
+    when there are several items (the kernels release the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from nlsid.simulate.threads import thread_count
+
+    items = list(items)
+    workers = min(thread_count(), len(items))
+    if workers <= 1:
+        return [function(item) for item in items]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(function, items))
 
 
 @dataclass
@@ -277,10 +305,20 @@ def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iteration
         kept.append((model, x0s))
         if decrease < CONVERGED:
             return model, x0s, "converged"
-        if history[-1].validation_rms is not None and len(history) - 1 - _best(history) >= patience:
+        if _overfitting(history, patience):
             return model, x0s, "stopped early"
         H, g, cost = problem.normal_equations(model, x0s)
     return model, x0s, "iteration limit"
+
+
+def _overfitting(history: list[Iteration], patience: int) -> bool:
+    """Early stopping: no lower validation rms in the last ``patience`` iterates while the estimation
+    rms fell by less than PROGRESS over them. A fit still learning (the estimation error falling
+    faster) crosses a plateau of the validation error rather than stopping on it: a PNLSS fit
+    often stalls for tens of iterations before its nonlinear terms find the system."""
+    if history[-1].validation_rms is None or len(history) - 1 - _best(history) < patience:
+        return False
+    return history[-1].estimation_rms > (1 - PROGRESS) * history[-1 - patience].estimation_rms
 
 
 def _best(history: list[Iteration], stage: str | None = None) -> int:
@@ -343,7 +381,8 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
     max_iterations : accepted iterations of the nonlinear stage at most (0: none).
     linear_iterations : of the linear stage (E = F = 0); default 20 when the start has no nonlinear
         coefficients, else 0 (a nonlinear start is refined as a whole).
-    patience : the fit stops after this many accepted iterates without a lower validation error.
+    patience : the fit stops after this many accepted iterates without a lower validation error
+        during which the estimation error fell by less than 1 % (:func:`_overfitting`).
 
     Returns
     -------
