@@ -44,6 +44,9 @@ hysteresis          odd distortion; the resonance and the     ``nonlinearities: 
                     damping move with level; residual force   beta, gamma; A = n = 1), the
                     depends on the path since the last        elastic part the model's own
                     reversal (a loop growing with the stroke) stiffness
+hysteresis_feedback as hysteresis, for a transfer function    ``nonlinear_feedback`` around the
+                    model (its output read as position)       model with ``bouc_wen`` (k, beta,
+                                                              gamma, the linear coefficients)
 end_stops           distortion at the largest levels only;    ``nonlinearities: end_stop`` (ks,
                     residual force where the position is      cs, upper_stop and/or lower_stop:
                     beyond an edge (contact)                  the keys stiffness, damping,

@@ -1,4 +1,6 @@
-"""Hysteresis: a Bouc-Wen restoring force on the mass of a mass-spring-damper.
+"""Hysteresis: a Bouc-Wen restoring force on the mass of a mass-spring-damper, or fed back around a
+transfer function model from force to position (``hysteresis_feedback``: y = G (u - k z(y')), a
+``nonlinear_feedback`` with G's coefficients refined, :mod:`~nlsid.diagnose.hypotheses.velocity_feedback`).
 
 The force is F = k z with the Bouc-Wen state z' = v - beta |v| z - gamma v |z| (A = 1 and n = 1
 held: for n = 1, A and k are one parameter, :mod:`nlsid.models.forces`), z in position units. It
@@ -31,7 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db
+from nlsid.diagnose.hypotheses import velocity_feedback
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, with_lti
 from nlsid.diagnose.hypotheses.mass_forces import add_force, force_paths, needs
 from nlsid.diagnose.simulation import ModelRunner
 
@@ -97,4 +100,58 @@ HYSTERESIS = Hypothesis(
     _applies, _estimate, add_force({"type": "bouc_wen"}), ("k", "beta", "gamma"),
     force_paths(("k", "beta", "gamma")), reading=_reading)
 
-HYPOTHESES = (HYSTERESIS,)
+
+
+def _estimate_feedback(ctx: Context) -> Estimate | str:
+    """Start values of the feedback around a transfer function: the same grid, the model's output
+    read as the position (:func:`velocity_feedback.reading`: a continuous G or its equivalent of
+    relative degree >= 2), its static stiffness K = G(0)^-1 in input units per output unit playing
+    the model's stiffness (k a share of it, the denominator lowered by k / 2 times the numerator)."""
+    found = velocity_feedback.reading(ctx)
+    if isinstance(found, str):
+        return found
+    reading, notes = found
+    if reading.output != "position":
+        return "needs the model's output read as a position (it has a zero at s = 0: a velocity)"
+    num, den = np.asarray(reading.linear["num"], float), np.asarray(reading.linear["den"], float)
+    discrete = reading.linear.get("domain") == "discrete"
+    num0, den0 = (num.sum(), den.sum()) if discrete else (num[-1], den[-1])
+    if num0 == 0 or den0 / num0 <= 0:
+        return "needs a spring in the model (a positive static stiffness den(0) / num(0)), part of which yields"
+    stiffness = float(den0 / num0)
+    outputs = np.concatenate(ctx.runner.simulate_each(ctx.runs))
+    spread = float(np.std(outputs))
+    if spread == 0:
+        return "the model does not move on the estimation runs"
+    lti = {"type": "transfer_function", **reading.linear, "output": "position"}
+    base = with_lti(ctx.runner.data, lti)
+    aligned = (np.pad(num, (0, max(den.size - num.size, 0)))[:den.size] if discrete
+               else np.pad(num, (den.size - num.size, 0)))
+    candidates = []
+    for share in GAMMA_SHARES:
+        for bound in (b * spread for b in BOUND_SHARES):
+            beta, gamma = _shape(bound, share)
+            for split in SPLITS:
+                k = split * stiffness
+                lowered = den - 0.5 * k * aligned
+                values = {"k": k, "beta": beta, "gamma": gamma,
+                          **{f"num[{i}]": float(c) for i, c in enumerate(num)},
+                          **{f"den[{i}]": float(c) for i, c in enumerate(lowered)}}
+                cost = ctx.simulation_rss(HYSTERESIS_FEEDBACK.extend(base, values))
+                candidates.append((cost, values, bound, split))
+    cost, values, bound, split = min(candidates, key=lambda c: c[0])
+    note = (f"the least simulation error of a grid of {len(candidates)} starts: zmax = {bound:.3g}, gamma / beta = "
+            f"{values['gamma'] / values['beta']:.2g}, k = {split:g} of the model's static stiffness {stiffness:.4g} and "
+            "the denominator lowered by k / 2 times the numerator (no standard errors)")
+    return Estimate(values, {n: float("nan") for n in values}, explained_db(float(np.sum(ctx.target() ** 2)), cost),
+                    "; ".join([note, *notes]), lti=lti)
+
+
+HYSTERESIS_FEEDBACK = Hypothesis(
+    "hysteresis_feedback", "Hysteresis (Bouc-Wen force) fed back around the transfer function", "stiffness", "k",
+    "input units / output units",
+    "as hysteresis, for a transfer function model: residual like the response to a Bouc-Wen force of the output",
+    velocity_feedback.applies, _estimate_feedback, velocity_feedback.extender({"type": "bouc_wen"}, ("k", "beta", "gamma")),
+    ("k", "beta", "gamma"), velocity_feedback.paths(("k", "beta", "gamma")), reading=_reading)
+
+HYPOTHESES = (HYSTERESIS, HYSTERESIS_FEEDBACK)
