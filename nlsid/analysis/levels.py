@@ -266,25 +266,124 @@ def analyse_recording(
         return analyse_runs(recording_runs(recording, path), method, probability, source=str(path))
 
 
-def across_levels(levels: list[LevelResult]) -> dict:
-    """BLA and distortion versus rms level (seed 000 Figs. 4-5).
+#: A line excited at every level whose share of its level's input power changes by more than this
+#: over the levels is not compared (dB): a line of the multisine keeps its share (the levels are
+#: scaled copies of one amplitude spectrum), an interference of fixed amplitude (a mains line in
+#: the force) loses 20 log10 of the level ratio.
+INPUT_SHARE_SPREAD_DB = 10.0
+
+
+@dataclass(frozen=True)
+class CommonLines:
+    """The lines on which the BLAs of several levels are compared (:func:`common_lines`).
+
+    ``frequency_hz`` are the compared lines; ``index[i]`` their positions in level i's excited
+    lines (its ``robust.G``), ``None`` for a level set aside (no line in common with the reference
+    level); ``excited_everywhere`` counts the lines excited at every level not set aside, before
+    ``input_outliers_hz`` (lines whose input does not follow the level) were removed;
+    ``reason`` says why nothing is compared, ``None`` when lines are.
+    """
+
+    frequency_hz: np.ndarray
+    index: list
+    excited_everywhere: int
+    input_outliers_hz: np.ndarray
+    reason: str | None
+
+    @property
+    def compared(self) -> bool:
+        return self.reason is None
+
+    def summary(self) -> dict:
+        """``lines_compared``, ``lines_excited_everywhere``, ``input_outliers_hz`` and ``not_compared``."""
+        return {"lines_compared": int(self.frequency_hz.size), "lines_excited_everywhere": self.excited_everywhere,
+                "input_outliers_hz": [float(f) for f in self.input_outliers_hz], "not_compared": self.reason}
+
+
+def _line_keys(level: LevelResult, tolerance: float) -> np.ndarray:
+    """Integer keys of a level's excited frequencies: equal keys, equal frequency within ``tolerance``."""
+    return np.rint(level.lines.frequency(level.lines.excited) / tolerance).astype(np.int64)
+
+
+def _input_share_db(level: LevelResult, index: np.ndarray) -> np.ndarray:
+    """Input power at the excited lines ``index`` relative to the median over all excited lines (dB)."""
+    power = level.spectrum.u_power[level.lines.excited]
+    with np.errstate(divide="ignore"):
+        return 10 * np.log10(power[index] / np.median(power))
+
+
+def common_lines(levels: list[LevelResult]) -> CommonLines:
+    """The lines excited at every level, without those whose input does not follow the level.
+
+    The levels are taken from the lowest (the reference); a level that excites no line the levels
+    before it all excite is set aside (``index`` None: not compared), so one level on another grid
+    does not take the comparison from the others. Of the lines excited at every other level, a line
+    whose input power relative to its level's median excited line (:func:`_input_share_db`) spreads
+    over the levels by more than :data:`INPUT_SHARE_SPREAD_DB` is left out: its input is not the
+    multisine's (a mains line inferred as excited). Frequencies are matched within 1e-6 of the
+    finest line spacing, so levels of different periods share the lines they both excite.
+    """
+    if not levels:
+        return CommonLines(np.zeros(0), [], 0, np.zeros(0), "no multisine level")
+    tolerance = 1e-6 * min(level.lines.fs / level.lines.period for level in levels)
+    keys = [_line_keys(level, tolerance) for level in levels]
+    shared = keys[0]
+    kept = [0]
+    for i in range(1, len(levels)):
+        both = np.intersect1d(shared, keys[i])
+        if both.size:
+            shared, kept = both, kept + [i]
+    if len(levels) < 2:
+        return CommonLines(np.zeros(0), [None], 0, np.zeros(0), "one level")
+    if len(kept) < 2:
+        return CommonLines(np.zeros(0), [None] * len(levels), 0, np.zeros(0),
+                           "no line is excited at the reference level and at any other level")
+    index = {i: np.searchsorted(keys[i], shared) for i in kept}
+    shares = np.array([_input_share_db(levels[i], index[i]) for i in kept])
+    with np.errstate(invalid="ignore"):
+        spread = np.max(shares, axis=0) - np.min(shares, axis=0)
+    follows = spread <= INPUT_SHARE_SPREAD_DB  # NaN (no input power) does not follow either
+    frequency = levels[0].lines.frequency(levels[0].lines.excited[index[0]])
+    if not follows.any():
+        reason = (f"none of the {shared.size} lines excited at every level has an input that follows the level "
+                  f"(its share of the input power changes by more than {INPUT_SHARE_SPREAD_DB:g} dB)")
+        return CommonLines(np.zeros(0), [None] * len(levels), int(shared.size), frequency, reason)
+    return CommonLines(frequency[follows], [index[i][follows] if i in index else None for i in range(len(levels))],
+                       int(shared.size), frequency[~follows], None)
+
+
+def across_levels(levels: list[LevelResult], common: CommonLines | None = None) -> dict:
+    """BLA and distortion versus rms level (seed 000 Figs. 4-5), compared on common lines only.
 
     Per level: the rms input, the band-mean |G_BLA|^2 (dB), the band-mean nonlinear and noise
-    variances relative to it (dB), and, for levels that excite the same lines as the lowest level,
-    the mean and the largest change of |G_BLA| relative to that level (dB, 20 log10 of the ratio).
-    Without multisine levels (a recording of arbitrary runs only) there is no reference level and no row.
+    variances relative to it (dB), and the change of |G_BLA| relative to the lowest level (the
+    reference), ``c_k = 20 log10 |G_k| / |G_ref,k|`` (dB) over the lines of :func:`common_lines`
+    (``common``, by default those of ``levels``): its mean, median and largest in magnitude. Where
+    no comparison is made (the reference itself, a level set aside, no common line) the changes are
+    ``None`` (null in JSON) and ``bla_not_compared`` says why: a change of 0 dB is never stated
+    for want of a comparison. Without multisine levels (a recording of arbitrary runs only) there
+    is no reference level and no row.
     """
     if not levels:
         return {"reference_level": None, "levels": []}
+    common = common_lines(levels) if common is None else common
     reference = levels[0]
     rows = []
-    for level in levels:
+    for i, level in enumerate(levels):
         row = {key: value for key, value in level.summary().items() if key not in ("spectrum", "warnings")}
-        same_lines = level.lines.period == reference.lines.period
-        if same_lines and np.array_equal(level.lines.excited, reference.lines.excited):
+        row.update(bla_change_mean_db=None, bla_change_median_db=None, bla_change_max_db=None, bla_compared_lines=0)
+        if i == 0:
+            row["bla_not_compared"] = "the reference level"
+        elif not common.compared:
+            row["bla_not_compared"] = common.reason
+        elif common.index[i] is None:
+            row["bla_not_compared"] = "no excited line in common with the reference level"
+        else:
             with np.errstate(divide="ignore", invalid="ignore"):  # a level that did not respond: G = 0
-                change = 20 * np.log10(np.abs(level.robust.G) / np.abs(reference.robust.G))
-            row["bla_change_mean_db"] = float(np.mean(change))
-            row["bla_change_max_db"] = float(change[np.argmax(np.abs(change))])
+                change = 20 * np.log10(np.abs(level.robust.G[common.index[i]])
+                                       / np.abs(reference.robust.G[common.index[0]]))
+            row.update(bla_change_mean_db=float(np.mean(change)), bla_change_median_db=float(np.median(change)),
+                       bla_change_max_db=float(change[np.argmax(np.abs(change))]),
+                       bla_compared_lines=int(change.size), bla_not_compared=None)
         rows.append(row)
-    return {"reference_level": reference.level, "levels": rows}
+    return {"reference_level": reference.level, "levels": rows, **common.summary()}

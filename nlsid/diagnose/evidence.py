@@ -320,6 +320,7 @@ class Evidence:
     harmonics: list[dict] = field(default_factory=list)
     output_rms: float = float("nan")  # of the measured mean periods (AC lines), as error_rms
     constant_runs: list[str] = field(default_factory=list)  # runs whose measured y never changes
+    across: dict = field(default_factory=dict)  # the measured across_levels without its rows
 
     @property
     def constant_output(self) -> bool:
@@ -364,7 +365,7 @@ class Evidence:
             "error_above_noise": self.overall.summary(),
             "lines": self.lines,
             "bla": [{k: v for k, v in row.items() if not isinstance(v, np.ndarray)} for row in self.bla],
-            "levels": self.levels,
+            "levels": self.levels, "across_levels": self.across,
             "harmonics": self.harmonics,
             "odd_distortion_unexplained": self.odd_seen, "even_distortion_unexplained": self.even_seen,
             "linear_mismatch": self.linear_seen, "constant_output_runs": self.constant_runs,
@@ -399,11 +400,7 @@ class Evidence:
                     out.append(f"level {_name(row['level'])}: {name} distortion the model does not produce, "
                                f"{_above_text(test)}")
         out += self._harmonic_findings()
-        changes = [row for row in self.levels if math.isfinite(row.get("bla_change_max_db", float("nan")))]
-        if len(self.levels) > 1 and changes:
-            last = changes[-1]
-            out.append(f"BLA changes by {last['bla_change_max_db']:+.1f} dB over the levels; the model's by "
-                       f"{last['model_bla_change_max_db']:+.1f} dB")
+        out += level_findings(self.levels, self.across)
         return out
 
 
@@ -437,6 +434,30 @@ class Evidence:
         return out
 
 
+def level_findings(rows: list[dict], across: dict) -> list[str]:
+    """The change of the measured BLA over the levels and the model's, in words, or why there is none.
+
+    ``rows`` are :func:`nlsid.analysis.levels.across_levels` rows with ``model_bla_change_max_db``,
+    ``across`` the rest of the measured ``across_levels`` (``not_compared``, ``lines_compared``).
+    The change is that of the highest level compared with the reference (the lowest), on the lines
+    excited at every level: a level that was not compared never reads as a change of 0 dB.
+    """
+    if len(rows) < 2:
+        return []
+    compared = [row for row in rows if row.get("bla_change_max_db") is not None]
+    if not compared:
+        reasons = sorted({row["bla_not_compared"] for row in rows[1:] if row.get("bla_not_compared")})
+        return [f"BLA not compared over the levels: {'; '.join(reasons) or 'no common lines'}"]
+    last = compared[-1]
+    model = last.get("model_bla_change_max_db")
+    model_text = "" if model is None or not math.isfinite(model) else f"; the model's by {model:+.1f} dB"
+    aside = [row for row in rows[1:] if row.get("bla_change_max_db") is None]
+    return [f"BLA changes by up to {last['bla_change_max_db']:+.1f} dB (mean {last['bla_change_mean_db']:+.1f} dB "
+            f"over {last['bla_compared_lines']} lines excited at every level) from level {_name(rows[0]['level'])} "
+            f"to level {_name(last['level'])}{model_text}"
+            + (f"; {len(aside)} level(s) not compared ({aside[0]['bla_not_compared']})" if aside else "")]
+
+
 def _above_text(test: dict) -> str:
     """A test summary's residual against the noise in words (a zero floor has no dB value)."""
     if test.get("noise_floor_zero"):
@@ -460,13 +481,13 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
     Returns the evidence and the model's simulated runs keyed by run id. ``source`` (the
     recording) prefixes the runs in error messages: ``source:/runs/<id>``.
     """
-    from nlsid.analysis.levels import across_levels, analyse_runs
+    from nlsid.analysis.levels import across_levels, analyse_runs, common_lines
 
     used = [run for run in runs if run.run_id in roles]
     simulated = {run.run_id: runner.simulate(run) for run in used}
     residuals = [residual_of(run, simulated[run.run_id].y, roles[run.run_id]) for run in used]
     multisine = [run for run in used if run.kind == "multisine"]
-    lines, bla, levels, spectra_ = [], [], [], {}
+    lines, bla, levels, spectra_, across = [], [], [], {}, {}
     measured_levels = model_levels = ()
     if multisine:
         model_runs = [_as_measured(simulated[run.run_id], run) for run in multisine]
@@ -483,9 +504,11 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
             comparison["significant"] = bla_significant(comparison)
             bla.append(comparison)
             spectra_[measured.level] = (measured.spectrum, model.spectrum, measured.lines)
-        for row, model_row in zip(across_levels(list(measured_levels))["levels"],
-                                  across_levels(list(model_levels))["levels"]):
-            row["model_bla_change_max_db"] = model_row.get("bla_change_max_db", float("nan"))
+        common = common_lines(list(measured_levels))  # the model is compared on the measured lines
+        measured_across = across_levels(list(measured_levels), common)
+        across = {key: value for key, value in measured_across.items() if key != "levels"}
+        for row, model_row in zip(measured_across["levels"], across_levels(list(model_levels), common)["levels"]):
+            row["model_bla_change_max_db"] = model_row["bla_change_max_db"]
             row["model_bla_db"] = model_row["bla_db"]
             levels.append(row)
     error, noise = error_power(residuals)
@@ -495,7 +518,7 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
         time=_time_signals(runner, used, residuals), noise_rms=math.sqrt(noise), error_rms=math.sqrt(error),
         spectra=spectra_, bla_levels=(measured_levels, model_levels), harmonics=harmonic_tests(residuals, used),
         output_rms=math.sqrt(output),
-        constant_runs=[run.run_id for run in used if run.y.size and np.ptp(run.y) == 0],
+        constant_runs=[run.run_id for run in used if run.y.size and np.ptp(run.y) == 0], across=across,
     ), simulated
 
 
