@@ -63,7 +63,7 @@ from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
 
 DOMAINS = ("s", "z")
-RELOCATION_ITERATIONS = 20      # upper bound; noise-free data settle within 3-10 steps, noisy ones jitter at the noise level
+RELOCATION_ITERATIONS = 20      # bound; noise-free data settle in 3-10 steps, noisy ones jitter
 RELOCATION_TOLERANCE = 1e-10    # relative pole change (to the band scale) that ends the relocation
 SMALL_SIGMA_DIRECT = 1e-8       # |d~| below this: the relaxed step is degenerate, redo it with d~ = 1
 STABILITY_MARGIN = 1e-12        # a reflected pole on the boundary is moved this far inside
@@ -226,12 +226,17 @@ def _canonical(poles: np.ndarray, tolerance: float) -> np.ndarray:
     return out[np.argsort(np.abs(out.imag) + 1e-300 * np.abs(out))]
 
 
-def starting_poles(order: int, domain: str, f_min: float, f_max: float, fs: float) -> np.ndarray:
-    """Gustavsen and Semlyen's start: complex pairs with imaginary parts spread linearly over the band
-    and real parts 1/100 of them (weakly damped, so each basis function is a distinct peak), one
-    real pole at the band's centre for an odd order; mapped to z by z = e^{s/fs}."""
+def starting_poles(order: int, domain: str, f_min: float, f_max: float, fs: float,
+                   spacing: str = "linear") -> np.ndarray:
+    """Gustavsen and Semlyen's start: complex pairs with imaginary parts spread over the band
+    (``linear`` or ``log`` spacing: the second resolves modes crowded at the low end of a band of
+    several decades, where the linear one leaves the few lowest peaks without a nearby pole) and real
+    parts 1/100 of them (weakly damped, so each basis function is a distinct peak), one real pole at
+    the band's centre for an odd order; mapped to z by z = e^{s/fs}."""
     pairs = order // 2
-    omega = 2 * np.pi * np.linspace(max(f_min, f_max / 1000), f_max, pairs) if pairs else np.zeros(0)
+    low = max(f_min, f_max / 1000)
+    spread = np.geomspace(low, f_max, pairs) if spacing == "log" else np.linspace(low, f_max, pairs)
+    omega = 2 * np.pi * spread if pairs else np.zeros(0)
     s = np.concatenate([-omega / 100 + 1j * omega, [-2 * np.pi * 0.5 * (f_min + f_max)] if order % 2 else []])
     if domain == "z":
         s = np.exp(s / fs)
@@ -400,6 +405,12 @@ def _refine(x, G, weight, poles, residues, direct, iterations: int):
     return _unpack(result.x, pairs)
 
 
+def _canonical_pairs(poles: np.ndarray, residues: np.ndarray, direct: float):
+    """A pair whose pole the refinement moved to Im p < 0 written by its other member (p*, r*)."""
+    flip = poles.imag < 0
+    return np.where(flip, poles.conj(), poles), np.where(flip, residues.conj(), residues), direct
+
+
 def _covariance(theta: np.ndarray, pairs: np.ndarray, x: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
     """(1/2) (J^T J)^{-1}: each weighted residual's real and imaginary part has variance 1/2."""
     J = _jacobian(theta, pairs, x, weight)
@@ -492,32 +503,24 @@ def vector_fit(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray | None
     # continuous: work in p = s / omega_s (frequency scaling keeps the basis and A - b c^T well scaled)
     scale = 2 * np.pi * max(frequency.max(), 1e-300) if domain == "s" else 1.0
     xs = x / scale
-    f_pos = frequency[frequency > 0]
-    current = (starting_poles(order, domain, f_pos.min() if f_pos.size else 0.0, frequency.max(), fs)
-               if poles is None else _canonical(np.asarray(poles, complex), 0.0))
-    if poles is not None:
-        current = np.concatenate([current, current[current.imag > 0].conj()])
-        current = _canonical(current, 0.0)
-        if int(np.sum(np.where(current.imag > 0, 2, 1))) != order:
+    if poles is None:
+        f_pos = frequency[frequency > 0]
+        f_min = f_pos.min() if f_pos.size else 0.0
+        # a band of more than a decade: a log-spaced start too, the better relocation kept
+        spacings = ["linear", "log"] if f_min > 0 and frequency.max() > 10 * f_min else ["linear"]
+        starts = [starting_poles(order, domain, f_min, frequency.max(), fs, spacing) for spacing in spacings]
+    else:
+        given = _canonical(np.asarray(poles, complex), 0.0)
+        given = _canonical(np.concatenate([given, given[given.imag > 0].conj()]), 0.0)
+        if int(np.sum(np.where(given.imag > 0, 2, 1))) != order:
             raise InputError("poles", f"expected {order} starting poles, got {len(np.asarray(poles))}")
-    current = current / scale if domain == "s" else current
-    if stable:
-        current = _reflect(current, domain)
-    steps = 0
-    for steps in range(1, iterations + 1):
-        new = relocate(xs, G, weight, current)
-        if stable:
-            new = _reflect(new, domain)
-        new = _canonical(new, 1e-12 * max(1.0, float(np.max(np.abs(new)))))
-        change = _pole_change(current, new)
-        current = new
-        if change < RELOCATION_TOLERANCE:
-            break
-    residues, direct = residues_for(xs, G, weight, current)
-    cost = _cost(xs, G, weight, current, residues, direct)
+        starts = [given]
+    candidates = [_relocation(xs, G, weight, start / scale if domain == "s" else start, domain, stable, iterations)
+                  for start in starts]
+    current, residues, direct, cost, steps = min(candidates, key=lambda c: c[3])
     refined = False
     if refine:
-        p, r, d = _refine(xs, G, weight, current, residues, direct, refine_evaluations)
+        p, r, d = _canonical_pairs(*_refine(xs, G, weight, current, residues, direct, refine_evaluations))
         c = _cost(xs, G, weight, p, r, d)
         if c < cost and (not stable or np.all(_stable(p, domain))):
             current, residues, direct, cost, refined = p, r, d, c, True
@@ -531,6 +534,25 @@ def vector_fit(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray | None
             covariance = covariance * np.outer(factor, factor)
     return VectorFit(current, residues, direct, domain, float(fs), cost, int(frequency.size), steps, refined,
                      covariance, int(delay))
+
+
+def _relocation(x: np.ndarray, G: np.ndarray, weight: np.ndarray, poles: np.ndarray, domain: str, stable: bool,
+                iterations: int) -> tuple[np.ndarray, np.ndarray, float, float, int]:
+    """Relocation steps from ``poles`` until they settle (or ``iterations``); the poles, the residues
+    and d with them, the cost V, and the steps taken."""
+    current = _reflect(poles, domain) if stable else poles
+    steps = 0
+    for steps in range(1, iterations + 1):
+        new = relocate(x, G, weight, current)
+        if stable:
+            new = _reflect(new, domain)
+        new = _canonical(new, 1e-12 * max(1.0, float(np.max(np.abs(new)))))
+        change = _pole_change(current, new)
+        current = new
+        if change < RELOCATION_TOLERANCE:
+            break
+    residues, direct = residues_for(x, G, weight, current)
+    return current, residues, direct, _cost(x, G, weight, current, residues, direct), steps
 
 
 def _pole_change(old: np.ndarray, new: np.ndarray) -> float:
