@@ -154,6 +154,30 @@ class VectorFit:
         return StateSpace(A, B, C, float(self.direct), discrete=self.domain == "z",
                           delay=self.delay / self.fs if self.domain == "z" else 0.0)
 
+    def continuous_state_space(self) -> StateSpace:
+        """The continuous model whose zero-order-hold equivalent at ``fs`` is this ``z`` fit, block by
+        block of :meth:`state_space`: A_c = fs ln Phi (a pair's block is the real form of
+        fs ln p, a real pole's fs ln p) and B_c = (Phi - I)^{-1} A_c Gamma, from
+        Gamma = A_c^{-1} (e^{A_c / fs} - I) B_c; C and D unchanged. A ``s`` fit is returned as
+        :meth:`state_space`. A pole at z = 1 or on the negative real axis has no such equivalent."""
+        discrete = self.state_space()
+        if self.domain == "s":
+            return discrete
+        A, B = np.zeros_like(discrete.A), np.zeros_like(discrete.B)
+        i = 0
+        for p in self.poles:
+            m = 2 if p.imag > 0 else 1
+            if (m == 1 and p.real <= 0) or abs(p - 1) < 1e-12:
+                raise InputError("poles", f"the pole at z = {p:.6g} has no continuous-time equivalent "
+                                          "through the zero-order hold (z = 1 or negative real)")
+            ps = self.fs * np.log(p if m == 2 else p.real)
+            block = np.array([[ps.real, ps.imag], [-ps.imag, ps.real]]) if m == 2 else np.array([[ps.real]])
+            phi = discrete.A[i:i + m, i:i + m]
+            A[i:i + m, i:i + m] = block
+            B[i:i + m] = np.linalg.solve(phi - np.eye(m), block @ discrete.B[i:i + m])
+            i += m
+        return StateSpace(A, B, discrete.C.copy(), discrete.D, discrete=False, delay=discrete.delay)
+
     def modes(self) -> list[dict]:
         """Each complex pair as a mode: natural frequency (Hz) and damping ratio of its continuous-time
         pole (``z``: s = fs ln z), with standard deviations from :attr:`covariance` by the delta

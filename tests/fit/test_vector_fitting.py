@@ -92,6 +92,14 @@ def test_noise_free_discrete_forty_poles_exact_zoh():
     assert ss.discrete and ss.order == n
     assert np.max(np.abs(ss.frequency_response(z) - G)) < 1e-8 * np.max(np.abs(G))
     assert np.allclose([m["frequency"] for m in fit.modes()], fn, rtol=1e-8)
+    # back through the hold: the continuous structure itself, poles and response at s = j 2 pi f
+    continuous = fit.continuous_state_space()
+    assert not continuous.discrete
+    found = np.linalg.eigvals(continuous.A)
+    assert _relative_pole_error(found, poles) < 1e-8
+    s = 2j * np.pi * f[::40]
+    truth = _modal_response(s, poles, residues, 0.0)
+    assert np.max(np.abs(continuous.frequency_response(s) - truth)) < 1e-7 * np.max(np.abs(truth))
 
 
 def test_noisy_structure_modes_within_standard_errors_and_cost_chi_square():
