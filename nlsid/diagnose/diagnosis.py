@@ -79,7 +79,33 @@ class Outcome:
         h = self.hypothesis
         main = f"{h.main} = {self.estimate.values[h.main]:.4g} {h.unit}"
         moved = self.mechanics_changed()
-        return "; ".join(filter(None, [main, "" if moved in stated else moved]))
+        return "; ".join(filter(None, [main, self.sides_text(), "" if moved in stated else moved]))
+
+    def sides(self) -> dict | None:
+        """A Coulomb-type friction law refined with a constant force on a free mass: the law with
+        unequal sides it equals, or None. With a constant force f0 (the nuisance ``force_offset``)
+        the mass slides against fc - f0 moving forward and fc + f0 moving back, which is the law
+        ``fc_pos = fc - f0``, ``fc_neg = fc + f0`` (docs/configs.md; the two simulate the same
+        record, tests/simulate/test_friction_sides_offset.py): the data cannot tell them apart, so
+        where f0 is significant (more than :data:`MOVED` standard errors) both readings are given.
+        Standard errors ``sqrt(s_fc^2 + s_f0^2)`` (their covariance left out)."""
+        if self.hypothesis.family != "friction" or self.found is None or self.estimate is None:
+            return None
+        f0, s0 = self.found.values.get("force_offset"), self.found.std.get("force_offset", math.nan)
+        fc, sc = self.estimate.values.get("fc"), self.estimate.std.get("fc", math.nan)
+        if f0 is None or fc is None or not math.isfinite(s0) or abs(f0) <= MOVED * s0:
+            return None
+        std = math.sqrt(s0 ** 2 + (sc ** 2 if math.isfinite(sc) else 0.0))
+        return {"fc_pos": fc - f0, "fc_neg": fc + f0, "std": std, "force": f0}
+
+    def sides_text(self) -> str:
+        """:meth:`sides` in words, or ""."""
+        s = self.sides()
+        if s is None:
+            return ""
+        return (f"its sides differ: fc_pos = {s['fc_pos']:.4g} and fc_neg = {s['fc_neg']:.4g} (+- {s['std']:.2g}) "
+                f"{self.hypothesis.unit}, or one fc with a constant force of {s['force']:.4g} (the data cannot "
+                "tell these apart)")
 
     def qualifier(self) -> str:
         """The fitted values' physical reading in a word or two ("hardening"), or ""."""
@@ -127,6 +153,7 @@ class Outcome:
                        explained_on_estimation_db=self.estimate.explained_db, note=self.estimate.note)
         if self.score is not None:
             out["validation"] = self.score.summary()
+        out["sides"] = self.sides()
         return out
 
 
