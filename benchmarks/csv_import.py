@@ -4,7 +4,7 @@ Usage: ``python benchmarks/csv_import.py [ROWS] [--repeats R]`` (default 1,000,0
 Writes a CSV ``t,u,y`` (time in seconds, two noise signals, numbers as Python's shortest round-trip
 text) and prints JSON: the best of R wall-clock and CPU seconds of
 
-- ``nlsid``: :func:`nlsid.io.importers.convert.read_source`, what ``nlsid import`` reads a file
+- ``nlsid``: :func:`nlsid.importers.convert.read_source`, what ``nlsid import`` reads a file
   with (the table found, the columns chosen, the time vector scaled), its fast reading;
 - ``loadtxt``: ``numpy.loadtxt(path, delimiter=",", skiprows=1)``;
 - ``careful``: nlsid's cell-by-cell reading of the same file (the fast one made to decline), run once;
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nlsid.io.importers import csv_file
-from nlsid.io.importers.convert import ImportOptions, read_source
+from nlsid.importers import csv_file
+from nlsid.importers.convert import ImportOptions, read_source
 
 
 def _timed(action, repeats: int) -> tuple[float, float, object]:

@@ -65,7 +65,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
       nlsid import uval.mat yval.mat --fs 610.35 -o recording.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
-    from nlsid.io.importers.convert import ImportOptions, import_file, provenance_record
+    from nlsid.importers.convert import ImportOptions, import_file, provenance_record
     from nlsid.io.provenance import provenance
     from nlsid.io.ranges import parse_range
     from nlsid.io.recording import write_recording

@@ -240,7 +240,7 @@ def _check_config(path: str, kind: str) -> None:
     from nlsid.io.config import load_config, load_yaml
 
     if kind == "design":
-        from nlsid.io.design_config import DesignConfig
+        from nlsid.signals.design_config import DesignConfig
 
         load_config(path, DesignConfig)
     else:

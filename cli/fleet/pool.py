@@ -54,7 +54,7 @@ PRELOAD = ("numpy", "scipy.optimize", "h5py", "yaml", "pydantic", "numba", "nlsi
            "nlsid.cli.fleet.pool", "nlsid.io.recording", "nlsid.io.model_config")
 STAGE_PRELOAD = {
     "design": ("nlsid.signals.design",),
-    "import": ("nlsid.io.importers",),
+    "import": ("nlsid.importers",),
     "simulate": ("nlsid.simulate.batch",),
     "bla": ("nlsid.analysis.bla",),
     "hosidf": ("nlsid.analysis.hosidf",),

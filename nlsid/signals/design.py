@@ -14,7 +14,7 @@ from typing import Iterator
 
 import numpy as np
 
-from nlsid.io.design_config import DesignConfig, MultisineConfig, SinesConfig
+from nlsid.signals.design_config import DesignConfig, MultisineConfig, SinesConfig
 from nlsid.io.run import Run
 from nlsid.signals import multisine as ms
 from nlsid.signals.lines import band_bins, log_bins, random_grid

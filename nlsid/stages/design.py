@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterator, Mapping
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.design_config import DesignConfig
+from nlsid.signals.design_config import DesignConfig
 from nlsid.io.run import Run
 from nlsid.stages.recording import Recording
 

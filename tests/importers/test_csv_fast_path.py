@@ -16,8 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nlsid.errors import InputError
-from nlsid.io.importers import csv_file
-from nlsid.io.importers.csv_file import read_csv, read_table
+from nlsid.importers import csv_file
+from nlsid.importers.csv_file import read_csv, read_table
 
 ROWS = 40
 

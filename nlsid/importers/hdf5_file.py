@@ -1,11 +1,11 @@
 """Plain HDF5 files of any layout (data loggers, other tools): signals by dataset path.
 
 One record of a matrix dataset is named by its index (``/daq/acc[1]``; a dataset whose name ends in
-brackets is taken whole first; :mod:`nlsid.io.importers.variables`). The other datasets are
+brackets is taken whole first; :mod:`nlsid.importers.variables`). The other datasets are
 surveyed: sample-rate datasets (``fs``, ``Ts``, ...), scalars, and the ignored ones
 (``details["ignored_variables"]``).
 
-Attributes named as a sample rate or interval (:data:`nlsid.io.importers.source.RATE_NAME`,
+Attributes named as a sample rate or interval (:data:`nlsid.importers.source.RATE_NAME`,
 ``INTERVAL_NAME``: ``fs``, ``Fs``, ``sample_rate``, ``Ts``, ``dt``, ``dt_ms``, ...) of the imported
 datasets, of the groups holding them and of the file (its root group) are rate variables too
 (:func:`rate_attributes`): where several give a rate, all of them and the rate datasets must agree.
@@ -14,7 +14,7 @@ An attribute of text (a time stamp called ``ts``) is not a rate and is passed ov
 A rate's unit may be given apart from its name: an attribute ``units`` (or ``unit``) of a rate
 dataset, or an attribute ``NAME_units`` (``NAME_unit``, ``NAMEUnits``) beside a rate attribute
 ``NAME`` (``fs`` with ``fs_units = "kHz"``): Hz, kHz, MHz for a rate; s, ms, us for an interval
-(:data:`nlsid.io.importers.source.RATE_UNITS`, ``INTERVAL_UNITS``). It is applied, stated where the
+(:data:`nlsid.importers.source.RATE_UNITS`, ``INTERVAL_UNITS``). It is applied, stated where the
 rate is named (``fs_from``), kept in ``details["rate_units"]``, and an unknown one is refused.
 """
 
@@ -29,9 +29,9 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
-from nlsid.io.importers.source import (INTERVAL_NAME, RATE_NAME, NotFound, RateVariable, Source, option, pick,
+from nlsid.importers.source import (INTERVAL_NAME, RATE_NAME, NotFound, RateVariable, Source, option, pick,
                                       source_from)
-from nlsid.io.importers.variables import (Leaf, check_pairing, matrix_channels, record_of, shape_text, split_index,
+from nlsid.importers.variables import (Leaf, check_pairing, matrix_channels, record_of, shape_text, split_index,
                                          survey)
 
 LISTED = 20

@@ -1,7 +1,7 @@
 """MATLAB ``.mat`` files: v4/v5/v7 through scipy.io, v7.3 (HDF5 underneath) through h5py.
 
 A signal is named by its variable, or by a dotted path into a struct (``data.u``), and one record
-of a matrix by its index (``Acceleration[1]``, ``data.acc[2]``; :mod:`nlsid.io.importers.variables`).
+of a matrix by its index (``Acceleration[1]``, ``data.acc[2]``; :mod:`nlsid.importers.variables`).
 v7.3 files store arrays column-major, so h5py sees them transposed; they are transposed back to
 MATLAB's shape. Only numeric arrays are read (MATLAB classes double, single and the integer classes).
 The other variables are surveyed: sample-rate variables (``fs``, ``Ts``, ...), scalars, and the
@@ -18,8 +18,8 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import H5PY_ERRORS, hdf5_damage, link_name
-from nlsid.io.importers.source import NotFound, Source, option, pick, source_from
-from nlsid.io.importers.variables import Leaf, check_pairing, matrix_channels, record_of, split_index, survey
+from nlsid.importers.source import NotFound, Source, option, pick, source_from
+from nlsid.importers.variables import Leaf, check_pairing, matrix_channels, record_of, split_index, survey
 
 NUMERIC_CLASSES = {"double", "single", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "logical"}
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import Source
+from nlsid.importers.source import Source
 from nlsid.io.mcap_file import open_mcap
 from nlsid.io.mcap_foreign import read_foreign_run
 from nlsid.io.run import CHANNEL_KEY

@@ -9,7 +9,7 @@
   exactly one file. The files are joined sample by sample when they are on one clock (the same
   number of samples and rate, and their time vectors, if any, agree within half a sample); else the
   signals are moved onto the time grid of the file that holds u
-  (:func:`nlsid.io.importers.resample.onto_grid`), over the span both clocks cover, which needs a
+  (:func:`nlsid.importers.resample.onto_grid`), over the span both clocks cover, which needs a
   time vector in each file, or a rate in each (both then taken to start at the same instant, as
   the note says).
 
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import Source, as_matrix, source_rate
+from nlsid.importers.source import Source, as_matrix, source_rate
 
 # Two clocks are one when their rates agree this closely and their starts within half a sample.
 SAME_RATE_TOL = 1e-6
@@ -142,7 +142,7 @@ def _onto_reference(ref: _Clocked, others: list[_Clocked]) -> tuple[dict[str, np
     dropped = ref.n - (last - first)
     notes.append(f"{ref.source.path}: the clock of the input u ({ref.fs:.9g} Hz); samples {first}..{last - 1} kept, "
                  f"the span every file covers ({dropped} dropped)")
-    from nlsid.io.importers.resample import onto_grid
+    from nlsid.importers.resample import onto_grid
 
     for other in others:
         for key, m in other.matrices.items():

@@ -19,8 +19,8 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.feeds import BlaRuns, sine_bin
-from nlsid.io.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
-from nlsid.io.importers.source import LAYOUTS, Record, Source, records_of
+from nlsid.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
+from nlsid.importers.source import LAYOUTS, Record, Source, records_of
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import CHANNEL_KEY, Run, check_channel_name, make_run
 from nlsid.signals.inference import Inference, infer_excitation
@@ -39,7 +39,7 @@ class ImportOptions:
     name in the file (like ``names`` of u, y, r); ``units``: signal or channel name -> its unit
     (overrides a unit the file gives); ``crop``: the samples of each source record kept (before
     decimation); ``decimate``: keep every K-th sample after an anti-alias filter
-    (:mod:`nlsid.io.importers.resample`); ``skip_rows``: lines above a CSV header (None: found)."""
+    (:mod:`nlsid.importers.resample`); ``skip_rows``: lines above a CSV header (None: found)."""
 
     names: dict[str, str]
     channels: dict[str, str] = field(default_factory=dict)
@@ -115,20 +115,20 @@ def read_source(path: Path, options: ImportOptions, every_signal_optional: bool 
     if options.skip_rows is not None and fmt != "csv":
         raise InputError(f"--skip-rows {options.skip_rows}", f"applies to CSV/TSV files; {path} is {fmt}")
     if fmt == "csv":
-        from nlsid.io.importers.csv_file import read_csv
+        from nlsid.importers.csv_file import read_csv
 
         source = read_csv(path, names, options.time, optional, fs_given=options.fs is not None, defaulted=defaulted,
                           skip_rows=options.skip_rows)
     elif fmt == "mat":
-        from nlsid.io.importers.mat_file import read_mat
+        from nlsid.importers.mat_file import read_mat
 
         source = read_mat(path, names, options.time, optional)
     elif fmt == "hdf5":
-        from nlsid.io.importers.hdf5_file import read_hdf5
+        from nlsid.importers.hdf5_file import read_hdf5
 
         source = read_hdf5(path, names, options.time, optional)
     else:
-        from nlsid.io.importers.mcap_log import read_mcap
+        from nlsid.importers.mcap_log import read_mcap
 
         source = read_mcap(path, names, options.time)
     if options.fs is not None:
@@ -158,7 +158,7 @@ def check_units(units: dict[str, str], options: ImportOptions) -> None:
 
 
 def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions) -> Imported:
-    """Read, infer and cut ``path`` (a file, or several: :mod:`nlsid.io.importers.several`) into
+    """Read, infer and cut ``path`` (a file, or several: :mod:`nlsid.importers.several`) into
     validated runs (nothing is written)."""
     paths = [Path(path)] if isinstance(path, (str, Path)) else [Path(p) for p in path]
     if not paths:
@@ -247,7 +247,7 @@ def _trimmed(records: list[Record], fs: float, options: ImportOptions) -> tuple[
         records = cut
         notes.append(f"{options.crop.option} {options.crop.text}: samples {a}..{b - 1} of each record kept")
     if options.decimate > 1:
-        from nlsid.io.importers.resample import anti_alias, decimate, edge_samples
+        from nlsid.importers.resample import anti_alias, decimate, edge_samples
 
         k = options.decimate
         fir = anti_alias(k)

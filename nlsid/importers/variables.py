@@ -1,7 +1,7 @@
 """The variables of a MAT or HDF5 file around the imported ones.
 
 - ``NAME[i]`` names record ``i`` (from 0) of a matrix variable: the slice across the axis along
-  which time runs (the longer one, as :func:`nlsid.io.importers.source.as_matrix` decides), so row
+  which time runs (the longer one, as :func:`nlsid.importers.source.as_matrix` decides), so row
   1 of a 3 x N ``Acceleration`` is ``Acceleration[1]``, and column 1 of an N x 3 one too.
 - A channel given a matrix of several records, beside u, y, r of one record each, becomes one
   channel per record, ``NAME_0``, ``NAME_1``, ... (:func:`matrix_channels`).
@@ -9,7 +9,7 @@
   ``NAME[i]`` options that pick one record (:func:`check_pairing`); a matrix as u, y or r beside
   signals of another shape would be several inputs or outputs, which a recording does not hold.
 - Every other variable of the file is surveyed (:func:`survey`): one named as a sample rate or
-  interval (:data:`nlsid.io.importers.source.RATE_NAME`, ``INTERVAL_NAME``) is a rate variable of
+  interval (:data:`nlsid.importers.source.RATE_NAME`, ``INTERVAL_NAME``) is a rate variable of
   the source; numeric scalars are kept to be listed when no sample rate is found; the rest, and the
   records of an indexed matrix that were not picked, go to ``details["ignored_variables"]``.
 """
@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import INTERVAL_NAME, RATE_NAME, RateVariable, Source, option, time_axis
+from nlsid.importers.source import INTERVAL_NAME, RATE_NAME, RateVariable, Source, option, time_axis
 from nlsid.io.run import CHANNEL_KEY, check_channel_name
 
 INDEXED = re.compile(r"^(?P<base>.+)\[(?P<index>\d+)\]$")

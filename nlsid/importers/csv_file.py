@@ -51,7 +51,7 @@ from typing import Callable
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.importers.source import NotFound, Source, option, sample_rate, source_from
+from nlsid.importers.source import NotFound, Source, option, sample_rate, source_from
 from nlsid.io.timestamps import REL_TOL
 
 TIME_NAMES = ("t", "time", "timestamp")
@@ -579,7 +579,7 @@ def read_csv(path: Path, names: dict[str, str], time: str | None, optional: set[
     given (``u``, ``y``, ``r``); ``skip_rows``: lines above the header (None: found).
 
     Several columns of one signal (realizations side by side) give a (realizations, samples) matrix,
-    which :func:`nlsid.io.importers.source.records_of` cuts into one record per realization.
+    which :func:`nlsid.importers.source.records_of` cuts into one record per realization.
     """
     table = read_table(path, skip_rows)
     header, body, width = table.header, table.body, table.width

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nlsid.io.hdf5_recording import HDF5Recording
-from nlsid.io.importers.csv_file import read_csv
+from nlsid.importers.csv_file import read_csv
 from nlsid.io.recording import read_runs
 
 FS = 1000.0
