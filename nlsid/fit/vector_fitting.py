@@ -63,7 +63,8 @@ from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
 
 DOMAINS = ("s", "z")
-RELOCATION_ITERATIONS = 20      # bound; noise-free data settle in 3-10 steps, noisy ones jitter
+RELOCATION_ITERATIONS = 10      # bound; noise-free data settle in 3-10 steps, noisy ones jitter (refined after)
+NOISE_LEVEL_COST = 2.0          # a start whose cost is below this times the lines needs no other start
 RELOCATION_TOLERANCE = 1e-10    # relative pole change (to the band scale) that ends the relocation
 SMALL_SIGMA_DIRECT = 1e-8       # |d~| below this: the relaxed step is degenerate, redo it with d~ = 1
 STABILITY_MARGIN = 1e-12        # a reflected pole on the boundary is moved this far inside
@@ -505,7 +506,10 @@ def vector_fit(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray | None
     delay : int
         Known dead time in samples (``z``): the data are multiplied by z^delay before the fit.
     poles : array of complex or None
-        Starting poles (one member per pair, or both); None: :func:`starting_poles`.
+        Starting poles (one member per pair, or both); None: :func:`starting_poles`, linearly
+        spaced, and log-spaced too on a band of more than a decade unless the first relocation
+        already reaches the noise level (cost below NOISE_LEVEL_COST times the lines); the
+        relocation of lower cost is kept.
     iterations : int
         Upper bound of relocation steps.
     refine : bool
@@ -539,8 +543,12 @@ def vector_fit(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray | None
         if int(np.sum(np.where(given.imag > 0, 2, 1))) != order:
             raise InputError("poles", f"expected {order} starting poles, got {len(np.asarray(poles))}")
         starts = [given]
-    candidates = [_relocation(xs, G, weight, start / scale if domain == "s" else start, domain, stable, iterations)
-                  for start in starts]
+    candidates = []
+    for start in starts:
+        candidates.append(_relocation(xs, G, weight, start / scale if domain == "s" else start, domain, stable,
+                                      iterations))
+        if candidates[-1][3] <= NOISE_LEVEL_COST * frequency.size:
+            break   # at the noise level already (E V = F - n_theta/2 for a correct model): no other start
     current, residues, direct, cost, steps = min(candidates, key=lambda c: c[3])
     refined = False
     if refine:

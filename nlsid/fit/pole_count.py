@@ -1,0 +1,95 @@
+"""How many poles a measured FRF supports: vector fits of N = 1, 2, ... poles until the weighted cost
+is within its bound.
+
+Each candidate is a vector fit (:mod:`nlsid.fit.vector_fitting`) of N poles, n_theta = 2 N + 1
+parameters (the class of the polynomial fit nb = na = N). At the minimum of a correct model the cost
+V = sum |G_k - G(x_k)|^2 / sigma_k^2 is distributed as in :func:`nlsid.fit.tf_fit.cost_bound` (exact
+variances: (1/2) chi^2(2F - n_theta); variances from M realizations: a sum of F(2, 2M - 2) terms),
+and a model that misses a mode leaves a cost far above that bound. The fewest poles whose fit is
+within the bound are chosen (the parsimony rule of the book's 4.7 L: the first order whose cost is
+compatible with the noise); when none up to ``max_poles`` is, the fit of the lowest cost relative to
+its bound is returned and the selection says so. A scan costs one vector fit per order (seconds at
+20-40 poles), where the polynomial form's fits grow ill conditioned beyond ten.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.fit.tf_fit import cost_bound
+from nlsid.fit.vector_fitting import VectorFit, vector_fit
+
+DEFAULT_MAX_POLES = 40
+
+
+@dataclass(frozen=True)
+class PoleCandidate:
+    """One scanned order: poles, cost, its bound, and whether the fit is stable."""
+
+    poles: int
+    cost: float
+    bound: float
+    stable: bool
+
+    @property
+    def accepted(self) -> bool:
+        return bool(self.cost <= self.bound)
+
+
+@dataclass(frozen=True)
+class PoleSelection:
+    """The chosen fit, every scanned candidate, whether the choice is within its bound, and why."""
+
+    fit: VectorFit
+    scan: list[PoleCandidate]
+    accepted: bool
+    reason: str
+
+
+def select_poles(data, max_poles: int = DEFAULT_MAX_POLES, domain: str = "z", stable: bool = True,
+                 delay: int = 0) -> PoleSelection:
+    """Scan N = 1 .. ``max_poles`` poles (module docstring) on ``data``, an FRF with ``frequency`` (Hz),
+    ``G``, ``variance``, ``fs`` and ``realizations`` (:class:`nlsid.fit.tf_fit.FRFData`).
+
+    Parameters
+    ----------
+    data : FRFData
+        The measured FRF and the variances weighting it.
+    max_poles : int
+        The largest order scanned.
+    domain : {'z', 's'}
+        As :func:`nlsid.fit.vector_fitting.vector_fit` (``s`` fits the data as a continuous
+        response, no zero-order hold).
+    stable : bool
+        Keep every fit stable.
+    delay : int
+        Known dead time in samples (``z``).
+
+    Returns
+    -------
+    PoleSelection
+    """
+    lines = int(np.asarray(data.G).size)
+    if not isinstance(max_poles, (int, np.integer)) or max_poles < 1:
+        raise InputError("max_poles", f"expected a whole number >= 1, got {max_poles!r}")
+    top = min(int(max_poles), lines - 1)   # 2N + 1 parameters must stay below the 2F real data
+    if top < 1:
+        raise InputError("data", f"{lines} line(s) cannot support a pole and its residue with a cost check")
+    scan, fits = [], []
+    for n in range(1, top + 1):
+        fit = vector_fit(data.frequency, data.G, data.variance, n, domain, data.fs, stable=stable, delay=delay)
+        candidate = PoleCandidate(n, fit.cost, cost_bound(lines, fit.n_parameters, data.realizations), fit.stable())
+        scan.append(candidate)
+        fits.append(fit)
+        if candidate.accepted and (candidate.stable or not stable):
+            return PoleSelection(fit, scan, True, f"{n} poles: the fewest whose cost {fit.cost:.6g} is within "
+                                                  f"its bound {candidate.bound:.6g}")
+    ratio = [c.cost / c.bound if np.isfinite(c.bound) and c.bound > 0 else np.inf for c in scan]
+    best = int(np.argmin(ratio)) if np.isfinite(np.min(ratio)) else int(np.argmin([c.cost for c in scan]))
+    chosen = scan[best]
+    return PoleSelection(fits[best], scan, False,
+                         f"no order up to {top} poles has its cost within its bound; {chosen.poles} poles "
+                         f"come closest (cost {chosen.cost:.6g}, bound {chosen.bound:.6g})")
