@@ -7,7 +7,8 @@ theta = the coefficients of A, B, C, D, E, F and the initial state of each arbit
 
 * Start: a linear model (:func:`nlsid.models.pnlss.from_linear`: the BLA's fit, balanced), E = F = 0.
   Stage "linear": A, B, C, D (and the initial states) first, E and F held at zero; stage
-  "nonlinear": all coefficients. A start whose nonlinear terms make the simulation diverge has them
+  "nonlinear_states" (monomials with the input in them: the start's linear part, E and F of the
+  monomials of the states alone free), then "nonlinear": all coefficients. A start whose nonlinear terms make the simulation diverge has them
   shrunk tenfold until it does not (stated in the notes).
 * Levenberg-Marquardt with the exact Jacobian (:mod:`nlsid.simulate.pnlss_kernels`, forward
   sensitivities). The columns are normalised to unit length (parameter scaling); the normal matrix
@@ -49,6 +50,7 @@ MU_START = 1e-3
 MU_MAX = 1e12
 MAX_REJECTED = 14        # rejected trials per iteration before the fit stops (mu grows 10x per trial)
 CONVERGED = 1e-10        # relative cost decrease below which an accepted step ends the stage
+WORSE = 1.25            # a validation rms this much above the lowest is overfitting, whatever the estimation error does
 PROGRESS = 0.01          # early stopping needs the estimation rms to fall less than this over the patience
 
 
@@ -158,6 +160,19 @@ def linear_indices(model: Pnlss) -> np.ndarray:
     ab = np.arange(n * n + n)
     cd = n * n + n + n * nz + np.arange(n + 1)
     return np.concatenate([ab, cd])
+
+
+def state_term_indices(model: Pnlss) -> np.ndarray:
+    """Positions in :func:`global_vector` of A, B, C, D and of the coefficients of E and F whose
+    monomials hold no power of the input (all of them with ``with_input`` False)."""
+    n, nz = model.order, model.E.shape[1]
+    if not model.with_input:
+        return np.arange(global_vector(model).size)
+    free_z = model.state_exponents[:, -1] == 0
+    free_h = model.output_exponents[:, -1] == 0
+    e_cols = n * n + n + (np.arange(n)[:, None] * nz + np.flatnonzero(free_z)[None, :]).ravel()
+    f_cols = n * n + n + n * nz + n + 1 + np.flatnonzero(free_h)
+    return np.sort(np.concatenate([linear_indices(model), e_cols, f_cols]))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -284,6 +299,7 @@ def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iteration
     ``history`` and its (model, initial states) to ``kept``. Returns the last model, its initial
     states and how the stage ended."""
     mu = MU_START
+    stage_start = len(history)
     theta0 = global_vector(model)
     H, g, cost = problem.normal_equations(model, x0s)
     n_samples = sum(r.y.size for r in problem.records)
@@ -305,20 +321,25 @@ def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iteration
         kept.append((model, x0s))
         if decrease < CONVERGED:
             return model, x0s, "converged"
-        if _overfitting(history, patience):
+        if _overfitting(history, patience, stage_start):
             return model, x0s, "stopped early"
         H, g, cost = problem.normal_equations(model, x0s)
     return model, x0s, "iteration limit"
 
 
-def _overfitting(history: list[Iteration], patience: int) -> bool:
-    """Early stopping: no lower validation rms in the last ``patience`` iterates while the estimation
-    rms fell by less than PROGRESS over them. A fit still learning (the estimation error falling
-    faster) crosses a plateau of the validation error rather than stopping on it: a PNLSS fit
-    often stalls for tens of iterations before its nonlinear terms find the system."""
-    if history[-1].validation_rms is None or len(history) - 1 - _best(history) < patience:
+def _overfitting(history: list[Iteration], patience: int, stage_start: int) -> bool:
+    """Early stopping: no lower validation rms in the last ``patience`` iterates of this stage
+    (from index ``stage_start`` of ``history``), and either the estimation rms fell by less than
+    PROGRESS over them or the validation rms is WORSE times the lowest. A fit still learning (the
+    estimation error falling faster, the validation error near its lowest) crosses a plateau
+    rather than stopping on it: a PNLSS fit often stalls for tens of iterations before its
+    nonlinear terms find the system."""
+    current = history[-1]
+    best = history[_best(history)]
+    if current.validation_rms is None or len(history) - 1 - max(_best(history), stage_start - 1) < patience:
         return False
-    return history[-1].estimation_rms > (1 - PROGRESS) * history[-1 - patience].estimation_rms
+    stalled = current.estimation_rms > (1 - PROGRESS) * history[-1 - patience].estimation_rms
+    return stalled or current.validation_rms > WORSE * best.validation_rms
 
 
 def _best(history: list[Iteration], stage: str | None = None) -> int:
@@ -429,6 +450,11 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
         model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience)
         seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
     linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
+    if max_iterations > 0 and model.with_input and not nonlinear_start:
+        states = _Problem(est, state_term_indices(model), bound)
+        model, x0s, status = _stage(states, model, x0s, "nonlinear_states", max_iterations, validate, history, kept,
+                                    patience)
+        seconds, work = seconds + states.jacobian_seconds, work + states.jacobian_work
     if max_iterations > 0 and model.E.size + model.F.size:
         model, x0s, status = _stage(full, model, x0s, "nonlinear", max_iterations, validate, history, kept, patience)
         seconds, work = seconds + full.jacobian_seconds, work + full.jacobian_work
