@@ -36,6 +36,7 @@ _TITLES = {
     "lpl": "Parallel LPL (Wiener-Hammerstein) system",
     "nonlinear_feedback": "Nonlinear feedback around an LTI system",
     "equations": "Model written as equations",
+    "pnlss": "Polynomial nonlinear state-space model (black box)",
 }
 
 
@@ -138,6 +139,13 @@ def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
                 else:
                     linear.append(Element(name, from_config.lti(block, f"model.{name}")))
         return linear, nonlinear
+    if model.type == "pnlss":  # the linear part A, B, C, D; E and F as polynomial terms (docs/pnlss.md)
+        pnlss = from_config.model(config)
+        terms = [(name, {"type": f"polynomial terms of degrees {list(degrees)}", "monomials": int(coefficients.shape[-1]),
+                         "nonzero": int(np.count_nonzero(coefficients))})
+                 for name, degrees, coefficients in (("E, state equation", pnlss.state_degrees, pnlss.E),
+                                                     ("F, output equation", pnlss.output_degrees, pnlss.F)) if degrees]
+        return [Element("linear part A, B, C, D", pnlss.linear)], terms
     plant = from_config.plant(model, closed=config.closed_loop is not None)
     label = "linear plant" + (" (nonlinear forces removed)" if plant.forces else "")
     nonlinear = [(f"nonlinearities[{i}]", f.model_dump()) for i, f in enumerate(getattr(model, "nonlinearities", []))]

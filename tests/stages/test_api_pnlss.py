@@ -80,6 +80,9 @@ def test_command_line_route_and_refinement(files, run_cli):
     assert stages <= {"start", "nonlinear"} and again.json()["validation_rms"] <= summary["validation_rms"]
     simulated = run_cli("simulate", out, "--excitation", validation, "-o", folder / "sim.h5")
     assert simulated.exit_code == 0, simulated.stderr
+    page = run_cli("report", out, "-o", folder / "pnlss.html", "--json")
+    assert page.exit_code == 0, page.stderr
+    assert page.json()["numbers"]["model"] == "pnlss" and "black box" in page.json()["headline"]
 
 
 @pytest.mark.parametrize("args, fragment", [
