@@ -77,8 +77,8 @@ class VectorFit:
     ``poles`` and ``residues`` hold every real pole and the member of each complex pair with positive
     imaginary part (its conjugate is implied); ``domain`` ``s`` (poles in rad/s) or ``z`` (poles in
     z at the rate ``fs``). ``cost`` is V at the data the fit was given, ``lines`` their number,
-    ``covariance`` that of :attr:`parameters` (None where the Jacobian is singular or the data carry
-    no weights), ``iterations`` the relocation steps taken, ``refined`` whether the
+    ``covariance`` that of :attr:`parameters` (None where the Jacobian is singular; for data fitted
+    without variances it is relative to a unit variance per line), ``iterations`` the relocation steps taken, ``refined`` whether the
     Levenberg-Marquardt refinement was kept, ``delay`` a dead time in samples the data were
     corrected for (``z`` only).
     """
