@@ -274,6 +274,9 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
     if not isinstance(data, dict):
         raise InputError(source, "expected a model config (a mapping with a 'model' key)")
     validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
+    if data["model"].get("type") == "pnlss":
+        raise InputError(f"{source}: model.type", "a pnlss model is a black box: diagnose looks for the physical cause "
+                                                  "of a model's error; give the linear or physical model it came from")
     return data, source, [source] if isinstance(model, (str, os.PathLike)) else []
 
 

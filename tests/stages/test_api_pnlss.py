@@ -83,6 +83,9 @@ def test_command_line_route_and_refinement(files, run_cli):
     page = run_cli("report", out, "-o", folder / "pnlss.html", "--json")
     assert page.exit_code == 0, page.stderr
     assert page.json()["numbers"]["model"] == "pnlss" and "black box" in page.json()["headline"]
+    run_cli("diagnose", "--model", out, "--data", estimation, "-o", folder / "diagnosis"
+            ).assert_one_line_error("model.type", "black box")
+    assert not (folder / "diagnosis").exists()
 
 
 @pytest.mark.parametrize("args, fragment", [
