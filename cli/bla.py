@@ -80,6 +80,8 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         return
     if summaries:
         _print_table(output, summaries)
+    if across.get("modes"):
+        _print_modes_table(output, across["modes"])
     if lpm_summaries:
         _print_lpm_table(output, lpm_summaries)
 
@@ -108,6 +110,24 @@ def _print_table(output: str, summaries: list[dict]) -> None:
             _cell(spectrum["odd_above_even_db"]),
             _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
         )
+    settings().console.print(table)
+
+
+def _print_modes_table(output: str, modes: list[dict]) -> None:
+    """The resonances compared over the levels (docs/level_comparison.md): at the lowest and the
+    highest level where each is fitted, and the relative changes with their standard errors."""
+    from rich.table import Table
+
+    table = Table(title=f"{output}: modes from the lowest to the highest level (changes in %, +- 1 standard error)")
+    for column in ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"):
+        table.add_column(column)
+    for mode in modes:
+        fitted = [level for level in mode["levels"] if level is not None]
+        first, last = fitted[0], fitted[-1]
+        changes = [_cell(100 * mode[key], fmt) for name in ("frequency", "damping")
+                   for key, fmt in ((f"{name}_change", "+.3f"), (f"{name}_change_se", ".3f"))]
+        table.add_row(f"{first['frequency_hz']:.4g}", f"{first['damping']:.3g}", f"{last['frequency_hz']:.4g}",
+                      f"{last['damping']:.3g}", *changes, "yes" if mode["significant"] else "no")
     settings().console.print(table)
 
 

@@ -24,6 +24,7 @@ from nlsid.analysis.distortion_class import classify
 from nlsid.analysis.fast_bla import FastAccumulator, FastBLA, fast_run
 from nlsid.analysis.lines import EXCITED, Lines, classify_lines
 from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
+from nlsid.analysis.modes import level_modes
 from nlsid.analysis.output_spectrum import OutputSpectrum, SpectrumAccumulator, db
 from nlsid.analysis.period_stats import run_period_stats
 from nlsid.analysis.precision import negligible
@@ -352,7 +353,7 @@ def common_lines(levels: list[LevelResult]) -> CommonLines:
                        int(shared.size), frequency[~follows], None)
 
 
-def across_levels(levels: list[LevelResult], common: CommonLines | None = None) -> dict:
+def across_levels(levels: list[LevelResult], common: CommonLines | None = None, modes: bool = True) -> dict:
     """BLA and distortion versus rms level (seed 000 Figs. 4-5), compared on common lines only.
 
     Per level: the rms input, the band-mean |G_BLA|^2 (dB), the band-mean nonlinear and noise
@@ -361,8 +362,9 @@ def across_levels(levels: list[LevelResult], common: CommonLines | None = None) 
     (``common``, by default those of ``levels``): its mean, median and largest in magnitude. Where
     no comparison is made (the reference itself, a level set aside, no common line) the changes are
     ``None`` (null in JSON) and ``bla_not_compared`` says why: a change of 0 dB is never stated
-    for want of a comparison. Without multisine levels (a recording of arbitrary runs only) there
-    is no reference level and no row.
+    for want of a comparison. With ``modes``, ``modes`` holds the resonances compared from the
+    lowest to the highest level (:func:`nlsid.analysis.modes.level_modes`). Without multisine
+    levels (a recording of arbitrary runs only) there is no reference level and no row.
     """
     if not levels:
         return {"reference_level": None, "levels": []}
@@ -386,4 +388,7 @@ def across_levels(levels: list[LevelResult], common: CommonLines | None = None) 
                        bla_change_max_db=float(change[np.argmax(np.abs(change))]),
                        bla_compared_lines=int(change.size), bla_not_compared=None)
         rows.append(row)
-    return {"reference_level": reference.level, "levels": rows, **common.summary()}
+    out = {"reference_level": reference.level, "levels": rows, **common.summary()}
+    if modes:
+        out["modes"] = level_modes(levels, common)
+    return out

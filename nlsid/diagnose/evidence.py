@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlsid.analysis.lines import EVEN, EXCITED, ODD, classify_lines, spectra
+from nlsid.analysis.modes import SIGNIFICANCE
 from nlsid.analysis.output_spectrum import db
 from nlsid.analysis.precision import PRECISION, negligible
 from nlsid.diagnose.simulation import ModelRunner, steady_mean, steady_periods
@@ -448,14 +449,42 @@ def level_findings(rows: list[dict], across: dict) -> list[str]:
     if not compared:
         reasons = sorted({row["bla_not_compared"] for row in rows[1:] if row.get("bla_not_compared")})
         return [f"BLA not compared over the levels: {'; '.join(reasons) or 'no common lines'}"]
+    out = _mode_findings(across.get("modes", []))
     last = compared[-1]
     model = last.get("model_bla_change_max_db")
     model_text = "" if model is None or not math.isfinite(model) else f"; the model's by {model:+.1f} dB"
     aside = [row for row in rows[1:] if row.get("bla_change_max_db") is None]
-    return [f"BLA changes by up to {last['bla_change_max_db']:+.1f} dB (mean {last['bla_change_mean_db']:+.1f} dB "
+    return [f"BLA changes by up to {last['bla_change_max_db']:+.1f} dB (mean {last['bla_change_mean_db']:+.2f} dB "
             f"over {last['bla_compared_lines']} lines excited at every level) from level {_name(rows[0]['level'])} "
             f"to level {_name(last['level'])}{model_text}"
-            + (f"; {len(aside)} level(s) not compared ({aside[0]['bla_not_compared']})" if aside else "")]
+            + (f"; {len(aside)} level(s) not compared ({aside[0]['bla_not_compared']})" if aside else "")] + out
+
+
+def _mode_findings(modes: list[dict]) -> list[str]:
+    """Each resonance whose frequency or damping changes significantly from the lowest to the highest
+    level, with the relative changes and their standard errors (:mod:`nlsid.analysis.modes`); the
+    others in one line."""
+    out, quiet, alone = [], [], []
+    for mode in modes:
+        if mode["significant"]:
+            out.append(f"mode near {mode['frequency_hz']:.3g} Hz: frequency {_percent(mode, 'frequency')}, damping "
+                       f"{_percent(mode, 'damping')} from level {_name(mode['from_level'])} to level "
+                       f"{_name(mode['to_level'])}: significant ({SIGNIFICANCE:g} standard errors)")
+        elif mode["to_level"] == mode["from_level"]:
+            alone.append(f"{mode['frequency_hz']:.3g}")
+        else:
+            quiet.append(f"{mode['frequency_hz']:.3g}")
+    if quiet:
+        out.append(f"mode{'s' if len(quiet) > 1 else ''} near {', '.join(quiet)} Hz: no significant change of "
+                   "frequency or damping over the levels")
+    if alone:
+        out.append(f"mode{'s' if len(alone) > 1 else ''} near {', '.join(alone)} Hz: fitted at the lowest level only")
+    return out
+
+
+def _percent(mode: dict, name: str) -> str:
+    """A relative change and its standard error in percent, e.g. ``-1.3 % +- 0.07 %``."""
+    return f"{100 * mode[f'{name}_change']:+.2g} % +- {100 * mode[f'{name}_change_se']:.2g} %"
 
 
 def _above_text(test: dict) -> str:
@@ -507,7 +536,8 @@ def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
         common = common_lines(list(measured_levels))  # the model is compared on the measured lines
         measured_across = across_levels(list(measured_levels), common)
         across = {key: value for key, value in measured_across.items() if key != "levels"}
-        for row, model_row in zip(measured_across["levels"], across_levels(list(model_levels), common)["levels"]):
+        model_across = across_levels(list(model_levels), common, modes=False)
+        for row, model_row in zip(measured_across["levels"], model_across["levels"]):
             row["model_bla_change_max_db"] = model_row["bla_change_max_db"]
             row["model_bla_db"] = model_row["bla_db"]
             levels.append(row)
