@@ -45,3 +45,82 @@ def power_db(power: np.ndarray) -> np.ndarray:
     power = np.asarray(power, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(power > 0, 10 * np.log10(power), np.nan)
+
+
+PHASE_LIMITS = (-180.0, 180.0)
+#: a band spanning this ratio of its highest to its lowest frequency (a decade) is drawn on a log axis
+LOG_SPAN = 10.0
+#: a model's power below this fraction of the measured signal's largest line power is its numerical
+#: floor (round-off of the simulation, 90 dB down), not a level the model predicts
+NUMERICAL_FLOOR = 1e-9
+#: the margin around the excited band on a spectrum's frequency axis (a factor on a log axis)
+BAND_MARGIN = 1.5
+
+
+def wrapped_phase(frequency: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The phase of G in degrees wrapped to [-180, 180], as (frequency, degrees) to plot: where two
+    neighbouring lines differ by more than 180 degrees (the wrap, or noise where the estimate is not
+    coherent) a NaN point is put between them, so the curve breaks there instead of drawing a
+    vertical stroke across the panel. Unlike :func:`unwrapped_phase`, noise cannot accumulate into
+    thousands of degrees that flatten the coherent part of the curve."""
+    frequency = np.asarray(frequency, dtype=float)
+    degrees = np.degrees(np.angle(np.asarray(G)))
+    degrees = np.where(degrees <= -180.0, 180.0, degrees)
+    jumps = np.flatnonzero(np.abs(np.diff(degrees)) > 180.0) + 1
+    return np.insert(frequency, jumps, np.nan), np.insert(degrees, jumps, np.nan)
+
+
+def phase_axis(axis) -> None:
+    """A phase panel in degrees held to [-180, 180] with ticks every 90 degrees."""
+    axis.set_ylim(*PHASE_LIMITS)
+    axis.set_yticks([-180, -90, 0, 90, 180])
+    axis.set_ylabel("phase (deg)")
+
+
+def spans_decades(frequency: np.ndarray) -> bool:
+    """True when the positive, finite frequencies span a decade or more (:data:`LOG_SPAN`)."""
+    f = np.asarray(frequency, dtype=float)
+    f = f[np.isfinite(f)]
+    return bool(f.size and f.min() > 0 and f.max() / f.min() >= LOG_SPAN)
+
+
+def frequency_axis(axis, frequency: np.ndarray) -> None:
+    """Label ``axis``' x axis as frequency in Hz, on a log scale with plain tick labels when
+    ``frequency`` spans a decade or more, with a grid at every tick."""
+    axis.set_xlabel("frequency (Hz)")
+    if spans_decades(frequency):
+        axis.set_xscale("log")
+        plain_log_ticks(axis.xaxis)
+    axis.grid(True, which="both", alpha=0.3)
+
+
+def band_limits(axis, band: np.ndarray) -> None:
+    """Hold the frequency axis to the excited ``band`` plus a margin: a factor :data:`BAND_MARGIN`
+    either side on a log axis, half the band's width either side on a linear one (not 0 to fs/2,
+    where a band of 1.5-60 Hz in 512 Hz fills the left eighth)."""
+    band = np.asarray(band, dtype=float)
+    band = band[np.isfinite(band) & (band > 0)]
+    if not band.size:
+        return
+    low, high = band.min(), band.max()
+    if axis.get_xscale() == "log":
+        axis.set_xlim(low / BAND_MARGIN, high * BAND_MARGIN)
+    else:
+        margin = 0.5 * (high - low) or 0.5 * high
+        axis.set_xlim(max(low - margin, 0.0), high + margin)
+
+
+def above_floor(power: np.ndarray, reference: float) -> tuple[np.ndarray, float]:
+    """``power`` with NaN where it lies below the numerical floor (:data:`NUMERICAL_FLOOR` times
+    ``reference``, the measured signal's largest line power), and that floor. A model line at
+    -200 dB is the simulation's round-off, not a prediction: it is not drawn as data."""
+    power = np.asarray(power, dtype=float)
+    floor = NUMERICAL_FLOOR * float(reference)
+    with np.errstate(invalid="ignore"):
+        return np.where(power >= floor, power, np.nan), floor
+
+
+def legend_outside(axis, **style):
+    """The legend of ``axis`` beside it, right of the panel, where it hides no data point."""
+    style.setdefault("fontsize", "small")
+    return axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **style)

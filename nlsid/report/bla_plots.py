@@ -20,7 +20,8 @@ import numpy as np
 
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
-from nlsid.report.axes import FIGURE_HEIGHT, plain_log_ticks, power_db, unwrapped_phase
+from nlsid.report.axes import (FIGURE_HEIGHT, band_limits, frequency_axis, legend_outside, phase_axis,
+                               plain_log_ticks, power_db, wrapped_phase)
 from nlsid.report.units import Units
 from nlsid.report.vector import band, fit_labels, new_figure
 
@@ -56,10 +57,12 @@ def spectrum_figure(level: LevelResult, units: Units):
     bins = lines.bins
     axis.plot(lines.frequency(bins), power_db(spectrum.y_noise[bins]), color="tab:green", linewidth=1,
               label="noise (variance of the P-mean)")
-    axis.set_xlabel("frequency (Hz)")
+    excited = lines.frequency(np.flatnonzero(lines.kind == EXCITED))
+    frequency_axis(axis, excited)
+    band_limits(axis, excited)
     axis.set_ylabel(f"output power ({units.power_db('y')})")
     axis.set_title(f"Output spectrum: {_title(level, units)}")
-    axis.legend(fontsize="small", loc="best")
+    legend_outside(axis)
     return figure
 
 
@@ -79,17 +82,18 @@ def bla_figure(level: LevelResult, units: Units):
         if level.fast.var_nl_even is not None:
             magnitude.plot(f, power_db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
                            label="fast method: std nonlinear (even)")
-    magnitude.set_xlabel("frequency (Hz)")
     magnitude.set_ylabel(f"|G_BLA|, std ({units.ratio_db('y', 'u')})")
     magnitude.set_title(f"BLA ({robust.method}): {_title(level, units)}")
     # beside the axes: six curves spread over the whole height leave no free corner
     magnitude.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    degrees, shift = unwrapped_phase(robust.G)
-    phase.plot(f, degrees, color="k", label="phase of G_BLA")
-    band(phase, f, np.degrees(robust.bounds.phase_lo + shift), np.degrees(robust.bounds.phase_hi + shift),
-         "95% bounds", color="k", alpha=0.15)
-    phase.set_xlabel("frequency (Hz)")
-    phase.set_ylabel("phase (deg)")
+    # wrapped to +-180 degrees: unwrapped, the noise of incoherent lines adds up to thousands of
+    # degrees and flattens the coherent part; the bounds are computed around np.angle, the wrapped phase
+    phase.plot(*wrapped_phase(f, robust.G), color="k", label="phase of G_BLA")
+    band(phase, f, np.degrees(robust.bounds.phase_lo), np.degrees(robust.bounds.phase_hi), "95% bounds",
+         color="k", alpha=0.15)
+    phase_axis(phase)
+    for axis in (magnitude, phase):
+        frequency_axis(axis, f)
     return figure
 
 
@@ -99,9 +103,9 @@ def levels_figure(levels: list[LevelResult], units: Units):
     for level in levels:
         curves.plot(level.lines.frequency(level.lines.excited), power_db(np.abs(level.robust.G) ** 2),
                     label=f"u rms {units.value(format(level.u_rms, '.3g'), 'u')}")
-    curves.set_xlabel("frequency (Hz)")
+    frequency_axis(curves, np.concatenate([level.lines.frequency(level.lines.excited) for level in levels]))
     curves.set_ylabel(f"|G_BLA| ({units.ratio_db('y', 'u')})")
-    curves.legend(fontsize="small", loc="best")
+    legend_outside(curves)
     rows = across_levels(levels)["levels"]
     rms = [row["u_rms"] for row in rows]
     trend.semilogx(rms, [row["nl_var_db"] for row in rows], "o--", color="tab:red", label="nonlinear variance")
@@ -109,7 +113,7 @@ def levels_figure(levels: list[LevelResult], units: Units):
     plain_log_ticks(trend.xaxis)
     trend.set_xlabel(units.label("u rms", "u"))
     trend.set_ylabel("band mean (dB re |G_BLA|²)")
-    trend.legend(fontsize="small", loc="best")
+    legend_outside(trend)
     return figure
 
 

@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from nlsid.analysis.lines import EVEN, EXCITED, ODD
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.axes import (above_floor, band_limits, frequency_axis, legend_outside, phase_axis,
+                               wrapped_phase)
 from nlsid.report.units import Units
 from nlsid.report.vector import band, new_figure
 
@@ -39,12 +40,9 @@ def _gain_db(G: np.ndarray) -> np.ndarray:
         return np.where(magnitude > 0, 20 * np.log10(magnitude), np.nan)
 
 
-def _frequency_axes(*axes) -> None:
+def _frequency_axes(frequency: np.ndarray, *axes) -> None:
     for axis in axes:
-        axis.set_xscale("log")
-        axis.set_xlabel("frequency (Hz)")
-        axis.grid(True, which="both", alpha=0.3)
-        plain_log_ticks(axis.xaxis)
+        frequency_axis(axis, frequency)
 
 
 def model_vs_bla(level: dict, units: Units):
@@ -57,11 +55,11 @@ def model_vs_bla(level: dict, units: Units):
     out = level["outside"].astype(bool)
     mag.plot(f[out], _gain_db(G[out]), "kx", label="model outside bounds")
     mag.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
-    mag.legend(fontsize=8)
-    phase.plot(f, unwrapped_phase(G)[0], "C0.-", label="measured BLA")
-    phase.plot(f, unwrapped_phase(Gm)[0], "C3--", label="model")
-    phase.set_ylabel("phase (deg)")
-    _frequency_axes(mag, phase)
+    legend_outside(mag, fontsize=8)
+    phase.plot(*wrapped_phase(f, G), "C0.-", label="measured BLA")
+    phase.plot(*wrapped_phase(f, Gm), "C3--", label="model")
+    phase_axis(phase)
+    _frequency_axes(f, mag, phase)
     return figure
 
 
@@ -72,14 +70,21 @@ def spectrum(level: dict, units: Units):
         k = kind == cls
         axis.plot(f[k], _db(level["y_power"][k]), style, ms=3.5, label=f"measured, {name}")
     k = kind >= 0
-    axis.plot(f[k], _db(level["model_power"][k]), "k.", ms=2, alpha=0.6, label="model")
+    measured = np.asarray(level["y_power"], dtype=float)[kind == EXCITED]
+    reference = np.nanmax(measured) if np.isfinite(measured).any() else np.nan
+    model, floor = above_floor(np.asarray(level["model_power"], dtype=float)[k], reference)
+    axis.plot(f[k], _db(model), "k.", ms=2, alpha=0.6, label="model")
+    if np.isfinite(floor) and np.any(np.asarray(level["model_power"])[k] < floor):
+        # the model's lines under its round-off level are not data: one labelled line stands for them
+        axis.axhline(_db(floor), color="k", lw=0.8, ls=":", label="model's numerical floor (lines below not drawn)")
     axis.plot(f[k], _db(level["noise"][k]), color="0.5", lw=1, label="noise variance")
+    excited = f[kind == EXCITED]
+    frequency_axis(axis, excited)
     if band_.any():
         axis.axvspan(f[band_].min(), f[band_].max(), color="C0", alpha=0.05)
-    axis.set_xlabel("frequency (Hz)")
+    band_limits(axis, excited)
     axis.set_ylabel(f"output power ({units.power_db('y')})")
-    axis.grid(True, alpha=0.3)
-    axis.legend(fontsize=8, ncol=3)
+    legend_outside(axis, fontsize=8)
     return figure
 
 
@@ -90,8 +95,8 @@ def bla_vs_level(levels: list[dict], units: Units):
         axis.plot(level["frequency"], _gain_db(level["G"]), f"C{i}-", label=f"measured, level {name}")
         axis.plot(level["frequency"], _gain_db(level["G_model"]), f"C{i}--", label=f"model, level {name}")
     axis.set_ylabel(f"|G| ({units.ratio_db('y', 'u')})")
-    _frequency_axes(axis)
-    axis.legend(fontsize=8, ncol=2)
+    _frequency_axes(np.concatenate([level["frequency"] for level in levels]), axis)
+    legend_outside(axis, fontsize=8)
     return figure
 
 
@@ -116,5 +121,5 @@ def before_after(validation: dict, units: Units):
     axis.set_xlabel("time in the period (s)")
     axis.set_ylabel(units.label("error y - y_model", "y"))
     axis.grid(True, alpha=0.3)
-    axis.legend(fontsize=8)
+    legend_outside(axis, fontsize=8)
     return figure

@@ -11,7 +11,7 @@ import io
 
 import numpy as np
 
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.axes import frequency_axis, legend_outside, phase_axis, wrapped_phase
 from nlsid.report.units import Units
 from nlsid.report.vector import fit_labels, new_figure
 
@@ -33,19 +33,13 @@ def tf_fit_png(frequency: np.ndarray, data: np.ndarray, model: np.ndarray, model
     magnitude.plot(frequency, _db(noise_std), color="tab:green", linewidth=1, label="noise std")
     magnitude.plot(frequency, _db(nl_std), color="tab:orange", linewidth=1, label="nonlinear std")
     magnitude.set_ylabel(f"|G|, std ({units.ratio_db('y', 'u')})")
-    magnitude.set_xlabel("frequency (Hz)")
     magnitude.set_title(title)
-    magnitude.legend(fontsize="small", ncol=3)
-    magnitude.grid(True, alpha=0.3)
-    phase.plot(frequency, unwrapped_phase(data)[0], "k.", markersize=3, label="BLA")
-    phase.plot(frequency, unwrapped_phase(model)[0], color="tab:blue", linewidth=1.2, label="model")
-    phase.set_ylabel("phase (deg)")
-    phase.set_xlabel("frequency (Hz)")
-    phase.grid(True, alpha=0.3)
-    if frequency.size and frequency.min() > 0 and frequency.max() / frequency.min() > 20:
-        for axis in (magnitude, phase):
-            axis.set_xscale("log")
-            plain_log_ticks(axis.xaxis)
+    legend_outside(magnitude)
+    phase.plot(*wrapped_phase(frequency, data), "k.", markersize=3, label="BLA")
+    phase.plot(*wrapped_phase(frequency, model), color="tab:blue", linewidth=1.2, label="model")
+    phase_axis(phase)
+    for axis in (magnitude, phase):
+        frequency_axis(axis, frequency)
     fit_labels(figure)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=110)

@@ -16,7 +16,7 @@ import numpy as np
 
 from nlsid.analysis.hosidf import HOSIDFGrid, RunSpectra
 from nlsid.analysis.linearity_cost import Sweep
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.axes import above_floor, legend_outside, phase_axis, plain_log_ticks, wrapped_phase
 from nlsid.report.units import Units
 from nlsid.report.vector import fit_labels, new_figure
 
@@ -47,7 +47,7 @@ def versus_amplitude_figure(grid: HOSIDFGrid, fi: int, units: Units, signal: str
     ax.set_xlabel(units.label("input amplitude", signal))
     ax.set_ylabel(f"|H_k| (solid), std (dashed) ({units.ratio('y', signal)})")
     ax.set_title(f"HOSIDFs at {grid.frequencies[fi]:g} Hz")
-    ax.legend(ncol=2, fontsize="small")
+    legend_outside(ax)
     ax.grid(True, which="both", alpha=0.3)
     plain_log_ticks(ax.xaxis)
     plain_log_ticks(ax.yaxis)
@@ -61,13 +61,14 @@ def first_hosidf_figure(grid: HOSIDFGrid, units: Units, analytic: np.ndarray | N
     for ai, level in enumerate(grid.levels):
         name = f"a = {units.value(format(level, 'g'), signal)}"
         line, = ax_mag.semilogy(grid.frequencies, np.abs(h1[:, ai]), "o-", ms=3, label=name)
-        ax_phase.plot(grid.frequencies, unwrapped_phase(h1[:, ai])[0], "o-", ms=3, color=line.get_color(), label=name)
+        ax_phase.plot(*wrapped_phase(grid.frequencies, h1[:, ai]), "o-", ms=3, color=line.get_color(), label=name)
         if analytic is not None:
             ax_mag.semilogy(grid.frequencies, np.abs(analytic[:, ai, 1]), "--", color=line.get_color(),
                             label=f"analytic, {name}")
     ax_mag.set_ylabel(f"|H_1| ({units.ratio('y', signal)})")
+    phase_axis(ax_phase)
     ax_phase.set_ylabel("angle H_1 (deg)")
-    ax_mag.legend(fontsize="small", ncol=2)
+    legend_outside(ax_mag)
     for ax in (ax_mag, ax_phase):
         ax.set_xscale("log")
         ax.set_xlabel("frequency (Hz)")
@@ -84,14 +85,16 @@ def run_spectrum_figure(y_periods: np.ndarray, spectra: RunSpectra, fs: float, u
     amplitude[1:] *= 2
     freq = np.arange(amplitude.size) * fs / n
     figure, (ax,) = _figure()
-    ax.semilogy(freq[1:], np.maximum(amplitude[1:], 1e-300), ".", color="0.6", ms=3, label="all lines")
+    # lines under the numerical floor (round-off, not signal) are not drawn
+    power, _ = above_floor(amplitude[1:] ** 2, np.max(amplitude[1:] ** 2, initial=0.0))
+    ax.semilogy(freq[1:], np.sqrt(power), ".", color="0.6", ms=3, label="all lines")
     k = np.arange(spectra.y.shape[1])
     ax.semilogy(k[1:] * spectra.frequency, np.abs(spectra.y.mean(axis=0))[1:], "o", label="harmonics k f0")
     ax.set_xlim(0, (k[-1] + 1) * spectra.frequency)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(units.label("|Y|", "y"))
     ax.set_title(f"run {spectra.run_id}: {spectra.frequency:g} Hz, amplitude {spectra.level:g}")
-    ax.legend()
+    legend_outside(ax)
     ax.grid(True, which="both", alpha=0.3)
     return figure
 
@@ -104,11 +107,11 @@ def sweep_harmonics_figure(result: Sweep, units: Units):
     for k in range(2, min(mean.shape[1], 6)):
         ax_h.semilogy(values, mean[:, k] / mean[:, 1], label=f"k = {k}")
     ax_h.set_ylabel(f"|Y(k w0)| / |Y(w0)| ({units.ratio('y', 'y')})")
-    ax_h.legend(fontsize="small")
+    legend_outside(ax_h)
     ax_c.plot(values, result.values("cost"), "k.-", label="f_c")
     ax_c.axvline(result.optimum, color="C3", ls="--", label=f"optimum {result.optimum:g}")
     ax_c.set_ylabel(f"f_c, Definition 3 ({units.ratio('y', 'y')})")
-    ax_c.legend()
+    legend_outside(ax_c)
     for ax in (ax_h, ax_c):
         ax.set_xlabel(units.label(result.parameter, result.parameter))
         ax.grid(True, alpha=0.3)
@@ -126,7 +129,7 @@ def sweep_spectrum_figure(result: Sweep, units: Units):
         ax.semilogy(k, np.sqrt(point.stats.var_mean), "x" if index else "*", label=f"{label}: std")
     ax.set_xlabel("harmonic k (multiple of the tone's frequency)")
     ax.set_ylabel(units.label("|Y(k w0)|", "y"))
-    ax.legend(fontsize="small")
+    legend_outside(ax)
     ax.grid(True, which="both", alpha=0.3)
     return figure
 
@@ -137,10 +140,11 @@ def sweep_hosidf_figure(result: Sweep, units: Units, signal: str = "u"):
     figure, (ax_mag, ax_phase) = _figure(2, height=6)
     for k in range(1, min(h.shape[1], 6)):
         ax_mag.semilogy(values, np.abs(h[:, k]), label=f"H_{k}")
-        ax_phase.plot(values, np.degrees(np.unwrap(np.angle(h[:, k]))), label=f"H_{k}")
+        ax_phase.plot(*wrapped_phase(values, h[:, k]), label=f"H_{k}")
     ax_mag.set_ylabel(f"|H_k| ({units.ratio('y', signal, '^k')})")
+    phase_axis(ax_phase)
     ax_phase.set_ylabel("angle H_k (deg)")
-    ax_mag.legend(fontsize="small", ncol=2)
+    legend_outside(ax_mag)
     for ax in (ax_mag, ax_phase):
         ax.set_xlabel(units.label(result.parameter, result.parameter))
         ax.grid(True, alpha=0.3)
@@ -160,7 +164,7 @@ def sweep_performance_figure(result: Sweep, units: Units):
     ax_t.set_ylabel(units.label("ε, Eq. 7", "y"))
     for ax in (ax_f, ax_t):
         ax.set_xlabel(units.label(result.parameter, result.parameter))
-        ax.legend()
+        legend_outside(ax)
         ax.grid(True, alpha=0.3)
     return figure
 

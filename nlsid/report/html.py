@@ -106,6 +106,8 @@ class Page:
     warnings: list[str] = field(default_factory=list)
     provenance: dict = field(default_factory=dict)
     numbers: dict = field(default_factory=dict)
+    #: said once under the title, e.g. which units the recording did not carry (:mod:`nlsid.report.units`)
+    note: str = ""
 
     def summary(self) -> dict:
         """The machine-readable content of the page (``nlsid report --json``)."""
@@ -198,7 +200,8 @@ def render_html(page: Page, generator: str) -> str:
     body = (
         f'<header><div class="kind">{_e(page.kind)}</div><h1>{_e(page.title)}</h1>'
         f'<div class="source">{_e(page.source)}</div></header>'
-        f'<section id="verdict"><p class="headline">{_e(page.headline)}</p><ul>{findings}</ul></section>'
+        + (f'<p class="note" id="units-note">{_e(page.note)}</p>' if page.note else "")
+        + f'<section id="verdict"><p class="headline">{_e(page.headline)}</p><ul>{findings}</ul></section>'
         f"{warnings}"
         + (f'<h2>Evidence</h2><section id="figures">{figures}</section>' if figures else "")
         + (f'<h2>Numbers</h2><section id="numbers">{tables}</section>' if tables else "")

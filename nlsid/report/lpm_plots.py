@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlsid.report.axes import FIGURE_HEIGHT, plain_log_ticks, power_db, unwrapped_phase
+from nlsid.report.axes import FIGURE_HEIGHT, frequency_axis, legend_outside, phase_axis, power_db, wrapped_phase
 from nlsid.report.units import Units
 from nlsid.report.vector import band, new_figure
 
@@ -25,21 +25,16 @@ def lpm_figure(stored: dict, probability: float, units: Units):
     magnitude.plot(f, power_db(stored["var_G"]), color="tab:red", linewidth=0.8,
                    label="std of G: noise + distortion (upper bound of noise)")
     magnitude.set_ylabel(f"|G|, std ({units.ratio_db('y', 'u')})")
-    magnitude.legend(fontsize=8, loc="best")
-    degrees, _ = unwrapped_phase(G)
-    phase.plot(f, degrees, color="k", linewidth=1, label="phase of G (LPM)")
-    phase.set_ylabel("phase (deg)")
+    legend_outside(magnitude, fontsize=8)
+    phase.plot(*wrapped_phase(f, G), color="k", linewidth=1, label="phase of G (LPM)")
+    phase_axis(phase)
     attrs = stored["attrs"]
     level = "no level" if not np.isfinite(attrs["level"]) else f"level {attrs['level']:g}"
     magnitude.set_title(f"{level}: {attrs['n_records']} records of {attrs['n_samples']} samples, "
                         f"window {2 * attrs['half_width'] + 1} lines, degree {attrs['degree']}, q = {attrs['dof']}",
                         fontsize=9)
     for axis in (magnitude, phase):
-        axis.set_xlabel("frequency (Hz)")
-        if np.all(f > 0):
-            axis.set_xscale("log")
-            plain_log_ticks(axis.xaxis)
-        axis.grid(True, which="both", alpha=0.3)
+        frequency_axis(axis, f)
     return figure
 
 

@@ -341,7 +341,7 @@ def _figures(levels: list[LevelResult], summaries: list[dict], probability: floa
     order = [len(levels) - 1, *range(len(levels) - 1)]  # the highest level first
     out = []
     if len(levels) > 1:
-        out.append(figure(levels_figure(levels, units), _CAPTIONS["bla_vs_level"], "bla_vs_level"))
+        out.append(figure(levels_figure(levels, units.for_figures()), _CAPTIONS["bla_vs_level"], "bla_vs_level"))
     for index in order:
         name = _name(summaries[index], index)
         for key in ("spectrum", "bla"):
@@ -350,7 +350,7 @@ def _figures(levels: list[LevelResult], summaries: list[dict], probability: floa
                                    "noise level is drawn, and the bounds hold noise and distortion together.",
                         "zero": " The data are noise-free: the noise floor is zero (not drawn)."}.get(
                             noise_floor(summaries[index]), "")
-            out.append(figure(drawn[key](levels[index], units), caption, f"{key}_level_{index:02d}"))
+            out.append(figure(drawn[key](levels[index], units.for_figures()), caption, f"{key}_level_{index:02d}"))
     return out
 
 
@@ -389,7 +389,7 @@ def render_bla(path: Path) -> Page:
         kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
         headline=headline, findings=findings, figures=_figures(levels, summaries, probability, units) + lpm_figures,
         tables=_tables(summaries, across, probability, units) + lpm_tables, warnings=warnings + lpm_warnings,
-        provenance=data["attrs"]["provenance"],
+        provenance=data["attrs"]["provenance"], note=units.missing_note("u", "y"),
         numbers={"levels": summaries, "across_levels": across, "confidence": probability,
                  "detected_threshold_db": DETECTED_DB, "units": units.known,
                  "lpm_levels": [stored["attrs"]["summary"] for stored in data["lpm_levels"]]})
@@ -412,7 +412,7 @@ def _lpm_parts(data: dict, probability: float, units: Units) -> tuple[list[Figur
     for index, stored in enumerate(data["lpm_levels"]):
         summary = stored["attrs"]["summary"]
         name = _name(summary, index)
-        figures.append(figure(lpm_figure(stored, probability, units),
+        figures.append(figure(lpm_figure(stored, probability, units.for_figures()),
                               f"FRF of the arbitrary runs at {name} by the Local Polynomial Method ({BOOK}, "
                               f"Section 3.7) with its {probability:.0%} confidence "
                               "bounds, F(2, 2q) with q degrees of freedom. The red curve is the standard "
@@ -443,4 +443,5 @@ def _lpm_page(path: Path, data: dict) -> Page:
     return Page(kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
                 headline=lpm_headline(top, units), findings=findings, figures=figures, tables=tables,
                 warnings=list(data["attrs"]["warnings"]) + warnings, provenance=data["attrs"]["provenance"],
+                note=units.missing_note("u", "y"),
                 numbers={"levels": [], "lpm_levels": summaries, "confidence": probability})

@@ -188,6 +188,7 @@ def render_diagnosis(path: Path) -> Page:
     keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain", "explanation", "yardstick",
             "best_model")
     return Page(kind="Model diagnosis", title=f"Diagnosis of {Path(summary['model']).name}", source=str(path),
-                headline=summary["headline"], findings=list(summary["findings"]), figures=_figures(arrays, units),
+                headline=summary["headline"], findings=list(summary["findings"]),
+                figures=_figures(arrays, units.for_figures()), note=units.missing_note("u", "y"),
                 tables=_tables(summary, units), provenance=summary.get("provenance", {}),
                 numbers={k: summary[k] for k in keys if k in summary})

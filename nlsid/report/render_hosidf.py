@@ -250,5 +250,6 @@ def render_hosidf(path: Path) -> Page:
         numbers["sweep"] = {key: sweep[key] for key in ("parameter", "frequency", "level", "optimum", "time_optimum",
                                                        "value", "cost", "cost_all", "time_error")}
     return Page(kind="Higher order sinusoidal input describing functions", title=f"HOSIDF report: {Path(path).name}",
-                source=str(path), headline=headline, findings=findings, figures=_figures(data, units), tables=tables,
-                provenance=data["provenance"], numbers=numbers)
+                source=str(path), headline=headline, findings=findings, figures=_figures(data, units.for_figures()),
+                tables=tables, provenance=data["provenance"], numbers=numbers,
+                note=units.missing_note("y", signal))

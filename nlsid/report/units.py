@@ -5,6 +5,10 @@ their reference: ``dB re 1 m/N`` for a transfer function from N to m, ``dB re 1 
 of like units, ``dB re 1 m²`` for a power; with a unit missing, the signal's name stands in for it
 and the label says which unit was not recorded (``dB re 1 y/N, unit of y not recorded``), except
 in a ratio of like signals, whose unit cancels (``y/y``).
+
+A page says which units were not recorded once (:meth:`Units.missing_note`) and draws its figures
+with :meth:`Units.for_figures`, whose labels then write the signal's name for its unit without
+repeating "not recorded" on every axis.
 """
 
 from __future__ import annotations
@@ -19,15 +23,33 @@ class Units:
     """The units of the signals of a recording (signal name -> unit; a missing name: not recorded)."""
 
     known: dict[str, str] = field(default_factory=dict)
+    #: False in figures of a page that says once which units were not recorded
+    say_missing: bool = True
+
+    def for_figures(self) -> "Units":
+        """These units for the figures of a page that carries :meth:`missing_note`: a missing unit
+        is written as the signal's name (``dB re 1 y/N``, ``residual (y)``), not said per axis."""
+        return Units(self.known, say_missing=False)
+
+    def missing_note(self, *signals: str) -> str:
+        """The page's one sentence on the units of ``signals`` not recorded ("" when all are)."""
+        missing = sorted({s for s in signals if not self.known.get(s)})
+        if not missing:
+            return ""
+        names = " and ".join(missing)
+        return (f"{'Unit' if len(missing) == 1 else 'Units'} of {names} not recorded: the figures write "
+                f"{names} for {'its unit' if len(missing) == 1 else 'their units'}.")
 
     def unit(self, signal: str) -> str:
-        """The unit of ``signal`` ("N"), or "unit not recorded"."""
-        return self.known.get(signal) or NOT_RECORDED
+        """The unit of ``signal`` ("N"), or "unit not recorded" (the signal's name in figures)."""
+        return self.known.get(signal) or (NOT_RECORDED if self.say_missing else signal)
 
     def value(self, text: str, signal: str) -> str:
-        """A value with the unit of ``signal``: ``4 N``, or ``4 (unit not recorded)``."""
+        """A value with the unit of ``signal``: ``4 N``, or ``4 (unit not recorded)`` (``4`` in figures)."""
         unit = self.known.get(signal)
-        return f"{text} {unit}" if unit else f"{text} ({NOT_RECORDED})"
+        if unit:
+            return f"{text} {unit}"
+        return f"{text} ({NOT_RECORDED})" if self.say_missing else text
 
     def label(self, quantity: str, signal: str) -> str:
         """An axis or column label with the unit of ``signal``: ``u rms (N)``."""
@@ -35,7 +57,7 @@ class Units:
 
     def _missing(self, *signals: str) -> str:
         missing = sorted({s for s in signals if not self.known.get(s)})
-        if not missing:
+        if not missing or not self.say_missing:
             return ""
         if len(missing) == 1:
             return f", unit of {missing[0]} not recorded"

@@ -11,7 +11,8 @@
 - CSV of what the figure draws, at the resolution it draws it: per curve (a line or markers in data
   coordinates) a column of x and one of y, headed ``<legend label>: <axis label with its unit>``;
   a panel whose curves all share their x values has one x column, headed by the x label alone;
-  a band drawn with :func:`band` gives x, its lower and its upper edge. Columns of different
+  a band drawn with :func:`band` gives x, its lower and its upper edge. A point whose x is NaN
+  is a break in a curve (where a wrapped phase jumps), not data, and is left out. Columns of different
   lengths are padded with empty cells; an empty cell is also a value the figure does not show
   (NaN, a level of zero power in dB).
 
@@ -79,8 +80,9 @@ def _curves(axis) -> list[tuple[str, np.ndarray, np.ndarray]]:
     for line in axis.get_lines():
         if line.get_transform() == axis.transData:
             name = line.get_label()
-            out.append(("" if name.startswith("_") else f"{name}: ", np.asarray(line.get_xdata(), dtype=float),
-                        np.asarray(line.get_ydata(), dtype=float)))
+            x, y = np.asarray(line.get_xdata(), dtype=float), np.asarray(line.get_ydata(), dtype=float)
+            drawn = ~np.isnan(x)  # a NaN x is a break in the curve (a phase wrap), not a point
+            out.append(("" if name.startswith("_") else f"{name}: ", x[drawn], y[drawn]))
     return out
 
 
