@@ -46,6 +46,11 @@ past the middle between neighbouring peaks) and the mode refitted until the wind
 other levels are fitted on that window; a level whose natural frequency leaves its middle half is
 followed (the window recentred on that level's fit, :func:`follow_mode`).
 
+A fit counts as a resonance only where the data resolve it (:func:`resolved`): its damping ratio
+at least :data:`RESOLVED` standard errors above zero and its half-power band at least one line
+spacing wide (peaks of noise fit as pole pairs too, narrower than a line or with an undetermined
+damping).
+
 Change from level a (lowest) to level b (highest at which the mode is fitted): ``d = q_b / q_a - 1``
 for q the frequency or the damping ratio, ``se(d) = (q_b / q_a) sqrt((se_a / q_a)^2 + (se_b / q_b)^2)``
 (the levels are independent records); the change is *significant* when
@@ -69,6 +74,7 @@ MIN_SIDE_LINES = 4
 SMOOTH_LINES = 9  # lines over which a level's BLA variance is averaged for the weights
 SIGNIFICANCE = 3.0
 MAX_DAMPING = 0.5  # a fitted pair more damped than this is no resonance of the window
+RESOLVED = 3.0  # a resonance's damping ratio must stand this many standard errors above zero
 _REFITS = 3  # window updates after the first fit
 
 
@@ -219,6 +225,15 @@ def follow_mode(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray, weig
     return fit, window
 
 
+def resolved(fit: ModeFit | None, spacing: float) -> bool:
+    """The data determine the resonance: its damping ratio stands :data:`RESOLVED` standard errors
+    above zero and its half-power band ``2 zeta f_n`` spans at least one line spacing. A peak of
+    noise fits as a pole pair too, but narrower than the lines can show, or with a damping ratio
+    the data do not fix."""
+    return (fit is not None and fit.damping > RESOLVED * fit.damping_se
+            and 2 * fit.damping * fit.frequency_hz >= spacing)
+
+
 def _central(frequency: np.ndarray, window: tuple[int, int], fit: ModeFit | None) -> bool:
     """The fit's natural frequency lies in the middle half of the window."""
     if fit is None:
@@ -251,7 +266,8 @@ def level_modes(levels: list, common) -> list[dict]:
         start = (max(min(first, int(peak) - MIN_SIDE_LINES), bounds[0]),
                  min(max(last, int(peak) + MIN_SIDE_LINES + 1), bounds[1]))
         reference, window = follow_mode(frequency, G0, weight_variance, weight_variance, start, bounds)
-        if reference is None:
+        spacing = float(np.median(np.diff(frequency[window[0]:window[1]])))
+        if not resolved(reference, spacing):
             continue
         fits = {compared[0]: reference}
         for i in compared[1:]:
@@ -260,7 +276,7 @@ def level_modes(levels: list, common) -> list[dict]:
             fit = fit_mode(frequency[first:last], G[first:last], variance[first:last], weight_variance[first:last])
             if not _central(frequency, window, fit):
                 fit, _ = follow_mode(frequency, G, variance, weight_variance, window, bounds)
-            fits[i] = fit
+            fits[i] = fit if resolved(fit, spacing) else None
         out.append(_mode_row(levels, compared, fits))
     return out
 
