@@ -9,11 +9,12 @@
   ``polynomial_auto``: the path of ``nlsid fit bla.h5 --order auto`` (nlsid.fit.bla_fit.fit_level:
   orders up to 4/4, then up to 10/10 while none reaches its cost bound). ``vf_auto``: vector
   fitting at N = 1, 2, ... poles until the weighted cost lies within the same bound
-  (nlsid.fit.tf_fit.cost_bound, n_theta = 2N + 1), stability asked.
+  (nlsid.fit.pole_count.select_poles: nlsid.fit.tf_fit.cost_bound, n_theta = 2N + 1), stable.
 * ``structure_40_poles``: 20 modes (natural frequencies log-spaced 10..800 Hz, damping 0.5-3 %)
   sampled through the zero-order hold (scipy.signal.cont2discrete) at 4 kHz, 1,600 lines of a
   4,096-sample period, noise 1 % of the mean |G|. ``polynomial_40_40``: ``nlsid fit --order 40/40``
-  (nlsid.fit.tf_fit.fit_transfer_function, z); ``vf_40``: vector fitting with 40 poles.
+  (nlsid.fit.tf_fit.fit_transfer_function, z); ``polynomial_auto``: ``--order auto`` (up to 10/10); ``vf_40``: vector fitting with 40 poles;
+  ``vf_auto``: the scan of 1, 2, ... poles (up to 44) to the cost bound.
 
 For each: wall seconds, the weighted cost V = sum |G_k - G(z_k)|^2 / sigma_k^2 recomputed here from
 the model's response, its expected value F - n_theta/2 and bound, the stability and, for the
@@ -35,6 +36,7 @@ from threadpoolctl import threadpool_limits
 from nlsid.fit.bla_fit import fit_level
 from nlsid.fit.bla_source import BLALevel
 from nlsid.fit.tf_fit import FRFData, cost_bound, fit_transfer_function
+from nlsid.fit.pole_count import select_poles
 from nlsid.fit.vector_fitting import vector_fit
 
 QUICK = "--quick" in sys.argv          # a smoke run: fewer lines, no 40/40 polynomial fit
@@ -71,17 +73,6 @@ def _vf_entry(seconds: float, fit, data: FRFData) -> dict:
             "relocation_steps": fit.iterations, "refined": fit.refined}
 
 
-def vf_auto(data: FRFData, max_poles: int = 40):
-    """The fewest poles whose vector fit (stable) has its cost within the bound; the last one tried
-    if none has."""
-    fit = None
-    for n in range(1, max_poles + 1):
-        fit = vector_fit(data.frequency, data.G, data.variance, n, "z", data.fs)
-        if fit.cost <= cost_bound(data.bins.size, fit.n_parameters, None):
-            break
-    return fit
-
-
 def wiener_hammerstein(lines: int) -> dict:
     rng = np.random.default_rng(1)
     b1, a1 = signal.cheby1(3, 0.5, 0.17)
@@ -95,7 +86,7 @@ def wiener_hammerstein(lines: int) -> dict:
     data = FRFData(bins, _noisy(g, sd, rng), sd**2, 1.0, period)
     level = BLALevel(data, np.full(lines, np.nan), np.full(lines, np.nan), [], "robust")
     t_poly, poly = _timed(lambda: fit_level(level, None, "z", 0, None))
-    t_vf, vf = _timed(lambda: vf_auto(data))
+    t_vf, vf = _timed(lambda: select_poles(data, 40, "z").fit)
     return {"lines": lines, "polynomial_auto": _polynomial_entry(t_poly, poly.fit, data),
             "vf_auto": _vf_entry(t_vf, vf, data), "speedup": round(t_poly / t_vf, 1)}
 
@@ -126,9 +117,16 @@ def structure_40_poles(polynomial: bool) -> dict:
     out["vf_40"] = _vf_entry(t_vf, vf, data)
     out["vf_40"]["largest_frequency_error_relative"] = (float(np.max(np.abs(found - fn) / fn))
                                                         if found.size == fn.size else None)
+    t_auto, selection = _timed(lambda: select_poles(data, 44, "z"))
+    out["vf_auto"] = _vf_entry(t_auto, selection.fit, data)
+    out["vf_auto"]["accepted"] = selection.accepted
     if polynomial:
         t_poly, poly = _timed(lambda: fit_transfer_function(data, n, n, "z", 0))
         out["polynomial_40_40"] = _polynomial_entry(t_poly, poly, data)
+        level = BLALevel(data, np.full(bins.size, np.nan), np.full(bins.size, np.nan), [], "robust")
+        t_auto, chosen = _timed(lambda: fit_level(level, None, "z", 0, None))
+        out["polynomial_auto"] = _polynomial_entry(t_auto, chosen.fit, data)
+        out["polynomial_auto"]["accepted"] = bool(chosen.fit.accepted)
     return out
 
 
