@@ -32,11 +32,12 @@ every level where the FRF is, and cancels in the change between levels.
 
 Standard errors. The sandwich ``cov(theta) = (J^T J)^-1 J^T S J (J^T J)^-1`` with J the Jacobian
 of the weighted residuals and ``S = diag(v_L / v_ref)`` (the level's own variance over the
-weights'); by the delta method ``var(f_n) = (f_c / (2 sqrt(a0)))^2 var(a0)`` and
-``var(zeta) = g^T cov(a1, a0) g`` with ``g = (1 / (2 sqrt(a0)), -a1 / (4 a0^1.5))``. They hold
-noise and distortion, not the model's error: ``misfit``, the chi-square per degree of freedom
-``sum_k 2 |G(x_k) - G_k|^2 / v_L(k) / (2 L - 7)``, is about 1 where the local model holds within
-the noise, and says how far the absolute frequency may be biased where it is far above 1.
+weights'), times ``max(1, misfit)`` with ``misfit`` the chi-square per degree of freedom
+``sum_k 2 |G(x_k) - G_k|^2 / v_L(k) / (2 L - 7)``: about 1 where the local model holds within the
+noise; above, the model's error is in the estimates too and the scatter of the residuals, not the
+variances alone, sets the uncertainty (the Birge ratio). By the delta method
+``var(f_n) = (f_c / (2 sqrt(a0)))^2 var(a0)`` and ``var(zeta) = g^T cov(a1, a0) g`` with
+``g = (1 / (2 sqrt(a0)), -a1 / (4 a0^1.5))``.
 
 Windows. A resonance is a peak of ``20 log10 |G|`` of the lowest level standing out by at least
 :data:`PEAK_PROMINENCE_DB`. Its first window spans the lines above half its peak power (the
@@ -55,7 +56,12 @@ Change from level a (lowest) to level b (highest at which the mode is fitted): `
 for q the frequency or the damping ratio, ``se(d) = (q_b / q_a) sqrt((se_a / q_a)^2 + (se_b / q_b)^2)``
 (the levels are independent records); the change is *significant* when
 ``|d| > SIGNIFICANCE * se(d)`` (3 standard errors: 0.27 % false alarms per mode and quantity for
-normal errors).
+normal errors) and above a floor: :data:`MIN_FREQUENCY_CHANGE` of the half-power bandwidth for the
+frequency (``|d| > 0.01 * 2 zeta``), :data:`MIN_DAMPING_CHANGE` for the damping ratio. When a
+neighbouring mode moves, its tail across this mode's window changes, and the local model puts a
+little of that into this mode's pole: on a 18 000-line BLA of ten modes 9.4 Hz apart with 1 %
+noise, the neighbour of a mode moving by 1.3 % "moved" by 1e-5 at 10 standard errors; the floor
+is far below any shift the lines can show and far above that.
 """
 
 from __future__ import annotations
@@ -69,10 +75,12 @@ from nlsid.analysis.precision import PRECISION
 
 PEAK_PROMINENCE_DB = 6.0
 NUMERATOR_DEGREE = 4  # the local model's numerator: the residue and a quadratic background
-WINDOW_BANDWIDTHS = 2.0  # half-width of the window in half-power bandwidths
+WINDOW_BANDWIDTHS = 1.5  # half-width of the window in half-power bandwidths
 MIN_SIDE_LINES = 4
 SMOOTH_LINES = 9  # lines over which a level's BLA variance is averaged for the weights
 SIGNIFICANCE = 3.0
+MIN_FREQUENCY_CHANGE = 0.01  # of the half-power bandwidth: a smaller shift is not called significant
+MIN_DAMPING_CHANGE = 0.01  # relative: a smaller change of the damping ratio is not called significant
 MAX_DAMPING = 0.5  # a fitted pair more damped than this is no resonance of the window
 RESOLVED = 3.0  # a resonance's damping ratio must stand this many standard errors above zero
 _REFITS = 3  # window updates after the first fit
@@ -167,7 +175,8 @@ def fit_mode(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray,
         inverse = np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
         return None
-    cov = (inverse @ (J.T * ratio) @ J @ inverse)[-2:, -2:]  # of (a1, a0)
+    # where the local model misses beyond the noise its error is in the estimates too (Birge ratio)
+    cov = (inverse @ (J.T * ratio) @ J @ inverse)[-2:, -2:] * max(1.0, misfit)  # of (a1, a0)
     grad_f = np.array([0.0, centre / (2 * np.pi) / (2 * math.sqrt(a0))])
     grad_z = np.array([1 / (2 * math.sqrt(a0)), -a1 / (4 * a0 ** 1.5)])
     se_f = math.sqrt(max(float(grad_f @ cov @ grad_f), 0.0))
@@ -318,6 +327,7 @@ def _mode_row(levels: list, compared: list[int], fits: dict) -> dict:
                                             getattr(last, value), getattr(last, se))
         row[f"{name}_change"] = change
         row[f"{name}_change_se"] = error
-        row[f"{name}_significant"] = bool(math.isfinite(change) and abs(change) > SIGNIFICANCE * error)
+        floor = MIN_FREQUENCY_CHANGE * 2 * first.damping if name == "frequency" else MIN_DAMPING_CHANGE
+        row[f"{name}_significant"] = bool(math.isfinite(change) and abs(change) > max(SIGNIFICANCE * error, floor))
     row["significant"] = row["frequency_significant"] or row["damping_significant"]
     return row
