@@ -8,7 +8,8 @@ import click
 from nlsid.analysis.bla_methods import METHOD_CHOICES
 from nlsid.io.atomic import atomic_path, check_suffix, check_writable
 
-from .common import LOGGER, StageCommand, emit_json, force_option, json_option, keep_freed_memory, progress, settings
+from .common import (LOGGER, StageCommand, emit_json, force_option, json_option, keep_freed_memory, progress,
+                     settings, text_table)
 from .options import map_option, parse_map, plot_folder, plots_option
 
 
@@ -94,52 +95,47 @@ def _cell(value: float, fmt: str = ".1f") -> str:
 
 
 def _print_table(output: str, summaries: list[dict]) -> None:
-    from rich.table import Table
-
-    table = Table(title=f"{output}: BLA per level (dB; variances relative to |G_BLA|^2)")
-    for column in ("level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var",
-                   "odd-even", "odd-noise", "even-noise"):
-        table.add_column(column)
+    rows = []
     for row in summaries:
         spectrum = row["spectrum"]
-        table.add_row(
+        rows.append([
             "-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
             f"{row['realizations']} x {row['periods']}", row["method"], _cell(row["bla_db"]),
             _cell(row["nl_var_db"]),
             {"zero": "zero", "unknown": "unknown"}.get(row.get("noise_floor"), _cell(row["noise_var_db"])),
             _cell(spectrum["odd_above_even_db"]),
             _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
-        )
-    settings().console.print(table)
+        ])
+    # headers of words that wrap: "odd-even" would be cut to "odd-…" at 80 columns
+    header = ("level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var", "odd over even",
+              "odd over noise", "even over noise")
+    settings().console.print(text_table(f"{output}: BLA per level (dB; variances relative to |G_BLA|^2)", header,
+                                        rows))
 
 
 def _print_modes_table(output: str, modes: list[dict]) -> None:
     """The resonances compared over the levels (docs/level_comparison.md): at the lowest and the
     highest level where each is fitted, and the relative changes with their standard errors."""
-    from rich.table import Table
-
-    table = Table(title=f"{output}: modes from the lowest to the highest level (changes in %, +- 1 standard error)")
-    for column in ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"):
-        table.add_column(column)
+    rows = []
     for mode in modes:
         fitted = [level for level in mode["levels"] if level is not None]
         first, last = fitted[0], fitted[-1]
         changes = [_cell(100 * mode[key], fmt) for name in ("frequency", "damping")
                    for key, fmt in ((f"{name}_change", "+.3f"), (f"{name}_change_se", ".3f"))]
-        table.add_row(f"{first['frequency_hz']:.4g}", f"{first['damping']:.3g}", f"{last['frequency_hz']:.4g}",
-                      f"{last['damping']:.3g}", *changes, "yes" if mode["significant"] else "no")
-    settings().console.print(table)
+        rows.append([f"{first['frequency_hz']:.4g}", f"{first['damping']:.3g}", f"{last['frequency_hz']:.4g}",
+                     f"{last['damping']:.3g}", *changes, "yes" if mode["significant"] else "no"])
+    settings().console.print(text_table(
+        f"{output}: modes from the lowest to the highest level (changes in %, +- 1 standard error)",
+        ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"), rows))
 
 
 def _print_lpm_table(output: str, summaries: list[dict]) -> None:
-    from rich.table import Table
-
-    table = Table(title=f"{output}: BLA of arbitrary runs by the Local Polynomial Method (dB)")
-    for column in ("level", "u rms", "records", "method", "band Hz", "|G| dB", "noise+NL var (upper bound)", "dof"):
-        table.add_column(column)
+    rows = []
     for row in summaries:
         lo, hi = row["band_hz"]
-        table.add_row("-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
-                      str(row["realizations"]), row["method"], f"{lo:.4g}..{hi:.4g}", _cell(row["bla_db"]),
-                      _cell(row["total_var_db"]), str(row["lpm"]["dof"]))
-    settings().console.print(table)
+        rows.append(["-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
+                     str(row["realizations"]), row["method"], f"{lo:.4g}..{hi:.4g}", _cell(row["bla_db"]),
+                     _cell(row["total_var_db"]), str(row["lpm"]["dof"])])
+    settings().console.print(text_table(f"{output}: BLA of arbitrary runs by the Local Polynomial Method (dB)",
+                                        ("level", "u rms", "records", "method", "band Hz", "|G| dB",
+                                         "noise+NL var (upper bound)", "dof"), rows))

@@ -92,13 +92,20 @@ def _stderr_is_plain_file() -> bool:
 
 
 @contextlib.contextmanager
-def progress(description: str, total: int) -> Iterator[Any]:
+def progress(description: str, total: int, kernels: bool = False) -> Iterator[Any]:
     """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step()`` callable.
+
+    ``kernels``: the stage simulates; when numba has yet to compile the kernels
+    (:func:`kernels_not_compiled`) the bar says :data:`COMPILING_NOTE` until its first step, where
+    it would otherwise stand at 0 for some 20 s as if hung (logged at ``-v`` where there is no bar).
 
     Where stderr is no terminal (a pipe, a log) the bar would show nothing and rich would write one
     empty line when it ends: that line is written without rich's live display (0.015 s of `nlsid
     bla`, benchmarks/bla.py), and with ``--json`` without rich at all."""
     quiet = settings().quiet  # here: a generator holding the bar may be closed outside the command
+    compiling = kernels and kernels_not_compiled()
+    if compiling:
+        LOGGER.info(COMPILING_NOTE)
     if _stderr_is_plain_file():
         if not click.get_current_context().params.get("as_json"):
             # The stage's report follows through rich, once its outputs are written: imported now,
@@ -126,12 +133,14 @@ def progress(description: str, total: int) -> Iterator[Any]:
         disable=quiet,
     )
     with bar:
-        task = bar.add_task(description, total=total)
+        task = bar.add_task(f"{description}: {COMPILING_NOTE}" if compiling else description, total=total)
         done, planned = 0, total
 
         def step(advance: int = 1) -> None:
             # a stage that takes further rounds (diagnose's chain of causes) extends the bar by a round
             nonlocal done, planned
+            if compiling and done == 0:
+                bar.update(task, description=description)
             done += advance
             if done > planned:
                 planned += total
@@ -139,6 +148,63 @@ def progress(description: str, total: int) -> Iterator[Any]:
             bar.advance(task, advance)
 
         yield step
+
+
+def text_table(title: str, header: list[str] | tuple[str, ...], rows: list[list[str]]):
+    """A rich table whose cells wrap at spaces and never cut a word: each column is at least as
+    wide as its longest word (header included), and only a word wider than the whole terminal is
+    folded rather than cut to an ellipsis (rich's default cuts "odd-even" to "odd-…" at 80 columns)."""
+    from rich.table import Table
+
+    table = Table(title=title)
+    for index, name in enumerate(header):
+        words = [word for cell in [name, *(row[index] for row in rows)] for word in str(cell).split()]
+        table.add_column(name, overflow="fold", min_width=max((len(word) for word in words), default=1))
+    for row in rows:
+        table.add_row(*(str(cell) for cell in row))
+    return table
+
+
+def grouped_notes(prefix: str, named: list[tuple[str, str]]) -> list[str]:
+    """One line per distinct note of ``named`` (name, note) pairs, in first-seen order, naming the
+    items that share it: ``not fitted: REASON (7 hypotheses: a, b, c, ...)`` instead of seven rows
+    repeating REASON."""
+    groups: dict[str, list[str]] = {}
+    for name, note in named:
+        groups.setdefault(note, []).append(name)
+    lines = []
+    for note, names in groups.items():
+        who = names[0] if len(names) == 1 else f"{len(names)} hypotheses: {', '.join(names)}"
+        lines.append(f"{prefix}{note} ({who})")
+    return lines
+
+
+def kernels_not_compiled() -> bool:
+    """Whether the simulation kernels have no compiled code in numba's cache for this install's
+    sources (a first run, or the first after an update of ``nlsid/simulate/kernels.py``): then the
+    first simulations wait some 20 s for numba to compile. Judged from the cache's index files
+    (``kernels.*.nbi`` no older than the source, in the sub-folder numba names after the source
+    folder: the folder's name and the SHA-1 of its absolute path), without compiling anything.
+    Kernel variants of a new model structure may compile on a warm cache as well; they are quicker."""
+    import hashlib
+    import importlib.util
+    from pathlib import Path
+
+    from nlsid.simulate import jit
+
+    if not jit.CACHING:
+        return True
+    folder = Path(importlib.util.find_spec("nlsid.simulate").submodule_search_locations[0]).resolve()
+    source = folder / "kernels.py"
+    cache = Path(os.environ.get("NUMBA_CACHE_DIR", "")) / f"{folder.name}_{hashlib.sha1(str(folder).encode()).hexdigest()}"
+    try:
+        stamp = source.stat().st_mtime
+        return not any(index.stat().st_mtime >= stamp for index in cache.glob("kernels.*.nbi"))
+    except OSError:
+        return True
+
+
+COMPILING_NOTE = "compiling simulation kernels (first run only, about 20 s)"
 
 
 #: glibc's mallopt parameters and the values its dynamic thresholds reach once a 32 MB block has

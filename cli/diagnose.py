@@ -8,7 +8,8 @@ import click
 
 from nlsid.errors import CheckFailed
 
-from .common import StageCommand, emit_json, force_option, json_option, progress, settings
+from .common import (StageCommand, emit_json, force_option, grouped_notes, json_option, progress,
+                     settings, text_table)
 from .options import map_option, parse_map, split_options
 
 
@@ -60,7 +61,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
 
     inputs = diagnosis_inputs(model_path, data_path, list(validate_on), estimation_range, validation_range,
                               allow_overlap, workers, parse_map(mapping), False if no_yardstick else None, names=FLAGS)
-    with progress("diagnose", inputs.steps) as step:  # evidence, nuisances, each hypothesis
+    with progress("diagnose", inputs.steps, kernels=True) as step:  # evidence, nuisances, each hypothesis
         result = inputs.run(progress=step)
     summary = result.summary()
     result.write(output, force=force, provenance=provenance(config_paths=[model_path],
@@ -83,25 +84,26 @@ def _print(result, output: str) -> None:
     console.print(result.headline(), style="bold", markup=False)
     for line in result.evidence.findings():
         console.print(f"  - {line}", markup=False)
-    from rich.table import Table
-
     from nlsid.report.render_diagnosis import floor_text
 
-    table = Table(title="Hypotheses (validation runs)")
-    for column in ("hypothesis", "main parameter", "gain dB", "vs noise floor", "distortion gain dB", "note"):
-        table.add_column(column)
+    rows, not_fitted = [], []
     for o in result.outcomes:
         if o.score is None:
-            table.add_row(o.hypothesis.title, "-", "-", "-", "-", o.reason)
+            not_fitted.append((o.hypothesis.title, o.reason.removeprefix("not fitted: ")))
             continue
         main = o.hypothesis.main
         distortion = o.score.distortion_gain_db
         gain = f"{o.score.gain_db:+.1f}" if math.isfinite(o.score.gain_db) else "exact" if o.score.exact else "-"
-        table.add_row(o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain,
-                      floor_text(o.score.summary()),
-                      "-" if math.isnan(distortion) else f"{distortion:+.1f}",
-                      "winner" if o is result.winner else "")
-    console.print(table)
+        rows.append([o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain,
+                     floor_text(o.score.summary()), "-" if math.isnan(distortion) else f"{distortion:+.1f}",
+                     "winner" if o is result.winner else ""])
+    if rows:
+        console.print(text_table("Hypotheses (validation runs)", ("hypothesis", "main parameter", "gain dB",
+                                                                   "vs noise floor", "distortion gain dB", "note"),
+                                 rows))
+    # the hypotheses left out usually share a reason: one line per reason, not a row each
+    for line in grouped_notes("not fitted: ", not_fitted):
+        console.print(line, markup=False)
     console.print(f"-> {output}", markup=False)
 
 

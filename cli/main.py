@@ -51,6 +51,11 @@ class NlsidGroup(click.Group):
         args = sys.argv[1:] if args is None else list(args)
         try:
             result = super().main(self.reorder(args), prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            # bare `nlsid` (or a command group without its subcommand): the help, as written, not
+            # folded into one error line
+            click.echo(exc.format_message(), err=True)
+            sys.exit(exc.exit_code)
         except click.ClickException as exc:
             click.echo(f"nlsid: error: {_usage_message(exc)}", err=True)
             sys.exit(exc.exit_code)

@@ -52,7 +52,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     model = Model.from_yaml(config)
     runs = read(excitation, require_y=False)
     start = time.perf_counter()
-    with progress("simulate", len(runs) * len(model.points)) as step:
+    with progress("simulate", len(runs) * len(model.points), kernels=True) as step:
         recording = model.simulate(runs, seed=seed, workers=workers, steady=steady, progress=step)
     seconds = time.perf_counter() - start
     recording.write(output, force=force)
