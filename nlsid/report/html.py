@@ -1,5 +1,8 @@
 """One self-contained HTML page: the verdict first, then the evidence figures, then the numbers.
 
+Findings an engineer need not read to decide (numerical settings, side estimates, optimiser notes)
+sit under the verdict in a collapsed ``<details>`` element (``id="details"``), one click away.
+
 The page needs nothing but itself: the CSS is inline, every figure is inline SVG (its text is text:
 it zooms and can be searched) with its data as a CSV ``data:`` link, there is no script and no
 external resource (no fonts, no stylesheets, no images by address), so it can be mailed to a
@@ -54,6 +57,10 @@ th:first-child, td:first-child { text-align: left; }
 td.text, th.text { text-align: left; }
 table.provenance td.text { overflow-wrap: anywhere; }
 p.note { color: var(--muted); font-size: 13px; }
+details#details { margin-top: 10px; padding: 6px 18px; border: 1px solid var(--line); border-radius: 4px;
+                  font-size: 14px; }
+details#details summary { cursor: pointer; color: var(--muted); font-weight: 600; }
+details#details ul { margin: 6px 0 4px; padding-left: 20px; }
 ol.references { font-size: 13px; padding-left: 22px; }
 footer { margin-top: 36px; color: var(--muted); font-size: 12px; border-top: 1px solid var(--line);
          padding-top: 8px; }
@@ -108,11 +115,14 @@ class Page:
     numbers: dict = field(default_factory=dict)
     #: said once under the title, e.g. which units the recording did not carry (:mod:`nlsid.report.units`)
     note: str = ""
+    #: findings behind the verdict, collapsed under it: settings, side estimates, optimiser notes
+    details: list[str] = field(default_factory=list)
+    details_title: str = "Details"
 
     def summary(self) -> dict:
         """The machine-readable content of the page (``nlsid report --json``)."""
         return {"kind": self.kind, "title": self.title, "source": self.source, "headline": self.headline,
-                "findings": list(self.findings), "warnings": list(self.warnings),
+                "findings": list(self.findings), "details": list(self.details), "warnings": list(self.warnings),
                 "figures": [item.alt for item in self.figures], "numbers": self.numbers}
 
 
@@ -195,6 +205,11 @@ def render_html(page: Page, generator: str) -> str:
     if page.warnings:
         items = "".join(f"<li>{_e(w)}</li>" for w in page.warnings)
         warnings = f'<div class="warnings" id="warnings"><b>Warnings of the analysis</b><ul>{items}</ul></div>'
+    details = ""
+    if page.details:
+        items = "".join(f"<li>{_e(d)}</li>" for d in page.details)
+        details = (f'<details id="details"><summary>{_e(page.details_title)}</summary>'
+                   f"<ul>{items}</ul></details>")
     figures = "".join(_figure(item, i + 1) for i, item in enumerate(page.figures))
     tables = "".join(_table(item) for item in page.tables)
     body = (
@@ -202,7 +217,7 @@ def render_html(page: Page, generator: str) -> str:
         f'<div class="source">{_e(page.source)}</div></header>'
         + (f'<p class="note" id="units-note">{_e(page.note)}</p>' if page.note else "")
         + f'<section id="verdict"><p class="headline">{_e(page.headline)}</p><ul>{findings}</ul></section>'
-        f"{warnings}"
+        f"{details}{warnings}"
         + (f'<h2>Evidence</h2><section id="figures">{figures}</section>' if figures else "")
         + (f'<h2>Numbers</h2><section id="numbers">{tables}</section>' if tables else "")
     )

@@ -1,7 +1,10 @@
 """The report page of a ``diagnosis/`` folder: the verdict, the evidence figures, then the numbers.
 
 The verdict and the findings are those of ``summary.json`` (rules in :mod:`nlsid.diagnose.verdict`
-and :mod:`nlsid.diagnose.evidence`); the figures come from ``results.h5``
+and :mod:`nlsid.diagnose.evidence`), led by what an engineer decides on: the cause with its
+parameters and their standard errors, and where the original model, the extended one and the
+black-box yardstick stand against the noise floor; nuisances, numerical settings and each fit's
+notes go to the collapsed details (:func:`split_findings`, :func:`optimiser_notes`); the figures come from ``results.h5``
 (:mod:`nlsid.report.diagnosis_plots`); the tables rank the hypotheses by their validation error and
 give the evidence per level and the gain, and, when the summary has a ``chain`` of causes, each of
 its steps. A validation error's distance to the noise floor reads as in the verdict ("0.2 dB
@@ -34,6 +37,78 @@ def floor_text(score: dict | None) -> str:
     if x is None or not math.isfinite(x):
         return "floor unknown"
     return f"{abs(x):.1f} dB {'above' if x >= 0 else 'below'}"
+
+
+#: the opening words of the findings that are settings or side estimates rather than the answer
+#: (:meth:`nlsid.diagnose.diagnosis.Diagnosis.findings`): they go to the page's collapsed details
+DETAIL_OPENINGS = ("nuisances estimated first", "initial state fitted", "extended model simulated with",
+                   "the model simulated with", "estimation budget", "black-box yardstick")
+
+
+def split_findings(findings: list[str]) -> tuple[list[str], list[str]]:
+    """The findings an engineer decides on, and those for the details (:data:`DETAIL_OPENINGS`)."""
+    lead = [line for line in findings if not line.startswith(DETAIL_OPENINGS)]
+    return lead, [line for line in findings if line.startswith(DETAIL_OPENINGS)]
+
+
+def _with_std(name: str, values: dict, std: dict, unit: str = "") -> str:
+    text = f"{name} = {number(values[name], '.4g')}"
+    if std.get(name) is not None:
+        text += f" ± {number(std[name], '.2g')}"
+    return text + (f" {unit}" if unit else "")
+
+
+def _parameters(title: str, values: dict, std: dict, main: str | None, unit: str) -> str:
+    """``Coulomb friction: fc = 100.2 ± 0.17 N; with it, the model's damping = 20 ± 0.0017, ...``."""
+    first = [_with_std(main, values, std, unit)] if main in values else []
+    others = [_with_std(name, values, std) for name in values if name != main]
+    if not first:
+        return f"{title}: {', '.join(others)}"
+    return f"{title}: {first[0]}" + (f"; with it, the model's {', '.join(others)}" if others else "")
+
+
+def cause_lines(summary: dict) -> list[str]:
+    """The named cause(s) with every estimated parameter ± one standard error, the main parameter
+    first with its unit: each step of the chain of causes, else the verdict's winner."""
+    by_name = {h.get("name"): h for h in summary["hypotheses"]}
+    steps = summary.get("chain") or []
+    if not steps:
+        winner = by_name.get(summary["verdict"].get("winner"))
+        steps = [{"cause": winner["name"], "title": winner["title"], "values": winner["values"],
+                  "std": winner.get("std") or {}}] if winner and winner.get("values") else []
+    out = []
+    for i, step in enumerate(steps):
+        h = by_name.get(step.get("cause"), {})
+        title = step.get("title") or step.get("cause", "-")
+        text = _parameters(title, step.get("values", {}), step.get("std") or {}, h.get("main_parameter"),
+                           h.get("unit", ""))
+        out.append((f"cause {i + 1}, " if len(steps) > 1 else "cause: ") + text + " (± one standard error)")
+    return out
+
+
+def standing_lines(summary: dict) -> list[str]:
+    """Where the models' validation errors stand against the noise floor: the original, the
+    extended (named causes) and the black-box yardstick, which shows how far a flexible model gets."""
+    original, gain = summary["original"], summary.get("gain")
+    text = f"validation error against the noise floor: original model {floor_text(original)}"
+    if gain:
+        text += (f", extended model (named causes) {floor_text(gain['extended'])}, "
+                 f"{number(gain['gain_db'], '.1f')} dB smaller than the original's")
+    lines = [text]
+    yardstick = summary.get("yardstick")
+    if yardstick and yardstick.get("fitted"):
+        lines.append(f"a black-box model fitted to the same data as a yardstick (PNLSS) reaches "
+                     f"{floor_text(yardstick['validation'])} the floor: what a flexible model gets, beside "
+                     "the named causes")
+    elif yardstick:
+        lines.append("no black-box yardstick to compare with (why: in the details below)")
+    return lines
+
+
+def optimiser_notes(summary: dict) -> list[str]:
+    """Each fitted hypothesis' note of its estimate (start, identifiability, parameters the data
+    determine poorly): for whoever checks the fit, not for the decision."""
+    return [f"{h['title']}: {h['note']}" for h in summary["hypotheses"] if h.get("note") and h.get("values")]
 
 
 def _figures(arrays: dict, units: Units) -> list[Figure]:
@@ -85,7 +160,8 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
         parameter = f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" if value is not None else "-"
         rows.append([h["title"], parameter,
                      number(v and v["gain_db"], "+.1f"), floor_text(v),
-                     number(v and v.get("distortion_gain_db"), "+.1f"), h["reason"] or h.get("note", "")])
+                     number(v and v.get("distortion_gain_db"), "+.1f"),
+                     h["reason"] or ("winner" if h.get("name") == summary["verdict"].get("winner") else "")])
     split, verdict = summary["split"], summary["verdict"]
     return Table("Hypotheses, ranked by validation error",
                  ["hypothesis", "main parameter", "validation gain dB", "validation error vs noise floor",
@@ -97,7 +173,8 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
                       "gain: the drop of the residual power at the odd and even detection lines of the validation "
                       "multisines (> 0: the hypothesis removes distortion, < 0: it adds some). A cause is named "
                       "when its error power is below the original's by more than the F threshold "
-                      f"{verdict['f_threshold']:.3g} (alpha {verdict['alpha']:g}).")
+                      f"{verdict['f_threshold']:.3g} (alpha {verdict['alpha']:g}). Each fit's notes (start, "
+                      "parameters the data determine poorly) are in the details under the verdict.")
 
 
 def _level_table(evidence: dict, units: Units) -> Table:
@@ -187,8 +264,11 @@ def render_diagnosis(path: Path) -> Page:
     units = units_of(summary.get("units"))
     keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain", "explanation", "yardstick",
             "best_model")
+    lead, details = split_findings(list(summary["findings"]))
     return Page(kind="Model diagnosis", title=f"Diagnosis of {Path(summary['model']).name}", source=str(path),
-                headline=summary["headline"], findings=list(summary["findings"]),
+                headline=summary["headline"], findings=cause_lines(summary) + standing_lines(summary) + lead,
+                details=details + optimiser_notes(summary),
+                details_title="Details: nuisances, numerical settings and the fits' notes",
                 figures=_figures(arrays, units.for_figures()), note=units.missing_note("u", "y"),
                 tables=_tables(summary, units), provenance=summary.get("provenance", {}),
                 numbers={k: summary[k] for k in keys if k in summary})

@@ -99,3 +99,17 @@ def test_a_chain_of_causes_is_a_table_of_steps(diagnosis):
     assert [row["validation error rms (unit not recorded)"] for row in steps] == ["2.5e-06", "1.6e-06"]
     assert [row["validation gain dB"] for row in steps] == ["+31.5", "+4.0"]
     assert [row["validation error vs noise floor"] for row in steps] == ["4.3 dB above", "0.3 dB below"]
+
+
+def test_the_verdict_leads_with_the_cause_and_keeps_settings_in_the_details(diagnosis):
+    """The verdict box: the cause's parameters with their standard errors and unit, the errors
+    against the floor; no nuisance, sub-step or optimiser note, and no internal key path. Those
+    are in the collapsed details."""
+    summary, seen = diagnosis
+    verdict = seen["diagnosis", 1280]["verdict"]["text"]
+    (winner,) = [h for h in summary["hypotheses"] if h["name"] == summary["verdict"]["winner"]]
+    main = winner["main_parameter"]
+    assert (f"{main} = {winner['values'][main]:.4g} ± {winner['std'][main]:.2g} {winner['unit']}") in verdict
+    assert "validation error against the noise floor: original model" in verdict
+    for internal in ("nuisances estimated first", "sub-steps", "model.", "singular value", "% of its value"):
+        assert internal not in verdict, internal
