@@ -114,7 +114,7 @@ def _levy(x: np.ndarray, G: np.ndarray, weight: np.ndarray) -> np.ndarray:
     iterated (Sanathanan-Koerner) from D = 1."""
     theta = None
     scale = weight.copy()
-    for _ in range(5):
+    for _ in range(3):
         columns = np.stack([x ** d for d in range(NUMERATOR_DEGREE + 1)] + [-G * x, -G], axis=1) * scale[:, None]
         target = G * x * x * scale
         A = np.concatenate([columns.real, columns.imag])
