@@ -25,7 +25,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
-from nlsid.report.axes import plain_log_ticks, unwrapped_phase
+from nlsid.report.axes import legend_outside, plain_log_ticks, unwrapped_phase
 from nlsid.report.html import Page, Table, number
 from nlsid.report.vector import figure, new_figure
 
@@ -170,7 +170,7 @@ def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarra
         phase.semilogx(frequency, unwrapped_phase(values)[0], label=name)
     magnitude.set_ylabel(f"magnitude ({BODE_UNIT})")
     phase.set_ylabel("phase (deg)")
-    magnitude.legend(fontsize="small", loc="best")
+    legend_outside(magnitude)
     for axis in (magnitude, phase):
         axis.set_xlabel("f / fs (cycles per sample)" if elements[0].ss.discrete else "frequency (Hz)")
         axis.grid(True, which="both", alpha=0.3)
