@@ -31,7 +31,9 @@ faster and does not bias the poles towards d~ = 1. The zeros of sigma are the ne
 eigenvalues of A - b c~^T / d~, with (A, b) the real block-diagonal realisation of the basis
 (a pair a = alpha + j beta as [[alpha, beta], [-beta, alpha]], b = [2, 0]; the pair's real basis
 functions are 1/(x - a) + 1/(x - a*) and j/(x - a) - j/(x - a*), its residue c1 + j c2). Each
-iteration is an SK-like step (Sanathanan and Koerner 1963) in a well-conditioned basis. When
+iteration is an SK-like step (Sanathanan and Koerner 1963) in a well-conditioned basis; the steps
+stop when the poles settle or the cost V (below) stops falling (with noise the poles jitter at the
+noise level), and the poles of the lowest V met are kept. When
 stability is asked, a pole outside the stable region is reflected into it (s: Re p -> -Re p;
 z: p -> 1 / p*), which keeps |G| on the imaginary axis / unit circle up to an all-pass factor.
 
@@ -41,8 +43,8 @@ The poles of the fixed point of the relocation are not the minimiser of the weig
     V = sum_k w_k^2 |G_k - G(x_k)|^2
 
 (the SK fixed point carries an O(noise^2) bias), so a Levenberg-Marquardt refinement of V over the
-poles and residues themselves follows (:func:`scipy.optimize.least_squares`, analytic Jacobian:
-dG/dr = 1/(x - p), dG/dp = r/(x - p)^2); V is the maximum-likelihood cost for circular complex
+poles and residues themselves follows (analytic Jacobian dG/dr = 1/(x - p), dG/dp = r/(x - p)^2,
+one QR factorisation per Jacobian, :func:`_refine`); V is the maximum-likelihood cost for circular complex
 Gaussian noise of variance sigma_k^2 on G_k. The refined model is kept when its cost is lower and,
 when stability is asked, its poles stay stable. Its parameters are n_theta = 2 N + 1 real numbers
 (pole and residue per real pole: 2; per pair: 4; d: 1), the number of the polynomial fit nb = na = N.
@@ -79,9 +81,9 @@ class VectorFit:
     imaginary part (its conjugate is implied); ``domain`` ``s`` (poles in rad/s) or ``z`` (poles in
     z at the rate ``fs``). ``cost`` is V at the data the fit was given, ``lines`` their number,
     ``covariance`` that of :attr:`parameters` (None where the Jacobian is singular; for data fitted
-    without variances it is relative to a unit variance per line), ``iterations`` the relocation steps taken, ``refined`` whether the
-    Levenberg-Marquardt refinement was kept, ``delay`` a dead time in samples the data were
-    corrected for (``z`` only).
+    without variances it is relative to a unit variance per line), ``iterations`` the relocation
+    steps taken, ``refined`` whether the Levenberg-Marquardt refinement was kept, ``delay`` a dead
+    time in samples the data were corrected for (``z`` only).
     """
 
     poles: np.ndarray
