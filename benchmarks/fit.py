@@ -41,7 +41,8 @@ import numpy as np
 from scipy import signal
 
 from nlsid.fit.extension import FreeParameter, fit_free_parameters, split_runs
-from nlsid.fit.tf_fit import FRFData, fit_order
+from nlsid.fit.frf_data import FRFData
+from nlsid.fit.tf_fit import fit_order
 from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
 from nlsid.simulate.batch import simulate_all

@@ -9,7 +9,7 @@
   ``polynomial_auto``: the path of ``nlsid fit bla.h5 --order auto`` (nlsid.fit.bla_fit.fit_level:
   orders up to 4/4, then up to 10/10 while none reaches its cost bound). ``vf_auto``: vector
   fitting at N = 1, 2, ... poles until the weighted cost lies within the same bound
-  (nlsid.fit.pole_count.select_poles: nlsid.fit.tf_fit.cost_bound, n_theta = 2N + 1), stable.
+  (nlsid.fit.pole_count.select_poles: nlsid.fit.cost_statistics.cost_bound, n_theta = 2N + 1), stable.
 * ``structure_40_poles``: 20 modes (natural frequencies log-spaced 10..800 Hz, damping 0.5-3 %)
   sampled through the zero-order hold (scipy.signal.cont2discrete) at 4 kHz, 1,600 lines of a
   4,096-sample period, noise 1 % of the mean |G|. ``polynomial_40_40``: ``nlsid fit --order 40/40``
@@ -35,7 +35,9 @@ from threadpoolctl import threadpool_limits
 
 from nlsid.fit.bla_fit import fit_level
 from nlsid.fit.bla_source import BLALevel
-from nlsid.fit.tf_fit import FRFData, cost_bound, fit_transfer_function
+from nlsid.fit.cost_statistics import cost_bound
+from nlsid.fit.frf_data import FRFData
+from nlsid.fit.tf_fit import fit_transfer_function
 from nlsid.fit.pole_count import select_poles
 from nlsid.fit.vector_fitting import vector_fit
 

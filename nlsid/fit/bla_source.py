@@ -29,7 +29,7 @@ import numpy as np
 
 from nlsid.citations import BOOK
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import FRFData
+from nlsid.fit.frf_data import FRFData
 from nlsid.analysis.precision import PRECISION, negligible
 from nlsid.io.bla_file import read_bla
 

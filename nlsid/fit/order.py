@@ -1,12 +1,12 @@
 """Order selection for transfer functions fitted to a BLA (book 4.7 L, Ex 76, 99, 100; Section 7.5).
 
 Every proper order nb/na (nb <= na, 1 <= na <= max_order) is fitted, by
-:func:`nlsid.fit.tf_fit.fit_stable`: the free fit when it is stable; when the free fit has real
+:func:`nlsid.fit.tf_stable.fit_stable`: the free fit when it is stable; when the free fit has real
 poles just beyond the stability boundary (within 3 standard deviations of z = 1 / s = 0) the data
 ask for integrators (a free mass) and those poles are fixed on the boundary; otherwise the fit is
 continued inside the stable region from its reflected poles. Two checks per order:
 
-* the cost at the minimum against its statistical bound :func:`nlsid.fit.tf_fit.cost_bound`
+* the cost at the minimum against its statistical bound :func:`nlsid.fit.cost_statistics.cost_bound`
   (the sample-ML cost of a correct model: E{V} = F - n_theta/2 for exact variances, (M-1)/(M-2)
   times that for variances from M realizations, with the spread of (1/2) chi^2(2F - n_theta),
   respectively of a sum of F(2, 2M - 2) terms; book 4.7 L and Chapter 7): a correct order stays
@@ -49,7 +49,10 @@ import numpy as np
 
 from nlsid.citations import BOOK
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import ACCEPT_PROBABILITY, FRFData, TFFit, expected_cost, fit_stable, on_boundary, refit
+from nlsid.fit.cost_statistics import ACCEPT_PROBABILITY, expected_cost
+from nlsid.fit.frf_data import FRFData
+from nlsid.fit.tf_fit import TFFit, refit
+from nlsid.fit.tf_stable import fit_stable, on_boundary
 
 
 EXTENSION_NB_SPAN = 2  # beyond --max-order: nb = na - 2 .. na only
@@ -65,10 +68,10 @@ class OrderResult:
     holdout_error: float       # mean weighted squared error per held-out line
     accepted: bool             # the cost lies within its bound
     cost_bound: float = math.nan
-    stability: str = "stable"  # of the fit considered for this order (tf_fit.TransferFunction.stability)
-    how: str = "free"          # free, integrator or stabilised (tf_fit.fit_stable)
+    stability: str = "stable"  # of the fit considered for this order (TransferFunction.stability)
+    how: str = "free"          # free, integrator or stabilised (tf_stable.fit_stable)
     free_pole: float = math.nan  # the free fit's largest |z| (z) or Re s (s): where it would have put its poles
-    boundary: bool = False     # a stabilised fit with a pole within 3 std of the boundary (tf_fit.on_boundary)
+    boundary: bool = False     # a stabilised fit with a pole within 3 std of the boundary (tf_stable.on_boundary)
 
     @property
     def eligible(self) -> bool:
@@ -116,7 +119,7 @@ def likelihood_ratio_bound(extra: int, realizations: int | None, correlation: fl
     (with probability ACCEPT_PROBABILITY): V_small - V_large ~ (1/2) chi^2(extra) for exact
     variances and independent lines (the likelihood ratio of nested Gaussian models, Soderstrom
     and Stoica 1989, Section 11.5), scaled by (M-1)/(M-2) for variances from M realizations as the
-    expected cost is (:func:`nlsid.fit.tf_fit.expected_cost`; approximate: the weights are shared
+    expected cost is (:func:`nlsid.fit.cost_statistics.expected_cost`; approximate: the weights are shared
     by both models), and by ``correlation`` (:func:`line_correlation`) for lines whose errors are
     correlated. M <= 2: no finite bound (inf)."""
     from scipy.stats import chi2

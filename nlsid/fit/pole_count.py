@@ -3,7 +3,7 @@ is within its bound.
 
 Each candidate is a vector fit (:mod:`nlsid.fit.vector_fitting`) of N poles, n_theta = 2 N + 1
 parameters (the class of the polynomial fit nb = na = N). At the minimum of a correct model the cost
-V = sum |G_k - G(x_k)|^2 / sigma_k^2 is distributed as in :func:`nlsid.fit.tf_fit.cost_bound` (exact
+V = sum |G_k - G(x_k)|^2 / sigma_k^2 is distributed as in :func:`nlsid.fit.cost_statistics.cost_bound` (exact
 variances: (1/2) chi^2(2F - n_theta); variances from M realizations: a sum of F(2, 2M - 2) terms),
 and a model that misses a mode leaves a cost far above that bound. The fewest poles whose fit is
 within the bound are chosen (the parsimony rule of the book's 4.7 L: the first order whose cost is
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.fit.tf_fit import cost_bound
+from nlsid.fit.cost_statistics import cost_bound
 from nlsid.fit.vector_fitting import VectorFit, vector_fit
 
 DEFAULT_MAX_POLES = 40
@@ -62,7 +62,7 @@ def _ordered(scan: dict[int, PoleCandidate]) -> list[PoleCandidate]:
 def select_poles(data, max_poles: int = DEFAULT_MAX_POLES, domain: str = "z", stable: bool = True,
                  delay: int = 0) -> PoleSelection:
     """Scan N = 1 .. ``max_poles`` poles (module docstring) on ``data``, an FRF with ``frequency`` (Hz),
-    ``G``, ``variance``, ``fs`` and ``realizations`` (:class:`nlsid.fit.tf_fit.FRFData`).
+    ``G``, ``variance``, ``fs`` and ``realizations`` (:class:`nlsid.fit.frf_data.FRFData`).
 
     Parameters
     ----------

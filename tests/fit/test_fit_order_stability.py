@@ -1,5 +1,5 @@
 """``--order auto`` chooses stable models, integrators only where the data ask for them, and s fits
-start from the z fit (issue #14, nlsid.fit.order / nlsid.fit.tf_fit).
+start from the z fit (issue #14, nlsid.fit.order / nlsid.fit.tf_fit / nlsid.fit.tf_stable).
 
 The data are built here, independently of the code under test: exact zero-order-hold
 discretisations of known continuous systems (scipy.signal.cont2discrete), evaluated at the
@@ -18,8 +18,9 @@ import pytest
 import yaml
 from scipy import signal
 
+from nlsid.fit.frf_data import FRFData
 from nlsid.fit.order import select_order
-from nlsid.fit.tf_fit import FRFData, fit_order
+from nlsid.fit.tf_fit import fit_order
 
 
 FS, N = 1000.0, 1000

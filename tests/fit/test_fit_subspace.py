@@ -50,7 +50,7 @@ def test_wiener_hammerstein_bla_fitted_within_its_cost_bound(run_cli, tmp_path):
     Gaussian input, 0.3 mV noise, an output offset): the BLA's variance is mostly stochastic
     nonlinear distortion. With the smoothed weights the cost check has a finite bound, and the
     fit reaches it: the sample-ML cost of a correct model lies below its 3-std bound with
-    probability 0.99865 (nlsid.fit.tf_fit.cost_bound). Measured when written: the linear
+    probability 0.99865 (nlsid.fit.cost_statistics.cost_bound). Measured when written: the linear
     (Levy, Sanathanan-Koerner) start alone ends in a local minimum at 20 916, above the bound
     19 562; from the subspace start 18 564."""
     from nlsid.io.recording import write_recording

@@ -1,4 +1,4 @@
-"""Transfer functions fitted to a BLA (nlsid.fit.tf_fit, nlsid.fit.order, nlsid fit BLA).
+"""Transfer functions fitted to a BLA (nlsid.fit.tf_fit and its modules, nlsid.fit.order, nlsid fit BLA).
 
 References are independent of the code under test: systems from scipy.signal (cheby1, lfilter,
 cont2discrete with the zero-order hold), multisines and noise from tests/generators/bla_cases.py, and the
@@ -17,8 +17,11 @@ import yaml
 from scipy import signal, stats
 
 from nlsid.analysis.levels import analyse_runs
+from nlsid.fit.cost_statistics import cost_bound, expected_cost
+from nlsid.fit.frf_data import FRFData
 from nlsid.fit.order import select_order
-from nlsid.fit.tf_fit import FRFData, TransferFunction, cost_bound, expected_cost, fit_order, fit_transfer_function
+from nlsid.fit.tf_fit import fit_order, fit_transfer_function
+from nlsid.fit.transfer_function import TransferFunction
 from nlsid.io.run import Run
 
 from generators.bla_cases import multisine  # noqa: E402
@@ -359,7 +362,7 @@ def test_the_cost_drop_on_lpm_lines_is_half_a_chi_square_times_their_correlation
     from nlsid.cli.main import cli
     from nlsid.fit.bla_source import frf_from_bla
     from nlsid.fit.order import likelihood_ratio_bound, line_correlation
-    from nlsid.fit.tf_fit import expected_cost
+    from nlsid.fit.cost_statistics import expected_cost
     from nlsid.io.recording import write_recording
     from nlsid.io.run import Run
 

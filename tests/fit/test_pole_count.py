@@ -13,7 +13,7 @@ import pytest
 
 from nlsid.errors import InputError
 from nlsid.fit.pole_count import select_poles
-from nlsid.fit.tf_fit import FRFData
+from nlsid.fit.frf_data import FRFData
 
 
 def _structure_frf(modes: int, noise: float, seed: int) -> tuple[FRFData, np.ndarray]:
