@@ -126,7 +126,7 @@ def _print_modes_table(output: str, modes: list[dict]) -> None:
                      f"{last['damping']:.3g}", *changes, "yes" if mode["significant"] else "no"])
     settings().console.print(text_table(
         f"{output}: modes from the lowest to the highest level (changes in %, +- 1 standard error)",
-        ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"), rows))
+        ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"), rows, ruled=True))
 
 
 def _print_lpm_table(output: str, summaries: list[dict]) -> None:

@@ -150,13 +150,17 @@ def progress(description: str, total: int, kernels: bool = False) -> Iterator[An
         yield step
 
 
-def text_table(title: str, header: list[str] | tuple[str, ...], rows: list[list[str]]):
+def text_table(title: str, header: list[str] | tuple[str, ...], rows: list[list[str]], ruled: bool = False):
     """A rich table whose cells wrap at spaces and never cut a word: each column is at least as
     wide as its longest word (header included), and only a word wider than the whole terminal is
-    folded rather than cut to an ellipsis (rich's default cuts "odd-even" to "odd-…" at 80 columns)."""
+    folded rather than cut to an ellipsis (rich's default cuts "odd-even" to "odd-…" at 80 columns).
+    ``ruled``: with rich's borders around and between the columns (a table of few narrow columns)."""
+    from rich import box
     from rich.table import Table
 
-    table = Table(title=title)
+    # by default a rule under the header and spaces between the columns: borders take 11 of the 80
+    # columns of a ten-column table, which then needs 81, and rich crops what it cannot fit
+    table = Table(title=title, box=box.HEAVY_HEAD if ruled else box.SIMPLE_HEAD, pad_edge=ruled)
     for index, name in enumerate(header):
         words = [word for cell in [name, *(row[index] for row in rows)] for word in str(cell).split()]
         table.add_column(name, overflow="fold", min_width=max((len(word) for word in words), default=1))

@@ -7,6 +7,7 @@ import io
 import os
 import re
 import time
+from collections import Counter
 from types import SimpleNamespace
 
 import numpy as np
@@ -30,6 +31,11 @@ def _words_intact(text: str, words: list[str]) -> None:
         assert word in tokens, (word, text)
 
 
+def _tokens(text: str) -> Counter:
+    """The words of ``text``, without the table's rules and borders."""
+    return Counter(token for token in re.findall(r"[^\s│┃|━─┏┓┗┛┡┩└┘┳┻╇┴┬]+", text))
+
+
 def test_bla_table_fits_80_columns_with_whole_words(run_cli, tmp_path, monkeypatch):
     monkeypatch.setenv("COLUMNS", str(WIDTH))
     rng = np.random.default_rng(2)
@@ -43,6 +49,10 @@ def test_bla_table_fits_80_columns_with_whole_words(run_cli, tmp_path, monkeypat
     lines = result.stderr.splitlines()
     assert max(len(line) for line in lines) <= WIDTH, result.stderr
     _words_intact(result.stderr, ["odd", "over", "even", "noise", "method", "level"])
+    # rich crops a table it cannot fit (the last column lost): the words at 80 columns are those at 200
+    monkeypatch.setenv("COLUMNS", "200")
+    wide = run_cli("bla", tmp_path / "rec.h5", "-o", tmp_path / "bla_wide.h5")
+    assert _tokens(result.stderr) == _tokens(wide.stderr.replace("bla_wide.h5", "bla.h5"))
 
 
 def test_text_table_wraps_at_spaces_and_keeps_long_words():
@@ -52,10 +62,12 @@ def test_text_table_wraps_at_spaces_and_keeps_long_words():
             ["Coulomb friction", "fc = 0.3", "+1.0", "26.0 dB above", "-"]]
     table = common.text_table("Hypotheses", ["hypothesis", "main parameter", "gain dB", "vs noise floor", "note"],
                               rows)
-    buffer = io.StringIO()
+    buffer, wide = io.StringIO(), io.StringIO()
     Console(file=buffer, width=WIDTH, color_system=None).print(table)
+    Console(file=wide, width=300, color_system=None).print(table)
     text = buffer.getvalue()
     assert max(len(line) for line in text.splitlines()) <= WIDTH
+    assert _tokens(text) == _tokens(wide.getvalue())  # nothing cropped
     _words_intact(text, long_note.split() + ["k3", "2.001e+08", "stiffness", "hypothesis"])
 
 
@@ -168,3 +180,17 @@ def test_the_bar_says_kernels_compile_until_its_first_step(monkeypatch):
         with common.progress("bla", 1) as step:
             step()
         assert _Bar.seen == ["bla"]
+
+
+def test_a_ten_column_table_fits_without_cropping():
+    """rich crops a table wider than the console (losing its right edge and, when wider still, its
+    last column): the table's own minimum width, as rich measures it, must fit 80 columns. Ten
+    columns of five-character numbers, as the BLA table per level."""
+    header = ["level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var", "odd over even",
+              "odd over noise", "even over noise"]
+    rows = [["4", "4", "3 x 2", "io", "-72.1", "-24.1", "-78.9", "67.2", "67.4", "-0.1"]]
+    buffer = io.StringIO()
+    # printed uncropped, the table shows its real width (with vertical borders: 81 columns)
+    Console(file=buffer, width=WIDTH, color_system=None).print(common.text_table("BLA per level", header, rows),
+                                                               crop=False)
+    assert max(len(line.rstrip()) for line in buffer.getvalue().splitlines()) <= WIDTH
