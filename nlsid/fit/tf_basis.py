@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from nlsid.fit.frf_data import FRFData
-from nlsid.fit.transfer_function import TransferFunction, zoh_response
+from nlsid.models.lti import TransferFunction, from_transfer_function, sampled_response
 
 
 class Basis:
@@ -147,3 +147,12 @@ class Basis:
     def values_scale(self) -> np.ndarray:
         """The map theta -> config values of :meth:`to_model` (to go back from values to theta)."""
         return self.to_model(np.ones(self.na + self.nb + 1))[1]
+
+
+def zoh_response(num_asc: np.ndarray, den_asc: np.ndarray, step: float, z: np.ndarray) -> np.ndarray:
+    """ZOH-sampled response C (zI - Phi)^{-1} Gamma + D of B(p)/A(p) (p in units where a sample
+    lasts ``step``), at the points z = e^{j w h}: the state space of the config loader
+    (:func:`nlsid.models.lti.from_transfer_function`) through :func:`nlsid.models.lti.sampled_response`."""
+    continuous = from_transfer_function(np.asarray(num_asc, float)[::-1], np.asarray(den_asc, float)[::-1],
+                                        False, 0.0, "fit")
+    return sampled_response(continuous, z, step)

@@ -35,7 +35,7 @@ from nlsid.fit.tf_basis import Basis
 from nlsid.fit.tf_cost import line_weights
 from nlsid.fit.tf_refine import EXTRA_EVALUATIONS, refine
 from nlsid.fit.tf_starts import linear_start, spread_starts, subspace_start, theta_from_poles
-from nlsid.fit.transfer_function import TransferFunction
+from nlsid.models.lti import TransferFunction
 
 
 @dataclass

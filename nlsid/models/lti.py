@@ -8,7 +8,13 @@ input held constant over a step h (a DAC), the state at the end of the step is e
 
 computed from one matrix exponential of the augmented matrix [[A, B], [0, 0]] h (Van Loan 1978).
 Its frequency response at the sample instants is G_zoh(e^{j w Ts}) = C (zI - Phi)^{-1} Gamma + D,
-which equals (1 - z^-1) Z{G(s)/s}. A discrete model is used as it is, one step per sample.
+which equals (1 - z^-1) Z{G(s)/s} (:func:`sampled_response`). A discrete model is used as it is,
+one step per sample.
+
+A transfer function with polynomial coefficients (:class:`TransferFunction`, e.g. the model the
+transfer-function fit returns) is the same model in the form a config writes it: it becomes a
+:class:`StateSpace` by the conversion the config loader uses (:func:`from_transfer_function`), and
+its response and stability are those of that state space.
 """
 
 from __future__ import annotations
@@ -51,6 +57,59 @@ class StateSpace:
         rhs = np.broadcast_to(self.B.astype(complex), (points.size, self.order))[..., None]
         x = np.linalg.solve(system, rhs)[..., 0]
         return (x @ self.C + self.D).reshape(points.shape)
+
+
+@dataclass(frozen=True)
+class TransferFunction:
+    """A rational transfer function in the config conventions of ``docs/configs.md`` (``transfer_function``).
+
+    ``z``: num/den ascending powers of z^-1, den[0] = 1. ``s``: num/den descending powers of s,
+    den[0] = 1. ``delay`` in samples at ``fs`` (a continuous model is run at ``fs`` through the
+    zero-order hold).
+    """
+
+    domain: str
+    num: np.ndarray
+    den: np.ndarray
+    delay: int
+    fs: float
+
+    def config(self) -> dict:
+        """The ``model`` block of a config that ``nlsid simulate`` runs."""
+        return {"type": "transfer_function", "domain": "discrete" if self.domain == "z" else "continuous",
+                "num": [float(x) for x in self.num], "den": [float(x) for x in self.den],
+                "delay": self.delay / self.fs}
+
+    def to_state_space(self) -> StateSpace:
+        """The model as ``nlsid simulate`` builds it from :meth:`config` (:func:`from_transfer_function`),
+        its dead time in seconds."""
+        return from_transfer_function(self.num, self.den, self.domain == "z", self.delay / self.fs, "model")
+
+    def response(self, bins: np.ndarray, period: int) -> np.ndarray:
+        """The response at the sample instants to line k of a period of N samples, times z^-delay
+        (z = e^{j 2 pi k / N}): ``z``, B(z^-1)/A(z^-1) itself; ``s``, :func:`sampled_response` of
+        :meth:`to_state_space` (the zero-order hold as ``nlsid simulate`` runs it)."""
+        z = np.exp(2j * np.pi * np.asarray(bins) / period)
+        if self.domain == "z":
+            g = np.polyval(self.num[::-1], 1 / z) / np.polyval(self.den[::-1], 1 / z)
+        else:
+            g = sampled_response(self.to_state_space(), z, 1.0 / self.fs)
+        return g * z ** (-self.delay)
+
+    def poles(self) -> np.ndarray:
+        """Poles in s (continuous) or z (discrete): the roots of the denominator (the state space of
+        a discrete model with nb > na has nb - na further poles at z = 0, the numerator's delay)."""
+        if self.domain == "z":
+            return np.roots(self.den) if len(self.den) > 1 else np.zeros(0)  # den(z^-1) z^na: same coefficients
+        return np.roots(self.den)
+
+    def stable(self) -> bool:
+        """Asymptotically stable: every pole strictly inside the unit circle (z) or the left half plane (s)."""
+        return self.stability() == "stable"
+
+    def stability(self) -> str:
+        """:func:`stability` of the poles."""
+        return stability(self.poles(), self.domain == "z")
 
 
 def delay_samples(delay: float, fs: float, where: str) -> int:
@@ -193,21 +252,43 @@ def stepped(ss: StateSpace, h: float) -> tuple[np.ndarray, np.ndarray]:
     return zoh(ss.A, ss.B, h)
 
 
+def sampled_response(ss: StateSpace, z: np.ndarray, h: float) -> np.ndarray:
+    """The response of the model run on sampled data with step h at the points z = e^{j w h}:
+    C (zI - Phi)^{-1} Gamma + D with (Phi, Gamma) of :func:`stepped` (the ZOH equivalent of a
+    continuous model, a discrete model as it is); no dead time."""
+    Phi, Gamma = stepped(ss, h)
+    return StateSpace(Phi, Gamma, ss.C, ss.D, discrete=True).frequency_response(z)
+
+
+BOUNDARY = 1e-9  # a pole within this (relative) distance of the stability boundary lies on it (rounding)
+
+
+def stability(poles: np.ndarray, discrete: bool) -> str:
+    """``stable``: every pole strictly inside the unit circle (discrete) or the left half plane;
+    ``marginal`` when the only poles not strictly stable lie on the boundary within rounding
+    (BOUNDARY: |z| - 1, or Re s relative to max(1, |s|); integrators, as ``nlsid simulate`` accepts
+    them); else ``unstable``."""
+    if not poles.size:
+        return "stable"
+    if discrete:
+        margin = np.abs(poles) - 1
+    else:
+        margin = poles.real / max(1.0, float(np.max(np.abs(poles))))
+    if np.all(margin < -BOUNDARY):
+        return "stable"
+    return "marginal" if np.all(margin <= BOUNDARY) else "unstable"
+
+
 def check_stable(ss: StateSpace, where: str) -> None:
-    """Refuse a model with a pole in the open right half plane (continuous) or outside the unit circle.
+    """Refuse a model with a pole in the open right half plane (continuous) or outside the unit circle
+    (:func:`stability` ``unstable``).
 
     Poles on the boundary (integrators, e.g. a free mass) are accepted: the response to a zero-mean
     excitation stays bounded for a single integrator.
     """
     poles = ss.poles()
-    if not poles.size:
+    if stability(poles, ss.discrete) != "unstable":
         return
     if ss.discrete:
-        worst = np.max(np.abs(poles))
-        if worst > 1 + 1e-9:
-            raise InputError(where, f"unstable model: pole with |z| = {worst:.6g} > 1")
-    else:
-        scale = max(1.0, float(np.max(np.abs(poles))))
-        worst = np.max(poles.real)
-        if worst > 1e-9 * scale:
-            raise InputError(where, f"unstable model: pole with real part {worst:.6g} > 0")
+        raise InputError(where, f"unstable model: pole with |z| = {np.max(np.abs(poles)):.6g} > 1")
+    raise InputError(where, f"unstable model: pole with real part {np.max(poles.real):.6g} > 0")

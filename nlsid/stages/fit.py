@@ -145,7 +145,7 @@ class TransferFunctionFit:
 
     @property
     def model(self):
-        """The fitted :class:`nlsid.fit.transfer_function.TransferFunction` (``.config()`` is the ``model`` block)."""
+        """The fitted :class:`nlsid.models.lti.TransferFunction` (``.config()`` is the ``model`` block)."""
         return self.fitted.fit.model
 
     @property

@@ -21,8 +21,8 @@ from nlsid.fit.cost_statistics import cost_bound, expected_cost
 from nlsid.fit.frf_data import FRFData
 from nlsid.fit.order import select_order
 from nlsid.fit.tf_fit import fit_order, fit_transfer_function
-from nlsid.fit.transfer_function import TransferFunction
 from nlsid.io.run import Run
+from nlsid.models.lti import TransferFunction
 
 from generators.bla_cases import multisine  # noqa: E402
 
