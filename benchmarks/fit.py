@@ -40,7 +40,9 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from nlsid.fit.extension import FreeParameter, fit_free_parameters, split_runs
+from nlsid.fit.extension import fit_free_parameters
+from nlsid.fit.free_parameters import FreeParameter
+from nlsid.fit.run_split import split_runs
 from nlsid.fit.frf_data import FRFData
 from nlsid.fit.tf_fit import fit_order
 from nlsid.io.model_config import validate_simulate_config

@@ -60,11 +60,12 @@ def runs():
 
 
 def problem_and_cost(measured, start: dict):
-    from nlsid.fit.extension import FreeParameter, _Cost, _Problem
+    from nlsid.fit.free_parameters import FreeParameter
+    from nlsid.fit.simulation_cost import Cost, Problem
 
     free = {name: FreeParameter(value, -np.inf, np.inf) for name, value in start.items()}
-    problem = _Problem(config(start), free, "benchmark", {}, None)
-    return problem, _Cost.of(problem, measured, problem.inputs(measured))
+    problem = Problem(config(start), free, "benchmark", {}, None)
+    return problem, Cost.of(problem, measured, problem.inputs(measured))
 
 
 def differences(problem, cost, theta: np.ndarray, relative: float = 1e-3) -> np.ndarray:
@@ -103,7 +104,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    from nlsid.fit.extension import FreeParameter, fit_free_parameters
+    from nlsid.fit.extension import fit_free_parameters
+    from nlsid.fit.free_parameters import FreeParameter
 
     measured = runs()
     problem, cost = problem_and_cost(measured, TRUTH)

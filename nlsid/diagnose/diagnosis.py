@@ -123,7 +123,7 @@ class Outcome:
         from the Stribeck fit's mechanics, a later round from the last round's); a transfer
         function's coefficients, refined in the form the hypothesis extends (a discrete model's
         continuous equivalent), are counted against their start."""
-        from nlsid.fit.extension import value_at
+        from nlsid.fit.free_parameters import value_at
 
         if self.estimate is None:
             return ""
@@ -528,7 +528,8 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     not the cause can wander into parameters the simulator is slow on (a Stribeck curve steeper
     than the mass can follow), and is then scored where the budget stopped it, with the optimiser's warning.
     """
-    from nlsid.fit.extension import FreeParameter, fit_free_parameters, value_at
+    from nlsid.fit.extension import fit_free_parameters
+    from nlsid.fit.free_parameters import FreeParameter, value_at
 
     if estimate.lti is not None:  # the model's LTI part in the form the hypothesis extends
         data = with_lti(data, estimate.lti)
@@ -583,7 +584,7 @@ def _carried(carried: dict[str, str], extended: dict) -> dict[str, str]:
     hypothesis of a later round (fitted without the later cause, they carry part of it: Coulomb
     friction fitted before a cubic spring came out 1.6 % high, and the final model stayed 5 dB above
     the floor with it held)."""
-    from nlsid.fit.extension import value_at
+    from nlsid.fit.free_parameters import value_at
 
     out = {}
     for name, path in carried.items():

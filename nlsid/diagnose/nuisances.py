@@ -139,7 +139,7 @@ def _force_offset_seen(model: dict) -> bool:
 def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) -> dict:
     """The nuisance keys to fit (module docstring) with start and bounds (:class:`FreeParameter`);
     ``timing`` False leaves the output timing out."""
-    from nlsid.fit.extension import FreeParameter
+    from nlsid.fit.free_parameters import FreeParameter
 
     model = runner.data["model"]
     y_scale, u_scale = _rms(runs, "y") or 1.0, _rms(runs, "u") or 1.0

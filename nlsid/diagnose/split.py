@@ -107,7 +107,7 @@ def budgeted(runs: list[Run], roles: dict[str, str], samples: int = BUDGET_SAMPL
     ``ceil(samples n_i / N)`` of its ``n_i`` samples (``N`` their sum; the record's share, so every
     record is seen); a part starts where its range starts, and is simulated from the record's
     first sample as the range is. Periodic runs stay whole: the fit engine fits them on their mean
-    period already (:func:`nlsid.fit.extension._compact`), and their periods are what the noise
+    period already (:func:`nlsid.fit.simulation_cost._compact`), and their periods are what the noise
     floor is measured on.
 
     Why a fixed number: a fitted parameter's variance falls as 1/N, and a model fitted on B

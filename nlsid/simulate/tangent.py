@@ -32,7 +32,7 @@ theta_i = 0): the coefficients are analytic functions (matrix exponentials, prod
 the error is O(h^2) relative, about 1e-10, far below the finite-difference Jacobian's O(h) of 1e-3
 (``diff_step``), and their cost is 2 p model builds instead of p simulations.
 
-Used by ``nlsid fit --model --jacobian sensitivities`` (:meth:`nlsid.fit.extension._Cost.sensitivities`).
+Used by ``nlsid fit --model --jacobian sensitivities`` (:meth:`nlsid.fit.simulation_cost.Cost.sensitivities`).
 Measured against the fit's forward differences (``benchmarks/jacobian.py``, docs/commands.md): exact
 to 1.5e-9 where the differences err by 1.4 % of a column, 2.2 times their cost per Jacobian on 2
 cores, fewer steps from a distant start.

@@ -229,7 +229,7 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
         A bad argument (named), a model that is neither linear nor pnlss, runs at another rate.
         A start that diverges does not raise: the result's status and notes say what happened.
     """
-    from nlsid.fit.extension import split_runs
+    from nlsid.fit.run_split import split_runs
     from nlsid.fit.pnlss import fit_pnlss as fit
 
     names = dict(names or {})

@@ -46,7 +46,7 @@ from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
 from nlsid.diagnose.hypotheses import by_name  # noqa: E402
 from nlsid.diagnose.simulation import ModelRunner  # noqa: E402
 from nlsid.errors import InputError  # noqa: E402
-from nlsid.fit.extension import value_at  # noqa: E402
+from nlsid.fit.free_parameters import value_at  # noqa: E402
 from nlsid.io.run import Run  # noqa: E402
 from nlsid.signals.lines import random_grid  # noqa: E402
 from nlsid.signals.multisine import flat_amplitudes, random_phases, synthesize  # noqa: E402

@@ -8,7 +8,7 @@ from __future__ import annotations
 from nlsid.diagnose.diagnosis import MOVED, Outcome
 from nlsid.diagnose.hypotheses import LIBRARY
 from nlsid.diagnose.hypotheses.base import Estimate
-from nlsid.fit.extension import FreeParameter
+from nlsid.fit.free_parameters import FreeParameter
 
 MODEL = {"model": {"type": "mass_spring_damper", "mass": 0.5, "damping": 6.0, "stiffness": 2.0e4}}
 LUGRE = next(h for h in LIBRARY if h.name == "lugre")

@@ -1,5 +1,5 @@
 """The fit's standard errors account for correlated residuals (the sandwich of
-nlsid.fit.extension), checked by Monte Carlo on a case where the white-noise formula is far off.
+nlsid.fit.uncertainty), checked by Monte Carlo on a case where the white-noise formula is far off.
 
 A first-order discrete system y = b0 u + a y[k-1] (lfilter, here) with its gain b0 free, driven by
 low-pass noise, and output noise coloured by an AR(1) filter with pole 0.95: the residual's
@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 from scipy.signal import butter, lfilter
 
-from nlsid.fit.extension import FreeParameter, fit_free_parameters
+from nlsid.fit.extension import fit_free_parameters
+from nlsid.fit.free_parameters import FreeParameter
 from nlsid.io.run import Run
 
 B0, A1, N, R = 0.5, 0.8, 1500, 150
@@ -66,14 +67,14 @@ def test_correlations_stay_within_one_when_the_jacobian_is_nearly_singular():
     before, roundoff in A^-1 B A^-1 gave correlations of 3 on such fits."""
     from scipy.signal import lfilter
 
-    from nlsid.fit.extension import _uncertainty
+    from nlsid.fit.uncertainty import sandwich_covariance
 
     rng = np.random.default_rng(5)
     base = rng.standard_normal((4000, 3))
     jac = np.column_stack([base, base[:, 0] * (1 + 1e-9) + 1e-9 * rng.standard_normal(4000)])
     residual = lfilter([1.0], [1.0, -0.95], rng.standard_normal(4000))
     names = ["a", "b", "c", "d"]
-    _, corr, warnings = _uncertainty(jac, residual, np.ones(4), names, np.ones(4), np.full(4, -np.inf),
+    _, corr, warnings = sandwich_covariance(jac, residual, np.ones(4), names, np.ones(4), np.full(4, -np.inf),
                                      np.full(4, np.inf), [4000])
     assert np.all(np.abs(corr) <= 1 + 1e-12), corr
     assert any("cannot tell these apart" in w for w in warnings)

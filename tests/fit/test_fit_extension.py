@@ -1,4 +1,4 @@
-"""Free parameters fitted by simulation error (nlsid.fit.extension, nlsid fit --model --data).
+"""Free parameters fitted by simulation error (nlsid.fit.extension and its modules, nlsid fit --model --data).
 
 The data are simulated from a known "true" config with white output noise 40 dB below the output
 (the simulator is tested on its own against solve_ivp references); the fit starts from a wrong
@@ -16,7 +16,9 @@ import pytest
 import yaml
 
 from nlsid.errors import InputError
-from nlsid.fit.extension import FreeParameter, fit_free_parameters, split_runs
+from nlsid.fit.extension import fit_free_parameters
+from nlsid.fit.free_parameters import FreeParameter
+from nlsid.fit.run_split import split_runs
 from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.run import Run
 from nlsid.simulate.batch import simulate_all
@@ -220,7 +222,7 @@ def test_a_converging_fit_is_not_stopped_by_the_stall_rule():
 
 
 def test_the_cost_at_the_noise_floor_is_the_noise_variance_per_residual_sample():
-    """The stall share's floor (nlsid.fit.extension._floor_cost): the true model's cost on white
+    """The stall share's floor (nlsid.fit.simulation_cost.floor_cost): the true model's cost on white
     noise of variance sigma^2 is sigma^2 per residual sample, for runs fitted on their mean period
     (sqrt(P) times a mean of P periods) as for whole runs. The output is simulated independently
     (tests/generators/independent_plant.py); over 4 x 2048 residual samples the cost's relative spread is
@@ -228,7 +230,7 @@ def test_the_cost_at_the_noise_floor_is_the_noise_variance_per_residual_sample()
     variance, 4 x 2048 x 2 degrees of freedom) adds less."""
     from generators import independent_plant as IP
 
-    from nlsid.fit.extension import _Cost, _floor_cost, _Problem
+    from nlsid.fit.simulation_cost import Cost, Problem, floor_cost
 
     rng = np.random.default_rng(7)
     n, sigma = 2048, 1e-5
@@ -239,10 +241,10 @@ def test_the_cost_at_the_noise_floor_is_the_noise_variance_per_residual_sample()
     Y = IP.outputs(truth, U, FS)
     runs = [Run(f"r{i}", FS, "multisine", u, y=y + sigma * rng.standard_normal(y.size), period=n,
                 transient_periods=1, realization=i, excited_bins=bins) for i, (u, y) in enumerate(zip(U, Y))]
-    problem = _Problem(truth, {"model.mass": FreeParameter(1.0, 0.1, 10.0)}, "m.yaml", {}, None)
-    cost = _Cost.of(problem, runs, problem.inputs(runs))
+    problem = Problem(truth, {"model.mass": FreeParameter(1.0, 0.1, 10.0)}, "m.yaml", {}, None)
+    cost = Cost.of(problem, runs, problem.inputs(runs))
     assert np.all(cost.weights == np.sqrt(P))  # fitted on their mean period
-    floor = _floor_cost(cost, runs, "y")
+    floor = floor_cost(cost, runs, "y")
     assert floor == pytest.approx(M * n * sigma ** 2, rel=0.08)
     residual = cost.residuals(problem, [problem.start], "y")[0]
     assert float(residual @ residual) == pytest.approx(floor, rel=0.08)

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from generators.exact_zoh import zoh  # noqa: E402
-from nlsid.fit.extension import FreeParameter, fit_free_parameters  # noqa: E402
+from nlsid.fit.extension import fit_free_parameters  # noqa: E402
+from nlsid.fit.free_parameters import FreeParameter  # noqa: E402
 from nlsid.io.run import Run  # noqa: E402
 
 FS, N, NOISE = 1000.0, 4000, 1e-3

@@ -60,7 +60,8 @@ def _offset_runs(closed: bool = False, periodic: bool = True):
 def _offset_problem(closed: bool, periodic: bool, force: dict | None = None):
     """A mass-spring-damper with ``force`` (Coulomb friction) and a free output offset on
     :func:`_offset_runs`."""
-    from nlsid.fit.extension import FreeParameter, _Cost, _Problem
+    from nlsid.fit.free_parameters import FreeParameter
+    from nlsid.fit.simulation_cost import Cost, Problem
 
     model = {"type": "mass_spring_damper", "mass": 1.0, "damping": 400.0, "stiffness": 40000.0, "output_offset": 1e-4,
              "nonlinearities": [force or {"type": "coulomb", "fc": 0.3}]}
@@ -70,8 +71,8 @@ def _offset_problem(closed: bool, periodic: bool, force: dict | None = None):
     runs = _offset_runs(closed, periodic)
     key = "fc" if "fc" in model["nonlinearities"][0] else "k3"
     free = {f"model.nonlinearities[0].{key}": FreeParameter(), "model.output_offset": FreeParameter()}
-    problem = _Problem(data, free, "m", {}, None)
-    return problem, _Cost.of(problem, runs, problem.inputs(runs))
+    problem = Problem(data, free, "m", {}, None)
+    return problem, Cost.of(problem, runs, problem.inputs(runs))
 
 
 def test_the_output_offset_column_is_the_simulated_derivative():

@@ -12,7 +12,7 @@ The models cover what the tangent loop differentiates: sub-steps with a cubic an
 spring (forces inside the sample), polynomial input and output blocks, input and output offsets, an
 output timing that leads (read-out coefficients c_f) and one that lags, a closed loop with a
 computation delay and a controller coefficient, the plant input u fitted as well as y, a periodic
-run with transient periods (fitted on its mean period, :func:`nlsid.fit.extension._compact`) and one
+run with transient periods (fitted on its mean period, :func:`nlsid.fit.simulation_cost._compact`) and one
 of a single period simulated with its lead into the periodic steady state.
 """
 
@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nlsid.fit.extension import FreeParameter, _Cost, _Problem, fit_free_parameters
+from nlsid.fit.extension import fit_free_parameters
+from nlsid.fit.free_parameters import FreeParameter
+from nlsid.fit.simulation_cost import Cost, Problem
 from nlsid.io.run import Run
 
 from generators import independent_plant as IP  # noqa: E402
@@ -47,7 +49,7 @@ def _runs(rms: float, seed: int) -> list[Run]:
     return out
 
 
-def _richardson(problem: _Problem, cost: _Cost, theta: np.ndarray, signal: str) -> np.ndarray:
+def _richardson(problem: Problem, cost: Cost, theta: np.ndarray, signal: str) -> np.ndarray:
     def central(relative: float) -> np.ndarray:
         steps = relative * np.where(theta != 0, np.abs(theta), 1.0)
         points = [theta + sign * np.diag(steps)[i] for i in range(theta.size) for sign in (1, -1)]
@@ -61,10 +63,10 @@ def _column_errors(jac: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.max(np.abs(jac - reference), axis=0) / np.max(np.abs(reference), axis=0)
 
 
-def _problem(data: dict, free: dict, runs: list[Run], fit_on: str = "y") -> tuple[_Problem, _Cost]:
-    problem = _Problem(data, {k: FreeParameter(v, -np.inf, np.inf) for k, v in free.items()}, "m.yaml", {}, None,
+def _problem(data: dict, free: dict, runs: list[Run], fit_on: str = "y") -> tuple[Problem, Cost]:
+    problem = Problem(data, {k: FreeParameter(v, -np.inf, np.inf) for k, v in free.items()}, "m.yaml", {}, None,
                        fit_on)
-    return problem, _Cost.of(problem, runs, problem.inputs(runs))
+    return problem, Cost.of(problem, runs, problem.inputs(runs))
 
 
 def test_open_loop_sensitivities_are_the_derivatives_of_the_simulation():

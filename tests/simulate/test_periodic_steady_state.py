@@ -19,7 +19,8 @@ from scipy.signal import cont2discrete, freqz
 
 from generators.diagnose_cases import FS, N, excitation  # noqa: E402
 from nlsid.diagnose.simulation import ModelRunner  # noqa: E402
-from nlsid.fit.extension import FreeParameter, fit_free_parameters  # noqa: E402
+from nlsid.fit.extension import fit_free_parameters  # noqa: E402
+from nlsid.fit.free_parameters import FreeParameter  # noqa: E402
 from nlsid.simulate.engine import lead_periods  # noqa: E402
 from nlsid.simulate.runs import simulate_run  # noqa: E402
 

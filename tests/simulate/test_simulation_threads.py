@@ -83,7 +83,8 @@ def test_fits_and_diagnose_run_blas_in_one_thread_and_restore_it(monkeypatch):
 
     import nlsid.diagnose.diagnosis as diagnosis
     import nlsid.simulate.batch as batch
-    from nlsid.fit.extension import FreeParameter, fit_free_parameters
+    from nlsid.fit.extension import fit_free_parameters
+    from nlsid.fit.free_parameters import FreeParameter
     from nlsid.io.run import Run
 
     seen = []
