@@ -70,6 +70,19 @@ def wrapped_phase(frequency: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.
     return np.insert(frequency, jumps, np.nan), np.insert(degrees, jumps, np.nan)
 
 
+def wrapped_band(frequency: np.ndarray, G: np.ndarray, low: np.ndarray, high: np.ndarray):
+    """Bounds of the phase (``low`` and ``high`` in radians, around ``np.angle(G)``) in degrees,
+    as (frequency, low, high) broken by NaN where :func:`wrapped_phase` breaks the curve, so that no
+    band is drawn across the panel at a wrap."""
+    frequency = np.asarray(frequency, dtype=float)
+    degrees = np.degrees(np.angle(np.asarray(G)))
+    shift = np.where(degrees <= -180.0, 360.0, 0.0)  # as wrapped_phase moves -180 to +180
+    degrees = degrees + shift
+    jumps = np.flatnonzero(np.abs(np.diff(degrees)) > 180.0) + 1
+    low, high = np.degrees(np.asarray(low)) + shift, np.degrees(np.asarray(high)) + shift
+    return (np.insert(frequency, jumps, np.nan), np.insert(low, jumps, np.nan), np.insert(high, jumps, np.nan))
+
+
 def phase_axis(axis) -> None:
     """A phase panel in degrees held to [-180, 180] with ticks every 90 degrees."""
     axis.set_ylim(*PHASE_LIMITS)

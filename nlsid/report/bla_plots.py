@@ -21,7 +21,7 @@ import numpy as np
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
 from nlsid.report.axes import (FIGURE_HEIGHT, band_limits, frequency_axis, legend_outside, phase_axis,
-                               plain_log_ticks, power_db, wrapped_phase)
+                               plain_log_ticks, power_db, wrapped_band, wrapped_phase)
 from nlsid.report.units import Units
 from nlsid.report.vector import band, fit_labels, new_figure
 
@@ -89,7 +89,7 @@ def bla_figure(level: LevelResult, units: Units):
     # wrapped to +-180 degrees: unwrapped, the noise of incoherent lines adds up to thousands of
     # degrees and flattens the coherent part; the bounds are computed around np.angle, the wrapped phase
     phase.plot(*wrapped_phase(f, robust.G), color="k", label="phase of G_BLA")
-    band(phase, f, np.degrees(robust.bounds.phase_lo), np.degrees(robust.bounds.phase_hi), "95% bounds",
+    band(phase, *wrapped_band(f, robust.G, robust.bounds.phase_lo, robust.bounds.phase_hi), "95% bounds",
          color="k", alpha=0.15)
     phase_axis(phase)
     for axis in (magnitude, phase):

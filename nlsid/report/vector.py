@@ -69,8 +69,9 @@ def fit_labels(figure) -> None:
 def band(axis, x, low, high, label: str, **style):
     """``axis.fill_between(x, low, high)`` that keeps its edges for the figure's CSV."""
     collection = axis.fill_between(x, low, high, label=label, **style)
-    collection.nlsid_band = (label, np.asarray(x, dtype=float), np.asarray(low, dtype=float),
-                             np.asarray(high, dtype=float))
+    x, low, high = (np.asarray(values, dtype=float) for values in (x, low, high))
+    drawn = ~np.isnan(x)  # a NaN x breaks the band (a phase wrap): not a point of its data
+    collection.nlsid_band = (label, x[drawn], low[drawn], high[drawn])
     return collection
 
 

@@ -82,6 +82,10 @@ def test_bla_phase_stays_within_180_degrees_and_matches_the_filter(levels):
     assert passed.sum() >= 2
     error = (y[points][passed] - np.degrees(np.angle(true[passed])) + 180.0) % 360.0 - 180.0
     assert np.max(np.abs(error)) < 5.0
+    # the filter's phase passes -180 degrees (4th order: to -360), so the curve wraps at least once,
+    # and is broken there rather than drawn across the panel
+    assert np.isnan(y).any()
+    assert np.all(np.abs(np.diff(y)[np.isfinite(np.diff(y))]) <= 180.0)
     _legends_clear_of_data(figure)
 
 
