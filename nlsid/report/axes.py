@@ -123,12 +123,23 @@ def band_limits(axis, band: np.ndarray) -> None:
         axis.set_xlim(max(low - margin, 0.0), high + margin)
 
 
-def above_floor(power: np.ndarray, reference: float) -> tuple[np.ndarray, float]:
-    """``power`` with NaN where it lies below the numerical floor (:data:`NUMERICAL_FLOOR` times
-    ``reference``, the measured signal's largest line power), and that floor. A model line at
-    -200 dB is the simulation's round-off, not a prediction: it is not drawn as data."""
+#: a model line this far under the lowest measured noise variance (30 dB) could not be seen in any data
+BELOW_NOISE = 1e-3
+
+
+def above_floor(power: np.ndarray, reference: float, noise: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """``power`` with NaN where it lies below the numerical floor, and that floor: :data:`NUMERICAL_FLOOR`
+    times ``reference`` (the measured signal's largest line power), or, when lower, :data:`BELOW_NOISE`
+    times the lowest positive ``noise`` variance (data of more than 90 dB range keep every line
+    they could show). A model line at -200 dB is the simulation's round-off, not a prediction: it is
+    not drawn as data."""
     power = np.asarray(power, dtype=float)
     floor = NUMERICAL_FLOOR * float(reference)
+    if noise is not None:
+        noise = np.asarray(noise, dtype=float)
+        positive = noise[np.isfinite(noise) & (noise > 0)]
+        if positive.size:
+            floor = min(floor, BELOW_NOISE * float(positive.min()))
     with np.errstate(invalid="ignore"):
         return np.where(power >= floor, power, np.nan), floor
 

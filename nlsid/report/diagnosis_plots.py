@@ -72,7 +72,8 @@ def spectrum(level: dict, units: Units):
     k = kind >= 0
     measured = np.asarray(level["y_power"], dtype=float)[kind == EXCITED]
     reference = np.nanmax(measured) if np.isfinite(measured).any() else np.nan
-    model, floor = above_floor(np.asarray(level["model_power"], dtype=float)[k], reference)
+    model, floor = above_floor(np.asarray(level["model_power"], dtype=float)[k], reference,
+                               np.asarray(level["noise"], dtype=float)[k])
     axis.plot(f[k], _db(model), "k.", ms=2, alpha=0.6, label="model")
     if np.isfinite(floor) and np.any(np.asarray(level["model_power"])[k] < floor):
         # the model's lines under its round-off level are not data: one labelled line stands for them

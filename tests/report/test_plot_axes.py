@@ -16,7 +16,7 @@ from generators.bla_cases import odd_random_bins, runs_of_level
 
 from nlsid.analysis.levels import analyse_runs
 from nlsid.report import bla_plots, diagnosis_plots, hosidf_plots
-from nlsid.report.axes import NUMERICAL_FLOOR
+from nlsid.report.axes import BELOW_NOISE, NUMERICAL_FLOOR
 from nlsid.report.html import Page, render_html
 from nlsid.report.units import Units
 from nlsid.report.vector import figure as report_figure
@@ -142,7 +142,10 @@ def test_diagnosis_spectrum_masks_the_model_numerical_floor():
              "model_power": model, "noise": np.full(f.size, 1e-8)}
     figure = _drawn(diagnosis_plots.spectrum(level, Units({"u": "N", "y": "m"})))
     (axis,) = figure.axes
-    floor_db = 10 * np.log10(NUMERICAL_FLOOR * 1.0)  # the largest excited power is 1
+    # the largest excited power is 1 and the noise 1e-8: the floor is the lower of 1e-9 x 1 and
+    # 1e-3 x 1e-8 (-110 dB); the -170 dB lines are under it, the odd lines' -40 dB above
+    floor_db = 10 * np.log10(min(NUMERICAL_FLOOR * 1.0, BELOW_NOISE * 1e-8))
+    assert floor_db == pytest.approx(-110.0)
     (drawn,) = [line for line in axis.get_lines() if line.get_label() == "model"]
     y = np.asarray(drawn.get_ydata(), float)
     assert np.nanmin(y) >= floor_db - 1e-9  # no model point below the floor
