@@ -84,7 +84,7 @@ def _print(result, output: str) -> None:
     console.print(result.headline(), style="bold", markup=False)
     for line in result.evidence.findings():
         console.print(f"  - {line}", markup=False)
-    from nlsid.report.render_diagnosis import floor_text
+    from nlsid.report.render_diagnosis import floor_text, split_findings
 
     rows, not_fitted = [], []
     for o in result.outcomes:
@@ -104,6 +104,12 @@ def _print(result, output: str) -> None:
     # the hypotheses left out usually share a reason: one line per reason, not a row each
     for line in grouped_notes("not fitted: ", not_fitted):
         console.print(line, markup=False)
+    if settings().verbose:  # what the page keeps in its collapsed details
+        console.print("details (nuisances, numerical settings, the fits' notes):", markup=False)
+        notes = [f"{o.hypothesis.title}: {o.estimate.note}" for o in result.outcomes
+                 if o.score is not None and getattr(o.estimate, "note", "")]
+        for line in split_findings(result.findings())[1] + notes:
+            console.print(f"  - {line}", markup=False)
     console.print(f"-> {output}", markup=False)
 
 

@@ -87,12 +87,22 @@ def test_diagnose_prints_each_not_fitted_reason_once(monkeypatch):
                                                    summary=lambda: {"above_floor_db": 0.2}))
     skipped = [SimpleNamespace(hypothesis=SimpleNamespace(title=f"hypothesis {i}", main="x"), reason=reason, score=None)
                for i in range(7)]
+    nuisance = "nuisances estimated first (not causes): output_offset = 3.1e-06 +- 2.4e-05"
+    fitted.estimate.note = "model.output_offset and model.output_timing: the data cannot tell these apart"
     result = SimpleNamespace(headline=lambda: "Cause: cubic stiffness", evidence=SimpleNamespace(findings=lambda: []),
-                             outcomes=[fitted, *skipped], winner=fitted)
-    buffer = io.StringIO()
-    console = Console(file=buffer, width=WIDTH, color_system=None)
-    monkeypatch.setattr(diagnose_cli, "settings", lambda: SimpleNamespace(console=console))
-    diagnose_cli._print(result, "diag/")
+                             outcomes=[fitted, *skipped], winner=fitted,
+                             findings=lambda: [nuisance, "simulation error 0.0152 rms"])
+    printed = {}
+    for verbose in (0, 1):
+        buffer = io.StringIO()
+        console = Console(file=buffer, width=WIDTH, color_system=None)
+        monkeypatch.setattr(diagnose_cli, "settings", lambda: SimpleNamespace(console=console, verbose=verbose))
+        diagnose_cli._print(result, "diag/")
+        printed[verbose] = " ".join(buffer.getvalue().split())
+    # the settings and the fits' notes only with -v, as the page keeps them in its details
+    assert "nuisances estimated first" not in printed[0] and "cannot tell" not in printed[0]
+    assert nuisance in printed[1] and f"cubic stiffness: {fitted.estimate.note}" in printed[1]
+    assert "simulation error" not in printed[1]  # the evidence is not repeated among the details
     text = buffer.getvalue()
     assert text.count("needs a mechanical") == 1  # seven rows' note said once
     assert "7 hypotheses: hypothesis 0, hypothesis 1" in " ".join(text.split())
