@@ -936,7 +936,10 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
         if member.hypothesis.family == outcome.hypothesis.family and member.score is not None and member.free:
             own = member is outcome or accuracy.check(member.extended, source, estimation, floor, floor_from)
             if own is True or own is None or not own.sufficient:
-                refit_finer(member, substeps, estimation, source)
+                try:
+                    refit_finer(member, substeps, estimation, source)
+                except InputError:  # a member extended in discrete time runs one step per sample: no finer step
+                    continue
                 _score(member, runner, [by_id[res.run_id] for res in val], val)
     last.outcomes.sort(key=_rank)
     last.verdict = _decide(last.evidence, last.nuisances, last.baseline, last.outcomes, val)

@@ -79,8 +79,12 @@ def recording(seed: int, forces: list[dict], mass: float = MASS, linear: dict | 
 
 
 def _final_values(result) -> dict:
+    """The final model's mass and forces by type; a break-away written as ``peak`` (fs = fc + peak,
+    docs/configs.md) also as its ``fs``."""
     model = result.final.extended["model"]
-    return {"mass": model["mass"], **{f["type"]: f for f in model.get("nonlinearities", [])}}
+    forces = {f["type"]: ({**f, "fs": f["fc"] + f["peak"]} if "peak" in f else f)
+              for f in model.get("nonlinearities", [])}
+    return {"mass": model["mass"], **forces}
 
 
 @pytest.mark.slow
