@@ -28,7 +28,7 @@ def _level(value) -> str:
 
 def floor_text(score: dict | None) -> str:
     """Where a validation error lies against the noise floor, worded and rounded as the verdict
-    (:func:`nlsid.diagnose.diagnosis.versus_floor`): ``0.2 dB below``, ``56.7 dB above``."""
+    (:func:`nlsid.diagnose.result.versus_floor`): ``0.2 dB below``, ``56.7 dB above``."""
     if not score:
         return "-"
     if score.get("noise_floor_zero"):
@@ -40,7 +40,7 @@ def floor_text(score: dict | None) -> str:
 
 
 #: the opening words of the findings that are settings or side estimates rather than the answer
-#: (:meth:`nlsid.diagnose.diagnosis.Diagnosis.findings`): they go to the page's collapsed details
+#: (:meth:`nlsid.diagnose.result.Diagnosis.findings`): they go to the page's collapsed details
 DETAIL_OPENINGS = ("nuisances estimated first", "initial state fitted", "extended model simulated with",
                    "the model simulated with", "estimation budget", "black-box yardstick")
 

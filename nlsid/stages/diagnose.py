@@ -23,7 +23,7 @@ from nlsid.stages.model import Model
 from nlsid.stages.recording import Recording
 
 if TYPE_CHECKING:
-    from nlsid.diagnose.diagnosis import Diagnosis
+    from nlsid.diagnose.result import Diagnosis
 
 #: The resolution of the PNG figures of :meth:`DiagnosisResult.figures`.
 DPI = 100
@@ -35,7 +35,7 @@ class DiagnosisResult:
 
     Attributes
     ----------
-    diagnosis : nlsid.diagnose.diagnosis.Diagnosis
+    diagnosis : nlsid.diagnose.result.Diagnosis
         The evidence, every hypothesis' outcome, the verdict and the chain of accepted causes.
     extended_text : str or None
         The extended model config as written to ``extended_model.yaml`` (its header comment names
@@ -229,7 +229,7 @@ class DiagnosisInputs:
     def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
         """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
         from nlsid.diagnose import verdict as rules
-        from nlsid.diagnose.diagnosis import BLACK_BOX, CANDIDATE
+        from nlsid.diagnose.result import BLACK_BOX, CANDIDATE
         from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
         from nlsid.io.diagnosis_file import extended_yaml
         from nlsid.io.units import common_units

@@ -5,7 +5,7 @@ LuGre fit that left the user's mass unchanged read "the mass 0.383 % above the m
 
 from __future__ import annotations
 
-from nlsid.diagnose.diagnosis import MOVED, Outcome
+from nlsid.diagnose.outcome import MOVED, Outcome
 from nlsid.diagnose.hypotheses import LIBRARY
 from nlsid.diagnose.hypotheses.base import Estimate
 from nlsid.fit.free_parameters import FreeParameter

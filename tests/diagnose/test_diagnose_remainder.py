@@ -95,7 +95,8 @@ def test_a_leading_candidate_is_named_with_the_data_that_would_decide_it():
     """Built from its parts: a baseline error power 4.365 times a candidate's (+6.4 dB) on 807
     validation samples whose noise has 5 degrees of freedom: F*_0.999(5, 5) is 29.8 (+14.7 dB),
     so the gain is not significant, but above F_0.9(5, 5) = 3.45 (+5.4 dB): suggestive."""
-    from nlsid.diagnose.diagnosis import CANDIDATE, Diagnosis, Outcome
+    from nlsid.diagnose.outcome import Outcome
+    from nlsid.diagnose.result import CANDIDATE, Diagnosis
     from nlsid.diagnose.gain import Score
     from nlsid.diagnose.hypotheses import LIBRARY
     from nlsid.diagnose.hypotheses.base import Estimate
@@ -153,7 +154,7 @@ def check_written(result, folder):
     validation table shows the named causes and the yardstick side by side."""
     import yaml
 
-    from nlsid.diagnose.diagnosis import EXTENDED
+    from nlsid.diagnose.result import EXTENDED
     from nlsid.diagnose.yardstick import FILE
     from nlsid.report.render_diagnosis import render_diagnosis
     from nlsid.stages.diagnose import DiagnosisResult

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from nlsid.diagnose.diagnosis import Outcome
+from nlsid.diagnose.outcome import Outcome
 from nlsid.diagnose.hypotheses import LIBRARY
 from nlsid.diagnose.hypotheses.base import Estimate
 from nlsid.diagnose.nuisances import Nuisances

@@ -21,7 +21,7 @@ from generators.bla_cases import odd_random_bins, runs_of_level  # noqa: E402
 
 from nlsid.citations import BOOK, SOURCES  # noqa: E402
 from nlsid.cli.main import cli  # noqa: E402
-from nlsid.diagnose.diagnosis import versus_floor  # noqa: E402
+from nlsid.diagnose.result import versus_floor  # noqa: E402
 from nlsid.diagnose.gain import Score  # noqa: E402
 from nlsid.io.bla_file import read_units  # noqa: E402
 from nlsid.io.recording import write_recording  # noqa: E402

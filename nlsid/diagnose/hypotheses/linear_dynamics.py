@@ -8,7 +8,7 @@ excitation a static curve in series acts on the BLA as its mean slope), so a blo
 model with the linear part frozen cannot reach the noise floor. Freed, the
 coefficients could also absorb what is only a wrong linear model; this hypothesis is that linear
 refit alone, so that the verdict can name a block only when it is significantly better than the
-refit without it (:attr:`nlsid.diagnose.diagnosis.Outcome.generalizes`), as ``wrong_mechanics``
+refit without it (:attr:`nlsid.diagnose.outcome.Outcome.generalizes`), as ``wrong_mechanics``
 does for the mechanical templates.
 
 The free coefficients are the nonzero ones of the numerator (each may change sign: a zero may lie
