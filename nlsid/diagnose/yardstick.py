@@ -48,6 +48,8 @@ DEGREES = (2, 3)       # total degrees of the monomials in the state and the out
 MAX_ITERATIONS = 200   # accepted iterations of the nonlinear stage at most
 EXTRA_STATES = 1       # states beyond the user's model's, each started as a delay of the input
 WORK = 3e9             # samples x parameters^2 of an iteration's normal matrix at most (about 1 s here)
+SENSITIVITY_WORK = 3e8  # simulated samples (lead-in included) x parameters over the whole fit (about 30 s)
+MIN_ITERATIONS = 20     # accepted iterations of the nonlinear stage granted whatever SENSITIVITY_WORK says
 SHAPES = ((EXTRA_STATES, DEGREES), (0, DEGREES), (0, (3,)))  # (extra states, degrees), tried in this order
 LINEAR_ITERATIONS = 20
 PATIENCE = 40          # iterates without a lower early-stopping error before the fit stops
@@ -176,6 +178,23 @@ def affordable(order: int, samples: int) -> tuple[int, tuple[int, ...]] | None:
     return None
 
 
+def iterations(model, runs: list[Run]) -> int:
+    """The nonlinear stage's iterations the fit may take: :data:`SENSITIVITY_WORK` over the work of
+    one iteration's sensitivities (the samples simulated, a periodic run's steady-state lead-in
+    included, times the parameters: a lightly damped model needs up to 20 periods of lead-in per
+    period measured), within [MIN_ITERATIONS, MAX_ITERATIONS]."""
+    from nlsid.simulate.pnlss_runs import lead_periods
+
+    simulated = 0
+    for run in runs:
+        if run.period is not None and run.n_periods >= 1:
+            simulated += (lead_periods(model, run.period) + run.n_periods) * run.period
+        else:
+            simulated += run.n_samples
+    per_iteration = max(simulated * model.n_parameters, 1)
+    return int(min(MAX_ITERATIONS, max(MIN_ITERATIONS, SENSITIVITY_WORK // per_iteration)))
+
+
 def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run], val: list,
                   output_offset: float = 0.0) -> Yardstick:
     """Fit and score the yardstick (module docstring). ``fit_runs``: the estimation parts the
@@ -203,8 +222,8 @@ def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run],
             model, _ = from_linear(start, fit_runs[0].fs, degrees, degrees, True, output_offset=output_offset)
         model = with_delay_states(model, extra) if extra else model
         own, early, rule = _holdout(fit_runs, val_runs)
-        fit = fit_pnlss(model, own, early, max_iterations=MAX_ITERATIONS, linear_iterations=LINEAR_ITERATIONS,
-                        patience=PATIENCE)
+        fit = fit_pnlss(model, own, early, max_iterations=iterations(model, own + early),
+                        linear_iterations=LINEAR_ITERATIONS, patience=PATIENCE)
     except InputError as exc:
         return Yardstick(f"not fitted: {exc}")
     if fit.status == "failed" or not math.isfinite(fit.estimation_rms):

@@ -16,8 +16,8 @@ from scipy import signal
 
 from generators.bla_cases import odd_random_bins, runs_of_level
 
-import cli.common as common
-import cli.diagnose as diagnose_cli
+import nlsid.cli.common as common
+import nlsid.cli.diagnose as diagnose_cli
 from nlsid.io.recording import write_recording
 
 WIDTH = 80
