@@ -227,9 +227,45 @@ def _controller(loop: ClosedLoop, fs: float):
     return two_input(discrete_path(loop.controller, fs), discrete_path(loop.measurement, fs))
 
 
-def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> tuple:
+@dataclass(frozen=True)
+class LoopStart:
+    """The state a closed loop is in at the first sample of a record that starts in motion.
+
+    ``plant``: the plant state x(0) (in place of the model's own initial state); ``commands``: the
+    drive outputs u[-d] .. u[-1] issued before the record and still in the dead time of d samples
+    (:func:`timing`), applied at samples 0 .. d-1; ``controller``: the drive's state xc(0) in the
+    order of :func:`nlsid.models.controller.two_input` (the controller on the error, then the terms
+    on the measurement, e.g. a velocity estimate's past positions).
+
+    The drive is linear, so its state enters the command as its free response alone,
+    u[k] += Cc Ac^k xc(0), and a command in the dead time adds to the plant input of its sample:
+    the kernel runs such a start exactly from rest with these two terms added, whatever the plant's
+    forces and blocks.
+    """
+
+    plant: np.ndarray
+    commands: np.ndarray
+    controller: np.ndarray
+
+
+def _start_terms(start: LoopStart, controller, shift: Timing, fs: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(command term, plant-input term) of ``start`` over n samples (:class:`LoopStart`)."""
+    Ac, Bc, Cc, _ = controller
+    command = np.zeros(n)
+    if Ac.shape[0] and np.any(start.controller):
+        drive = StateSpace(Ac, Bc[:, 0].copy(), Cc, 0.0, True)
+        command = _filter(drive, np.zeros(n), fs, 0, start.controller)
+    plant_input = np.zeros(n)
+    d = min(shift.delay, n)
+    if d:
+        plant_input[:d] = start.commands[len(start.commands) - shift.delay:][:d]
+    return command, plant_input
+
+
+def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise,
+                    start: LoopStart | None = None) -> tuple:
     """The parameters of :func:`_kernel_arguments` for ``plant`` on ``run`` (open loop: u is the
-    plant input; closed loop: u is the reference)."""
+    plant input; closed loop: u is the reference), in closed loop from ``start`` (default rest)."""
     ss, n, fs = plant.ss, run.n_samples, run.fs
     if plant.difference_output:
         ss = dataclasses.replace(ss, C=ss.C * fs)
@@ -249,17 +285,23 @@ def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: i
                                             f"(pole with |z| = {worst:.6g} >= 1)")
         r = run.u if loop.prefilter is None else _filter(tustin(loop.prefilter, 1.0 / fs), run.u, fs, 0)
         ff = feedforward(run.u, fs, run.period is not None, loop.coulomb, loop.velocity)
+    x0, process = plant.x0, plant_input_terms(plant.offsets, run, noise.process)
+    if start is not None and loop is not None:
+        command, plant_input = _start_terms(start, controller, shift, fs, n)
+        x0, ff, process = _f64(start.plant), ff + command, process + plant_input
     kinds = np.array([f.kind for f in plant.forces], dtype=np.int64) if plant.forces else _EMPTY_I
     params = np.array([f.params for f in plant.forces]) if plant.forces else np.zeros((0, forces.MAX_PARAMS))
     rows, columns = _force_rows(plant, fs)
-    return (Phi, Gu, ss, plant.x0, kinds, params, rows, columns, m, h, shift, fs, controller, r, ff, run.u,
-            plant_input_terms(plant.offsets, run, noise.process), noise.y + plant.offsets.output,
+    return (Phi, Gu, ss, x0, kinds, params, rows, columns, m, h, shift, fs, controller, r, ff, run.u,
+            process, noise.y + plant.offsets.output,
             plant.input_block, plant.output_block, plant.force_bias)
 
 
-def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise) -> Run:
-    """Run ``plant`` on ``run`` (open loop: u is the plant input; closed loop: u is the reference)."""
-    u_out, y_out = _run_kernel(*plant_arguments(plant, loop, run, substeps, noise))
+def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise,
+                   start: LoopStart | None = None) -> Run:
+    """Run ``plant`` on ``run`` (open loop: u is the plant input; closed loop: u is the reference,
+    the loop from ``start``, default rest: :class:`LoopStart`)."""
+    u_out, y_out = _run_kernel(*plant_arguments(plant, loop, run, substeps, noise, start))
     _check_finite(y_out, run.run_id)
     u_out += noise.u  # in place: a fresh 8 MB array costs ~2 ms of page faults per 1e6 samples
     if loop is None:
