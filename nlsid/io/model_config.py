@@ -650,13 +650,47 @@ class FeedforwardConfig(FiniteModel):
     velocity: float = 0.0
 
 
+AUTO_DELAY_MAX = 3     # the largest computation delay ``auto`` tries unless told
+AUTO_DELAY_LIMIT = 20  # the largest ``{auto: {max: D}}`` accepted (each candidate is a fit)
+
+
+class AutoDelayConfig(FiniteModel):
+    """``computation_delay: auto`` (or ``{auto: {max: D}}``): the delay estimated from measured data
+    among the whole numbers 0..``max`` (:mod:`nlsid.fit.computation_delay`)."""
+
+    max: Annotated[int, Field(ge=0, le=AUTO_DELAY_LIMIT)] = AUTO_DELAY_MAX
+
+
+def _delay_or_auto(value):
+    """A computation delay as written: a whole number >= 0 as it is, ``auto`` and ``{auto: {max: D}}``
+    as :class:`AutoDelayConfig`; anything else refused in one message naming the three forms."""
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+        return value
+    if value == "auto":
+        return AutoDelayConfig()
+    if isinstance(value, AutoDelayConfig):
+        return value
+    if isinstance(value, dict) and list(value) == ["auto"]:
+        inner = value["auto"]
+        if inner is None or inner == {}:
+            return AutoDelayConfig()
+        largest = inner.get("max") if isinstance(inner, dict) and list(inner) == ["max"] else None
+        if isinstance(largest, int) and not isinstance(largest, bool) and 0 <= largest <= AUTO_DELAY_LIMIT:
+            return AutoDelayConfig(max=largest)
+    raise ValueError(f"expected a whole number of samples >= 0, auto, or {{auto: {{max: D}}}} with D a whole "
+                     f"number from 0 to {AUTO_DELAY_LIMIT}; got {value!r}")
+
+
+ComputationDelay = Annotated[Union[int, AutoDelayConfig], BeforeValidator(_delay_or_auto)]
+
+
 class ClosedLoopConfig(FiniteModel):
     """u[k] = C(e)[k] - M(y)[k] + u_ff[k], e = F(r) - y, applied after ``computation_delay`` samples."""
 
     controller: ControllerConfig               # on the error e
     measurement: Optional[LinearControllerConfig] = None  # on the measured y, subtracted from u
     prefilter: Optional[LTIConfig] = None      # on the reference r before the error
-    computation_delay: Annotated[int, Field(ge=0)] = 0  # whole samples from u[k] to the plant input
+    computation_delay: ComputationDelay = 0  # whole samples from u[k] to the plant input, or auto
     feedforward: FeedforwardConfig = FeedforwardConfig()
 
     @model_validator(mode="after")

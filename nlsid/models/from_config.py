@@ -246,6 +246,9 @@ def closed_loop(config: mc.SimulateConfig) -> ClosedLoop | None:
     loop = config.closed_loop
     if loop is None:
         return None
+    if not isinstance(loop.computation_delay, int):  # auto: a choice among whole numbers that needs data
+        raise InputError("closed_loop.computation_delay", "auto is estimated from measured data (nlsid fit --model, "
+                                                          "nlsid diagnose); to simulate, give a whole number of samples")
     where = "closed_loop.controller"
     c = loop.controller
     measurement = []
