@@ -138,7 +138,7 @@ def with_delay_states(model, count: int):
     E = np.zeros((m, exponents(m, model.state_degrees, model.with_input).shape[0]))
     F = np.zeros(exponents(m, model.output_degrees, model.with_input).shape[0])
     return Pnlss(A, B, C, model.D, E, F, model.fs, model.state_degrees, model.output_degrees, model.with_input,
-                 model.input_offset, model.output_offset, model.input_channels)
+                 model.input_offset, model.output_offset, model.input_channels, model.zero_if_absent)
 
 
 def _holdout(fit_runs: list[Run], val_runs: list[Run]) -> tuple[list[Run], list[Run], str]:

@@ -154,16 +154,52 @@ BlockConfig = Annotated[
 ]
 
 
+class ChannelConfig(FiniteModel):
+    """A measured channel of the recording added to a signal of the model: ``gain`` times the
+    channel, and what a run that does not record it gets (``absent``): ``error`` (the run is refused,
+    named) or ``zero`` (an all-zero channel for that run, stated where the stage reports)."""
+
+    gain: float = 1.0
+    absent: Literal["error", "zero"] = "error"
+
+
+def _channel_shape(entry) -> str:
+    return "mapping" if isinstance(entry, dict) else "gain"
+
+
+ChannelName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+# A channel's entry: a number (its gain; a run without it refused) or a ChannelConfig mapping, told
+# apart by its shape so that a bad entry gets the one error of what it looks like
+Channel = Annotated[Union[Annotated[float, Tag("gain")], Annotated[ChannelConfig, Tag("mapping")]],
+                    Discriminator(_channel_shape)]
+
+
+def channel_gain(entry) -> float:
+    """The gain of a channel entry (:data:`Channel`), validated or as loaded: a number or its ``gain``."""
+    if isinstance(entry, ChannelConfig):
+        return float(entry.gain)
+    if isinstance(entry, dict):
+        return float(entry.get("gain", 1.0))
+    return float(entry)
+
+
+def absent_as_zero(entry) -> bool:
+    """Whether a run without the channel of ``entry`` (:data:`Channel`) gets an all-zero channel."""
+    if isinstance(entry, ChannelConfig):
+        return entry.absent == "zero"
+    return isinstance(entry, dict) and entry.get("absent") == "zero"
+
+
 class _Offsets(FiniteModel):
     """Converter offsets of every model: the plant gets u + ``input_offset`` (a DAC or actuator
     offset; the recorded u stays the command) and the recorded y is the model output +
     ``output_offset`` (a sensor offset, seen by a controller too). ``input_channels`` adds measured
-    channels of the recording (``channel name: gain``) to the plant input: u + input_offset + sum
-    gain * channel."""
+    channels of the recording to the plant input: u + input_offset + sum gain * channel, each
+    ``name: gain`` or ``name: {gain, absent}`` (:class:`ChannelConfig`)."""
 
     input_offset: float = 0.0
     output_offset: float = 0.0
-    input_channels: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")], float] = {}
+    input_channels: dict[ChannelName, Channel] = {}
 
 
 class _PlantBlocks(_Offsets):
@@ -685,13 +721,17 @@ ComputationDelay = Annotated[Union[int, AutoDelayConfig], BeforeValidator(_delay
 
 
 class ClosedLoopConfig(FiniteModel):
-    """u[k] = C(e)[k] - M(y)[k] + u_ff[k], e = F(r) - y, applied after ``computation_delay`` samples."""
+    """u[k] = C(e)[k] - M(y)[k] + u_ff[k] + sum gain * channel[k], e = F(r) - y, applied after
+    ``computation_delay`` samples. ``excitation_channels``: measured channels of the recording the
+    drive adds to its output (an identification signal on the command; the recorded u includes
+    them), each ``name: gain`` or ``name: {gain, absent}`` (:class:`ChannelConfig`)."""
 
     controller: ControllerConfig               # on the error e
     measurement: Optional[LinearControllerConfig] = None  # on the measured y, subtracted from u
     prefilter: Optional[LTIConfig] = None      # on the reference r before the error
     computation_delay: ComputationDelay = 0  # whole samples from u[k] to the plant input, or auto
     feedforward: FeedforwardConfig = FeedforwardConfig()
+    excitation_channels: dict[ChannelName, Channel] = {}
 
     @model_validator(mode="after")
     def _one_measurement_path(self):

@@ -43,11 +43,13 @@ class Force:
 @dataclass(frozen=True)
 class Offsets:
     """Constant and measured terms at a model's input and output (:class:`nlsid.io.model_config._Offsets`):
-    the plant gets u + input + sum gain * run.channels[name]; the recorded y is the output + output."""
+    the plant gets u + input + sum gain * run.channels[name]; the recorded y is the output + output.
+    ``zero_if_absent``: the channels a run may lack (taken as zero there; the others are required)."""
 
     input: float = 0.0
     output: float = 0.0
     channels: dict[str, float] = field(default_factory=dict)
+    zero_if_absent: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -86,11 +88,14 @@ class Structure:
 
 @dataclass(frozen=True)
 class ClosedLoop:
-    """The drive's computation (:mod:`nlsid.models.controller`): u = C(e) - M(y) + u_ff, e = F(r) - y.
+    """The drive's computation (:mod:`nlsid.models.controller`):
+    u = C(e) - M(y) + u_ff + sum gain * run.channels[name], e = F(r) - y.
 
     ``controller`` and ``measurement`` are stages in series (state-space models, continuous ones
     run as their Tustin equivalent, or the name of a velocity estimate of
     :func:`nlsid.models.controller.difference`); ``measurement`` is empty without terms on y.
+    ``excitation``: the measured channels added to the drive's output (channel name: gain), of which
+    a run may lack those in ``excitation_zero_if_absent`` (taken as zero there).
     """
 
     controller: list
@@ -99,6 +104,15 @@ class ClosedLoop:
     measurement: list = field(default_factory=list)
     prefilter: StateSpace | None = None
     computation_delay: int = 0
+    excitation: dict[str, float] = field(default_factory=dict)
+    excitation_zero_if_absent: frozenset[str] = frozenset()
+
+
+def channels(entries: dict) -> tuple[dict[str, float], frozenset[str]]:
+    """(name: gain, the names a run may lack) of a config's channel entries
+    (:data:`nlsid.io.model_config.Channel`: a gain, or ``{gain, absent}``)."""
+    return ({name: mc.channel_gain(entry) for name, entry in entries.items()},
+            frozenset(name for name, entry in entries.items() if mc.absent_as_zero(entry)))
 
 
 def lti(config, where: str) -> StateSpace:
@@ -136,7 +150,7 @@ def _force(config, plant: MechanicalPlant, where: str) -> Force:
 
 
 def _offsets(config) -> Offsets:
-    return Offsets(config.input_offset, config.output_offset, dict(config.input_channels))
+    return Offsets(config.input_offset, config.output_offset, *channels(config.input_channels))
 
 
 def _force_bias(config, where: str) -> float:
@@ -266,4 +280,4 @@ def closed_loop(config: mc.SimulateConfig) -> ClosedLoop | None:
         if prefilter.delay:
             raise InputError("closed_loop.prefilter.delay", "a prefilter has no dead time")
     return ClosedLoop(error, loop.feedforward.coulomb, loop.feedforward.velocity, measurement, prefilter,
-                      loop.computation_delay)
+                      loop.computation_delay, *channels(loop.excitation_channels))

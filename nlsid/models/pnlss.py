@@ -100,6 +100,7 @@ class Pnlss:
     input_offset, output_offset : the model runs on u + input_offset and records y + output_offset.
     input_channels : (channel name, gain) pairs: measured channels added to the input
         (u + input_offset + sum gain * channel), as in the other models of the config language.
+    zero_if_absent : the names of ``input_channels`` a run may lack (taken as zero there).
     """
 
     A: np.ndarray
@@ -115,6 +116,7 @@ class Pnlss:
     input_offset: float = 0.0
     output_offset: float = 0.0
     input_channels: tuple[tuple[str, float], ...] = ()
+    zero_if_absent: tuple[str, ...] = ()
     state_exponents: np.ndarray = field(init=False, repr=False, compare=False)
     output_exponents: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -148,7 +150,8 @@ class Pnlss:
         """A copy with the named fields changed (arrays copied as float64)."""
         values = {name: getattr(self, name) for name in ("A", "B", "C", "D", "E", "F", "fs", "state_degrees",
                                                          "output_degrees", "with_input", "input_offset",
-                                                         "output_offset", "input_channels")}
+                                                         "output_offset", "input_channels",
+                                                         "zero_if_absent")}
         values.update(changes)
         return Pnlss(**values)
 
@@ -279,6 +282,7 @@ def from_linear(ss: StateSpace, fs: float, state_degrees=(2, 3), output_degrees=
 def build(config, where: str = "model") -> Pnlss:
     """The :class:`Pnlss` of a validated :class:`nlsid.io.model_config.PnlssConfig`, its matrix
     shapes checked against the number of states and of monomials (an InputError names the key)."""
+    from nlsid.io.model_config import absent_as_zero, channel_gain
     from nlsid.models.lti import from_matrices
 
     ss = from_matrices(config.A, config.B, config.C, config.D, True, 0.0, where)
@@ -304,7 +308,8 @@ def build(config, where: str = "model") -> Pnlss:
         F = np.array(config.F, dtype=float)
     return Pnlss(np.array(ss.A, float), np.array(ss.B, float), np.array(ss.C, float), float(ss.D), E, F,
                  float(config.fs), sd, od, bool(config.with_input), float(config.input_offset),
-                 float(config.output_offset), tuple((str(k), float(v)) for k, v in config.input_channels.items()))
+                 float(config.output_offset), tuple((str(k), channel_gain(v)) for k, v in config.input_channels.items()),
+                 tuple(str(k) for k, v in config.input_channels.items() if absent_as_zero(v)))
 
 
 def to_config(model: Pnlss) -> dict:
@@ -318,5 +323,6 @@ def to_config(model: Pnlss) -> dict:
     if model.output_offset:
         out["output_offset"] = float(model.output_offset)
     if model.input_channels:
-        out["input_channels"] = {name: float(gain) for name, gain in model.input_channels}
+        out["input_channels"] = {name: {"gain": float(gain), "absent": "zero"} if name in model.zero_if_absent
+                                 else float(gain) for name, gain in model.input_channels}
     return out

@@ -20,6 +20,7 @@ from nlsid.models import blocks, equations, forces
 from nlsid.models.controller import discrete_path, feedforward, tustin, two_input
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
+from nlsid.simulate.channels import weighted_sum
 from nlsid.simulate.kernels import SIZED_SAMPLES, apply_block, simulate_loop
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.propagation import propagation
@@ -211,15 +212,10 @@ def closed_loop_poles(ss: StateSpace, controller, fs: float, shift: Timing) -> n
 
 
 def plant_input_terms(offsets, run: Run, process: np.ndarray) -> np.ndarray:
-    """process + input offset + sum gain * channel: everything added to the command at the plant input."""
-    out = process + offsets.input
-    for name, gain in offsets.channels.items():
-        if name not in run.channels:
-            have = ", ".join(sorted(run.channels)) or "none"
-            raise InputError(f"model.input_channels.{name}", f"run {run.run_id} records no channel {name!r} "
-                                                             f"(its channels: {have})")
-        out = out + gain * run.channels[name]
-    return out
+    """process + input offset + sum gain * channel: everything added to the command at the plant input
+    (:func:`nlsid.simulate.channels.weighted_sum`: a channel the run lacks is refused, or zero)."""
+    return process + offsets.input + weighted_sum(offsets.channels, offsets.zero_if_absent, run,
+                                                  "model.input_channels")
 
 
 def _controller(loop: ClosedLoop, fs: float):
@@ -284,7 +280,8 @@ def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: i
             raise InputError("closed_loop", f"the linear closed loop is unstable at fs = {fs:g} Hz "
                                             f"(pole with |z| = {worst:.6g} >= 1)")
         r = run.u if loop.prefilter is None else _filter(tustin(loop.prefilter, 1.0 / fs), run.u, fs, 0)
-        ff = feedforward(run.u, fs, run.period is not None, loop.coulomb, loop.velocity)
+        ff = feedforward(run.u, fs, run.period is not None, loop.coulomb, loop.velocity) + weighted_sum(
+            loop.excitation, loop.excitation_zero_if_absent, run, "closed_loop.excitation_channels")
     x0, process = plant.x0, plant_input_terms(plant.offsets, run, noise.process)
     if start is not None and loop is not None:
         command, plant_input = _start_terms(start, controller, shift, fs, n)

@@ -58,8 +58,9 @@ def free_responses(plant: Plant, loop: ClosedLoop | None, run: Run, length: int)
     linear = dataclasses.replace(plant, forces=[], input_block=blocks.encode(None), output_block=blocks.encode(None),
                                  offsets=Offsets(), force_bias=0.0)
     rest = Run(run.run_id, run.fs, "arbitrary", np.zeros(length))
+    quiet = None if loop is None else dataclasses.replace(loop, excitation={})  # nor the drive's added channels
     n = plant.ss.order
-    columns = [simulate_plant(dataclasses.replace(linear, x0=unit), loop, rest, 1, Noise.zero(length)).y
+    columns = [simulate_plant(dataclasses.replace(linear, x0=unit), quiet, rest, 1, Noise.zero(length)).y
                for unit in np.eye(n)]
     return np.column_stack(columns) if columns else np.zeros((length, 0))
 
@@ -77,6 +78,10 @@ class InitialState:
     @property
     def transient_rms(self) -> float:
         return float(np.sqrt(np.mean(self.transient ** 2)))
+
+    def summary(self) -> dict:
+        """Plain numbers for JSON: ``samples``, ``x0``, ``transient_rms``."""
+        return {"samples": int(self.samples), "x0": [float(x) for x in self.x0], "transient_rms": self.transient_rms}
 
 
 def estimate(plant: Plant, loop: ClosedLoop | None, run: Run, simulated: Run) -> InitialState | None:

@@ -24,6 +24,7 @@ import numpy as np
 from nlsid.errors import InputError
 from nlsid.io.run import Run
 from nlsid.models.pnlss import Pnlss
+from nlsid.simulate.channels import weighted_sum
 from nlsid.simulate.pnlss_kernels import sensitivities, simulate
 
 STEADY_TOLERANCE = 1e-6  # the linear part's slowest mode decays to this within the lead-in
@@ -197,17 +198,13 @@ def rms_on(model: Pnlss, recs: Sequence[Record], bound: float, starts: dict | No
 
 def fitted_input(model: Pnlss, run: Run, process: np.ndarray | None = None) -> np.ndarray:
     """The model's input on ``run`` before its own input offset: u + the measured channels of
-    ``model.input_channels`` times their gains (+ process noise); checks the sample rate."""
+    ``model.input_channels`` times their gains (+ process noise; a channel the run lacks refused,
+    or zero: :func:`nlsid.simulate.channels.weighted_sum`); checks the sample rate."""
     if abs(run.fs - model.fs) > 1e-9 * model.fs:
         raise InputError("model.fs", f"the PNLSS model is discrete at {model.fs:g} Hz; run {run.run_id} is sampled "
                                      f"at {run.fs:g} Hz")
     u = np.array(run.u, dtype=float)
-    for name, gain in model.input_channels:
-        if name not in run.channels:
-            have = ", ".join(sorted(run.channels)) or "none"
-            raise InputError(f"model.input_channels.{name}", f"run {run.run_id} records no channel {name!r} "
-                                                             f"(its channels: {have})")
-        u += gain * run.channels[name]
+    u += weighted_sum(dict(model.input_channels), frozenset(model.zero_if_absent), run, "model.input_channels")
     if process is not None:
         u += process
     return u

@@ -161,7 +161,8 @@ def start_model(model, fs: float, degrees, output_degrees, with_input: bool, nam
                                                            "linear start without output_timing")
     start, how = from_linear(plant.ss, fs, degrees, degrees if output_degrees is None else output_degrees,
                              with_input, plant.offsets.input, plant.offsets.output)
-    start = start.replace(input_channels=tuple(plant.offsets.channels.items()))
+    start = start.replace(input_channels=tuple(plant.offsets.channels.items()),
+                          zero_if_absent=tuple(sorted(plant.offsets.zero_if_absent)))
     return start, how, source, configs
 
 

@@ -84,10 +84,14 @@ class Candidate:
 
 
 def plant_input(model: dict, run) -> np.ndarray:
-    """What the plant gets: the recorded u, the input offset and the input channels."""
+    """What the plant gets: the recorded u, the input offset and the input channels (one marked
+    ``absent: zero`` adds nothing on a run without it)."""
+    from nlsid.io.model_config import absent_as_zero, channel_gain
+
     u = run.u + float(model.get("input_offset", 0.0))
-    for name, gain in (model.get("input_channels") or {}).items():
-        u = u + gain * run.channels[name]
+    for name, entry in (model.get("input_channels") or {}).items():
+        if name in run.channels or not absent_as_zero(entry):
+            u = u + channel_gain(entry) * run.channels[name]
     return u
 
 
