@@ -52,6 +52,7 @@ from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
 from nlsid.models.key_paths import deep_copy, set_value
+from nlsid.simulate.channels import absent_notes
 from nlsid.simulate.threads import blas_in_one_thread
 
 
@@ -329,6 +330,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     cov, corr, ident = sandwich_covariance(result.jac, result.fun, scale, problem.names, values, problem.lower, problem.upper,
                                     cost.segments())
     warnings += ident
+    warnings += absent_notes(problem.point(problem.start).config, [*estimation, *validation])
 
     est_errors = (cost.split(result.fun, fit_on) if cost.whole(estimation) and problem.signals == (fit_on,)
                   else problem.errors(values, estimation, est_inputs))
