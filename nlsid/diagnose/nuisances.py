@@ -53,8 +53,7 @@ class Nuisances:
     initial: dict = field(default_factory=dict)  # run id -> InitialState of an arbitrary record
 
     def summary(self) -> dict:
-        initial = [{"run_id": run_id, "samples": state.samples, "x0": [float(x) for x in state.x0],
-                    "transient_rms": state.transient_rms} for run_id, state in self.initial.items()]
+        initial = [{"run_id": run_id, **state.summary()} for run_id, state in self.initial.items()]
         return {"values": dict(self.values), "std": dict(self.std), "notes": list(self.notes),
                 "initial_state": initial}
 

@@ -83,6 +83,7 @@ class ModelRunner:
         """The run the engine needs: u is the excitation (the reference r in closed loop); a range
         part is simulated as the record it was cut from (:func:`nlsid.io.ranges.record`)."""
         from nlsid.io.ranges import record
+        from nlsid.simulate.loop_state import loop_excitation
 
         run = record(run)
         if not self.closed:
@@ -90,7 +91,7 @@ class ModelRunner:
         if run.r is None:
             raise InputError(f"run {run.run_id}", "the model has a closed_loop section but the run records "
                                                   "no reference r")
-        return dataclasses.replace(run, u=run.r, r=None)
+        return loop_excitation(run)  # the recorded command kept for the loop's initial state (nlsid.simulate.loop_state)
 
     def simulate(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None,
                  excite: bool = True) -> Run:
@@ -117,29 +118,15 @@ class ModelRunner:
 
     def initial_state(self, run: Run):
         """The initial state fitted to the start of an arbitrary record as the model simulates it
-        (:class:`nlsid.simulate.initial_state.InitialState`; of a block structure its filters'
-        states, :mod:`nlsid.simulate.structure_state`), None where none is fitted (a periodic
-        run, a mode too slow for the record, a model written as equations)."""
-        from nlsid.models.from_config import Plant
-        from nlsid.simulate.runs import simulate_run
-        from nlsid.simulate.initial_state import estimate
-        from nlsid.simulate.noise import Noise
+        (:func:`nlsid.simulate.runs.fitted_initial_state`: a plant's, a closed loop's with its drive,
+        a block structure's filters'), None where none is fitted (a periodic run, a mode too slow
+        for the record, a model written as equations)."""
+        from nlsid.simulate.runs import fitted_initial_state
 
-        from nlsid.models.equations import Equations
-
-        source = self.excitation(run)
-        if source.period is not None or source.y is None or isinstance(self.plant, Equations):
-            return None  # a model written as equations starts at its written states (nlsid.models.equations)
-        if not isinstance(self.plant, Plant):
-            from nlsid.simulate.structure_state import estimate as structure_estimate
-
-            return structure_estimate(self.plant, source, self.config.simulation.substeps)
         try:
-            rest = simulate_run(self.plant, self.loop, source, self.config.simulation.substeps,
-                                Noise.zero(source.n_samples))
+            return fitted_initial_state(self.plant, self.loop, self.excitation(run), self.config.simulation.substeps)
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
-        return estimate(self.plant, self.loop, source, rest)
 
     def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
         """Recorded-output response to a plant-input and/or output disturbance: of a linear model

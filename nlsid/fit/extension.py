@@ -71,6 +71,7 @@ class RunError:
     samples: int
     y_error_rms: float = math.nan
     u_error_rms: float = math.nan
+    initial_state: dict | None = None  # the state fitted to an arbitrary record's start (its summary)
 
 
 @dataclass
@@ -337,6 +338,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     val_errors = problem.errors(values, validation, val_inputs) if validation else {s: [] for s in problem.signals}
     val_start = problem.errors(problem.start, validation, val_inputs) if validation else {s: [] for s in problem.signals}
     runs = []
+    states = initial_states(problem, values, list(est_inputs) + list(val_inputs))
     for role, rs, errs, starts in (("estimation", estimation, est_errors, est_start),
                                    ("validation", validation, val_errors, val_start)):
         for i, run in enumerate(rs):
@@ -344,7 +346,8 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
             y = steady(run, run.y)
             runs.append(RunError(run.run_id, role, _rms([e]), float(np.sqrt(np.mean(y * y))), noise_rms(run, fit_on),
                                  _rms([starts[fit_on][i]]), int(e.size), _rms([errs["y"][i]]),
-                                 _rms([errs["u"][i]]) if "u" in errs else math.nan))
+                                 _rms([errs["u"][i]]) if "u" in errs else math.nan,
+                                 states.get(run.run_id)))
     noise = {role: _pooled([r.noise_rms for r in runs if r.role == role], [r.samples for r in runs if r.role == role])
              for role in ("estimation", "validation")}
     completed = {k: deep_copy(v) for k, v in config_data.items() if k != "free"}
@@ -362,6 +365,22 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                                    for s in problem.signals},
         jacobians=formed,
     )
+
+
+def initial_states(problem: Problem, values: np.ndarray, inputs: Sequence[Run]) -> dict[str, dict]:
+    """Run id -> the summary of the initial state the fitted model starts each arbitrary record
+    from (:func:`nlsid.simulate.runs.fitted_initial_state`), for the runs where one is fitted."""
+    from nlsid.simulate.batch import build
+    from nlsid.simulate.runs import fitted_initial_state
+
+    point = problem.point(values)
+    model, loop = build(point)
+    out = {}
+    for run in inputs:
+        state = fitted_initial_state(model, loop, run, point.config.simulation.substeps)
+        if state is not None:
+            out[run.run_id] = state.summary()
+    return out
 
 
 def fit_config_file(model_path: str, runs: Sequence[Run], validation_ids: Sequence[str] | None = None,

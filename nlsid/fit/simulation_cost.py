@@ -53,6 +53,7 @@ from nlsid.io.ranges import record
 from nlsid.io.run import Run
 from nlsid.models.key_paths import deep_copy, set_value
 from nlsid.simulate.sweep import SweepPoint
+from nlsid.simulate.loop_state import loop_excitation
 
 
 def steady(run: Run, x: np.ndarray) -> np.ndarray:
@@ -169,7 +170,10 @@ class Problem:
             # r stays for a model written as equations, whose expressions may read it
             model = self.base.get("model")
             keep_r = not self.closed and isinstance(model, dict) and model.get("type") == "equations"
-            out.append(dataclasses.replace(record(run), u=run.r if self.closed else run.u, r=run.r if keep_r else None))
+            if self.closed:  # the recorded command kept to fit the loop's initial state (nlsid.simulate.loop_state)
+                out.append(loop_excitation(record(run)))
+            else:
+                out.append(dataclasses.replace(record(run), r=run.r if keep_r else None))
         return out
 
     def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:

@@ -16,10 +16,11 @@ from nlsid.models.equations import Equations
 from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
-from nlsid.simulate.initial_state import with_initial_state
+from nlsid.simulate.initial_state import estimate as estimate_plant, with_initial_state
+from nlsid.simulate.loop_state import estimate as estimate_loop, simulate_from_start
 from nlsid.simulate.pnlss_runs import simulate_pnlss
 from nlsid.simulate.noise import Noise
-from nlsid.simulate.structure_state import with_initial_states
+from nlsid.simulate.structure_state import estimate as estimate_structure, with_initial_states
 
 
 def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, run: Run, substeps: int | None,
@@ -29,7 +30,9 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     :func:`lead_periods` more periods before it (each signal's first period repeated ahead of it,
     then cut off again); an arbitrary record with a measured ``y`` from the initial state that
     fits its first samples (a plant's: :mod:`nlsid.simulate.initial_state`; a block structure's
-    filters': :mod:`nlsid.simulate.structure_state`). A model written as equations runs from its
+    filters': :mod:`nlsid.simulate.structure_state`; a closed loop's plant, pending commands and
+    drive, from y and the recorded command of a
+    :class:`~nlsid.simulate.loop_state.LoopExcitation`: :mod:`nlsid.simulate.loop_state`). A model written as equations runs from its
     written initial states in either case (:mod:`nlsid.models.equations`)."""
     noise = noise or Noise.zero(run.n_samples)
     if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
@@ -41,6 +44,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
         noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
     if isinstance(model, Equations):  # from its written initial states, whatever the run (no lead, no fitted state)
         return simulate_equations(model, run, substeps, noise)
+    if steady and run.period is None and loop is not None:  # a record that may start in motion
+        return simulate_from_start(model, loop, run, substeps, noise)
     out = (simulate_structure(model, run, substeps, noise) if isinstance(model, Structure)
            else simulate_plant(model, loop, run, substeps, noise))
     if steady and run.period is None and isinstance(model, Plant):
@@ -51,3 +56,18 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
         return out
     return dataclasses.replace(out, u=out.u[m:], y=None if out.y is None else out.y[m:],
                                r=None if out.r is None else out.r[m:], channels=original.channels)
+
+
+def fitted_initial_state(model: Plant | Structure | Equations, loop: ClosedLoop | None, run: Run,
+                         substeps: int | None):
+    """The initial state :func:`simulate_run` with ``steady`` fits to the start of ``run`` (an
+    :class:`~nlsid.simulate.initial_state.InitialState`, in closed loop a
+    :class:`~nlsid.simulate.loop_state.LoopState`), None where it fits none: a periodic run, a run
+    without a measured y, a model written as equations or a PNLSS model (their own initial states)."""
+    if run.period is not None or run.y is None or isinstance(model, (Equations, Pnlss)):
+        return None
+    if loop is not None:
+        return estimate_loop(model, loop, run, substeps)
+    if isinstance(model, Structure):
+        return estimate_structure(model, run, substeps)
+    return estimate_plant(model, None, run, simulate_plant(model, None, run, substeps, Noise.zero(run.n_samples)))
