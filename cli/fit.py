@@ -180,6 +180,8 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
     for signal, rms in fitted.signal_rms.items():
         if signal != fit_on:
             console.print(f"rms error of {signal}: estimation {rms['estimation']:.4g}, validation {rms['validation']:.4g}")
+    if result.computation_delay is not None:
+        console.print(result.computation_delay.statement(), markup=False)
 
 
 def _is_pnlss(model_config) -> bool:

@@ -25,6 +25,7 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.fit.bla_fit import BLAFit
+from nlsid.fit.computation_delay import DelayChoice, candidates_of, choose_delay
 from nlsid.fit.extension import ExtensionFit
 from nlsid.stages.bla import BlaResult
 from nlsid.stages.held_out import held_out, whole
@@ -442,6 +443,9 @@ class ModelFit:
         Config files and recordings the fit comes from (its provenance).
     allow_overlap : bool
         A ``validate_on`` recording that is the fitted one was accepted.
+    computation_delay : nlsid.fit.computation_delay.DelayChoice or None
+        Where the config asks for ``closed_loop.computation_delay: auto``: the delay chosen, every
+        candidate's cost and whether the data decide it; ``fitted`` is the chosen delay's fit.
     """
 
     fitted: ExtensionFit
@@ -450,6 +454,7 @@ class ModelFit:
     configs: list[str] = field(default_factory=list)
     inputs: list[str] = field(default_factory=list)
     allow_overlap: bool = False
+    computation_delay: DelayChoice | None = None
 
     @property
     def names(self) -> list[str]:
@@ -496,11 +501,18 @@ class ModelFit:
 
     @property
     def warnings(self) -> list[str]:
-        return list(self.fitted.warnings)
+        choice = self.computation_delay
+        if choice is None or choice.decided:
+            return list(self.fitted.warnings)
+        return list(self.fitted.warnings) + [
+            f"computation delay {choice.chosen} not decided by the data: {choice.runner_up} is within what the "
+            f"noise explains (cost {choice.difference:.3g} more, the noise explains {choice.noise_part:.3g})"]
 
     def summary(self) -> dict:
         """The ``nlsid fit --model --json`` summary without paths (``docs/formats.md``)."""
-        return {**self.fitted.summary(), "allow_overlap": self.allow_overlap}
+        choice = self.computation_delay
+        return {**self.fitted.summary(), "allow_overlap": self.allow_overlap,
+                "computation_delay": None if choice is None else choice.summary()}
 
     def header(self, report_name: str) -> list[str]:
         """The comment lines of the fitted model's YAML (``report_name``: the report beside it)."""
@@ -509,7 +521,11 @@ class ModelFit:
                 "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}"
                                        for n, v, s in zip(result.names, result.values, result.std)),
                 f"validation rms error of {result.fit_on} {result.validation_rms:.4g} (noise "
-                f"{result.noise_rms_validation:.4g}); report: {report_name}"]
+                f"{result.noise_rms_validation:.4g}); report: {report_name}"] + (
+            [] if self.computation_delay is None else
+            [f"closed_loop.computation_delay: {self.computation_delay.chosen}, chosen from auto (0.."
+             f"{max(c.delay for c in self.computation_delay.candidates)}) by the lowest error; "
+             f"{'decided' if self.computation_delay.decided else 'NOT decided'} by the data (report)"])
 
     def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
         """Write the fitted model config ``path`` (YAML) and the fit report ``<name>.fit.json`` beside it,
@@ -626,6 +642,7 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
         A bad argument (named), config, key path, bound or run, or a model that refuses its start.
     """
     from nlsid.fit.extension import JACOBIANS, fit_config
+    from nlsid.fit.run_split import split_runs
 
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
@@ -639,8 +656,17 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
         validation = [validation]
     data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
     config, lines, source, configs = _model_config(model, free, names)
-    fitted = fit_config(config, data.runs, list(validation) if validation else None, workers, start_estimate,
-                        validate_on=data.extra_runs, estimation_range=data.estimation,
-                        validation_range=data.validation, fit_on=fit_on, where=data.where, jacobian=jacobian,
-                        source=source, lines=lines)
-    return ModelFit(fitted, source, data.where, configs, data.inputs, bool(allow_overlap))
+    held = list(validation) if validation else None
+
+    def fit(written: dict) -> ExtensionFit:
+        return fit_config(written, data.runs, held, workers, start_estimate, validate_on=data.extra_runs,
+                          estimation_range=data.estimation, validation_range=data.validation, fit_on=fit_on,
+                          where=data.where, jacobian=jacobian, source=source, lines=lines)
+
+    largest = candidates_of(config, source, lines)
+    if largest is None:
+        return ModelFit(fit(config), source, data.where, configs, data.inputs, bool(allow_overlap))
+    # computation_delay: auto, a discrete nuisance: one fit per candidate (nlsid.fit.computation_delay)
+    estimation, _ = split_runs(data.runs, held, data.extra_runs, data.estimation, data.validation, data.where)
+    fitted, choice = choose_delay(config, largest, fit, estimation, fit_on, "free parameters", source)
+    return ModelFit(fitted, source, data.where, configs, data.inputs, bool(allow_overlap), choice)

@@ -87,8 +87,10 @@ def _advance(p: float, v: float, force: float, h: float, mass: float, viscous: f
 
 
 def closed_loop(r: np.ndarray, mass=MASS, viscous=VISCOUS, coulomb=COULOMB, offset=OFFSET,
-                encoder=ENCODER, fs=FS) -> tuple[np.ndarray, np.ndarray]:
-    """The drive and the axis sample by sample: (u, y), y the encoder reading."""
+                encoder=ENCODER, fs=FS, delay: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The drive and the axis sample by sample: (u, y), y the encoder reading. ``delay``: the
+    drive's computation delay in whole samples, the command u[k] applied from sample k + delay
+    on (held over [t_{k+delay}, t_{k+delay+1}); the motor force zero before the first command arrives)."""
     h = 1.0 / fs
     p = v = 0.0
     y = np.empty(r.size)
@@ -98,5 +100,6 @@ def closed_loop(r: np.ndarray, mass=MASS, viscous=VISCOUS, coulomb=COULOMB, offs
         y[k] = round(p / encoder) * encoder
         u[k] = KP * KV * (r[k] - y[k]) - KV * (y[k] - y2) * fs / 2
         y2, y1 = y1, y[k]
-        p, v = _advance(p, v, GAIN * u[k], h, mass, viscous, coulomb, offset)
+        applied = u[k - delay] if k >= delay else 0.0
+        p, v = _advance(p, v, GAIN * applied, h, mass, viscous, coulomb, offset)
     return u, y
