@@ -31,6 +31,7 @@ from nlsid.diagnose.yardstick import Yardstick, fit_yardstick
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
+from nlsid.simulate.channels import absent_notes
 from nlsid.simulate.threads import blas_in_one_thread
 
 
@@ -606,4 +607,5 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     verdict = _decide(evidence, found, baseline, outcomes, val)
     samples = sum(res.period * res.n_periods for res in val)
     return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline, budget=budget,
+                     notes=absent_notes(runner.config, runs),
                      validation_samples=samples)

@@ -34,6 +34,7 @@ class Diagnosis:
     leading: Outcome | None = None  # without a named cause: the best hypothesis that lowers the error
     validation_samples: int = 0  # the steady-state samples of the validation runs the scores are of
     yardstick: Yardstick | None = None  # the black-box model fitted to the same estimation data
+    notes: list[str] = field(default_factory=list)  # on the runs as simulated (a channel taken as zero)
 
     @property
     def final(self) -> Outcome | None:
@@ -245,7 +246,7 @@ class Diagnosis:
         return self.budget.summary()
 
     def findings(self) -> list[str]:
-        out = self.nuisances.findings() + self._nuisance_findings() + self.evidence.findings()
+        out = list(self.notes) + self.nuisances.findings() + self._nuisance_findings() + self.evidence.findings()
         if self.budget is not None and self.budget.active:
             out.append(budget_note(self.budget, self.final is not None))
         if self.accuracy is not None:

@@ -175,9 +175,11 @@ class ModelRunner:
 
     @property
     def has_offsets(self) -> bool:
-        """The model moves without excitation: offsets or measured channels at its input or output."""
-        m = self.config.model
-        return bool(m.input_offset or m.output_offset or getattr(m, "force_offset", 0.0) or m.input_channels)
+        """The model moves without excitation: offsets or measured channels at its input or output,
+        or channels its drive adds to its command."""
+        m, loop = self.config.model, self.config.closed_loop
+        return bool(m.input_offset or m.output_offset or getattr(m, "force_offset", 0.0) or m.input_channels
+                    or (loop is not None and loop.excitation_channels))
 
     def internal(self, run: Run) -> dict[str, np.ndarray]:
         """Signals inside the model on ``run``: ``input`` (the plant input), and for a mechanical
