@@ -44,6 +44,8 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     """
     import nlsid.simulate.batch  # noqa: F401  (the simulator loaded before the clock: "seconds" is the simulation's)
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
+    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.simulate.channels import absent_notes
     from nlsid.stages.model import Model
     from nlsid.stages.recording import read
 
@@ -51,6 +53,7 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     check_writable(output, force)
     model = Model.from_yaml(config)
     runs = read(excitation, require_y=False)
+    notes = absent_notes(validate_simulate_config(model.to_dict(), config, {}), runs.runs)
     start = time.perf_counter()
     with progress("simulate", len(runs) * len(model.points), kernels=True) as step:
         recording = model.simulate(runs, seed=seed, workers=workers, steady=steady, progress=step)
@@ -60,6 +63,8 @@ def simulate(config: str, excitation: str, output: str, seed: int | None, worker
     samples = sum(run.n_samples for run in out)
     if as_json:
         emit_json({"output": output, "runs": len(out), "samples": samples, "seconds": seconds,
-                   "run_ids": [run.run_id for run in out]})
+                   "run_ids": [run.run_id for run in out], "notes": notes})
     else:
         settings().console.print(f"{output}: {len(out)} runs, {samples} samples simulated in {seconds:.2f} s")
+        for note in notes:
+            settings().console.print(f"note: {note}", markup=False)

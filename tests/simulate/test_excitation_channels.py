@@ -151,8 +151,9 @@ def test_the_cli_refuses_a_channel_a_run_lacks_unless_marked_absent_zero(run_cli
 
     config[section][name] = {"pulses": {"gain": 1.0, "absent": "zero"}}
     path.write_text(yaml.safe_dump(config, sort_keys=False))
-    accepted = run_cli("simulate", path, "--excitation", data, "-o", tmp_path / "accepted.h5")
+    accepted = run_cli("--json", "simulate", path, "--excitation", data, "-o", tmp_path / "accepted.h5")
     assert accepted.exit_code == 0, accepted.stderr
+    assert accepted.json()["notes"] == [f"run plain records no channel 'pulses': taken as zero ({key}.pulses.absent: zero)"]
     out = {run.run_id: run for run in read_runs(tmp_path / "accepted.h5")}
     np.testing.assert_array_equal(out["plain"].y, _simulate(axis(), records[1]).y)
 
