@@ -225,3 +225,44 @@ def test_forward_sensitivities_carry_the_excitation(records):
         difference = (up - down) / (2 * h)
         assert _rms(du[i] - difference) <= 1e-6 * _rms(difference)
     assert _rms(du[0]) >= 0.5 * _rms(pulsed.channels["pulses"])  # the pulses reach u through the gain
+
+
+def test_a_pnlss_model_takes_the_channel_entries_and_writes_them_back():
+    """A pnlss model's input_channels: on a run without the channel, absent: zero runs the model
+    on u alone; with it, on u + gain * channel (both against the model's own simulation of the
+    input formed here); to_config writes the entry back as it reads it; without absent: zero the
+    run is refused, named."""
+    from nlsid.errors import InputError
+    from nlsid.models.pnlss import build, to_config
+    from nlsid.simulate.pnlss_runs import fitted_input, simulate_measured
+
+    data = {"type": "pnlss", "fs": 100.0, "A": [[0.9]], "B": [1.0], "C": [1.0], "D": 0.0, "state_degrees": [3],
+            "E": [[-0.1, 0.02, 0.0, 0.01]], "input_channels": {"d": {"gain": 2.0, "absent": "zero"}}}
+    model = build(mc.SimulateConfig.model_validate({"model": data}).model)
+    rng = np.random.default_rng(1)
+    u, d = rng.standard_normal(200), rng.standard_normal(200)
+    plain = Run("plain", 100.0, "arbitrary", u)
+    disturbed = Run("disturbed", 100.0, "arbitrary", u, channels={"d": d})
+    np.testing.assert_array_equal(fitted_input(model, plain), u)
+    np.testing.assert_allclose(fitted_input(model, disturbed), u + 2.0 * d, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(simulate_measured(model, plain, False), model.simulate(u))
+    assert to_config(model)["input_channels"] == {"d": {"gain": 2.0, "absent": "zero"}}
+    refused = build(mc.SimulateConfig.model_validate({"model": {**data, "input_channels": {"d": 2.0}}}).model)
+    with pytest.raises(InputError, match="run plain records no channel 'd'") as error:
+        fitted_input(refused, plain)
+    assert error.value.where == "model.input_channels.d"
+    assert to_config(refused)["input_channels"] == {"d": 2.0}
+
+
+@pytest.mark.parametrize(("entry", "message"), [
+    ({"gain": 1.0, "absent": "maybe"}, "excitation_channels.pulses.absent: expected 'error' or 'zero', got 'maybe'"),
+    ({"gian": 1.0}, "excitation_channels.pulses.gian: unknown key"),
+    ({"gain": float("inf")}, "excitation_channels.pulses.gain: expected a finite number"),
+])
+def test_a_bad_channel_entry_is_refused_at_its_key(entry, message):
+    from nlsid.errors import InputError
+    from nlsid.io.config import validate
+
+    with pytest.raises(InputError) as error:
+        validate(axis({"pulses": entry}), mc.SimulateConfig, "axis.yaml", {})
+    assert message in str(error.value)
