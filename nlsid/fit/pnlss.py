@@ -141,24 +141,27 @@ class PnlssFit:
 
 
 def global_vector(model: Pnlss) -> np.ndarray:
-    """theta in the kernel's column order after x0: A (row-major), B, E (row-major), C, D, F."""
-    return np.concatenate([model.A.ravel(), model.B, model.E.ravel(), model.C, [model.D], model.F])
+    """theta in the kernel's column order after x0: A (row-major), B, E (row-major), [Cz
+    (row-major), Dz of the LFR form], C, D, F."""
+    mixing = [model.Cz.ravel(), model.Dz] if model.lfr else []
+    return np.concatenate([model.A.ravel(), model.B, model.E.ravel(), *mixing, model.C, [model.D], model.F])
 
 
 def with_vector(model: Pnlss, theta: np.ndarray) -> Pnlss:
     """``model`` with the coefficients of :func:`global_vector` set to ``theta``."""
-    n, nz, nh = model.order, model.E.shape[1], model.F.size
-    cuts = np.cumsum([n * n, n, n * nz, n, 1, nh])
-    A, B, E, C, D, F, _ = np.split(np.asarray(theta, dtype=float), cuts)
+    n, nz, nh, nv = model.order, model.E.shape[1], model.F.size, model.lfr_inputs
+    cuts = np.cumsum([n * n, n, n * nz, nv * n, nv, n, 1, nh])
+    A, B, E, Cz, Dz, C, D, F, _ = np.split(np.asarray(theta, dtype=float), cuts)
+    mixing = {"Cz": Cz.reshape(nv, n).copy(), "Dz": Dz.copy()} if model.lfr else {}
     return model.replace(A=A.reshape(n, n).copy(), B=B.copy(), E=E.reshape(n, nz).copy(), C=C.copy(),
-                         D=float(D[0]), F=F.copy())
+                         D=float(D[0]), F=F.copy(), **mixing)
 
 
 def linear_indices(model: Pnlss) -> np.ndarray:
     """Positions of A, B, C, D in :func:`global_vector`."""
     n, nz = model.order, model.E.shape[1]
     ab = np.arange(n * n + n)
-    cd = n * n + n + n * nz + np.arange(n + 1)
+    cd = n * n + n + n * nz + model.lfr_inputs * (n + 1) + np.arange(n + 1)
     return np.concatenate([ab, cd])
 
 
@@ -367,6 +370,29 @@ def _bound(linear: Pnlss, recs: list[Record]) -> float:
     return BOUND_FACTOR * peak
 
 
+def lfr_combinations(model: Pnlss, recs: list[Record], x0s: list) -> Pnlss:
+    """``model`` (LFR form) with its combinations z = Cz x + Dz u set to the start rows of
+    :func:`nlsid.models.pnlss.lfr_start_rows` for its current linear part (z_1 = C x + D u, its
+    output: a Wiener-like start; z_2 = u; z_k = x_(k-2)), each scaled to unit rms over the
+    records (lead-in left out) so that the monomials of z are of order one."""
+    from nlsid.models.pnlss import lfr_start_rows
+    from nlsid.simulate.pnlss_kernels import states
+
+    Cz, Dz = lfr_start_rows(model.C, model.D, model.lfr_inputs)
+    power, count = np.zeros(Dz.size), 0
+    matrices = model.kernel_matrices()
+    for rec, x0 in zip(recs, x0s):
+        u, lead = driven_input(model, rec)
+        x = np.zeros((u.size, model.order))
+        states(*matrices, u, np.zeros(model.order) if x0 is None else np.asarray(x0, dtype=float), x)
+        z = x[lead:] @ Cz.T + u[lead:, None] * Dz
+        power += np.sum(z * z, axis=0)
+        count += z.shape[0]
+    rms = np.sqrt(power / max(count, 1))
+    rms[~((rms > 0) & np.isfinite(rms))] = 1.0
+    return model.replace(Cz=Cz / rms[:, None], Dz=Dz / rms)
+
+
 def _tamed(start: Pnlss, recs: list[Record], bound: float) -> tuple[Pnlss | None, str | None]:
     """The start, or, if its simulation diverges on the estimation runs, the start with its
     nonlinear coefficients shrunk tenfold until it does not (zero at last); None if even the linear
@@ -450,7 +476,12 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
         model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience)
         seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
     linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
-    if max_iterations > 0 and model.with_input and not nonlinear_start:
+    if max_iterations > 0 and model.lfr and not nonlinear_start:
+        model = lfr_combinations(model, est, x0s)
+        notes.append(f"LFR form: the {model.lfr_inputs} combination(s) z = Cz x + Dz u started as the linear model's "
+                     "output C x + D u (Wiener-like)" + (", the input, then single states" if model.lfr_inputs > 1 else "")
+                     + ", each scaled to unit rms on the estimation runs")
+    if max_iterations > 0 and model.with_input and not model.lfr and not nonlinear_start:
         states = _Problem(est, state_term_indices(model), bound)
         model, x0s, status = _stage(states, model, x0s, "nonlinear_states", max_iterations, validate, history, kept,
                                     patience)

@@ -612,12 +612,35 @@ class EquationsConfig(_Offsets):
         return self
 
 
+class PnlssNonlinearity(FiniteModel):
+    """The form of a PNLSS model's monomials: ``full`` (of the states and u) or ``lfr`` (of the
+    ``inputs`` combinations z = Cz x + Dz u; Cz, Dz default to the start rows of
+    :func:`nlsid.models.pnlss.lfr_start_rows`); sizes are checked when the model is built."""
+
+    form: Literal["full", "lfr"] = "full"
+    inputs: Optional[Annotated[int, Field(ge=1)]] = None
+    Cz: Optional[list[list[float]]] = None
+    Dz: Optional[list[float]] = None
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        given = [key for key in ("inputs", "Cz", "Dz") if getattr(self, key) is not None]
+        if self.form == "full" and given:
+            raise ValueError(f"{given[0]} belongs to form: lfr (the full form's monomials are of the states and u)")
+        if self.form == "lfr" and self.inputs is None and self.Cz is None:
+            raise ValueError("form: lfr needs inputs (the number of combinations z) or Cz")
+        if self.Dz is not None and self.Cz is None:
+            raise ValueError("Dz needs Cz (the states' part of each combination z)")
+        return self
+
+
 class PnlssConfig(_Offsets):
     """A polynomial nonlinear state-space model, discrete at ``fs`` (``docs/configs.md``, "PNLSS";
     ``docs/pnlss.md``): x[t+1] = A x + B u + E zeta(x, u), y = C x + D u + F eta(x, u), zeta and
     eta the monomials of the states (and of u, ``with_input``) of total degrees ``state_degrees``
-    and ``output_degrees``. E (n rows, one coefficient per monomial of zeta) and F (one per monomial
-    of eta) default to zeros; their sizes are checked when the model is built."""
+    and ``output_degrees``, or with ``nonlinearity: {form: lfr}`` of z = Cz x + Dz u. E (n rows,
+    one coefficient per monomial of zeta) and F (one per monomial of eta) default to zeros; their
+    sizes are checked when the model is built."""
 
     type: Literal["pnlss"]
     fs: Positive
@@ -630,6 +653,7 @@ class PnlssConfig(_Offsets):
     with_input: bool = True
     E: Optional[list[list[float]]] = None
     F: Optional[list[float]] = None
+    nonlinearity: Optional[PnlssNonlinearity] = None
 
 
 ModelConfig = Annotated[

@@ -1,12 +1,19 @@
 """The polynomial nonlinear state-space model (PNLSS; Paduart et al., Automatica 46, 2010), discrete
 time, single input single output:
 
-    x[t+1] = A x[t] + B u[t] + E zeta(x[t], u[t])
-    y[t]   = C x[t] + D u[t] + F eta(x[t], u[t])
+    x[t+1] = A x[t] + B u[t] + E zeta(v[t])
+    y[t]   = C x[t] + D u[t] + F eta(v[t])
 
-``zeta`` and ``eta`` are vectors of monomials of the variables (x_1, ..., x_n, u), or of the states
-alone, of chosen total degrees (for example 2 and 3; odd degrees only, such as 3 and 5, keep the
-model odd). The linear part (A, B, C, D) is a state-space realisation of a linear model (the BLA's
+``zeta`` and ``eta`` are vectors of monomials of the variables v, of chosen total degrees (for
+example 2 and 3; odd degrees only, such as 3 and 5, keep the model odd). Two forms:
+
+* full (the default): v = (x_1, ..., x_n, u), or the states alone;
+* nonlinear LFR (Schoukens and Tiels, Int. J. Control 90, 2017, the parsimonious option): v = z =
+  C_z x + D_z u, a few (n_z) linear combinations of the states and the input, C_z (n_z x n) and
+  D_z (n_z) coefficients of the model. Its monomial count depends on n_z, not on n.
+
+Both are run by the same kernels with v = M x + N u: the full form's M stacks the identity (and a
+zero row for u), N picks u; the LFR form's M, N are C_z, D_z. The linear part (A, B, C, D) is a state-space realisation of a linear model (the BLA's
 fit); E (n x n_zeta) and F (n_eta) hold the coefficients of the nonlinear terms. The model can
 represent, exactly, a Wiener-Hammerstein system with a polynomial between its filters, a Duffing
 oscillator (its cubic spring is a monomial of the position) and a wide class of systems with
@@ -76,9 +83,10 @@ def exponent_table(n_states: int, degrees: tuple[int, ...], with_input: bool = T
     return np.array(rows, dtype=np.int64).reshape(len(rows), n_vars)
 
 
-def monomial_names(n_states: int, degrees: tuple[int, ...], with_input: bool = True) -> list[str]:
-    """Readable names of the monomials of :func:`exponents` (``x1^2*u``), in its order."""
-    names = [f"x{i + 1}" for i in range(n_states)] + (["u"] if with_input else [])
+def monomial_names(n_states: int, degrees: tuple[int, ...], with_input: bool = True, symbol: str = "x") -> list[str]:
+    """Readable names of the monomials of :func:`exponents` (``x1^2*u``), in its order; ``symbol``
+    names the variables (``z`` for the LFR form's combinations, ``with_input`` False there)."""
+    names = [f"{symbol}{i + 1}" for i in range(n_states)] + (["u"] if with_input else [])
     out = []
     for row in exponents(n_states, degrees, with_input):
         factors = [name if e == 1 else f"{name}^{e}" for name, e in zip(names, row) if e]
@@ -96,11 +104,13 @@ class Pnlss:
     E : (n x n_zeta) coefficients of the state equation's monomials zeta.
     F : (n_eta) coefficients of the output equation's monomials eta.
     state_degrees, output_degrees : total degrees of zeta and eta (empty: no terms).
-    with_input : whether the monomials contain the input u (else the states only).
+    with_input : whether the monomials contain the input u (else the states only); full form only.
     input_offset, output_offset : the model runs on u + input_offset and records y + output_offset.
     input_channels : (channel name, gain) pairs: measured channels added to the input
         (u + input_offset + sum gain * channel), as in the other models of the config language.
     zero_if_absent : the names of ``input_channels`` a run may lack (taken as zero there).
+    Cz, Dz : None (the full form), or the LFR form's combinations z = Cz x + Dz u: Cz (n_z x n),
+        Dz (n_z); the monomials are then those of z (n_z variables).
     """
 
     A: np.ndarray
@@ -117,13 +127,23 @@ class Pnlss:
     output_offset: float = 0.0
     input_channels: tuple[tuple[str, float], ...] = ()
     zero_if_absent: tuple[str, ...] = ()
+    Cz: np.ndarray | None = None
+    Dz: np.ndarray | None = None
     state_exponents: np.ndarray = field(init=False, repr=False, compare=False)
     output_exponents: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         n = self.A.shape[0]
-        object.__setattr__(self, "state_exponents", exponents(n, self.state_degrees, self.with_input))
-        object.__setattr__(self, "output_exponents", exponents(n, self.output_degrees, self.with_input))
+        if (self.Cz is None) != (self.Dz is None):
+            raise InputError("model.nonlinearity", "the LFR form needs both Cz and Dz")
+        if self.Cz is not None:
+            nv = self.Dz.shape[0] if self.Dz.ndim == 1 else -1
+            if nv < 1 or self.Cz.shape != (nv, n):
+                raise InputError("model.nonlinearity", f"expected Cz of n_z rows of {n} coefficients (one per state) and "
+                                                       f"Dz of n_z numbers, n_z >= 1; got shapes {self.Cz.shape} and "
+                                                       f"{self.Dz.shape}")
+        object.__setattr__(self, "state_exponents", self._exponents(self.state_degrees))
+        object.__setattr__(self, "output_exponents", self._exponents(self.output_degrees))
         if self.E.shape != (n, self.state_exponents.shape[0]):
             raise InputError("model.E", f"expected {n} rows of {self.state_exponents.shape[0]} coefficients "
                                         f"(one per monomial of degrees {list(self.state_degrees)}), got shape {self.E.shape}")
@@ -131,15 +151,50 @@ class Pnlss:
             raise InputError("model.F", f"expected {self.output_exponents.shape[0]} coefficients (one per monomial "
                                         f"of degrees {list(self.output_degrees)}), got {self.F.size}")
 
+    def _exponents(self, degrees: tuple[int, ...]) -> np.ndarray:
+        if self.Cz is None:
+            return exponents(self.A.shape[0], degrees, self.with_input)
+        return exponents(self.Cz.shape[0], degrees, False)
+
     @property
     def order(self) -> int:
         return int(self.A.shape[0])
 
     @property
+    def lfr(self) -> bool:
+        """Whether the model is of the LFR form (its monomials those of z = Cz x + Dz u)."""
+        return self.Cz is not None
+
+    @property
+    def lfr_inputs(self) -> int:
+        """n_z, the number of combinations z of the LFR form (0 for the full form)."""
+        return 0 if self.Cz is None else int(self.Cz.shape[0])
+
+    @property
     def n_parameters(self) -> int:
-        """Coefficients of A, B, C, D, E and F."""
+        """Coefficients of A, B, C, D, E and F (and Cz, Dz of the LFR form)."""
         n = self.order
-        return n * n + 2 * n + 1 + self.E.size + self.F.size
+        mixing = 0 if self.Cz is None else self.Cz.size + self.Dz.size
+        return n * n + 2 * n + 1 + self.E.size + self.F.size + mixing
+
+    def monomials(self, degrees: tuple[int, ...]) -> list[str]:
+        """Names of the monomials of ``degrees`` in the model's variables (``x1^2*u``, or ``z1^3``)."""
+        if self.Cz is None:
+            return monomial_names(self.order, degrees, self.with_input)
+        return monomial_names(self.lfr_inputs, degrees, False, "z")
+
+    def mixing(self) -> tuple[np.ndarray, np.ndarray]:
+        """(M, N) with the monomials' variables v = M x + N u: the LFR form's (Cz, Dz); the full
+        form's [I; 0] and (0, ..., 0, 1) (or I and 0 with the states alone)."""
+        if self.Cz is not None:
+            return self.Cz, self.Dz
+        n = self.order
+        M = np.zeros((n + (1 if self.with_input else 0), n))
+        M[:n, :n] = np.eye(n)
+        N = np.zeros(M.shape[0])
+        if self.with_input:
+            N[n] = 1.0
+        return M, N
 
     @property
     def linear(self) -> StateSpace:
@@ -151,7 +206,7 @@ class Pnlss:
         values = {name: getattr(self, name) for name in ("A", "B", "C", "D", "E", "F", "fs", "state_degrees",
                                                          "output_degrees", "with_input", "input_offset",
                                                          "output_offset", "input_channels",
-                                                         "zero_if_absent")}
+                                                         "zero_if_absent", "Cz", "Dz")}
         values.update(changes)
         return Pnlss(**values)
 
@@ -187,11 +242,12 @@ class Pnlss:
         return y[lead_periods * len(u_period):], t
 
     def kernel_matrices(self) -> tuple:
-        """(A, B, C, D, E, F, state exponents, output exponents): the kernels' arguments, float64
-        and int64, C-ordered."""
+        """(A, B, C, D, E, F, state exponents, output exponents, M, N): the kernels' arguments,
+        float64 and int64, C-ordered (M, N: :meth:`mixing`)."""
         f = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+        M, N = self.mixing()
         return (f(self.A), f(self.B), f(self.C), float(self.D), f(self.E), f(self.F),
-                np.ascontiguousarray(self.state_exponents), np.ascontiguousarray(self.output_exponents))
+                np.ascontiguousarray(self.state_exponents), np.ascontiguousarray(self.output_exponents), f(M), f(N))
 
     def spectral_radius(self) -> float:
         """max |eig(A)|: below 1 the linear part is stable."""
@@ -262,21 +318,62 @@ def balanced(ss: StateSpace) -> tuple[StateSpace, str]:
     return StateSpace(Ti @ A @ T, Ti @ B, C @ T, float(ss.D), discrete=True), "balanced realisation"
 
 
+def lfr_start_rows(C: np.ndarray, D: float, inputs: int, where: str = "nonlinearity.inputs") -> tuple[np.ndarray, np.ndarray]:
+    """(Cz, Dz): the LFR form's start combinations for a linear part with output row (C, D):
+    z_1 = C x + D u, the linear output (a Wiener-like start: the nonlinearity acts on what the
+    linear model predicts); z_2 = u (Hammerstein-like); z_k = x_(k-2) for k >= 3 (states of a
+    balanced realisation are of comparable size). At most n + 1 rows (n states and the input)."""
+    n = C.shape[0]
+    if not 1 <= inputs <= n + 1:
+        raise InputError(where, f"expected 1 to {n + 1} combinations z (the {n} states and the input), got {inputs}")
+    Cz, Dz = np.zeros((inputs, n)), np.zeros(inputs)
+    Cz[0], Dz[0] = C, D
+    if inputs > 1:
+        Dz[1] = 1.0
+    for k in range(2, inputs):
+        Cz[k, k - 2] = 1.0
+    return Cz, Dz
+
+
 def from_linear(ss: StateSpace, fs: float, state_degrees=(2, 3), output_degrees=(2, 3), with_input: bool = True,
-                input_offset: float = 0.0, output_offset: float = 0.0) -> tuple[Pnlss, str]:
+                input_offset: float = 0.0, output_offset: float = 0.0, lfr_inputs: int = 0) -> tuple[Pnlss, str]:
     """A PNLSS model at ``fs`` whose linear part is ``ss`` (ZOH-discretised if continuous, a dead
     time as shift-register states, then balanced: :func:`balanced`) and whose nonlinear
-    coefficients E, F are zero; and how the realisation was obtained."""
+    coefficients E, F are zero; and how the realisation was obtained. ``lfr_inputs`` > 0: the LFR
+    form with that many combinations z, started by :func:`lfr_start_rows`."""
     sd = check_degrees(state_degrees, "state_degrees")
     od = check_degrees(output_degrees, "output_degrees")
     realisation, how = balanced(discretised(ss, fs))
     n = realisation.order
-    nz = exponents(n, sd, with_input).shape[0]
-    nh = exponents(n, od, with_input).shape[0]
-    model = Pnlss(np.array(realisation.A, float), np.array(realisation.B, float), np.array(realisation.C, float),
+    C = np.array(realisation.C, float)
+    Cz, Dz = lfr_start_rows(C, float(realisation.D), int(lfr_inputs)) if lfr_inputs else (None, None)
+    variables, inputs = (n, with_input) if Cz is None else (Cz.shape[0], False)
+    nz = exponents(variables, sd, inputs).shape[0]
+    nh = exponents(variables, od, inputs).shape[0]
+    model = Pnlss(np.array(realisation.A, float), np.array(realisation.B, float), C,
                   float(realisation.D), np.zeros((n, nz)), np.zeros(nh), float(fs), sd, od, bool(with_input),
-                  float(input_offset), float(output_offset))
+                  float(input_offset), float(output_offset), Cz=Cz, Dz=Dz)
     return model, how
+
+
+def _lfr_of(config, n: int, C: np.ndarray, D: float, where: str) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(Cz, Dz) of a config's ``nonlinearity`` section (None, None: the full form)."""
+    spec = config.nonlinearity
+    if spec is None or spec.form == "full":
+        return None, None
+    key = f"{where}.nonlinearity"
+    if spec.Cz is None:
+        return lfr_start_rows(C, D, spec.inputs, f"{key}.inputs")
+    rows = len(spec.Cz)
+    if spec.inputs is not None and spec.inputs != rows:
+        raise InputError(f"{key}.Cz", f"inputs is {spec.inputs} but Cz has {rows} rows; give one row per combination z")
+    if any(len(row) != n for row in spec.Cz):
+        raise InputError(f"{key}.Cz", f"expected rows of {n} coefficients (one per state), got lengths "
+                                      f"{[len(r) for r in spec.Cz]}")
+    Dz = np.zeros(rows) if spec.Dz is None else np.array(spec.Dz, dtype=float)
+    if Dz.shape != (rows,):
+        raise InputError(f"{key}.Dz", f"expected {rows} numbers (one per row of Cz), got {Dz.size}")
+    return np.array(spec.Cz, dtype=float).reshape(rows, n), Dz
 
 
 def build(config, where: str = "model") -> Pnlss:
@@ -289,14 +386,16 @@ def build(config, where: str = "model") -> Pnlss:
     n = ss.order
     sd = check_degrees(config.state_degrees, f"{where}.state_degrees")
     od = check_degrees(config.output_degrees, f"{where}.output_degrees")
-    nz = exponents(n, sd, config.with_input).shape[0]
-    nh = exponents(n, od, config.with_input).shape[0]
+    Cz, Dz = _lfr_of(config, n, np.array(ss.C, float), float(ss.D), where)
+    variables, inputs, symbol = (n, config.with_input, "x") if Cz is None else (Cz.shape[0], False, "z")
+    nz = exponents(variables, sd, inputs).shape[0]
+    nh = exponents(variables, od, inputs).shape[0]
     if config.E is None:
         E = np.zeros((n, nz))
     else:
         if len(config.E) != n or any(len(row) != nz for row in config.E):
             raise InputError(f"{where}.E", f"expected {n} rows (one per state) of {nz} coefficients (one per monomial "
-                                           f"of degrees {list(sd)}: {', '.join(monomial_names(n, sd, config.with_input))}), "
+                                           f"of degrees {list(sd)}: {', '.join(monomial_names(variables, sd, inputs, symbol))}), "
                                            f"got {len(config.E)} rows of lengths {[len(r) for r in config.E]}")
         E = np.array(config.E, dtype=float).reshape(n, nz)
     if config.F is None:
@@ -304,12 +403,12 @@ def build(config, where: str = "model") -> Pnlss:
     else:
         if len(config.F) != nh:
             raise InputError(f"{where}.F", f"expected {nh} coefficients (one per monomial of degrees {list(od)}: "
-                                           f"{', '.join(monomial_names(n, od, config.with_input))}), got {len(config.F)}")
+                                           f"{', '.join(monomial_names(variables, od, inputs, symbol))}), got {len(config.F)}")
         F = np.array(config.F, dtype=float)
     return Pnlss(np.array(ss.A, float), np.array(ss.B, float), np.array(ss.C, float), float(ss.D), E, F,
                  float(config.fs), sd, od, bool(config.with_input), float(config.input_offset),
                  float(config.output_offset), tuple((str(k), channel_gain(v)) for k, v in config.input_channels.items()),
-                 tuple(str(k) for k, v in config.input_channels.items() if absent_as_zero(v)))
+                 tuple(str(k) for k, v in config.input_channels.items() if absent_as_zero(v)), Cz, Dz)
 
 
 def to_config(model: Pnlss) -> dict:
@@ -318,6 +417,10 @@ def to_config(model: Pnlss) -> dict:
            "C": model.C.tolist(), "D": float(model.D), "state_degrees": list(model.state_degrees),
            "output_degrees": list(model.output_degrees), "with_input": bool(model.with_input),
            "E": model.E.tolist(), "F": model.F.tolist()}
+    if model.lfr:
+        del out["with_input"]  # the LFR form's combinations hold the input (Dz)
+        out["nonlinearity"] = {"form": "lfr", "inputs": model.lfr_inputs, "Cz": model.Cz.tolist(),
+                               "Dz": model.Dz.tolist()}
     if model.input_offset:
         out["input_offset"] = float(model.input_offset)
     if model.output_offset:

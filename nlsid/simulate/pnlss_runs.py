@@ -113,14 +113,15 @@ def jacobian_blocks(model: Pnlss, record: Record, x0: np.ndarray | None, bound: 
                     samples: int | None = None):
     """Yield (residual, J) chunks over the record's first ``samples`` (default all; lead-in rows
     dropped): residual = y_sim - y and the Jacobian rows in the kernel's column layout
-    (:mod:`nlsid.simulate.pnlss_kernels`: x0, A, B, E, C, D, F; x0 alone if not ``full``).
-    Raises FloatingPointError if the simulation diverges."""
+    (:mod:`nlsid.simulate.pnlss_kernels`: x0, A, B, E, [Cz, Dz of the LFR form], C, D, F; x0
+    alone if not ``full``). Raises FloatingPointError if the simulation diverges."""
     n = model.order
     u, lead = driven_input(model, record)
     if samples is not None:
         u = u[:lead + samples]
     matrices = model.kernel_matrices()
-    ps = n + (n * n + n + n * matrices[6].shape[0] if full else 0)
+    mixing = model.lfr_inputs * (n + 1)
+    ps = n + (n * n + n + n * matrices[6].shape[0] + mixing if full else 0)
     width = ps + (n + 1 + matrices[7].shape[0] if full else 0)
     x = np.zeros(n) if x0 is None or not record.arbitrary else np.array(x0, dtype=float)
     S = np.zeros((n, ps))
@@ -131,7 +132,7 @@ def jacobian_blocks(model: Pnlss, record: Record, x0: np.ndarray | None, bound: 
     for start in range(0, u.shape[0], rows):
         stop = min(start + rows, u.shape[0])
         m = stop - start
-        t = sensitivities(*matrices, u[start:stop], x, S, full, float(bound), y[:m], J[:m])
+        t = sensitivities(*matrices, model.lfr, u[start:stop], x, S, full, float(bound), y[:m], J[:m])
         if t >= 0:
             raise FloatingPointError(f"diverged at sample {start + t}")
         first = max(lead - start, 0)
