@@ -69,7 +69,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     if as_json:
         emit_json({"output": output, **summary})
     else:
-        _print(result.diagnosis, output)
+        _print(result.diagnosis, output, result.computation_delay)
     _check(summary, fail_if_discrepancy, fail_if_error_above, fail_if_distortion_above)
 
 
@@ -79,11 +79,13 @@ FLAGS = {"model": "--model", "rec": "--data", "validate_on": "--validate-on", "e
          "mapping": "--map", "yardstick": "--no-yardstick"}
 
 
-def _print(result, output: str) -> None:
+def _print(result, output: str, delay=None) -> None:
     console = settings().console
     console.print(result.headline(), style="bold", markup=False)
     for line in result.evidence.findings():
         console.print(f"  - {line}", markup=False)
+    if delay is not None:  # closed_loop.computation_delay: auto, chosen before the diagnosis
+        console.print(f"  - {delay.statement()}", markup=False)
     from nlsid.report.render_diagnosis import floor_text, split_findings
 
     rows, not_fitted = [], []

@@ -24,6 +24,7 @@ from nlsid.stages.recording import Recording
 
 if TYPE_CHECKING:
     from nlsid.diagnose.result import Diagnosis
+    from nlsid.fit.computation_delay import DelayChoice
 
 #: The resolution of the PNG figures of :meth:`DiagnosisResult.figures`.
 DPI = 100
@@ -50,6 +51,10 @@ class DiagnosisResult:
         Further model configs the folder holds, file name -> YAML text: ``candidate_model.yaml``
         (the leading candidate where no cause is named, marked as not significant) and
         ``black_box_model.yaml`` (the yardstick: :mod:`nlsid.diagnose.yardstick`).
+    computation_delay : nlsid.fit.computation_delay.DelayChoice or None
+        Where the model asks for ``closed_loop.computation_delay: auto``: the delay chosen before
+        the diagnosis (:mod:`nlsid.diagnose.computation_delay`), every candidate's cost, whether
+        the data decide it; None otherwise.
     """
 
     diagnosis: Diagnosis
@@ -59,6 +64,7 @@ class DiagnosisResult:
     inputs: list[str] = field(default_factory=list)
     allow_overlap: bool = False
     other_models: dict[str, str] = field(default_factory=dict)
+    computation_delay: DelayChoice | None = None
 
     @property
     def headline(self) -> str:
@@ -105,7 +111,9 @@ class DiagnosisResult:
     def summary(self) -> dict:
         """The content of ``summary.json`` without its format, provenance and file list (the
         ``nlsid diagnose --json`` summary without ``output``; ``docs/formats.md``)."""
-        return {**self.diagnosis.summary(), "units": dict(self.units), "allow_overlap": bool(self.allow_overlap)}
+        delay = None if self.computation_delay is None else self.computation_delay.summary()
+        return {**self.diagnosis.summary(), "units": dict(self.units), "allow_overlap": bool(self.allow_overlap),
+                "computation_delay": delay}
 
     def write(self, folder: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
         """Write the diagnosis folder ``nlsid diagnose -o`` writes (``summary.json``, ``results.h5``,
@@ -229,6 +237,7 @@ class DiagnosisInputs:
     def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
         """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
         from nlsid.diagnose import verdict as rules
+        from nlsid.diagnose.computation_delay import resolve as resolve_delay
         from nlsid.diagnose.result import BLACK_BOX, CANDIDATE
         from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
         from nlsid.io.diagnosis_file import extended_yaml
@@ -237,7 +246,9 @@ class DiagnosisInputs:
 
         tick = progress or (lambda: None)
         with default_threads(self.workers):
-            result = run_diagnosis(self.config, self.model_source, self.runs, self.where, step=lambda name: tick(),
+            config, delay = resolve_delay(self.config, self.model_source, self.runs, self.where, self.extra,
+                                          self.estimation, self.validation, "y")
+            result = run_diagnosis(config, self.model_source, self.runs, self.where, step=lambda name: tick(),
                                    validate_on=self.extra, estimation_range=self.estimation,
                                    validation_range=self.validation, yardstick=self.yardstick)
         final = result.final
@@ -251,7 +262,7 @@ class DiagnosisInputs:
         if result.leading is not None:
             others[CANDIDATE] = extended_yaml(result.leading.extended, result.candidate_header())
         units = common_units(run.units for run in [*self.runs, *self.extra])
-        return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap, others)
+        return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap, others, delay)
 
 
 def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:

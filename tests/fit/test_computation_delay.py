@@ -7,26 +7,27 @@
   the data, and recovers mass, viscous, Coulomb and offset within 1 % (issue 15's tolerance; what
   limits it is the encoder quantisation the model does not have), and writes the whole number.
 - A first-order plant K/(tau s + 1) under a proportional drive, solved exactly at the samples
-  (zero-order hold: y[k+1] = a y[k] + K (1 - a) u[k - d], a = exp(-h / tau)), a periodic
-  multisine reference, white noise on the measured position fed back as the drive reads it:
+  (tests/generators/delayed_loop.py), a periodic multisine reference, white noise on the
+  measured output fed back as the drive reads it:
   with little noise the delay is decided; with noise whose share of the cost difference
   (2 sigma ||delta||, module docstring) is larger than the difference the delay makes, it is
   stated as not decided by the data.
 - A loop unstable with the largest candidate delay (the discrete loop's pole beyond the unit
-  circle: roots of z^(d+1) - a z^d + K (1 - a) kp, computed here): that candidate is skipped with
-  the reason, the others compared.
+  circle, from its characteristic polynomial): that candidate is skipped with the reason, the
+  others compared.
 - ``auto`` in a plain ``simulate`` config is refused in one line.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import math
 
 import numpy as np
 import pytest
 import yaml
 
+from generators import delayed_loop as L
 from generators import emps_cases as E
 from nlsid.io.recording import write_recording
 from nlsid.io.run import Run
@@ -91,60 +92,19 @@ def test_fit_chooses_no_delay_where_the_drive_has_none():
     _check_axis(dict(zip(fit.names, fit.values)))
 
 
-FS = 1000.0
-PERIOD = 1000
-
-
-def _first_order_loop(delay: int, gain: float, tau: float, kp: float, noise: float, periods: int = 3,
-                      seed: int = 1) -> Run:
-    """The drive u[k] = kp (r[k] - y[k]) of a plant K/(tau s + 1) whose input is u[k - delay] held
-    over a sample (exact ZOH recursion), y measured with white noise of std ``noise`` (the drive
-    reads the noisy y); a multisine reference of lines 1..20 Hz, ``periods`` periods of which the
-    first is transient."""
-    rng = np.random.default_rng(seed)
-    k = np.arange(PERIOD)
-    lines = np.arange(1, 21)
-    phases = rng.uniform(0, 2 * np.pi, lines.size)
-    one = np.sum(np.cos(2 * np.pi * np.outer(lines, k) / PERIOD + phases[:, None]), axis=0)
-    r = np.tile(one / np.sqrt(np.mean(one ** 2)), periods)
-    a = math.exp(-1.0 / (FS * tau))
-    b = gain * (1.0 - a)
-    state = 0.0
-    n = r.size
-    y, u = np.empty(n), np.empty(n)
-    e = noise * rng.standard_normal(n)
-    for i in range(n):
-        y[i] = state + e[i]
-        u[i] = kp * (r[i] - y[i])
-        applied = u[i - delay] if i >= delay else 0.0
-        state = a * state + b * applied
-    return Run("loop", FS, "multisine", u, y=y, r=r, period=PERIOD, transient_periods=1, realization=0)
-
-
-def _loop_config(tau: float, kp: float, start: float, largest: int) -> dict:
-    return {"model": {"type": "transfer_function", "num": [start], "den": [tau, 1.0]},
-            "closed_loop": {"controller": {"type": "pid", "kp": kp}, "computation_delay": {"auto": {"max": largest}}},
-            "free": {"model.num[0]": {"lower": 0.1, "upper": 10.0}}}
-
-
 def _fit_loop(run: Run, config: dict):
     from nlsid.stages.recording import Recording
 
-    # one run fitted, none held out: the choice is made on the estimation runs alone
-    return fit_model(config, Recording([run, _renamed(run, "held")]), validation=["held"])
-
-
-def _renamed(run: Run, run_id: str) -> Run:
-    import dataclasses
-
-    return dataclasses.replace(run, run_id=run_id, realization=1)
+    # one run fitted, a copy held out: the choice is made on the estimation run alone
+    held = dataclasses.replace(run, run_id="held", realization=1)
+    return fit_model(config, Recording([run, held]), validation=["held"])
 
 
 @pytest.mark.parametrize("noise, decided", [(1e-3, True), (0.3, False)])
 def test_the_choice_is_stated_as_decided_only_beyond_the_noise(noise, decided):
     # a slow loop (closed-loop pole (1 + K kp) / tau = 6 rad/s) at 1 kHz: one sample of delay changes y little
-    run = _first_order_loop(2, 1.0, 0.5, 2.0, noise)
-    fit = _fit_loop(run, _loop_config(0.5, 2.0, 0.8, 3))
+    run = L.first_order_loop(2, 1.0, 0.5, 2.0, noise)
+    fit = _fit_loop(run, L.loop_config(0.5, 2.0, 0.8, 3))
     choice = fit.computation_delay
     assert choice.noise_known
     # the measured noise level: the period-to-period std of y, near the std of the added noise
@@ -160,13 +120,10 @@ def test_the_choice_is_stated_as_decided_only_beyond_the_noise(noise, decided):
 
 def test_a_delay_that_makes_the_loop_unstable_is_skipped():
     tau, kp, start = 5e-3, 3.0, 1.1
-    b = start * (1.0 - math.exp(-1.0 / (FS * tau)))
-    a = math.exp(-1.0 / (FS * tau))
-    radius = {d: max(abs(np.roots([1.0, -a] + [0.0] * (d - 1) + [b * kp]))) if d else abs(a - b * kp)
-              for d in range(4)}
-    assert all(radius[d] < 1 for d in range(3)) and radius[3] > 1  # the start's loop: unstable with d = 3 alone
-    run = _first_order_loop(1, 1.0, tau, kp, 1e-4)
-    fit = _fit_loop(run, _loop_config(tau, kp, start, 3))
+    # the start's loop is unstable with d = 3 alone
+    assert [L.loop_radius(d, start, tau, kp) < 1 for d in range(4)] == [True, True, True, False]
+    run = L.first_order_loop(1, 1.0, tau, kp, 1e-4)
+    fit = _fit_loop(run, L.loop_config(tau, kp, start, 3))
     choice = fit.computation_delay
     assert choice.chosen == 1 and choice.decided, choice.statement()
     skipped = {c.delay: c.reason for c in choice.candidates if not c.fitted}
@@ -176,9 +133,9 @@ def test_a_delay_that_makes_the_loop_unstable_is_skipped():
 
 def test_auto_in_a_plain_simulation_is_refused_in_one_line(run_cli, tmp_path):
     config = tmp_path / "loop.yaml"
-    config.write_text(yaml.safe_dump({key: value for key, value in _loop_config(0.5, 2.0, 1.0, 3).items()
+    config.write_text(yaml.safe_dump({key: value for key, value in L.loop_config(0.5, 2.0, 1.0, 3).items()
                                       if key != "free"}))
-    excitation = write_recording(tmp_path / "r.h5", [Run("r", FS, "arbitrary", np.ones(100))], {"tool": "test"})
+    excitation = write_recording(tmp_path / "r.h5", [Run("r", L.FS, "arbitrary", np.ones(100))], {"tool": "test"})
     out = tmp_path / "out.h5"
     run_cli("simulate", config, "--excitation", excitation, "-o", out).assert_one_line_error(
         "computation_delay: auto is estimated from measured data")
