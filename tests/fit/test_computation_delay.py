@@ -140,3 +140,28 @@ def test_auto_in_a_plain_simulation_is_refused_in_one_line(run_cli, tmp_path):
     run_cli("simulate", config, "--excitation", excitation, "-o", out).assert_one_line_error(
         "computation_delay: auto is estimated from measured data")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("written, largest", [("auto", 3), ({"auto": None}, 3), ({"auto": {"max": 5}}, 5),
+                                              ({"auto": {"max": 0}}, 0), (2, None), (0, None)])
+def test_the_written_forms_give_the_candidates(written, largest):
+    from nlsid.fit.computation_delay import candidates_of
+
+    config = L.loop_config(0.5, 2.0, 1.0, 3)
+    config["closed_loop"]["computation_delay"] = written
+    assert candidates_of(config, "loop.yaml") == largest
+
+
+@pytest.mark.parametrize("written", [-1, 1.5, True, "automatic", {"auto": {"max": 21}}, {"auto": {"max": -1}},
+                                     {"auto": {"largest": 3}}, {"auto": 3}, {"auto": {"max": 2}, "min": 0}])
+def test_other_forms_are_refused_in_one_line(run_cli, tmp_path, written):
+    config = L.loop_config(0.5, 2.0, 1.0, 3)
+    config["closed_loop"]["computation_delay"] = written
+    path = tmp_path / "loop.yaml"
+    path.write_text(yaml.safe_dump(config))
+    data = write_recording(tmp_path / "loop.h5", [L.first_order_loop(0, 1.0, 0.5, 2.0, 1e-3, periods=2)],
+                           {"tool": "test"})
+    out = tmp_path / "fitted.yaml"
+    run_cli("fit", "--model", path, "--data", data, "-o", out).assert_one_line_error(
+        "closed_loop.computation_delay", "auto, or {auto: {max: D}}")
+    assert not out.exists()
