@@ -39,6 +39,14 @@ Domain = Literal["continuous", "discrete"]
 class _LTIBase(FiniteModel):
     domain: Domain = "continuous"
     delay: NonNegative = 0.0  # dead time in seconds, a whole number of samples at the run's fs
+    fs: Optional[Positive] = None  # a discrete model's sample rate (Hz): runs at another rate are refused
+
+    @model_validator(mode="after")
+    def _rate_of_discrete(self):
+        if self.fs is not None and self.domain != "discrete":
+            raise ValueError("fs is the sample rate a discrete model's z refers to; a continuous model runs at "
+                             "any rate: remove fs, or set domain: discrete")
+        return self
 
 
 class TransferFunctionConfig(_LTIBase):

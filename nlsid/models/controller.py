@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlsid.models.lti import StateSpace, from_transfer_function
+from nlsid.models.lti import StateSpace, check_rate, from_transfer_function
 
 
 def pid(kp: float, ki: float, kd: float, tau: float) -> StateSpace:
@@ -88,6 +88,8 @@ def discrete_path(stages: list, fs: float) -> StateSpace | None:
     Tustin, velocity estimates by :func:`difference`); None for an empty path."""
     out = None
     for stage in stages:
+        if not isinstance(stage, str):
+            check_rate(stage, fs, "closed_loop.controller")
         ss = difference(stage, fs) if isinstance(stage, str) else tustin(stage, 1.0 / fs)
         out = ss if out is None else series(out, ss)
     return out

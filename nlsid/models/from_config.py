@@ -15,6 +15,8 @@ Two kinds of model come out:
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 from typing import Union
 
@@ -119,10 +121,12 @@ def lti(config, where: str) -> StateSpace:
     """A generic LTI config (transfer function, zpk, state space) as a state-space model."""
     discrete = config.domain == "discrete"
     if config.type == "transfer_function":
-        return from_transfer_function(config.num, config.den, discrete, config.delay, where)
-    if config.type == "zpk":
-        return from_zpk(config.zeros, config.poles, config.gain, discrete, config.delay, where)
-    return from_matrices(config.A, config.B, config.C, config.D, discrete, config.delay, where)
+        ss = from_transfer_function(config.num, config.den, discrete, config.delay, where)
+    elif config.type == "zpk":
+        ss = from_zpk(config.zeros, config.poles, config.gain, discrete, config.delay, where)
+    else:
+        ss = from_matrices(config.A, config.B, config.C, config.D, discrete, config.delay, where)
+    return dataclasses.replace(ss, fs=config.fs) if config.fs is not None else ss
 
 
 def _mechanical(config, where: str) -> MechanicalPlant:

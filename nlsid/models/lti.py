@@ -31,7 +31,8 @@ from nlsid.errors import InputError
 class StateSpace:
     """x' = A x + B u (continuous) or x[k+1] = A x[k] + B u[k] (discrete); y = C x + D u.
 
-    ``B`` and ``C`` are 1-D (SISO); ``delay`` is a dead time in seconds on the input.
+    ``B`` and ``C`` are 1-D (SISO); ``delay`` is a dead time in seconds on the input; ``fs`` the
+    sample rate (Hz) a discrete model is written for, where its config states it (None: not stated).
     """
 
     A: np.ndarray
@@ -40,6 +41,7 @@ class StateSpace:
     D: float
     discrete: bool = False
     delay: float = 0.0
+    fs: float | None = None
 
     @property
     def order(self) -> int:
@@ -76,9 +78,12 @@ class TransferFunction:
 
     def config(self) -> dict:
         """The ``model`` block of a config that ``nlsid simulate`` runs."""
-        return {"type": "transfer_function", "domain": "discrete" if self.domain == "z" else "continuous",
-                "num": [float(x) for x in self.num], "den": [float(x) for x in self.den],
-                "delay": self.delay / self.fs}
+        out = {"type": "transfer_function", "domain": "discrete" if self.domain == "z" else "continuous",
+               "num": [float(x) for x in self.num], "den": [float(x) for x in self.den],
+               "delay": self.delay / self.fs}
+        if self.domain == "z":  # its z refers to this rate: stored, so that no run at another rate takes it
+            out["fs"] = float(self.fs)
+        return out
 
     def to_state_space(self) -> StateSpace:
         """The model as ``nlsid simulate`` builds it from :meth:`config` (:func:`from_transfer_function`),
@@ -110,6 +115,17 @@ class TransferFunction:
     def stability(self) -> str:
         """:func:`stability` of the poles."""
         return stability(self.poles(), self.domain == "z")
+
+
+def check_rate(ss: StateSpace, fs: float, where: str, run_id: str = "") -> None:
+    """Refuse to run a discrete model written for one sample rate on samples at another: its
+    z = e^{s Ts} refers to its own Ts, so at another rate every pole and zero moves in hertz
+    (a mode at nu fs_model would run at nu fs). Where the model states no rate nothing is checked."""
+    if not ss.discrete or ss.fs is None or abs(ss.fs - fs) <= 1e-9 * fs:
+        return
+    run = f"run {run_id} is" if run_id else "the run is"
+    raise InputError(f"{where}.fs", f"a discrete model written for {ss.fs:g} Hz; {run} sampled at {fs:g} Hz "
+                                    "(its z refers to its own sample rate: refit it at this rate, or resample the data)")
 
 
 def delay_samples(delay: float, fs: float, where: str) -> int:

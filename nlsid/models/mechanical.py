@@ -158,7 +158,7 @@ def _discrete_feedback(G: StateSpace, gain: float, output: str, delay: float, wh
         raise InputError(f"{where}.output", "a velocity output " + reason)
     C = position if output == "position" else difference
     return MechanicalPlant(
-        StateSpace(A, gain * B, C, 0.0, True, delay), np.zeros(n + 1),
+        StateSpace(A, gain * B, C, 0.0, True, delay, G.fs), np.zeros(n + 1),
         force_columns={"plant": B}, position_rows={"plant": position},
         velocity_rows={"plant": difference} if moves else {}, difference=True, no_velocity=reason,
     )

@@ -3,8 +3,8 @@
 Linear part: every LTI element the simulator builds from the config (:mod:`nlsid.models.from_config`)
 is shown by its frequency response ``G(x) = C (xI - A)^{-1} B + D`` (:meth:`StateSpace.frequency_response`)
 at ``x = j 2 pi f`` for continuous elements, with a dead time ``tau`` as ``e^{-j 2 pi f tau}``, and at
-``x = e^{j 2 pi nu}`` over the normalised frequency ``nu = f/fs`` for discrete ones (their sample rate
-is the recording's, so their dead time, a number of samples at that rate, is not drawn). A
+``x = e^{j 2 pi f / fs}`` for discrete ones, in Hz where the model states its sample rate ``fs``, else
+over the normalised frequency ``nu = f/fs`` (their dead time, a number of samples, is not drawn). A
 mechanical template contributes its linear plant (the nonlinear forces removed); a block structure
 contributes the LTI blocks of each branch; a closed loop adds the controller and, when plant and
 controller are continuous, the loop gain ``L = C P`` with its crossover frequency (``|L| = 1``) and
@@ -12,7 +12,8 @@ phase margin ``180 deg + angle L`` there.
 
 Poles are summarised as modes: a pole p of a continuous element has the natural frequency
 ``|p|/(2 pi)`` Hz and damping ratio ``-Re p/|p|``; a discrete pole z is mapped to ``s = ln z`` per
-sample first (frequency in units of fs). Poles at s = 0 (z = 1) are integrators.
+sample first, times fs where the model states it (else its frequency is in units of fs). Poles at
+s = 0 (z = 1) are integrators.
 """
 
 from __future__ import annotations
@@ -48,9 +49,19 @@ class Element:
     ss: StateSpace
 
 
+def in_hertz(ss: StateSpace) -> bool:
+    """Whether the frequencies of ``ss`` are drawn in Hz: a continuous model, or a discrete one that
+    states its sample rate (``fs``); else in cycles per sample (f / fs)."""
+    return not ss.discrete or ss.fs is not None
+
+
+def _unit(ss: StateSpace) -> str:
+    return "Hz" if in_hertz(ss) else "× fs"
+
+
 @dataclass(frozen=True)
 class Mode:
-    frequency: float  # Hz (continuous) or cycles per sample (discrete)
+    frequency: float  # Hz (continuous, or discrete with its fs) or cycles per sample (discrete without)
     damping: float
     count: int  # 1 real pole, 2 a complex pair
 
@@ -65,13 +76,14 @@ def modes(ss: StateSpace) -> list[Mode]:
         magnitude = abs(s)
         damping = -s.real / magnitude if magnitude > 0 else 1.0
         pair = abs(s.imag) > 1e-12 * max(1.0, magnitude)
-        out.append(Mode(magnitude / (2 * math.pi), float(damping), 2 if pair else 1))
+        scale = ss.fs if ss.discrete and ss.fs is not None else 1.0  # ln z per sample -> per second
+        out.append(Mode(magnitude / (2 * math.pi) * scale, float(damping), 2 if pair else 1))
     return sorted(out, key=lambda m: m.frequency)
 
 
 def describe_modes(ss: StateSpace) -> str:
     """Text such as ``2 integrators, mode 39 Hz (zeta 0.25)``."""
-    unit = "× fs" if ss.discrete else "Hz"
+    unit = _unit(ss)
     found = modes(ss)
     integrators = sum(m.count for m in found if m.frequency < 1e-9)
     parts = [f"{integrators} integrator{'s' if integrators > 1 else ''}"] if integrators else []
@@ -87,16 +99,18 @@ def describe_modes(ss: StateSpace) -> str:
 
 
 def response(ss: StateSpace, frequency: np.ndarray) -> np.ndarray:
-    """Frequency response at ``frequency`` (Hz, continuous with its dead time; f/fs, discrete without)."""
+    """Frequency response at ``frequency`` (Hz, continuous with its dead time; a discrete model
+    without its dead time, in Hz where it states its fs, else in f/fs)."""
     if ss.discrete:
-        return ss.frequency_response(np.exp(2j * math.pi * frequency))
+        return ss.frequency_response(np.exp(2j * math.pi * frequency / (ss.fs or 1.0)))
     return ss.frequency_response(2j * math.pi * frequency) * np.exp(-2j * math.pi * frequency * ss.delay)
 
 
 def frequency_axis(elements: list[Element]) -> np.ndarray:
-    """400 log-spaced points a decade beyond the lowest and highest nonzero mode (Hz); f/fs up to 0.5 if discrete."""
+    """400 log-spaced points a decade beyond the lowest and highest nonzero mode (Hz); up to half
+    the sample rate if discrete (from 1e-4 of it; in f/fs where the model states no fs)."""
     if elements[0].ss.discrete:
-        return np.logspace(-4, math.log10(0.5), 400)
+        return np.logspace(-4, math.log10(0.5), 400) * (elements[0].ss.fs or 1.0)
     found = [m.frequency for e in elements for m in modes(e.ss) if m.frequency > 1e-9]
     low, high = (min(found), max(found)) if found else (1.0, 1.0)
     return np.logspace(math.floor(math.log10(low)) - 1, math.ceil(math.log10(high)) + 1, 400)
@@ -172,7 +186,7 @@ def _bode(elements: list[Element], loop: np.ndarray | None, frequency: np.ndarra
     phase.set_ylabel("phase (deg)")
     legend_outside(magnitude)
     for axis in (magnitude, phase):
-        axis.set_xlabel("f / fs (cycles per sample)" if elements[0].ss.discrete else "frequency (Hz)")
+        axis.set_xlabel("frequency (Hz)" if in_hertz(elements[0].ss) else "f / fs (cycles per sample)")
         axis.grid(True, which="both", alpha=0.3)
         plain_log_ticks(axis.xaxis)
     return drawn
@@ -234,8 +248,9 @@ def render_model(path: Path) -> Page:
                                 "(continuous-time loop)")
                 numbers["crossover_hz"], numbers["phase_margin_deg"] = found
         figures.append(figure(_bode(group, loop, frequency),
-                              ("Frequency response of the LTI elements" + (" (discrete, over f/fs; dead time not "
-                               "drawn)" if domain else "") + ". Magnitude and phase of each element as simulated"
+                              ("Frequency response of the LTI elements" + (
+                                  (" (discrete, up to half its sample rate" if in_hertz(group[0].ss) else
+                                   " (discrete, over f/fs") + "; dead time not drawn)" if domain else "") + ". Magnitude and phase of each element as simulated"
                                + (", and the loop gain" if loop is not None else "") + "."),
                               "bode_discrete" if domain else "bode"))
     if config.disturbances.u_noise or config.disturbances.y_noise or config.disturbances.process_noise:
@@ -245,8 +260,8 @@ def render_model(path: Path) -> Page:
         findings.append(f"sweep of {config.sweep.name or config.sweep.parameter} ({config.sweep.parameter})")
     pole_rows = []
     for e in linear:
-        unit = "× fs" if e.ss.discrete else "Hz"
-        item = {"name": e.name, "discrete": e.ss.discrete, "delay": e.ss.delay, "modes": []}
+        unit = _unit(e.ss)
+        item = {"name": e.name, "discrete": e.ss.discrete, "delay": e.ss.delay, "fs": e.ss.fs, "modes": []}
         for m in modes(e.ss):
             pole_rows.append([e.name, f"{m.frequency:.4g} {unit}", number(m.damping, ".3g"),
                               "complex pair" if m.count == 2 else "real"])
@@ -254,7 +269,8 @@ def render_model(path: Path) -> Page:
         numbers["elements"].append(item)
     tables = [Table("Modes of the LTI elements", ["element", "natural frequency", "damping ratio ζ", "poles"],
                     pole_rows, note="Natural frequency |p|/(2π) and damping ratio −Re p/|p| of each pole p "
-                                    "(discrete: of ln z, in units of the sample rate fs).")]
+                                    "(discrete: of ln z per sample, times the sample rate where the "
+                                    "model states it, else in units of fs).")]
     if nonlinear:
         tables.append(Table("Nonlinear elements", ["element", "type", "parameters"],
                             [[name, values["type"], _parameters(values)] for name, values in nonlinear]))

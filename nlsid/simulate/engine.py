@@ -19,7 +19,7 @@ from nlsid.io.run import Run
 from nlsid.models import blocks, equations, forces
 from nlsid.models.controller import discrete_path, feedforward, tustin, two_input
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
-from nlsid.models.lti import StateSpace, delay_samples, stepped, zoh
+from nlsid.models.lti import StateSpace, check_rate, delay_samples, stepped, zoh
 from nlsid.simulate.channels import weighted_sum
 from nlsid.simulate.kernels import SIZED_SAMPLES, apply_block, simulate_loop
 from nlsid.simulate.noise import Noise
@@ -263,6 +263,7 @@ def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: i
     """The parameters of :func:`_kernel_arguments` for ``plant`` on ``run`` (open loop: u is the
     plant input; closed loop: u is the reference), in closed loop from ``start`` (default rest)."""
     ss, n, fs = plant.ss, run.n_samples, run.fs
+    check_rate(ss, fs, "model", run.run_id)
     if plant.difference_output:
         ss = dataclasses.replace(ss, C=ss.C * fs)
     m = _substeps(substeps, ss, bool(plant.forces))
@@ -370,6 +371,7 @@ def simulate_structure(structure: Structure, run: Run, substeps: int | None, noi
         signal = x
         for stage in branch:
             if isinstance(stage, StateSpace):
+                check_rate(stage, run.fs, "model", run.run_id)
                 delay = _delay(stage, run.fs, n, "model") * m
                 signal = _filter(stage, signal, run.fs * m, delay, next(starts))
             else:
