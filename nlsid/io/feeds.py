@@ -291,7 +291,9 @@ def check_repeated_excitation(group_sizes: Iterable[int], where: str) -> None:
 def check_run_count(n_runs: int) -> None:
     """``fit --model`` (default split) needs two runs: some to fit and one to validate on."""
     if n_runs < 2:
-        raise InputError("runs", "need at least two runs: some to fit and one to validate on")
+        raise InputError("runs", "need at least two runs: some to fit and one to validate on (or --validate-on "
+                                 "FILE, or one arbitrary record cut by --estimation-range A:B with "
+                                 "--validation-range C:D)")
 
 
 # --- nlsid info: every stage's verdict ----------------------------------------------------------

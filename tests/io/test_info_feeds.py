@@ -148,7 +148,9 @@ def test_one_realization_feeds_bla_but_not_diagnose_or_fit(run_cli, tmp_path):
     write_recording(rec, [multisine("m0", 0)])
     stages = assert_same_verdicts(run_cli, tmp_path, rec, {"bla": True, "diagnose": False, "fit --model": False})
     assert "needs two runs (realizations) of one excitation" in stages["diagnose"]["reason"]
-    assert stages["fit --model"]["reason"] == "runs: need at least two runs: some to fit and one to validate on"
+    assert stages["fit --model"]["reason"].startswith("runs: need at least two runs: some to fit and one to validate on")
+    # and the routes that feed it with one record, as fit --model itself offers them
+    assert "--validate-on" in stages["fit --model"]["reason"] and "--estimation-range" in stages["fit --model"]["reason"]
 
 
 def test_realizations_of_one_level_on_different_lines(run_cli, tmp_path):
