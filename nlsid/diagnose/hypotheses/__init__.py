@@ -103,6 +103,14 @@ wiener_hammerstein  the BLA's shape the same at every level,   ``wiener_hammerst
                     its gain changing; odd and even          poles and zeros split over ``first``
                     distortion                                and ``second``, polynomial f between
                                                               (a1 .. aP, the filters' coefficients)
+tank_outflow        even distortion; the BLA's gain and time  ``equations`` (one tank): dx/dt =
+                    constants change with the operating       -k1 sqrt(x) + k4 u (k1, k4), from
+                    level (a higher level, a slower tank);    the linearisation a 1st-order model
+                    a 1st-order LTI model                     is (tank_outflow.py)
+cascaded_tanks      as tank_outflow, for an LTI model with    ``equations`` (two tanks, Torricelli
+                    two real poles                            outflow, k2 = k1: k1, k3, k4), from
+                                                              the linearisation, both pole
+                                                              assignments tried
 delay               BLA phase error growing linearly with     ``delay`` (seconds, a real number
                     frequency, gain right, no distortion      of samples)
 =================== ========================================= ====================================
