@@ -20,6 +20,8 @@ Examples
 
 from __future__ import annotations
 
+import numbers as numbers_module
+
 import re
 from typing import Callable
 
@@ -88,3 +90,25 @@ def deep_copy(value):
     if isinstance(value, list):
         return [deep_copy(v) for v in value]
     return value
+
+
+def numbers(data: dict, sections: tuple[str, ...] = ("model", "closed_loop")) -> dict[str, float | int]:
+    """Every number (not a bool) of the ``sections`` of a config as written, by dotted key path
+    (``{"model.mass": 2.0, "model.nonlinearities[0].fc": 0.5, ...}``): the paths ``free:``,
+    ``sweep.parameter`` and :func:`set_value` take."""
+    out: dict[str, float | int] = {}
+
+    def walk(node, keys: tuple) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, keys + (key,))
+        elif isinstance(node, list):
+            for i, value in enumerate(node):
+                walk(value, keys + (i,))
+        elif isinstance(node, numbers_module.Real) and not isinstance(node, bool):
+            out[key_text(keys)] = node
+
+    for section in sections:
+        if section in data:
+            walk(data[section], (section,))
+    return out

@@ -197,6 +197,30 @@ def _parameters(values: dict) -> str:
                      for key, value in values.items() if key != "type" and value is not None)
 
 
+MAX_WRITTEN = 60  # numbers listed one per row on the page; a larger model (matrices) is summarised
+
+
+def written_numbers(data: dict) -> Table:
+    """The numbers of the model and closed_loop sections as the file writes them, by the key path
+    that ``free:``, ``sweep`` and the Python ``Model.with_parameters`` take; above
+    :data:`MAX_WRITTEN` numbers (a black-box model's matrices) their count per block instead."""
+    from nlsid.models.key_paths import numbers
+
+    found = numbers(data)
+    if len(found) <= MAX_WRITTEN:
+        rows = [[key, number(value, ".6g")] for key, value in found.items()]
+        return Table("Parameters as written", ["key path", "value"], rows, text=(0,),
+                     note="Every number of the model and closed_loop sections, by the key path that free:, "
+                          "sweep and Model.with_parameters take. A model config records no units: each "
+                          "takes its unit from the recording's signals it relates.")
+    blocks: dict[str, int] = {}
+    for key in found:
+        block = key.split("[", 1)[0]
+        blocks[block] = blocks.get(block, 0) + 1
+    return Table("Parameters as written", ["block", "numbers"], [[k, str(v)] for k, v in blocks.items()],
+                 text=(0,), note=f"{len(found)} numbers: their count per block (the file holds them).")
+
+
 def render_model(path: Path) -> Page:
     """The report page of a model config (module docstring)."""
     from nlsid.io.config import load_yaml
@@ -274,6 +298,7 @@ def render_model(path: Path) -> Page:
     if nonlinear:
         tables.append(Table("Nonlinear elements", ["element", "type", "parameters"],
                             [[name, values["type"], _parameters(values)] for name, values in nonlinear]))
+    tables.append(written_numbers(data))
     return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
                 headline=headline, findings=findings, figures=figures, tables=tables, numbers=numbers)
 

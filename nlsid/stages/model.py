@@ -85,11 +85,9 @@ class Model:
         (``{"model.mass": 2.0, "model.nonlinearities[0].fc": 0.5, ...}``): the paths that
         :meth:`with_parameters`, ``sweep.parameter`` and ``free:`` take. Keys left to their
         defaults are not listed, yet :meth:`with_parameters` sets them too."""
-        out: dict[str, float | int] = {}
-        for section in PARAMETER_SECTIONS:
-            if section in self._data:
-                _numbers(self._data[section], (section,), out)
-        return out
+        from nlsid.models.key_paths import numbers as config_numbers
+
+        return config_numbers(self._data, PARAMETER_SECTIONS)
 
     @property
     def points(self) -> list[dict]:
@@ -225,20 +223,6 @@ class Model:
         loop = ", closed loop" if "closed_loop" in self._data else ""
         sweep = f", sweep of {len(self._points)}" if len(self._points) > 1 else ""
         return f"Model({kind}{loop}{sweep}, path={self.path!r})"
-
-
-def _numbers(node, keys: tuple, out: dict) -> None:
-    """Every number (not a bool) under ``node`` by its dotted key path."""
-    from nlsid.models.key_paths import key_text
-
-    if isinstance(node, dict):
-        for key, value in node.items():
-            _numbers(value, keys + (key,), out)
-    elif isinstance(node, list):
-        for i, value in enumerate(node):
-            _numbers(value, keys + (i,), out)
-    elif isinstance(node, numbers.Real) and not isinstance(node, bool):
-        out[key_text(keys)] = node
 
 
 def _number(key: str, value) -> float | int:
