@@ -87,10 +87,12 @@ def _advance(p: float, v: float, force: float, h: float, mass: float, viscous: f
 
 
 def closed_loop(r: np.ndarray, mass=MASS, viscous=VISCOUS, coulomb=COULOMB, offset=OFFSET,
-                encoder=ENCODER, fs=FS, delay: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                encoder=ENCODER, fs=FS, delay: int = 0, excitation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The drive and the axis sample by sample: (u, y), y the encoder reading. ``delay``: the
     drive's computation delay in whole samples, the command u[k] applied from sample k + delay
-    on (held over [t_{k+delay}, t_{k+delay+1}); the motor force zero before the first command arrives)."""
+    on (held over [t_{k+delay}, t_{k+delay+1}); the motor force zero before the first command arrives).
+    ``excitation``: a signal the drive adds to its output (an identification experiment's), which
+    the recorded u includes."""
     h = 1.0 / fs
     p = v = 0.0
     y = np.empty(r.size)
@@ -98,7 +100,7 @@ def closed_loop(r: np.ndarray, mass=MASS, viscous=VISCOUS, coulomb=COULOMB, offs
     y1 = y2 = 0.0
     for k in range(r.size):
         y[k] = round(p / encoder) * encoder
-        u[k] = KP * KV * (r[k] - y[k]) - KV * (y[k] - y2) * fs / 2
+        u[k] = KP * KV * (r[k] - y[k]) - KV * (y[k] - y2) * fs / 2 + (0.0 if excitation is None else excitation[k])
         y2, y1 = y1, y[k]
         applied = u[k - delay] if k >= delay else 0.0
         p, v = _advance(p, v, GAIN * applied, h, mass, viscous, coulomb, offset)
