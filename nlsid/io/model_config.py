@@ -171,15 +171,18 @@ class ChannelConfig(FiniteModel):
     absent: Literal["error", "zero"] = "error"
 
 
-def _channel_shape(entry) -> str:
-    return "mapping" if isinstance(entry, dict) else "gain"
+def _channel_shape(entry) -> str | None:
+    if isinstance(entry, dict):
+        return "mapping"
+    return "gain" if isinstance(entry, (int, float, str)) else None  # str: pydantic's own number message
 
 
 ChannelName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
 # A channel's entry: a number (its gain; a run without it refused) or a ChannelConfig mapping, told
 # apart by its shape so that a bad entry gets the one error of what it looks like
 Channel = Annotated[Union[Annotated[float, Tag("gain")], Annotated[ChannelConfig, Tag("mapping")]],
-                    Discriminator(_channel_shape)]
+                    Discriminator(_channel_shape, custom_error_type="channel_entry",
+                                  custom_error_message="expected a gain (a number) or a mapping {gain, absent}")]
 
 
 def channel_gain(entry) -> float:

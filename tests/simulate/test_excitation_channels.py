@@ -265,6 +265,7 @@ def test_a_pnlss_model_takes_the_channel_entries_and_writes_them_back():
     ({"gain": 1.0, "absent": "maybe"}, "excitation_channels.pulses.absent: expected 'error' or 'zero', got 'maybe'"),
     ({"gian": 1.0}, "excitation_channels.pulses.gian: unknown key"),
     ({"gain": float("inf")}, "excitation_channels.pulses.gain: expected a finite number"),
+    ([1.0, 2.0], "excitation_channels.pulses: expected a gain (a number) or a mapping {gain, absent}"),
 ])
 def test_a_bad_channel_entry_is_refused_at_its_key(entry, message):
     from nlsid.errors import InputError
