@@ -27,6 +27,9 @@ from .options import map_option, parse_map, split_options
 @click.option("--fail-if-distortion-above", type=float, metavar="DB",
               help="Exit 1 when odd or even distortion the model does not produce exceeds the noise by DB dB.")
 @split_options
+@click.option("--fit-on", type=click.Choice(["y", "u"]), default="y", show_default=True,
+              help="The signal judged: the output y, or in closed loop the command u the controller computes "
+                   "(hypotheses fitted, noise floor and verdict on it).")
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Parallel simulations (threads; default: NLSID_THREADS if set, else all cores).")
 @map_option
@@ -36,8 +39,8 @@ from .options import map_option, parse_map, split_options
 @json_option
 def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: bool, fail_if_error_above: float | None,
              fail_if_distortion_above: float | None, validate_on: tuple[str, ...], estimation_range: str | None,
-             validation_range: str | None, allow_overlap: bool, workers: int | None, mapping: tuple[str, ...],
-             no_yardstick: bool, force: bool, as_json: bool) -> None:
+             validation_range: str | None, allow_overlap: bool, fit_on: str, workers: int | None,
+             mapping: tuple[str, ...], no_yardstick: bool, force: bool, as_json: bool) -> None:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -48,19 +51,22 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     damping/stiffness/mass, a delay) is estimated
     on half of the runs and scored on the others; a cause is named only when its gain is
     significant. The outputs are written before any --fail-if check exits 1. --validate-on and
-    the ranges choose what is estimated on and what is validated on, as in fit --model.
+    the ranges choose what is estimated on and what is validated on, and --fit-on u judges the
+    command u of a closed loop instead of the output y, as in fit --model.
 
     Examples:
 
     \b
       nlsid diagnose --model model.yaml --data recording.h5 -o diagnosis/
       nlsid diagnose --model model.yaml --data long.h5 --estimation-range :60000 --validation-range 60000: -o diagnosis/
+      nlsid diagnose --model axis.yaml --data estimation.h5 --validate-on validation.h5 --fit-on u -o diagnosis/
     """
     from nlsid.io.provenance import provenance
     from nlsid.stages.diagnose import diagnosis_inputs
 
     inputs = diagnosis_inputs(model_path, data_path, list(validate_on), estimation_range, validation_range,
-                              allow_overlap, workers, parse_map(mapping), False if no_yardstick else None, names=FLAGS)
+                              allow_overlap, workers, parse_map(mapping), False if no_yardstick else None, fit_on,
+                              names=FLAGS)
     with progress("diagnose", inputs.steps, kernels=True) as step:  # evidence, nuisances, each hypothesis
         result = inputs.run(progress=step)
     summary = result.summary()
@@ -69,17 +75,17 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     if as_json:
         emit_json({"output": output, **summary})
     else:
-        _print(result.diagnosis, output, result.computation_delay)
+        _print(result.diagnosis, output, result.computation_delay, fit_on)
     _check(summary, fail_if_discrepancy, fail_if_error_above, fail_if_distortion_above)
 
 
 #: the face's arguments -> this command's flags, for its messages
 FLAGS = {"model": "--model", "rec": "--data", "validate_on": "--validate-on", "estimation_range": "--estimation-range",
          "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "workers": "--workers",
-         "mapping": "--map", "yardstick": "--no-yardstick"}
+         "mapping": "--map", "yardstick": "--no-yardstick", "fit_on": "--fit-on"}
 
 
-def _print(result, output: str, delay=None) -> None:
+def _print(result, output: str, delay=None, fit_on: str = "y") -> None:
     console = settings().console
     console.print(result.headline(), style="bold", markup=False)
     for line in result.evidence.findings():
@@ -100,9 +106,9 @@ def _print(result, output: str, delay=None) -> None:
                      floor_text(o.score.summary()), "-" if math.isnan(distortion) else f"{distortion:+.1f}",
                      "winner" if o is result.winner else ""])
     if rows:
-        console.print(text_table("Hypotheses (validation runs)", ("hypothesis", "main parameter", "gain dB",
-                                                                   "vs noise floor", "distortion gain dB", "note"),
-                                 rows))
+        console.print(text_table(f"Hypotheses (validation runs, error of {fit_on})",
+                                 ("hypothesis", "main parameter", "gain dB", "vs noise floor", "distortion gain dB",
+                                  "note"), rows))
     # the hypotheses left out usually share a reason: one line per reason, not a row each
     for line in grouped_notes("not fitted: ", not_fitted):
         console.print(line, markup=False)

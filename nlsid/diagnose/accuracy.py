@@ -103,11 +103,11 @@ def _ac_mean(runs: list[Run], outputs: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(parts)
 
 
-def _outputs(data: dict, source: str, runs: list[Run], substeps: int) -> np.ndarray:
+def _outputs(data: dict, source: str, runs: list[Run], substeps: int, signal: str = "y") -> np.ndarray:
     trial = copy.deepcopy(data)
     trial.setdefault("simulation", {})["substeps"] = substeps
     runner = ModelRunner.from_data(trial, source)
-    return _ac_mean(runs, runner.simulate_each(runs))
+    return _ac_mean(runs, runner.simulate_each(runs, signal))
 
 
 def _rms(x: np.ndarray) -> float:
@@ -136,13 +136,15 @@ def refit_substeps(found: Accuracy, data: dict) -> int | None:
     return found.needed if found.needed <= MAX_SUBSTEPS else None
 
 
-def check(data: dict, source: str, runs: list[Run], floor_rms: float, floor_from: str = "noise") -> Accuracy | None:
-    """The accuracy of the model ``data`` on ``runs`` (module docstring); None for a model exact at
-    one sub-step (:func:`_stepped`) or without a floor."""
+def check(data: dict, source: str, runs: list[Run], floor_rms: float, floor_from: str = "noise",
+          signal: str = "y") -> Accuracy | None:
+    """The accuracy of the model ``data`` on ``runs`` (module docstring) in the judged ``signal``
+    (the output ``y``, or in closed loop the command ``u``: the floor is that signal's); None for
+    a model exact at one sub-step (:func:`_stepped`) or without a floor."""
     if not _stepped(data) or not math.isfinite(floor_rms) or floor_rms <= 0:
         return None
     m = int((data.get("simulation") or {}).get("substeps") or (1 if _structure(data) else DEFAULT_SUBSTEPS))
-    y1, y2, y4 = (_outputs(data, source, runs, k * m) for k in (1, 2, 4))
+    y1, y2, y4 = (_outputs(data, source, runs, k * m, signal) for k in (1, 2, 4))
     first, second = _rms(y2 - y1), _rms(y4 - y2)
     order = min(max(math.log2(first / second), 1.0), 2.0) if first > 0 and second > 0 else 1.0
     change, aim = _rms(y4 - y1), ACCURACY * floor_rms

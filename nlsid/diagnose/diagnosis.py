@@ -43,7 +43,7 @@ FINAL_EVALUATIONS = 2  # cost evaluations of the final model's refinement on eve
 
 
 def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
-           nominal: dict, carried: dict[str, str] | None = None
+           nominal: dict, carried: dict[str, str] | None = None, fit_on: str = "y"
            ) -> tuple[Estimate, dict, dict, dict, nuisances.Nuisances]:
     """The signature estimate refined by the fit engine (simulation error of the estimation runs),
     together with the nuisances (:mod:`nlsid.diagnose.nuisances`, starting at their values in
@@ -71,6 +71,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     the fits of a present effect with a few parameters converge in 5 to 15; a hypothesis that is
     not the cause can wander into parameters the simulator is slow on (a Stribeck curve steeper
     than the mass can follow), and is then scored where the budget stopped it, with the optimiser's warning.
+    ``fit_on``: the judged signal whose simulation error is minimised (``y``, or in closed loop ``u``).
     """
     from nlsid.fit.extension import fit_free_parameters
     from nlsid.fit.free_parameters import FreeParameter, value_at
@@ -103,7 +104,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         bounds = (-abs(start) * 1e3, abs(start) * 1e3) if NUMERATOR.search(path) else sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
     fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free),
-                              stall_db=STALL_DB, stall_share=STALL_SHARE)
+                              stall_db=STALL_DB, stall_share=STALL_SHARE, fit_on=fit_on)
     values, std = _derived(hypothesis, *_fitted(estimate, fit, paths), free, paths, fit.config["model"])
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
@@ -167,17 +168,18 @@ def budget(free: dict) -> int:
     return max(FIT_STEPS, 2 * len(free))
 
 
-def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str) -> None:
+def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str, fit_on: str = "y") -> None:
     """Re-fit ``outcome``'s free parameters (those of its :func:`refine`) from their fitted values
     with ``substeps`` sub-steps per sample, which its extended config then keeps
-    (:mod:`nlsid.diagnose.accuracy`: the default step missed a tenth of the floor)."""
+    (:mod:`nlsid.diagnose.accuracy`: the default step missed a tenth of the floor), on the judged
+    signal ``fit_on``."""
     from nlsid.fit.extension import fit_free_parameters
 
     data = copy.deepcopy(outcome.extended)
     data.setdefault("simulation", {})["substeps"] = substeps
     free = {path: dataclasses.replace(p, start=None) for path, p in outcome.free.items()}
     fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=budget(free),
-                              stall_db=STALL_DB)
+                              stall_db=STALL_DB, fit_on=fit_on)
     est = outcome.estimate
     values, std = _derived(outcome.hypothesis, *_fitted(est, fit, outcome.paths), outcome.free, outcome.paths,
                            fit.config["model"])
@@ -216,14 +218,14 @@ def _by_parameters(library: tuple[Hypothesis, ...]) -> list[Hypothesis]:
     return sorted(library, key=lambda h: len(h.parameters))
 
 
-def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list) -> None:
+def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: list, signal: str = "y") -> None:
     try:
         extended = runner.with_changes(outcome.extended)
     except InputError as exc:
         outcome.reason = f"the extended model is not valid: {exc.what}"
         return
     try:  # valid as a config, the extension may still not run (a dead time that destabilises the loop)
-        outcome.residuals = model_residuals(extended, val_runs, val_res)
+        outcome.residuals = model_residuals(extended, val_runs, val_res, signal)
     except InputError as exc:
         outcome.reason = f"the extended model does not run: {exc.what}"
         return
@@ -239,7 +241,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
              step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
              estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
              estimation_budget: int | None = BUDGET_SAMPLES, budget_above: int = BUDGET_ABOVE,
-             yardstick: bool | None = None) -> Diagnosis:
+             yardstick: bool | None = None, fit_on: str = "y") -> Diagnosis:
     """Diagnose the model ``data`` (from ``source``) on the measured ``runs`` (from ``where``);
     ``validate_on`` (runs of further recordings) and the ranges: :func:`nlsid.diagnose.split.assign`.
 
@@ -260,12 +262,18 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     ``yardstick``: fit the black-box model of :mod:`nlsid.diagnose.yardstick` after the chain
     (None: :data:`YARDSTICK`, True); without it the status rests on the noise floor alone (never
     ``outside_library``) and ``summary.json`` ``yardstick`` says it was not asked for.
+
+    ``fit_on``: the judged signal, the output ``y`` or in closed loop the command ``u`` (the plant
+    input the simulated controller computes): every hypothesis and the nuisances are fitted on it,
+    the evidence, the noise floor, the scores and the verdict are of it
+    (:mod:`nlsid.diagnose.evidence`, "The judged signal"). ``u`` needs a model with a
+    ``closed_loop`` (:func:`check_fit_on`).
     """
     step = step or (lambda name: None)
-    ModelRunner.from_data(data, source)  # the model is valid before the data are looked at
+    check_fit_on(fit_on, ModelRunner.from_data(data, source))  # the model is valid before the data are looked at
     runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
     budget = budgeted(runs, roles, estimation_budget or math.inf, budget_above if estimation_budget else math.inf)
-    first = current = last = _round(data, source, runs, roles, where, step, (), budget=budget)
+    first = current = last = _round(data, source, runs, roles, where, step, (), budget=budget, signal=fit_on)
     following = None  # the next round, where resolving a tie computed it already
     while True:
         if current.verdict.status == rules.AMBIGUOUS and len(first.chain) + 1 < MAX_CAUSES:
@@ -281,7 +289,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         if done or len(first.chain) == MAX_CAUSES:
             break
         current = following or _next_round(current.winner, first.chain, data, source, runs, roles, where, step,
-                                           budget)
+                                           budget, fit_on)
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
@@ -291,6 +299,20 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     step("yardstick")
     judge_extent(first)
     return first
+
+
+SIGNALS = ("y", "u")  # the signals a diagnosis can judge: the output, or in closed loop the command
+
+
+def check_fit_on(fit_on: str, runner: ModelRunner, name: str = "fit_on") -> None:
+    """Refuse a judged signal other than ``y`` or ``u``, and ``u`` for a model without a
+    ``closed_loop`` (in open loop the recorded u is the input the simulation is driven by);
+    ``name`` is the argument's name in the message."""
+    if fit_on not in SIGNALS:
+        raise InputError(name, f"expected y or u, got {fit_on!r}")
+    if fit_on == "u" and not runner.closed:
+        raise InputError(name, "u is judged only in closed loop (the model has no closed_loop): in open loop the "
+                               "recorded u is the input the simulation is driven by")
 
 
 def _yardstick(first: Diagnosis, data: dict, source: str, runs: list[Run], roles: dict[str, str],
@@ -354,7 +376,7 @@ def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, r
     est = outcome.estimate
     try:
         fit = fit_free_parameters(outcome.extended, free, estimation, [], source=source,
-                                  max_evaluations=FINAL_EVALUATIONS, stall_db=STALL_DB)
+                                  max_evaluations=FINAL_EVALUATIONS, stall_db=STALL_DB, fit_on=first.signal)
     except InputError as exc:  # the budget's fit stands, and says why
         outcome.estimate = dataclasses.replace(est, note=f"{est.note}; not refined on all estimation samples: {exc}")
         return
@@ -369,18 +391,19 @@ def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, r
     outcome.extended, outcome.found = fit.config, nuisances.fitted(fit)
     val = [res for res in last.evidence.residuals if res.role == VALIDATION]
     by_id = {run.run_id: run for run in runs}
-    _score(outcome, ModelRunner.from_data(data, source), [by_id[res.run_id] for res in val], val)
+    _score(outcome, ModelRunner.from_data(data, source), [by_id[res.run_id] for res in val], val, first.signal)
     _update_earlier(first.chain)
 
 
 def _next_round(cause: Outcome, chain: list[Outcome], data: dict, source: str, runs: list[Run],
                 roles: dict[str, str], where: str, step: Callable[[str], None],
-                budget: Budget | None = None) -> "Diagnosis":
+                budget: Budget | None = None, signal: str = "y") -> "Diagnosis":
     """The round that diagnoses ``cause``'s extended model, the families of ``chain`` (which ends
-    with ``cause``) left out and their parameters refined again (:func:`_carried`)."""
+    with ``cause``) left out and their parameters refined again (:func:`_carried`), on the judged
+    ``signal``."""
     accepted = tuple(o.hypothesis.family for o in chain)
     carried = {name: path for o in chain for name, path in o.paths.items()}
-    return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data, budget)
+    return _round(cause.extended, source, runs, roles, where, step, accepted, carried, data, budget, signal)
 
 
 @dataclass(frozen=True)
@@ -434,7 +457,7 @@ def _resolve_tie(current: "Diagnosis", chain: list[Outcome], data: dict, source:
         if at_floor and least > min(at_floor):
             continue
         branches.append(_Branch(outcome, _next_round(outcome, [*chain, outcome], data, source, runs, roles, where,
-                                                     step, budget)))
+                                                     step, budget, current.signal)))
     best = min(b.power for b in branches)
     near = [b for b in branches if rules.ratio(b.power, best) <= current.verdict.threshold]
     fewest = min(b.size for b in near)
@@ -467,7 +490,9 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
     estimation = [run for run in runs if roles.get(run.run_id) == ESTIMATION]
     estimation = budget.of(estimation) if budget is not None else estimation
     floor, floor_from = _accuracy_floor(first, outcome)
-    checked = accuracy.check(outcome.extended if outcome is not None else data, source, estimation, floor, floor_from)
+    signal = first.signal
+    checked = accuracy.check(outcome.extended if outcome is not None else data, source, estimation, floor, floor_from,
+                             signal)
     if checked is None or checked.sufficient or outcome is None or not outcome.free:
         return checked
     substeps = accuracy.refit_substeps(checked, outcome.extended)
@@ -478,19 +503,19 @@ def _accurate(first: Diagnosis, last: Diagnosis, data: dict, source: str, runs: 
     runner = ModelRunner.from_data(data, source)
     for member in last.outcomes:
         if member.hypothesis.family == outcome.hypothesis.family and member.score is not None and member.free:
-            own = member is outcome or accuracy.check(member.extended, source, estimation, floor, floor_from)
+            own = member is outcome or accuracy.check(member.extended, source, estimation, floor, floor_from, signal)
             if own is True or own is None or not own.sufficient:
                 try:
-                    refit_finer(member, substeps, estimation, source)
+                    refit_finer(member, substeps, estimation, source, signal)
                 except InputError:  # a member extended in discrete time runs one step per sample: no finer step
                     continue
-                _score(member, runner, [by_id[res.run_id] for res in val], val)
+                _score(member, runner, [by_id[res.run_id] for res in val], val, signal)
     last.outcomes.sort(key=_rank)
     last.verdict = _decide(last.evidence, last.nuisances, last.baseline, last.outcomes, val)
     if last.verdict.status == rules.EXPLAINED:
         first.chain[-1] = last.winner
     floor, floor_from = _accuracy_floor(first, first.final)
-    again = accuracy.check(first.final.extended, source, estimation, floor, floor_from)
+    again = accuracy.check(first.final.extended, source, estimation, floor, floor_from, signal)
     return dataclasses.replace(again, refit=True) if again is not None else None
 
 
@@ -523,7 +548,7 @@ def _decide(evidence: Evidence, found: nuisances.Nuisances, baseline: Score, out
 
 def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], where: str,
            step: Callable[[str], None], accepted: tuple[str, ...], carried: dict[str, str] | None = None,
-           users: dict | None = None, budget: Budget | None = None) -> Diagnosis:
+           users: dict | None = None, budget: Budget | None = None, signal: str = "y") -> Diagnosis:
     """One diagnosis of the model ``data``: evidence, nuisances, every hypothesis of a family not in
     ``accepted``, the verdict. ``users``: the user's model (default ``data``), against which the
     outcomes state the mechanics they changed (:meth:`Outcome.mechanics_changed`): the chain
@@ -536,10 +561,11 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     cause only when it beats the baseline significantly (each re-fits the nuisances with its own
     parameters, :func:`refine`). The nuisances and the hypotheses are fitted on the estimation
     parts of the ``budget`` (:func:`nlsid.diagnose.split.budgeted`; all of them without one); the
-    evidence and the scores are of the whole runs.
+    evidence and the scores are of the whole runs. All of it is of the judged ``signal`` (``y``, or
+    in closed loop ``u``: :func:`diagnose`).
     """
     runner = ModelRunner.from_data(data, source)
-    evidence, _ = gather(runner, runs, roles, where)
+    evidence, _ = gather(runner, runs, roles, where, signal)
     by_id = {run.run_id: run for run in runs}
     step("evidence")
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
@@ -548,13 +574,14 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     fit_runs = budget.of(est_runs) if budget is not None else est_runs
     fit_residuals = [res.residual if part is run else res.residual[:part.period]
                      for res, run, part in zip(est, est_runs, fit_runs)]
-    adjusted, found = (data, nuisances.Nuisances()) if evidence.exact else nuisances.estimate(data, source, fit_runs)
+    adjusted, found = ((data, nuisances.Nuisances()) if evidence.exact
+                       else nuisances.estimate(data, source, fit_runs, signal))
     with_nuisances = ModelRunner.from_data(adjusted, source)
     found = dataclasses.replace(found, initial=nuisances.initial_states(with_nuisances, est_runs + val_runs))
-    baseline = score(val, model_residuals(with_nuisances, val_runs, val))
+    baseline = score(val, model_residuals(with_nuisances, val_runs, val, signal))
     step("nuisances")
     context = Context(runner, fit_runs, fit_residuals, [runner.internal(run) for run in fit_runs],
-                      evidence.bla_levels)
+                      evidence.bla_levels, signal=signal)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
         outcome = Outcome(hypothesis, model=users or data)
@@ -590,7 +617,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             continue
         try:
             estimate, extended, outcome.free, outcome.paths, outcome.found = refine(
-                hypothesis, adjusted, estimate, fit_runs, source, data, carried)
+                hypothesis, adjusted, estimate, fit_runs, source, data, carried, signal)
         except InputError as exc:
             outcome.reason = f"the fit failed: {exc}"
             continue
@@ -601,11 +628,11 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             continue
         outcome.estimate = context.fitted[hypothesis.name] = estimate
         outcome.extended = context.extended[hypothesis.name] = extended
-        _score(outcome, runner, val_runs, val)
+        _score(outcome, runner, val_runs, val, signal)
         step(hypothesis.name)
     outcomes.sort(key=_rank)
     verdict = _decide(evidence, found, baseline, outcomes, val)
     samples = sum(res.period * res.n_periods for res in val)
     return Diagnosis(source, roles, evidence, score(val), outcomes, verdict, found, baseline, budget=budget,
                      notes=absent_notes(runner.config, runs),
-                     validation_samples=samples)
+                     validation_samples=samples, signal=signal)

@@ -11,6 +11,13 @@ whatever part of the measured output is not periodic yet and the model does not 
 friction transient that outlasts the transient periods): the noise of a wrong model is then
 overestimated and its test is conservative (:mod:`nlsid.diagnose.gain` takes each model's own).
 
+The judged signal. In closed loop the controller keeps the position error small, and what the
+plant gets wrong shows in the command it needs: with ``fit_on="u"`` (``diagnose --fit-on u``) the
+residual is ``e = u - u_model``, u_model the plant input as the simulated controller computes it
+(the loop closed in the simulation), and everything below (its noise from the period-to-period
+variance of that residual, the tests, the time signals) is of u. The BLA comparison stays that of
+the output.
+
 Size and significance against noise. For a set S of lines (and runs) the residual power relative
 to the noise is ``ratio = sum_S |E|^2 / sum_S s2`` (shown in dB). If the model is right, each
 ``|E(k)|^2`` is ``s2(k)`` times a chi-square with 2 degrees of freedom over 2, so the numerator is
@@ -101,9 +108,12 @@ class Residual:
         return float(np.sum(np.abs(spectra(self.measured)[ac_lines(self.period)]) ** 2))
 
 
-def residual_of(run: Run, model_y: np.ndarray, role: str) -> Residual:
-    """The :class:`Residual` of a measured run and the model's output on it (same length)."""
-    e = run.periods("y") - steady_periods(run, model_y)
+def residual_of(run: Run, model_y: np.ndarray, role: str, signal: str = "y") -> Residual:
+    """The :class:`Residual` of a measured run and the model's simulation of its ``signal`` on it
+    (same length): the output ``y``, or in closed loop the command ``u`` (the residual
+    ``u - u_model``, its noise the period-to-period variance of that residual)."""
+    measured = run.periods(signal)
+    e = measured - steady_periods(run, model_y)
     P = e.shape[0]
     if P > 1:
         deviation = spectra(e - e.mean(axis=0))
@@ -111,7 +121,7 @@ def residual_of(run: Run, model_y: np.ndarray, role: str) -> Residual:
     else:
         noise_var = np.full(run.period // 2 + 1, np.nan)
     return Residual(run.run_id, role, run.kind, run.level, run.fs, run.period, P, run.excited_bins,
-                    run.periods("y").mean(axis=0), steady_mean(run, model_y), noise_var)
+                    measured.mean(axis=0), steady_mean(run, model_y), noise_var)
 
 
 @dataclass(frozen=True)
@@ -504,17 +514,20 @@ def _name(level) -> str:
 
 
 def gather(runner: ModelRunner, runs: list[Run], roles: dict[str, str],
-           source: str = "") -> tuple[Evidence, dict[str, Run]]:
+           source: str = "", signal: str = "y") -> tuple[Evidence, dict[str, Run]]:
     """Simulate the model on every periodic run and measure the discrepancy (module docstring).
 
-    Returns the evidence and the model's simulated runs keyed by run id. ``source`` (the
-    recording) prefixes the runs in error messages: ``source:/runs/<id>``.
+    ``signal``: the judged signal, the output ``y`` or in closed loop the command ``u``: the
+    residuals, the noise floor, the line and harmonic tests and the time signals are of it (the
+    BLA comparison stays that of the output). Returns the evidence and the model's simulated runs
+    keyed by run id. ``source`` (the recording) prefixes the runs in error messages:
+    ``source:/runs/<id>``.
     """
     from nlsid.analysis.levels import across_levels, analyse_runs, common_lines
 
     used = [run for run in runs if run.run_id in roles]
     simulated = {run.run_id: runner.simulate(run) for run in used}
-    residuals = [residual_of(run, simulated[run.run_id].y, roles[run.run_id]) for run in used]
+    residuals = [residual_of(run, getattr(simulated[run.run_id], signal), roles[run.run_id], signal) for run in used]
     multisine = [run for run in used if run.kind == "multisine"]
     lines, bla, levels, spectra_, across = [], [], [], {}, {}
     measured_levels = model_levels = ()

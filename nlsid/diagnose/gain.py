@@ -2,7 +2,8 @@
 
 On the validation runs (:mod:`nlsid.diagnose.split`, never seen by an estimate) the error of a
 model M is the mean steady-state period of its residual ``y - y_M`` without its mean value (all
-lines but DC and Nyquist). Per model:
+lines but DC and Nyquist); with ``fit_on="u"`` (closed loop) of ``u - u_M`` in the same way
+(:mod:`nlsid.diagnose.evidence`, "The judged signal"). Per model:
 
 - ``error_rms``: the rms of that error, averaged in power over the runs; ``error_db`` = 20 log10;
 - ``gain_db`` = 20 log10(error_rms of the original / error_rms of this model): > 0 is better;
@@ -86,9 +87,12 @@ def _db20(rms: float) -> float:
     return 20 * math.log10(rms) if rms > 0 else float("nan")
 
 
-def model_residuals(runner: ModelRunner, runs: list[Run], residuals: list[Residual]) -> list[Residual]:
-    """The residuals of ``runner``'s model on the validation ``runs`` (same order and roles as ``residuals``)."""
-    return [residual_of(run, y, res.role) for run, y, res in zip(runs, runner.simulate_each(runs), residuals)]
+def model_residuals(runner: ModelRunner, runs: list[Run], residuals: list[Residual],
+                    signal: str = "y") -> list[Residual]:
+    """The residuals of ``runner``'s model on the validation ``runs`` (same order and roles as
+    ``residuals``), of the judged ``signal`` (``y``, or in closed loop ``u``)."""
+    return [residual_of(run, x, res.role, signal)
+            for run, x, res in zip(runs, runner.simulate_each(runs, signal), residuals)]
 
 
 def _detection_power(residuals: list[Residual]) -> tuple[float, float]:

@@ -161,20 +161,22 @@ def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) ->
     return free
 
 
-def estimate(data: dict, source: str, runs: list[Run]) -> tuple[dict, Nuisances]:
-    """The model config with its nuisances fitted to ``runs`` (estimation runs), and the values."""
+def estimate(data: dict, source: str, runs: list[Run], fit_on: str = "y") -> tuple[dict, Nuisances]:
+    """The model config with its nuisances fitted to ``runs`` (estimation runs) on the judged
+    signal ``fit_on`` (``y``, or in closed loop ``u``), and the values."""
     from nlsid.fit.extension import fit_free_parameters
 
     runner = ModelRunner.from_data(data, source)
     free = free_nuisances(runner, runs)
     if not free:
         return data, Nuisances()
-    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
+    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS, fit_on=fit_on)
     timing = free.get("model.output_timing")
     if timing is not None and not timing.lower + AT_BOUND < fit.value("model.output_timing") < timing.upper - AT_BOUND:
         # a shift of a sample or more is a dead time, a cause: left to the delay hypothesis
         free.pop("model.output_timing")
-        fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS)
+        fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS,
+                                  fit_on=fit_on)
     return fit.config, fitted(fit)
 
 

@@ -35,6 +35,7 @@ class Diagnosis:
     validation_samples: int = 0  # the steady-state samples of the validation runs the scores are of
     yardstick: Yardstick | None = None  # the black-box model fitted to the same estimation data
     notes: list[str] = field(default_factory=list)  # on the runs as simulated (a channel taken as zero)
+    signal: str = "y"  # the judged signal: the output y, or in closed loop the command u (diagnose --fit-on)
 
     @property
     def final(self) -> Outcome | None:
@@ -53,6 +54,12 @@ class Diagnosis:
         return next((o for o in self.outcomes if o.hypothesis.name == self.verdict.winner), None)
 
     def headline(self) -> str:
+        """The verdict in one sentence; where the judged signal is the command u, it says so
+        (every error, gain and distance to the floor in it is of u)."""
+        text = self._verdict_sentence()
+        return text if self.signal == "y" else f"{text} [{JUDGED_ON_U}]"
+
+    def _verdict_sentence(self) -> str:
         status, ev = self.verdict.status, self.evidence
         if status == rules.NO_DISCREPANCY:
             if ev.exact:
@@ -314,7 +321,7 @@ class Diagnosis:
                     "distortion_gain_db": final.distortion_gain_db,
                     "extended_above_floor_db": final.above_floor_db}
         return {
-            "headline": self.headline(), "findings": self.findings(), "model": self.model_source,
+            "headline": self.headline(), "fit_on": self.signal, "findings": self.findings(), "model": self.model_source,
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
             "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
             "nuisances": {**self.nuisances.summary(), "moved": self.moved_nuisances()},
@@ -328,6 +335,7 @@ class Diagnosis:
 
 
 NOISE_UNKNOWN = "the runs have no two periods to separate noise from the rest"
+JUDGED_ON_U = "judged on u, the command the controller computes: errors, gains and the noise floor are u's"
 CANDIDATE = "candidate_model.yaml"  # the leading candidate's model (Diagnosis.leading), as the stage writes it
 EXTENDED = "extended_model.yaml"    # the named causes' model (or the black box, status outside_library)
 

@@ -109,12 +109,13 @@ class ModelRunner:
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 
-    def simulate_each(self, runs: list[Run]) -> list[np.ndarray]:
-        """The simulated output y of every run (:meth:`simulate`), in parallel threads
+    def simulate_each(self, runs: list[Run], signal: str = "y") -> list[np.ndarray]:
+        """The simulated ``signal`` of every run (:meth:`simulate`): the output ``y``, or in closed
+        loop ``u``, the plant input as the simulated controller computes it; in parallel threads
         (:func:`~nlsid.simulate.threads.in_threads`)."""
         from nlsid.simulate.threads import in_threads
 
-        return in_threads(lambda run: self.simulate(run).y, runs)
+        return in_threads(lambda run: getattr(self.simulate(run), signal), runs)
 
     def initial_state(self, run: Run):
         """The initial state fitted to the start of an arbitrary record as the model simulates it
@@ -128,17 +129,19 @@ class ModelRunner:
         except InputError as exc:
             raise InputError(self.source, f"run {run.run_id}: {exc.where}: {exc.what}") from None
 
-    def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None) -> np.ndarray:
-        """Recorded-output response to a plant-input and/or output disturbance: of a linear model
+    def response(self, run: Run, process: np.ndarray | None = None, output: np.ndarray | None = None,
+                 signal: str = "y") -> np.ndarray:
+        """Response of the recorded ``signal`` (the output ``y``, or in closed loop the command
+        ``u``, through the loop) to a plant-input and/or output disturbance: of a linear model
         with the excitation zero (less the response to the model's own offsets and input
         channels, when it has any); of a nonlinear one along its own trajectory
         (:meth:`_along`)."""
         if self.nonlinear:
-            return self._along(run, process, output)
-        y = self.simulate(run, process, output, excite=False).y
+            return self._along(run, process, output, signal)
+        x = getattr(self.simulate(run, process, output, excite=False), signal)
         if self.has_offsets:
-            y = y - self.simulate(run, excite=False).y
-        return y
+            x = x - getattr(self.simulate(run, excite=False), signal)
+        return x
 
     @property
     def nonlinear(self) -> bool:
@@ -152,25 +155,28 @@ class ModelRunner:
         identity = blocks.encode(None)[0]
         return bool(self.plant.forces) or self.plant.input_block[0] != identity or self.plant.output_block[0] != identity
 
-    def _along(self, run: Run, process: np.ndarray | None, output: np.ndarray | None) -> np.ndarray:
-        """The first-order response of a nonlinear model to the disturbances along its own
-        trajectory on ``run``: for each disturbance d (scaled to RESPONSE_STEP times the rms of
-        the excitation, respectively of the model's output, that scale s divided out again),
-        (y(u; s d) - y(u)) / s, summed. Simulated as the model runs on ``run`` (its periodic
-        steady state), from rest where the record is arbitrary. The trajectory y(u) of each run is
-        simulated once per model (a signature's scan asks for many disturbances on the same runs)."""
+    def _along(self, run: Run, process: np.ndarray | None, output: np.ndarray | None, signal: str = "y") -> np.ndarray:
+        """The first-order response of a nonlinear model's ``signal`` to the disturbances along
+        its own trajectory on ``run``: for each disturbance d (scaled to RESPONSE_STEP times the
+        rms of the excitation, respectively of the model's output, that scale s divided out
+        again), (x(u; s d) - x(u)) / s, summed. Simulated as the model runs on ``run`` (its
+        periodic steady state), from rest where the record is arbitrary. The trajectory of each
+        run is simulated once per model (a signature's scan asks for many disturbances on the
+        same runs)."""
         quiet = dataclasses.replace(run, y=None)
         kept = self.trajectories.get(id(run))
         if kept is None or kept[0] is not run:
-            kept = self.trajectories[id(run)] = (run, self.simulate(quiet).y)
+            kept = self.trajectories[id(run)] = (run, self.simulate(quiet))
         nominal = kept[1]
         total = np.zeros(run.n_samples)
-        for name, signal, reference in (("process", process, self.excitation(run).u), ("output", output, nominal)):
-            size = _rms(signal) if signal is not None else 0.0
+        for name, disturbance, reference in (("process", process, self.excitation(run).u),
+                                             ("output", output, nominal.y)):
+            size = _rms(disturbance) if disturbance is not None else 0.0
             if size == 0:
                 continue
             scale = RESPONSE_STEP * (_rms(reference) or 1.0) / size
-            total += (self.simulate(quiet, **{name: scale * signal}).y - nominal) / scale
+            moved = self.simulate(quiet, **{name: scale * disturbance})
+            total += (getattr(moved, signal) - getattr(nominal, signal)) / scale
         return total
 
     @property

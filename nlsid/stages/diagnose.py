@@ -225,6 +225,7 @@ class DiagnosisInputs:
     allow_overlap: bool
     workers: int | None
     yardstick: bool | None = None
+    fit_on: str = "y"
 
     @property
     def steps(self) -> int:
@@ -247,10 +248,10 @@ class DiagnosisInputs:
         tick = progress or (lambda: None)
         with default_threads(self.workers):
             config, delay = resolve_delay(self.config, self.model_source, self.runs, self.where, self.extra,
-                                          self.estimation, self.validation, "y")
+                                          self.estimation, self.validation, self.fit_on)
             result = run_diagnosis(config, self.model_source, self.runs, self.where, step=lambda name: tick(),
                                    validate_on=self.extra, estimation_range=self.estimation,
-                                   validation_range=self.validation, yardstick=self.yardstick)
+                                   validation_range=self.validation, yardstick=self.yardstick, fit_on=self.fit_on)
         final = result.final
         extended = extended_yaml(final.extended, result.extended_header()) if final is not None else None
         others = {}
@@ -293,28 +294,35 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
 
 def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
                      validation_range=None, allow_overlap: bool = False, workers: int | None = None,
-                     mapping: Mapping[str, str] | None = None, yardstick: bool | None = None, *,
+                     mapping: Mapping[str, str] | None = None, yardstick: bool | None = None, fit_on: str = "y", *,
                      names: Mapping[str, str] | None = None) -> DiagnosisInputs:
     """The arguments of :func:`diagnose` checked and read, in the order the command line checks them:
-    the model, the ranges, the overlap of ``validate_on`` with ``rec``, the recordings."""
+    the model (and the judged signal it allows), the ranges, the overlap of ``validate_on`` with
+    ``rec``, the recordings."""
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
     if workers is not None and not (whole(workers) and workers >= 1):
         raise InputError(name("workers"), f"expected a whole number >= 1 or None, got {workers!r}")
     if mapping is not None and not isinstance(mapping, Mapping):
         raise InputError(name("mapping"), f"expected signal -> topic/field (a dict), got {type(mapping).__name__}")
+    if fit_on not in ("y", "u"):
+        raise InputError(name("fit_on"), f"expected 'y' or 'u', got {fit_on!r}")
     config, source, configs = _model_config(model, name)
+    if fit_on == "u" and "closed_loop" not in config:
+        raise InputError(name("fit_on"), f"u is judged only in closed loop ({source} has no closed_loop): in open "
+                                         "loop the recorded u is the input the simulation is driven by")
     data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
     if yardstick is not None and not isinstance(yardstick, bool):
         raise InputError(name("yardstick"), f"expected True, False or None, got {yardstick!r}")
     return DiagnosisInputs(config, source, data.runs, data.where, data.extra_runs, data.estimation, data.validation,
-                           configs, data.inputs, bool(allow_overlap), workers, yardstick)
+                           configs, data.inputs, bool(allow_overlap), workers, yardstick, fit_on)
 
 
 def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
              validation_range=None, allow_overlap: bool = False, workers: int | None = None,
              mapping: Mapping[str, str] | None = None, progress: Callable[[], None] | None = None,
-             yardstick: bool | None = None, *, names: Mapping[str, str] | None = None) -> DiagnosisResult:
+             yardstick: bool | None = None, fit_on: str = "y", *,
+             names: Mapping[str, str] | None = None) -> DiagnosisResult:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -351,6 +359,13 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
         Fit the black-box yardstick (:mod:`nlsid.diagnose.yardstick`; default True): how much of
         the error a flexible model reaches beside the named causes. False saves its fit (seconds
         to minutes); the status then rests on the noise floor alone.
+    fit_on : {"y", "u"}
+        The judged signal (default ``"y"``, the output). ``"u"``, closed loop only: the command
+        the controller computes, simulated with the loop closed, against the recorded u. In
+        closed loop the controller keeps the position error small and the plant's errors show in
+        the command: every hypothesis and nuisance is fitted on u, and the evidence, the noise
+        floor (period-to-period noise of u's residual), the scores and the verdict are of u
+        (``summary.json`` ``fit_on``). Refused (``InputError``) for a model without ``closed_loop``.
     names : dict, optional
         Argument -> how the caller calls it in messages (the command line passes its flags).
 
@@ -374,4 +389,4 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
     nlsid.errors.InputError: validation_range: needs estimation_range (the samples of each run to fit on)
     """
     return diagnosis_inputs(model, rec, validate_on, estimation_range, validation_range, allow_overlap, workers,
-                            mapping, yardstick, names=names).run(progress)
+                            mapping, yardstick, fit_on, names=names).run(progress)

@@ -18,7 +18,11 @@ class Context:
     """What the estimates need: the nominal model, the estimation runs, their residual periods, the
     model's internal signals on them (full length), the BLA levels (measured, model) and the
     final estimates of the hypotheses before this one in :data:`LIBRARY`, by name, with their
-    extended configs (every fitted value written in, nuisances too) in ``extended``."""
+    extended configs (every fitted value written in, nuisances too) in ``extended``.
+
+    ``signal`` is the judged signal, the output ``y`` or in closed loop the command ``u``
+    (``diagnose --fit-on``): the residuals, :meth:`simulation_rss` and :meth:`response` are of
+    it, so a signature regresses what the model misses of that signal on that signal's response."""
 
     runner: ModelRunner
     runs: list[Run]
@@ -27,23 +31,33 @@ class Context:
     bla_levels: tuple = ()
     fitted: dict = field(default_factory=dict)
     extended: dict = field(default_factory=dict)
+    signal: str = "y"
 
     def target(self) -> np.ndarray:
         return np.concatenate(self.residuals)
 
+    def measured(self, run: Run) -> np.ndarray:
+        """The recorded judged signal of ``run`` (full length)."""
+        return getattr(run, self.signal)
+
+    def simulated(self, runner: ModelRunner | None = None) -> list[np.ndarray]:
+        """The judged signal as ``runner`` (default: the nominal model) simulates it on every run."""
+        return (runner or self.runner).simulate_each(self.runs, self.signal)
+
     def simulation_rss(self, data: dict) -> float:
-        """Sum of squares of measured minus simulated mean steady-state periods of the model ``data``."""
-        simulated = self.runner.with_changes(data).simulate_each(self.runs)
-        return float(sum(np.sum((steady_mean(run, run.y) - steady_mean(run, y)) ** 2)
-                         for run, y in zip(self.runs, simulated)))
+        """Sum of squares of measured minus simulated mean steady-state periods of the judged
+        signal of the model ``data``."""
+        simulated = self.simulated(self.runner.with_changes(data))
+        return float(sum(np.sum((steady_mean(run, self.measured(run)) - steady_mean(run, x)) ** 2)
+                         for run, x in zip(self.runs, simulated)))
 
     def response(self, signals: list[np.ndarray], where: str) -> np.ndarray:
-        """Stacked mean steady-state response of every run to its disturbance (``process`` or
-        ``output``), the runs in parallel threads."""
+        """Stacked mean steady-state response of the judged signal of every run to its
+        disturbance (``process`` or ``output``), the runs in parallel threads."""
         from nlsid.simulate.threads import in_threads
 
         def one(pair: tuple[Run, np.ndarray]) -> np.ndarray:
-            return steady_mean(pair[0], self.runner.response(pair[0], **{where: pair[1]}))
+            return steady_mean(pair[0], self.runner.response(pair[0], **{where: pair[1]}, signal=self.signal))
         return np.concatenate(in_threads(one, list(zip(self.runs, signals))))
 
 @dataclass(frozen=True)

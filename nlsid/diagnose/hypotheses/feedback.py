@@ -149,12 +149,13 @@ def _score(ctx: Context, cubic: dict) -> tuple[float, float, float]:
     runner = ctx.runner.with_changes(cubic)
     residual, column = [], []
     for run in ctx.runs:
-        y = runner.simulate(run).y
-        d = -y**2
+        nominal = runner.simulate(run)
+        d = -nominal.y**2
         step = SCORE_STEP * float(np.sqrt(np.mean(run.u**2)) / max(np.sqrt(np.mean(d**2)), 1e-300))
-        moved = runner.simulate(run, process=step * d).y
-        residual.append(steady_mean(run, run.y - y))
-        column.append(steady_mean(run, moved - y) / step)
+        moved = getattr(runner.simulate(run, process=step * d), ctx.signal)
+        x = getattr(nominal, ctx.signal)  # the judged signal: y, or in closed loop u
+        residual.append(steady_mean(run, ctx.measured(run) - x))
+        column.append(steady_mean(run, moved - x) / step)
     r = np.concatenate(residual)
     est = regress(_centred(r), [_centred(np.concatenate(column))], ["k2"])
     return est.values["k2"] / est.std["k2"], est.values["k2"], float(np.sum(r**2))

@@ -111,8 +111,8 @@ def _beyond_coulomb(ctx: Context) -> dict[str, float] | None:
     if extended is None or coulomb is None:
         return None
     runner = ctx.runner.with_changes(extended)
-    left = [steady_mean(run, run.y) - steady_mean(run, y) for run, y in zip(ctx.runs, runner.simulate_each(ctx.runs))]
-    along = Context(runner, ctx.runs, left, [runner.internal(run) for run in ctx.runs])
+    left = [steady_mean(run, ctx.measured(run)) - steady_mean(run, x) for run, x in zip(ctx.runs, ctx.simulated(runner))]
+    along = Context(runner, ctx.runs, left, [runner.internal(run) for run in ctx.runs], signal=ctx.signal)
     if needs(along, "velocity"):
         return None
     without = copy.deepcopy(extended)

@@ -50,13 +50,14 @@ def _coupling(data: dict, change: float) -> dict:
 
 
 def _sensitivity(ctx: Context, changed, step: float) -> tuple[np.ndarray, float]:
-    """The stacked mean steady-state sensitivity of the output to a parameter, (y(step) - y) / step
-    with ``changed(data, step)`` the model moved by it, the step rescaled once so that its effect is
-    PROBE of the output's rms; and that step."""
-    base = [steady_mean(run, y) for run, y in zip(ctx.runs, ctx.runner.simulate_each(ctx.runs))]
+    """The stacked mean steady-state sensitivity of the judged signal (the output, or in closed
+    loop the command: :class:`Context`) to a parameter, (y(step) - y) / step with
+    ``changed(data, step)`` the model moved by it, the step rescaled once so that its effect is
+    PROBE of that signal's rms; and that step."""
+    base = [steady_mean(run, x) for run, x in zip(ctx.runs, ctx.simulated())]
     scale = float(np.sqrt(np.mean(np.concatenate(base) ** 2)))
     for _ in range(2):
-        moved = ctx.runner.with_changes(changed(ctx.runner.data, step)).simulate_each(ctx.runs)
+        moved = ctx.simulated(ctx.runner.with_changes(changed(ctx.runner.data, step)))
         column = np.concatenate([(steady_mean(run, y) - b) / step for run, y, b in zip(ctx.runs, moved, base)])
         effect = float(np.sqrt(np.mean((column * step) ** 2)))
         if effect == 0:
