@@ -73,3 +73,46 @@ def test_diagnose_on_u_names_coulomb_and_judges_u(run_cli, tmp_path):
     assert expected > 0.1  # volts: far from the position's error (about 1e-5 m), which y would give
     assert summary["chain"][0]["error_rms"] < 0.05 * expected
 
+
+
+def test_the_noise_floor_is_that_of_u_on_periodic_runs(tmp_path):
+    """A periodic reference (two realizations of an odd multisine, one transient and four steady
+    periods each), the axis without friction (the model is the truth) and white noise of 0.01 V on
+    the recorded command only. The floor diagnose reports is the noise in the averaged period of
+    u's residual; the model's u being periodic, that residual varies from period to period as u
+    does, so the floor is computed here from u alone: per run the mean over the period of u's
+    period-to-period variance over P, without the mean and Nyquist lines (Parseval: the AC lines
+    1 .. N/2 - 1 that diagnose sums), averaged over the runs. Judged on y, whose record has no
+    noise here, the floor would be zero."""
+    import nlsid
+
+    N, P, sigma = 512, 4, 0.01
+    rng = np.random.default_rng(3)
+    bins = np.arange(1, 22, 2)
+    runs = []
+    for i in range(2):
+        X = np.zeros(N // 2 + 1, complex)
+        X[bins] = np.exp(2j * np.pi * rng.uniform(size=bins.size))
+        period = np.fft.irfft(X, n=N)
+        r = np.tile(1e-3 * period / np.sqrt(np.mean(period ** 2)), P + 1)  # 1 mm rms
+        u, y = E.closed_loop(r, coulomb=0.0, offset=0.0, encoder=FINE)
+        runs.append(Run(f"ms{i}", E.FS, "multisine", u + sigma * rng.standard_normal(u.size), y=y, r=r, period=N,
+                        transient_periods=1, realization=i, level=1.0, excited_bins=bins,
+                        units={"u": "V", "y": "m", "r": "m"}))
+    data = write_recording(tmp_path / "periodic.h5", runs, {"tool": "test"})
+    result = nlsid.diagnose(_viscous_axis(E.MASS, E.VISCOUS), data, fit_on="u")
+    summary = result.summary()
+
+    powers = []
+    for run in runs:
+        d = run.u[N:].reshape(P, N)
+        d = d - d.mean(axis=0)  # period-to-period deviations
+        n = np.arange(N)
+        d = d - d.mean(axis=1, keepdims=True) - np.outer(np.mean(d * (-1.0) ** n, axis=1), (-1.0) ** n)
+        powers.append(np.mean(np.sum(d ** 2, axis=0) / (P - 1)) / P)
+    floor = np.sqrt(np.mean(powers))  # about sigma / sqrt(P) = 0.005 V
+    assert summary["fit_on"] == "u"
+    assert summary["evidence"]["noise_rms"] == pytest.approx(floor, rel=1e-6)
+    assert floor == pytest.approx(sigma / np.sqrt(P), rel=0.1)
+    # the true model's error is noise: nothing beyond it (a false alarm has probability 0.001)
+    assert summary["verdict"]["status"] == "no_discrepancy", summary["headline"]
