@@ -101,26 +101,26 @@ def bla_vs_level(levels: list[dict], units: Units):
     return figure
 
 
-def residual_vs_state(time: dict, units: Units):
+def residual_vs_state(time: dict, units: Units, signal: str = "y"):
     states = [name for name in ("velocity", "position", "input") if name in time]
     figure, axes = new_figure(1, len(states), height=3.2)
     for axis, name in zip(axes, states):
         axis.plot(time[name], time["residual"], ".", ms=2, alpha=0.5, label="residual")
         unit = units.unit("u") if name == "input" else STATE_UNITS[name]
         axis.set_xlabel(f"model {name} ({unit})")
-        axis.set_ylabel(units.label("residual y - y_model", "y"))
+        axis.set_ylabel(units.label(f"residual {signal} - {signal}_model", signal))  # signal: the judged one
         axis.grid(True, alpha=0.3)
     return figure
 
 
-def before_after(validation: dict, units: Units):
+def before_after(validation: dict, units: Units, signal: str = "y"):
     figure, (axis,) = new_figure(height=3.0)
     t = np.arange(validation["original_error"].size) / float(validation["fs"])
     axis.plot(t, validation["original_error"], "C3", lw=1, label="original model")
     if "extended_error" in validation:
         axis.plot(t, validation["extended_error"], "C0", lw=1, label="extended model")
     axis.set_xlabel("time in the period (s)")
-    axis.set_ylabel(units.label("error y - y_model", "y"))
+    axis.set_ylabel(units.label(f"error {signal} - {signal}_model", signal))
     axis.grid(True, alpha=0.3)
     legend_outside(axis, fontsize=8)
     return figure

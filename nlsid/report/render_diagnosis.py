@@ -111,7 +111,7 @@ def optimiser_notes(summary: dict) -> list[str]:
     return [f"{h['title']}: {h['note']}" for h in summary["hypotheses"] if h.get("note") and h.get("values")]
 
 
-def _figures(arrays: dict, units: Units) -> list[Figure]:
+def _figures(arrays: dict, units: Units, signal: str = "y") -> list[Figure]:
     from nlsid.report import diagnosis_plots as plots
     from nlsid.report.vector import figure
 
@@ -136,14 +136,14 @@ def _figures(arrays: dict, units: Units) -> list[Figure]:
     if "residual" in time:
         states = (" Positions in m and velocities in m/s, the SI units of the mechanical templates."
                   if "position" in time or "velocity" in time else "")
-        out.append(figure(plots.residual_vs_state(time, units),
+        out.append(figure(plots.residual_vs_state(time, units, signal),
                           f"Residual against the model's internal signals. Mean steady-state period of run "
                           f"{time['run_id']}, the estimation run with the largest input, where the hypotheses are "
                           "estimated and a nonlinearity shows most: a jump at zero velocity is friction, a cubic "
                           f"trend in position a cubic spring.{states}", "residual_vs_state"))
     validation = arrays["validation"]
     if "original_error" in validation:
-        out.append(figure(plots.before_after(validation, units),
+        out.append(figure(plots.before_after(validation, units, signal),
                           f"Simulation error before and after. Mean period of validation run {validation['run_id']}, "
                           "held out of every estimate (unlike the run of the residual figure), for the original "
                           "model and the extended one.", "before_after"))
@@ -223,8 +223,9 @@ def _error_table(summary: dict, units: Units) -> Table:
         rows.append([label, number(val["error_rms"], ".4g"), number(val["error_db"], ".1f"), floor_text(val)])
     floor = gain["extended"] if gain else original
     rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "the floor"])
-    return Table("Validation error", ["model", units.label("rms", "y"), f"level ({units.level_db('y')})",
-                                      "vs noise floor"], rows,
+    signal = summary.get("fit_on", "y")  # the judged signal (diagnose --fit-on)
+    return Table("Validation error", ["model", units.label(_of("rms", signal), signal),
+                                      f"level ({units.level_db(signal)})", "vs noise floor"], rows,
                  note="Mean steady-state period of the validation runs, without its mean value. Each model's "
                       "floor is the noise in its own residual (period-to-period variance over P): the error "
                       "the true model would show. The floor row is the best model's. The black-box yardstick is "
@@ -238,11 +239,17 @@ def _values(step: dict) -> str:
                      for name, value in step.get("values", {}).items()) or "-"
 
 
-def _chain_table(chain: list[dict], units: Units) -> Table:
+def _of(quantity: str, signal: str) -> str:
+    """A column's quantity, naming the judged signal where it is not the output y (diagnose --fit-on u)."""
+    return quantity if signal == "y" else f"{quantity} of {signal}"
+
+
+def _chain_table(chain: list[dict], units: Units, signal: str = "y") -> Table:
     rows = [[str(i + 1), step.get("title") or step.get("cause", "-"), _values(step),
              number(step.get("error_rms"), ".4g"), number(step.get("gain_db"), "+.1f"), floor_text(step)]
             for i, step in enumerate(chain)]
-    return Table("Chain of causes", ["step", "cause", "values", units.label("validation error rms", "y"),
+    return Table("Chain of causes", ["step", "cause", "values",
+                                     units.label(_of("validation error rms", signal), signal),
                                      "validation gain dB", "validation error vs noise floor"], rows, text=(1, 2),
                  note="Each step adds one cause to the model of the step before and diagnoses again; the gain is "
                       "against that model, the error and its distance to the floor those of the model after the "
@@ -250,7 +257,7 @@ def _chain_table(chain: list[dict], units: Units) -> Table:
 
 
 def _tables(summary: dict, units: Units) -> list[Table]:
-    tables = [_chain_table(summary["chain"], units)] if summary.get("chain") else []
+    tables = [_chain_table(summary["chain"], units, summary.get("fit_on", "y"))] if summary.get("chain") else []
     tables += [_hypothesis_table(summary, units), _level_table(summary["evidence"], units)]
     harmonics = _harmonic_table(summary["evidence"], units)
     return tables + ([harmonics] if harmonics else []) + [_error_table(summary, units)]
@@ -263,12 +270,13 @@ def render_diagnosis(path: Path) -> Page:
     summary, arrays = read_diagnosis(path)
     units = units_of(summary.get("units"))
     keys = ("verdict", "original", "gain", "evidence", "split", "units", "chain", "explanation", "yardstick",
-            "best_model")
+            "best_model", "fit_on")
     lead, details = split_findings(list(summary["findings"]))
     return Page(kind="Model diagnosis", title=f"Diagnosis of {Path(summary['model']).name}", source=str(path),
                 headline=summary["headline"], findings=cause_lines(summary) + standing_lines(summary) + lead,
                 details=details + optimiser_notes(summary),
                 details_title="Details: nuisances, numerical settings and the fits' notes",
-                figures=_figures(arrays, units.for_figures()), note=units.missing_note("u", "y"),
+                figures=_figures(arrays, units.for_figures(), summary.get("fit_on", "y")),
+                note=units.missing_note("u", "y"),
                 tables=_tables(summary, units), provenance=summary.get("provenance", {}),
                 numbers={k: summary[k] for k in keys if k in summary})

@@ -165,6 +165,7 @@ class DiagnosisResult:
         with self._folder() as folder:
             summary, arrays = read_diagnosis(folder)
         units = units_of(summary.get("units"))
+        signal = summary.get("fit_on", "y")  # the judged signal, which the residual figures show
         made = []
         if arrays["bla"]:
             made.append(("model_vs_bla", plots.model_vs_bla(arrays["bla"][-1], units)))
@@ -173,9 +174,9 @@ class DiagnosisResult:
         if len(arrays["bla"]) > 1:
             made.append(("bla_vs_level", plots.bla_vs_level(arrays["bla"], units)))
         if "residual" in arrays["time"]:
-            made.append(("residual_vs_state", plots.residual_vs_state(arrays["time"], units)))
+            made.append(("residual_vs_state", plots.residual_vs_state(arrays["time"], units, signal)))
         if "original_error" in arrays["validation"]:
-            made.append(("before_after", plots.before_after(arrays["validation"], units)))
+            made.append(("before_after", plots.before_after(arrays["validation"], units, signal)))
         from nlsid.stages.plotting import png_bytes
 
         return {name: png_bytes(figure, DPI) for name, figure in made}
