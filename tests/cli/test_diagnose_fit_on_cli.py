@@ -48,3 +48,28 @@ def test_the_face_refuses_u_in_open_loop_naming_fit_on(files):
     with pytest.raises(nlsid.InputError) as refused:
         nlsid.diagnose(config, data, fit_on="position")
     assert refused.value.where == "fit_on"
+
+
+def test_the_terminal_table_names_the_judged_signal(monkeypatch):
+    import io
+    from types import SimpleNamespace
+
+    from rich.console import Console
+
+    from nlsid.cli import diagnose as diagnose_cli
+
+    fitted = SimpleNamespace(hypothesis=SimpleNamespace(title="Coulomb friction", main="fc"),
+                             estimate=SimpleNamespace(values={"fc": 20.4}, note=""), reason="",
+                             score=SimpleNamespace(gain_db=41.2, exact=False, distortion_gain_db=float("nan"),
+                                                   summary=lambda: {"above_floor_db": float("nan")}))
+    result = SimpleNamespace(headline=lambda: "Cause: Coulomb friction [judged on u]",
+                             evidence=SimpleNamespace(findings=lambda: []), outcomes=[fitted], winner=fitted,
+                             findings=lambda: [])
+    shown = {}
+    for signal in ("y", "u"):
+        buffer = io.StringIO()
+        console = Console(file=buffer, width=100, color_system=None)
+        monkeypatch.setattr(diagnose_cli, "settings", lambda: SimpleNamespace(console=console, verbose=0))
+        diagnose_cli._print(result, "d/", fit_on=signal)
+        shown[signal] = " ".join(buffer.getvalue().split())
+    assert "validation runs, error of u" in shown["u"] and "error of u" not in shown["y"]
