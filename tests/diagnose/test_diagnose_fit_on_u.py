@@ -5,7 +5,7 @@ in the command it needs. The axis is the EMPS stand-in (tests/generators/emps_ca
 between samples, stick events located, quantised encoder, Coulomb friction and an offset force),
 here on short back-and-forth records of four and three moves at different speeds (so that Coulomb
 and viscous friction are told apart). The model is viscous only, its mass 4 % high and its damping
-4 % low. The diagnosis on u must name Coulomb friction with fc within the issue's 3 % of the truth,
+4 % low. The diagnosis on u must name Coulomb friction with fc within 3 % of the truth,
 and its errors must be those of u: the base model's reported validation error equals the rms of
 u - u_model over the validation record, u_model from an independent simulation of the model (the
 generator's exact solution with the friction, the offset and the encoder's steps taken out). With
