@@ -135,7 +135,7 @@ from __future__ import annotations
 
 from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
                                        output_blocks, resonance, stiffness)
-from nlsid.diagnose.hypotheses import tank_outflow, wiener_hammerstein
+from nlsid.diagnose.hypotheses import tank_outflow, tank_overflow, wiener_hammerstein
 from nlsid.diagnose.hypotheses import end_stops, hysteresis, joint
 from nlsid.diagnose.hypotheses import actuator_polynomial, friction_feedback, nonlinear_damping, output_saturation
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
@@ -146,7 +146,8 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + friction_feedback.HYPOTHESES + nonlinear_damping.HYPOTHESES
                                    + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + end_stops.HYPOTHESES + joint.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES + actuator_polynomial.HYPOTHESES
-                                   + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + tank_outflow.HYPOTHESES + resonance.HYPOTHESES + mechanics.HYPOTHESES
+                                   + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + tank_outflow.HYPOTHESES + tank_overflow.HYPOTHESES
+                                   + resonance.HYPOTHESES + mechanics.HYPOTHESES
                                    + linear_dynamics.HYPOTHESES
                                    + coupled_mode.HYPOTHESES + delay.HYPOTHESES)
 

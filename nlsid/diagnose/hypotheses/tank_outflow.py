@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -99,7 +100,8 @@ def _real_stable(poles: np.ndarray) -> bool:
     return bool(np.all(np.abs(poles.imag) <= 1e-9 * np.maximum(np.abs(poles), 1e-300)) and np.all(poles.real < 0))
 
 
-def _applies(order: int):
+def applies_to(order: int) -> Callable[[ModelRunner], str | None]:
+    """Whether the tanks of ``order`` (1 or 2) can be read from the runner's model (module docstring)."""
     def applies(runner: ModelRunner) -> str | None:
         if runner.kind not in LTI:
             return "needs an LTI model (transfer_function, zpk or state_space) to linearise"
@@ -162,47 +164,61 @@ def sensor_range(model: dict, offset: float) -> dict | None:
     return {**block, "lower": float(block["lower"]) - shift, "upper": float(block["upper"]) - shift}
 
 
-def _extend(data: dict, values: dict) -> dict:
-    """The linear model replaced by the tanks' equations (:func:`equations`), its dead time,
-    input offset and channels and input block kept, the output offset ``values['output_offset']``
-    and the sensor range at the recorded values (:func:`sensor_range`)."""
-    out = copy.deepcopy(data)
-    model = out["model"]
-    offset = float(values["output_offset"])
-    block = sensor_range(model, offset)
-    out["model"] = {**equations(values), **{k: model[k] for k in KEPT if model.get(k) is not None},
-                    **({"output_nonlinearity": block} if block is not None else {}), "output_offset": offset}
-    return out
+def extension(build: Callable[[dict], dict]) -> Callable[[dict, dict], dict]:
+    """The extension (data, values) -> config of the tanks that ``build`` writes of the values
+    (:func:`equations`): the linear model replaced by them, its dead time, input offset and
+    channels and input block kept, the output offset ``values['output_offset']`` and the sensor
+    range at the recorded values (:func:`sensor_range`)."""
+    def extend(data: dict, values: dict) -> dict:
+        out = copy.deepcopy(data)
+        model = out["model"]
+        offset = float(values["output_offset"])
+        block = sensor_range(model, offset)
+        out["model"] = {**build(values), **{k: model[k] for k in KEPT if model.get(k) is not None},
+                        **({"output_nonlinearity": block} if block is not None else {}), "output_offset": offset}
+        return out
+    return extend
 
 
-def _simulated(ctx: Context, values: dict) -> np.ndarray:
-    """The mean steady-state periods of the estimation runs simulated by the tanks of ``values``."""
-    runner = ctx.runner.with_changes(_extend(ctx.runner.data, values))
+extend = extension(equations)
+
+
+def simulated(ctx: Context, values: dict, extended: Callable[[dict, dict], dict] = extend) -> np.ndarray:
+    """The mean steady-state periods of the estimation runs simulated by the tanks of ``values``
+    (written by ``extended``, :func:`extension`)."""
+    runner = ctx.runner.with_changes(extended(ctx.runner.data, values))
     return np.concatenate([steady_mean(run, s) for run, s in zip(ctx.runs, runner.simulate_each(ctx.runs))])
 
 
-def prefit(ctx: Context, poles: tuple[float, ...], gain: float, u0: float, y: np.ndarray
+def prefit(ctx: Context, poles: tuple[float, ...], gain: float, u0: float, y: np.ndarray,
+           extra: dict[str, float] | None = None, extended: Callable[[dict, dict], dict] = extend
            ) -> tuple[dict, float, int]:
-    """The map's start for the pole assignment ``poles`` (:func:`start_values`), its output offset
+    """The map's start for the pole assignment ``poles`` (:func:`start_values`; with the further
+    positive parameters ``extra`` of a richer member, written by ``extended``), its output offset
     the mean of the measured less the simulated output, then fitted to the measured steady state
-    ``y`` in the coordinates v = (ln p.., ln x*, c) by a trust-region least-squares search of
-    PREFIT_STEPS residual evaluations besides its Jacobians' (scipy's ``trf``). In these the
-    model is nearly linear where the rates are not: a level traded against the output offset is
-    the straight valley x* + c = constant, in the rates a curved one (k4 / k3 fixed with k3^2 / k4),
-    which the fit engine, moving the rates, crossed slowly (on 14 % of clipped samples it stopped
-    at its budget, 6 dB above the noise floor, from a start 20 % off). Returns the values, the
-    residual sum of squares and the simulations run; an infinite sum where the start does not run."""
+    ``y`` in the coordinates v = (ln p.., ln x*, ln extra.., c) by a trust-region least-squares
+    search of PREFIT_STEPS residual evaluations besides its Jacobians' (scipy's ``trf``). In
+    these the model is nearly linear where the rates are not: a level traded against the output
+    offset is the straight valley x* + c = constant, in the rates a curved one (k4 / k3 fixed
+    with k3^2 / k4), which the fit engine, moving the rates, crossed slowly (on 14 % of clipped
+    samples it stopped at its budget, 6 dB above the noise floor, from a start 20 % off). Returns
+    the values, the residual sum of squares and the simulations run; an infinite sum where the
+    start does not run."""
     from scipy.optimize import least_squares
 
     from nlsid.errors import InputError
 
-    def unpack(v: np.ndarray) -> dict:
-        rates, level = tuple(float(r) for r in np.exp(v[:-2])), float(np.exp(v[-2]))
-        return {**start_values(rates, 2 * level / u0, u0), "u0": u0, "output_offset": float(v[-1])}
+    extra = extra or {}
+    n = len(poles)
 
-    start = {**start_values(poles, gain, u0), "u0": u0, "output_offset": 0.0}
+    def unpack(v: np.ndarray) -> dict:
+        rates, level = tuple(float(r) for r in np.exp(v[:n])), float(np.exp(v[n]))
+        more = {k: float(x) for k, x in zip(extra, np.exp(v[n + 1:-1]))}
+        return {**start_values(rates, 2 * level / u0, u0), **more, "u0": u0, "output_offset": float(v[-1])}
+
+    start = {**start_values(poles, gain, u0), **extra, "u0": u0, "output_offset": 0.0}
     try:
-        offset = float(np.mean(y - _simulated(ctx, start)))
+        offset = float(np.mean(y - simulated(ctx, start, extended)))
     except InputError:
         return start, math.inf, 1
     penalty = np.full(y.size, 10 * float(np.sqrt(np.mean(y**2))))
@@ -211,55 +227,70 @@ def prefit(ctx: Context, poles: tuple[float, ...], gain: float, u0: float, y: np
     def residual(v: np.ndarray) -> np.ndarray:
         count[0] += 1
         try:
-            e = _simulated(ctx, unpack(v)) - y
+            e = simulated(ctx, unpack(v), extended) - y
         except InputError:  # a trial the equations cannot run
             return penalty
         return e if np.all(np.isfinite(e)) else penalty
 
-    v0 = np.array([*np.log(poles), math.log(start["level"]), offset])
+    v0 = np.array([*np.log(poles), math.log(start["level"]), *np.log(list(extra.values())), offset])
     fit = least_squares(residual, v0, method="trf", x_scale="jac", max_nfev=PREFIT_STEPS)
     return unpack(fit.x), float(2 * fit.cost), count[0]
+
+
+def operating_point(ctx: Context) -> tuple[list[float], float, float, np.ndarray] | str:
+    """The linear model's pole rates (ascending), static gain G(0), the mean plant input u0 and
+    the measured steady state y of the estimation runs; or why the tanks cannot be read from them
+    (a dead time of a fraction of a sample, a level u0 G(0) / 2 <= 0 or below LEVEL_SWINGS
+    standard deviations of y)."""
+    from nlsid.errors import InputError
+    from nlsid.models.lti import delay_samples
+
+    model = ctx.runner.data["model"]
+    try:
+        for run in ctx.runs:
+            delay_samples(float(model.get("delay", 0.0)), run.fs, "model.delay")
+    except InputError:
+        return (f"the model's dead time ({float(model['delay']):g} s) is not a whole number of samples, which "
+                "a model written as equations needs (fit the dead time first)")
+    rates = sorted(float(-p.real) for p in linear_poles(model, ctx.runs[0].fs))
+    gain, u0 = static_gain(model), operating_input(ctx)
+    if not u0 * gain > 0:
+        return (f"the mean plant input u0 = {u0:.4g} and the linear model's static gain {gain:.4g} give an "
+                "operating level u0 G(0) / 2 <= 0: no level above an outlet (a model of detrended data, "
+                "input_offset = -mean(u), has no operating point)")
+    y = np.concatenate([steady_mean(run, run.y) for run in ctx.runs])
+    swing = float(np.std(y))
+    if u0 * gain / 2 < LEVEL_SWINGS * swing:
+        return (f"the operating level u0 G(0) / 2 = {u0 * gain / 2:.4g} (u0 = {u0:.4g}, the mean plant input) is "
+                f"below {LEVEL_SWINGS:g} standard deviation of the recorded output ({swing:.4g}): the "
+                "excitation is not around a level above an outlet")
+    return rates, gain, u0, y
+
+
+def pole_note(values: dict) -> str:
+    """The two tanks' poles of ``values`` at its mean input, in words."""
+    u0 = values["u0"]
+    return (f"the upper tank's pole {values['k1'] ** 2 / (2 * values['k4'] * u0):.3g} 1/s, the lower's "
+            f"{values['k3'] ** 2 / (2 * values['k4'] * u0):.3g} (the better of the two assignments)")
 
 
 def _estimate(order: int):
     def estimate(ctx: Context) -> Estimate | str:
         """The start of the module docstring's map, pre-fitted from each pole assignment
         (:func:`prefit`); the one of lower simulation error."""
-        from nlsid.errors import InputError
-        from nlsid.models.lti import delay_samples
-
-        model = ctx.runner.data["model"]
-        fs = ctx.runs[0].fs
-        try:
-            for run in ctx.runs:
-                delay_samples(float(model.get("delay", 0.0)), run.fs, "model.delay")
-        except InputError:
-            return (f"the model's dead time ({float(model['delay']):g} s) is not a whole number of samples, which "
-                    "a model written as equations needs (fit the dead time first)")
-        rates = sorted(float(-p.real) for p in linear_poles(model, fs))
-        gain, u0 = static_gain(model), operating_input(ctx)
-        if not u0 * gain > 0:
-            return (f"the mean plant input u0 = {u0:.4g} and the linear model's static gain {gain:.4g} give an "
-                    "operating level u0 G(0) / 2 <= 0: no level above an outlet (a model of detrended data, "
-                    "input_offset = -mean(u), has no operating point)")
-        y = np.concatenate([steady_mean(run, run.y) for run in ctx.runs])
-        swing = float(np.std(y))
-        if u0 * gain / 2 < LEVEL_SWINGS * swing:
-            return (f"the operating level u0 G(0) / 2 = {u0 * gain / 2:.4g} (u0 = {u0:.4g}, the mean plant input) is "
-                    f"below {LEVEL_SWINGS:g} standard deviation of the recorded output ({swing:.4g}): the "
-                    "excitation is not around a level above an outlet")
+        point = operating_point(ctx)
+        if isinstance(point, str):
+            return point
+        rates, gain, u0, y = point
         assignments = [tuple(rates)] if order == 1 else [tuple(reversed(rates)), tuple(rates)]
         fits = [prefit(ctx, poles, gain, u0, y) for poles in assignments]
         values, rss, _ = min(fits, key=lambda f: f[1])
         if not math.isfinite(rss):
             return "the start does not run (a level leaves its bounds or a value is not finite)"
         before = float(np.sum(ctx.target() ** 2))
-        upper = "" if order == 1 else (
-            f"; the upper tank's pole {values['k1'] ** 2 / (2 * values['k4'] * u0):.3g} 1/s, the lower's "
-            f"{values['k3'] ** 2 / (2 * values['k4'] * u0):.3g} (the better of the two assignments)")
         note = (f"linearisation of sqrt outflow at the mean input u0 = {u0:.4g}: operating level u0 G(0) / 2 = "
                 f"{u0 * gain / 2:.4g}, pre-fitted ({sum(f[2] for f in fits)} simulations) to {values['level']:.4g}"
-                f"{upper}")
+                + ("" if order == 1 else f"; {pole_note(values)}"))
         paths = {k: f"model.parameters.{k}" for k in ("k1", "k3", "k4") if k in values}
         return Estimate(values, {k: float("nan") for k in values}, explained_db(before, rss), note, paths=paths)
     return estimate
@@ -289,7 +320,7 @@ UNIT = "output units (the measured tank's level above its outlet at the mean inp
 
 HYPOTHESES = (
     Hypothesis("tank_outflow", "Square-root outflow (one tank)", "structure", "level", UNIT, SIGNATURE,
-               _applies(1), _estimate(1), _extend, ("k1", "k4"), reading=_reading, derive=derive),
+               applies_to(1), _estimate(1), extend, ("k1", "k4"), reading=_reading, derive=derive),
     Hypothesis("cascaded_tanks", "Square-root outflow (two cascaded tanks)", "structure", "level", UNIT, SIGNATURE,
-               _applies(2), _estimate(2), _extend, ("k1", "k3", "k4"), reading=_reading, derive=derive),
+               applies_to(2), _estimate(2), extend, ("k1", "k3", "k4"), reading=_reading, derive=derive),
 )
