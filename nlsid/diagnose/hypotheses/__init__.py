@@ -111,6 +111,11 @@ cascaded_tanks      as tank_outflow, for an LTI model with    ``equations`` (two
                     two real poles                            outflow, k2 = k1: k1, k3, k4), from
                                                               the linearisation, both pole
                                                               assignments tried
+cascaded_tanks_overflow
+                    as cascaded_tanks; the response to a      ``equations``: the upper tank capped
+                    rising input capped at the largest        at its rim (x1max, the spill share
+                    levels (the upper tank spills)            frac into the lower tank, with k1,
+                                                              k3, k4; tank_overflow.py)
 delay               BLA phase error growing linearly with     ``delay`` (seconds, a real number
                     frequency, gain right, no distortion      of samples)
 =================== ========================================= ====================================

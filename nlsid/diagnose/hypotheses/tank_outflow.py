@@ -38,9 +38,9 @@ extension fixes that scale by equal cross-sections, k2 = k1 (all of the upper ta
 raises the lower level at the rate it lowers its own; tanks of other cross-sections read with an
 upper level c = k2 / k1 times theirs), which leaves three rates, k1, k3 and k4,
 each determined by the data. Which of the linear model's two poles belongs to the upper tank the
-linear model cannot say (G is symmetric in p1 and p2) but the square roots can: both assignments
-are simulated from their start and the one of lower simulation error kept (the output offset c of
-each the mean of the measured output less the simulated one).
+linear model cannot say (G is symmetric in p1 and p2) but the square roots can: from each
+assignment's start (the output offset c the mean of the measured output less the simulated one)
+the tanks are pre-fitted briefly (:func:`prefit`) and the one of lower simulation error kept.
 
 The start uses the linear model's poles (a discrete model's as s = fs ln z) and its static gain
 (G(1) of a discrete model), not its zeros (the tanks have none: a fitted zero is the fit's); u0 is
@@ -51,8 +51,7 @@ outlet, not a zero-mean one around a linear model's origin). Dead time,
 input offset and channels and the input block of the linear model are kept, and an output
 saturation (a sensor range found in an earlier round) with its recorded limits (limit + output
 offset) where they were; another output block does not carry over to the level's scale (the
-family does not apply then). The fit
-engine then refines k1, k3, k4 with the output offset (``refine`` of
+family does not apply then). The fit engine then refines k1, k3, k4 with the output offset (``refine`` of
 :mod:`nlsid.diagnose.diagnosis`); the states start at the start's operating levels, which the
 runs' transient periods let the model leave for its own (an ``equations`` model has no lead-in).
 
