@@ -6,7 +6,8 @@ The flexible model is a polynomial nonlinear state-space model (PNLSS, Paduart e
 
     x[t+1] = A x + B u + E zeta(x, u),    y = C x + D u + F eta(x, u),
 
-zeta and eta all monomials of the states and the input of total degrees 2 and 3 (:data:`DEGREES`).
+zeta and eta all monomials of the states and the input of total degrees 2 and 3 (:data:`DEGREES`),
+or of a few combinations z of them (the LFR form, below).
 Its linear part starts from the user's model (the linear dynamics from u to y of an LTI or
 mechanical model, forces and blocks left out; of a block structure its filters in series), ZOH-
 discretised at the runs' rate and balanced, with EXTRA_STATES more states (:func:`with_delay_states`)
@@ -21,9 +22,12 @@ exactly as the hypotheses are (:mod:`nlsid.diagnose.gain`), so its error is comp
 named cause's: where the final extended model's error power exceeds the yardstick's by more than
 the verdict's F* (:mod:`nlsid.diagnose.verdict`), an effect outside the library remains.
 
-Its size is held to what an iteration can afford (:func:`affordable`, :data:`WORK`): the extra
-state and then the quadratic terms are left out for larger models or records, and a model too
-large even then is not fitted (stated).
+Its size is held to what an iteration can afford (:func:`affordable`, :data:`WORK`): where a
+polynomial in every state and the input costs too much (its monomial count grows as n^3: 120 of
+degrees 2 and 3 for 7 states and u), the nonlinear LFR form takes its place (Schoukens and Tiels,
+2017): the same degrees in LFR_INPUTS (or fewer) linear combinations z = C_z x + D_z u, fitted with
+the rest, the states kept (stated in the fit's notes). A model too large even then is not fitted
+(stated).
 
 Not fitted (the reason stated) in closed loop (the yardstick models the plant from the recorded
 u, while the diagnosis simulates the loop from r: their errors would not compare), for a model
@@ -33,6 +37,7 @@ user's model matches exactly.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -50,7 +55,9 @@ EXTRA_STATES = 1       # states beyond the user's model's, each started as a del
 WORK = 3e9             # samples x parameters^2 of an iteration's normal matrix at most (about 1 s here)
 SENSITIVITY_WORK = 3e8  # simulated samples (lead-in included) x parameters over the whole fit (about 30 s)
 MIN_ITERATIONS = 20     # accepted iterations of the nonlinear stage granted whatever SENSITIVITY_WORK says
-SHAPES = ((EXTRA_STATES, DEGREES), (0, DEGREES), (0, (3,)))  # (extra states, degrees), tried in this order
+LFR_INPUTS = 2          # combinations z = C_z x + D_z u of the LFR form, at most
+# (extra states, degrees, LFR combinations: 0 for the full form), tried in this order
+SHAPES = ((EXTRA_STATES, DEGREES, 0), (EXTRA_STATES, DEGREES, LFR_INPUTS), (EXTRA_STATES, DEGREES, 1), (0, DEGREES, 1))
 LINEAR_ITERATIONS = 20
 PATIENCE = 40          # iterates without a lower early-stopping error before the fit stops
 FILE = "black_box_model.yaml"
@@ -76,7 +83,8 @@ class Yardstick:
         if not self.fitted:
             return {"fitted": False, "reason": self.reason, "file": None}
         fit = self.fit.summary()
-        keep = ("status", "reason", "states", "state_degrees", "output_degrees", "parameters", "notes", "estimation_rms", "validation_rms", "linear_estimation_rms")
+        keep = ("status", "reason", "states", "state_degrees", "output_degrees", "form", "lfr_inputs", "parameters",
+                "notes", "estimation_rms", "validation_rms", "linear_estimation_rms")
         return {"fitted": True, "reason": "", "file": FILE, "kind": "pnlss", "early_stopping": self.early_stopping,
                 "fit": {key: fit[key] for key in keep}, "validation": self.score.summary()}
 
@@ -85,8 +93,9 @@ class Yardstick:
         s = self.score
         return [f"Black-box yardstick of nlsid diagnose (a PNLSS model, not a physical cause) fitted to the "
                 f"estimation data of {source}",
-                f"{self.fit.model.order} states, monomials of degrees {list(DEGREES)}, {self.fit.model.n_parameters} "
-                f"parameters; {self.fit.reason}",
+                f"{self.fit.model.order} states, monomials of degrees {list(self.fit.model.state_degrees)}"
+                + (f" of {self.fit.model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if self.fit.model.lfr
+                   else "") + f", {self.fit.model.n_parameters} parameters; {self.fit.reason}",
                 f"Validation error {s.error_rms:.4g} rms"]
 
 
@@ -125,8 +134,9 @@ def with_delay_states(model, count: int):
     x_e2[t+1] = x_e1[t], ...; they do not reach the output (C = 0) nor the other states, so the
     model's response is unchanged, while the output's sensitivity to their couplings (C_e: the
     delayed inputs themselves) is not zero and the fit can shape them into the dynamics it needs.
-    The monomial coefficients (all zero) are resized to the new state count."""
-    from nlsid.models.pnlss import Pnlss, exponents
+    The monomial coefficients (all zero) are resized to the new state count; an LFR form's
+    combinations get zero weights on the new states."""
+    from nlsid.models.pnlss import exponents
 
     n, m = model.order, model.order + count
     A = np.zeros((m, m))
@@ -135,10 +145,35 @@ def with_delay_states(model, count: int):
         A[n + i, n + i - 1] = 1.0
     B = np.concatenate([model.B, [1.0], np.zeros(count - 1)])
     C = np.concatenate([model.C, np.zeros(count)])
+    if model.lfr:
+        Cz = np.hstack([model.Cz, np.zeros((model.lfr_inputs, count))])
+        return model.replace(A=A, B=B, C=C, E=np.zeros((m, model.E.shape[1])), F=np.zeros_like(model.F), Cz=Cz)
     E = np.zeros((m, exponents(m, model.state_degrees, model.with_input).shape[0]))
     F = np.zeros(exponents(m, model.output_degrees, model.with_input).shape[0])
-    return Pnlss(A, B, C, model.D, E, F, model.fs, model.state_degrees, model.output_degrees, model.with_input,
-                 model.input_offset, model.output_offset, model.input_channels, model.zero_if_absent)
+    return model.replace(A=A, B=B, C=C, E=E, F=F)
+
+
+def as_recorded(runs: list[Run]) -> list[Run]:
+    """The runs as the PNLSS fit takes them: a part of an arbitrary record that diagnose compares
+    as one period (:class:`nlsid.io.ranges.RangeRun`) becomes the arbitrary record of exactly its
+    samples, started from an initial state the fit estimates (not a period repeated in steady
+    state, which a record that is not periodic is not); other runs as they are."""
+    from nlsid.io.ranges import RangeRun
+
+    out = []
+    for run in runs:
+        if not isinstance(run, RangeRun):
+            out.append(run)
+            continue
+        window = slice(run.start, run.start + run.period)
+        fields = {f.name: getattr(run, f.name) for f in dataclasses.fields(Run)}
+        for name in ("u", "y", "r"):
+            if fields[name] is not None:
+                fields[name] = fields[name][window]
+        fields.update(channels={name: x[window] for name, x in run.channels.items()}, period=None,
+                      transient_periods=0)
+        out.append(Run(**fields))
+    return out
 
 
 def _holdout(fit_runs: list[Run], val_runs: list[Run]) -> tuple[list[Run], list[Run], str]:
@@ -162,19 +197,31 @@ def _holdout(fit_runs: list[Run], val_runs: list[Run]) -> tuple[list[Run], list[
                                       "hold one out): its validation error is slightly optimistic")
 
 
-def affordable(order: int, samples: int) -> tuple[int, tuple[int, ...]] | None:
-    """The richest shape of :data:`SHAPES` (extra states, monomial degrees) whose Levenberg-
-    Marquardt iteration stays within :data:`WORK` (its normal matrix costs samples x parameters^2),
-    or None: a polynomial in every state is then too large (an LFR form, whose nonlinearity acts
-    on a few linear combinations of the states, is what such orders need)."""
+def parameters(order: int, degrees: tuple[int, ...], lfr_inputs: int = 0) -> int:
+    """Coefficients of a PNLSS model of ``order`` states with monomials of ``degrees`` in both
+    equations: of the states and the input (``lfr_inputs`` 0), or of that many combinations z
+    (the LFR form, whose Cz and Dz count too)."""
     from nlsid.models.pnlss import exponents
 
-    for extra, degrees in SHAPES:
-        n = order + extra
-        terms = exponents(n, degrees, True).shape[0]
-        parameters = n * n + 2 * n + 1 + (n + 1) * terms
-        if samples * parameters ** 2 <= WORK:
-            return extra, degrees
+    n = order
+    if lfr_inputs:
+        terms = exponents(lfr_inputs, degrees, False).shape[0]
+        return n * n + 2 * n + 1 + (n + 1) * terms + lfr_inputs * (n + 1)
+    terms = exponents(n, degrees, True).shape[0]
+    return n * n + 2 * n + 1 + (n + 1) * terms
+
+
+def affordable(order: int, samples: int) -> tuple[int, tuple[int, ...], int] | None:
+    """The richest shape of :data:`SHAPES` (extra states, monomial degrees, LFR combinations: 0
+    for the full form) whose Levenberg-Marquardt iteration stays within :data:`WORK` (its normal
+    matrix costs samples x parameters^2), or None. The full form is tried first; where its
+    polynomial in every state is too large, the LFR form with the same states and degrees, its
+    nonlinearity on a few linear combinations of them."""
+    for extra, degrees, inputs in SHAPES:
+        if inputs > order + extra + 1:
+            continue
+        if samples * parameters(order + extra, degrees, inputs) ** 2 <= WORK:
+            return extra, degrees, inputs
     return None
 
 
@@ -215,15 +262,23 @@ def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run],
         shape = affordable(model.order, samples)
         if shape is None:
             return Yardstick(f"not fitted: a polynomial state-space model of {model.order} states on {samples} samples "
-                             f"costs more than {WORK:.0e} samples x parameters^2 per iteration even with cubic terms "
-                             "alone (a form with the nonlinearity on a few state combinations is not built yet)")
-        extra, degrees = shape
-        if degrees != DEGREES:
-            model, _ = from_linear(start, fit_runs[0].fs, degrees, degrees, True, output_offset=output_offset)
+                             f"costs more than {WORK:.0e} samples x parameters^2 per iteration even in the LFR form "
+                             "with one combination z = Cz x + Dz u")
+        extra, degrees, inputs = shape
+        if inputs or degrees != DEGREES:
+            model, _ = from_linear(start, fit_runs[0].fs, degrees, degrees, True, output_offset=output_offset,
+                                   lfr_inputs=inputs)
         model = with_delay_states(model, extra) if extra else model
         own, early, rule = _holdout(fit_runs, val_runs)
+        own, early = as_recorded(own), as_recorded(early)
         fit = fit_pnlss(model, own, early, max_iterations=iterations(model, own + early),
                         linear_iterations=LINEAR_ITERATIONS, patience=PATIENCE)
+        if inputs:
+            full = parameters(model.order, degrees)
+            fit.notes.insert(0, f"LFR form: a polynomial in all {model.order} states and u would have {full} parameters, "
+                                f"{samples} x {full}^2 = {samples * full ** 2:.2g} samples x parameters^2 per iteration "
+                                f"(the limit is {WORK:.0e}); the nonlinearity acts on {inputs} combination(s) "
+                                f"z = Cz x + Dz u instead ({model.n_parameters} parameters), the states kept")
     except InputError as exc:
         return Yardstick(f"not fitted: {exc}")
     if fit.status == "failed" or not math.isfinite(fit.estimation_rms):

@@ -8,7 +8,9 @@ theta = the coefficients of A, B, C, D, E, F and the initial state of each arbit
 * Start: a linear model (:func:`nlsid.models.pnlss.from_linear`: the BLA's fit, balanced), E = F = 0.
   Stage "linear": A, B, C, D (and the initial states) first, E and F held at zero; stage
   "nonlinear_states" (monomials with the input in them: the start's linear part, E and F of the
-  monomials of the states alone free), then "nonlinear": all coefficients. A start whose nonlinear terms make the simulation diverge has them
+  monomials of the states alone free), then "nonlinear": all coefficients. The LFR form (monomials
+  of z = Cz x + Dz u) has no states-only stage: after the linear stage its combinations start as
+  the linear output (:func:`lfr_combinations`), then all coefficients, Cz and Dz included, are free. A start whose nonlinear terms make the simulation diverge has them
   shrunk tenfold until it does not (stated in the notes).
 * Levenberg-Marquardt with the exact Jacobian (:mod:`nlsid.simulate.pnlss_kernels`, forward
   sensitivities). The columns are normalised to unit length (parameter scaling); the normal matrix
@@ -131,6 +133,7 @@ class PnlssFit:
                 "start_validation_rms": self.iterations[0].validation_rms,
                 "states": self.model.order, "state_degrees": list(self.model.state_degrees),
                 "output_degrees": list(self.model.output_degrees), "with_input": self.model.with_input,
+                "form": "lfr" if self.model.lfr else "full", "lfr_inputs": self.model.lfr_inputs,
                 "parameters": self.model.n_parameters, "notes": list(self.notes),
                 "seconds": self.seconds, "jacobian_rate": self.jacobian_rate,
                 "iterations": [it.as_dict() for it in self.iterations]}

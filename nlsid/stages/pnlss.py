@@ -88,7 +88,9 @@ class PnlssResult:
         validation = "none" if fit.validation_rms is None else f"{fit.validation_rms:.4g}"
         return [f"nlsid fit --pnlss --model {self.model_source} --data {self.data_source}",
                 f"PNLSS, black box: {model.order} states, degrees {list(model.state_degrees)} (state) and "
-                f"{list(model.output_degrees)} (output), {model.n_parameters} coefficients",
+                f"{list(model.output_degrees)} (output)"
+                + (f" of {model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if model.lfr else "")
+                + f", {model.n_parameters} coefficients",
                 f"rms error: estimation {fit.estimation_rms:.4g}, validation {validation}; chosen: {fit.reason}",
                 f"report: {report_name}"]
 
@@ -131,11 +133,13 @@ def _config_of(model, name):
                                     f"{type(model).__name__}")
 
 
-def start_model(model, fs: float, degrees, output_degrees, with_input: bool, name=lambda a: a) -> tuple[Pnlss, str, str, list[str]]:
+def start_model(model, fs: float, degrees, output_degrees, with_input: bool, name=lambda a: a,
+                lfr: int = 0) -> tuple[Pnlss, str, str, list[str]]:
     """The start of a fit at the rate ``fs``: a PNLSS config as it is; a linear model config
     (transfer_function, zpk, state_space: the BLA's fit) realised by
-    :func:`nlsid.models.pnlss.from_linear` with E = F = 0, its offsets and input channels kept.
-    Returns (start, how it was realised, source name, config files)."""
+    :func:`nlsid.models.pnlss.from_linear` with E = F = 0 (the LFR form with ``lfr`` > 0
+    combinations z), its offsets and input channels kept. Returns (start, how it was realised,
+    source name, config files)."""
     from nlsid.models import from_config
     from nlsid.models.pnlss import from_linear
 
@@ -160,7 +164,7 @@ def start_model(model, fs: float, degrees, output_degrees, with_input: bool, nam
         raise InputError(f"{source}: model.output_timing", "a discrete PNLSS has no values between samples; fit the "
                                                            "linear start without output_timing")
     start, how = from_linear(plant.ss, fs, degrees, degrees if output_degrees is None else output_degrees,
-                             with_input, plant.offsets.input, plant.offsets.output)
+                             with_input, plant.offsets.input, plant.offsets.output, lfr)
     start = start.replace(input_channels=tuple(plant.offsets.channels.items()),
                           zero_if_absent=tuple(sorted(plant.offsets.zero_if_absent)))
     return start, how, source, configs
@@ -183,7 +187,7 @@ def _degrees(value, argument: str) -> tuple[int, ...]:
 def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validation: Sequence[str] | None = None,
               degrees=(2, 3), output_degrees=None, with_input: bool = True, max_iterations: int = 100,
               patience: int = 15, allow_overlap: bool = False, mapping: Mapping[str, str] | None = None, *,
-              names: Mapping[str, str] | None = None) -> PnlssResult:
+              names: Mapping[str, str] | None = None, lfr: int = 0) -> PnlssResult:
     """A PNLSS model fitted to recorded runs by simulation error (``docs/pnlss.md``).
 
     x[t+1] = A x + B u + E zeta(x, u), y = C x + D u + F eta(x, u): the linear part from ``model``
@@ -219,6 +223,10 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
         Signals of a foreign MCAP log.
     names : dict, optional
         Argument -> how the caller calls it in messages (the command line passes its flags).
+    lfr : int
+        0 (default): monomials of the states and u (the full form); n_z > 0: the nonlinear LFR
+        form, monomials of n_z combinations z = Cz x + Dz u fitted with the rest (1 to n + 1;
+        ``docs/pnlss.md``). Ignored for a pnlss start (its own form is kept).
 
     Returns
     -------
@@ -235,10 +243,10 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
 
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
-    for argument, value in (("max_iterations", max_iterations), ("patience", patience)):
-        if not (whole(value) and value >= (0 if argument == "max_iterations" else 1)):
-            raise InputError(name(argument), f"expected a whole number >= {0 if argument == 'max_iterations' else 1}, "
-                                             f"got {value!r}")
+    for argument, value in (("max_iterations", max_iterations), ("patience", patience), ("lfr", lfr)):
+        least = 1 if argument == "patience" else 0
+        if not (whole(value) and value >= least):
+            raise InputError(name(argument), f"expected a whole number >= {least}, got {value!r}")
     state_degrees = _degrees(degrees, name("degrees"))
     out_degrees = None if output_degrees is None else _degrees(output_degrees, name("output_degrees"))
     if isinstance(validation, str):
@@ -250,7 +258,8 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
     if len(rates) > 1:
         raise InputError(name("rec"), f"runs at different sample rates ({', '.join(f'{r:g}' for r in rates)} Hz): "
                                       "a discrete PNLSS runs at one")
-    start, how, source, configs = start_model(model, rates[0], state_degrees, out_degrees, bool(with_input), name)
+    start, how, source, configs = start_model(model, rates[0], state_degrees, out_degrees, bool(with_input), name,
+                                              int(lfr))
     result = fit(start, estimation, held, max_iterations=int(max_iterations), patience=int(patience))
     return PnlssResult(result, how, source, data.where, [r.run_id for r in estimation], [r.run_id for r in held],
                        configs, data.inputs)
