@@ -29,9 +29,10 @@ def test_the_overflow_is_named_with_its_rim():
     result = diagnose(linear_start(runs), "model.yaml", runs, "tanks.h5", yardstick=False)
     assert result.verdict.winner == "cascaded_tanks_overflow", result.headline()
     values = result.winner.estimate.values
-    assert values["x1max"] == pytest.approx(X1MAX * K2 / K1, rel=0.1)
-    assert values["frac"] == pytest.approx(FRAC * K1 / K2, rel=0.1)
-    fitted = identifiable(values["k1"], values["k1"], values["k3"], values["k4"])
+    assert values["parameter x1max"] == pytest.approx(X1MAX * K2 / K1, rel=0.1)
+    assert values["parameter frac"] == pytest.approx(FRAC * K1 / K2, rel=0.1)
+    k1, k3, k4 = (values[f"parameter {k}"] for k in ("k1", "k3", "k4"))
+    fitted = identifiable(k1, k1, k3, k4)
     assert fitted == pytest.approx(identifiable(K1, K2, K3, K4), rel=0.1), fitted
     assert result.final_score().above_floor_db < 3.0, result.headline()
     plain = next(o for o in result.outcomes if o.hypothesis.name == "cascaded_tanks")

@@ -60,7 +60,8 @@ def test_cascaded_tanks_then_the_sensor_ceiling_named_from_a_linear_fit():
     result = diagnose(linear_start(runs), "model.yaml", runs, "tanks.h5", yardstick=False)
     assert [o.hypothesis.name for o in result.chain] == ["cascaded_tanks", "output_saturation"], result.headline()
     values = result.chain[0].estimate.values
-    fitted = identifiable(values["k1"], values["k1"], values["k3"], values["k4"])
+    k1, k3, k4 = (values[f"parameter {k}"] for k in ("k1", "k3", "k4"))
+    fitted = identifiable(k1, k1, k3, k4)
     assert fitted == pytest.approx(identifiable(K1, K2, K3, K4), rel=0.1), fitted
     assert values["level"] == pytest.approx(X2, rel=0.1)
     final = result.final.extended["model"]

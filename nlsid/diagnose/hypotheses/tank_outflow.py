@@ -75,6 +75,21 @@ from nlsid.diagnose.simulation import LTI, ModelRunner, steady_mean
 PREFIT_STEPS = 12   # residual evaluations of a pre-fit (prefit), besides its Jacobians'
 LEVEL_SWINGS = 1.0  # the operating level at least this many standard deviations of the recorded output
 KEPT = ("input_offset", "input_channels", "delay", "input_nonlinearity")
+PARAMETER = "parameter "  # the prefix of an equations parameter's name in a diagnosis (mechanics.linear_paths)
+
+
+def named(values: dict) -> dict:
+    """``values`` with the equations' parameters (the rates, a rim) named as the diagnosis names the
+    parameters of an equations model it refines (``parameter k1``), the other values as they are."""
+    return {(PARAMETER + k if k in EQUATION_PARAMETERS else k): v for k, v in values.items()}
+
+
+def plain(values: dict) -> dict:
+    """The inverse of :func:`named`: ``parameter k1`` -> ``k1``."""
+    return {k.removeprefix(PARAMETER): v for k, v in values.items()}
+
+
+EQUATION_PARAMETERS = ("k1", "k3", "k4", "x1max", "frac")
 
 
 def linear_poles(model: dict, fs: float) -> np.ndarray:
@@ -290,21 +305,29 @@ def _estimate(order: int):
         note = (f"linearisation of sqrt outflow at the mean input u0 = {u0:.4g}: operating level u0 G(0) / 2 = "
                 f"{u0 * gain / 2:.4g}, pre-fitted ({sum(f[2] for f in fits)} simulations) to {values['level']:.4g}"
                 + ("" if order == 1 else f"; {pole_note(values)}"))
-        paths = {k: f"model.parameters.{k}" for k in ("k1", "k3", "k4") if k in values}
-        return Estimate(values, {k: float("nan") for k in values}, explained_db(before, rss), note, paths=paths)
+        paths = {PARAMETER + k: f"model.parameters.{k}" for k in ("k1", "k3", "k4") if k in values}
+        return Estimate(named(values), {k: float("nan") for k in named(values)}, explained_db(before, rss), note,
+                        paths=paths)
     return estimate
 
 
 def derive(fitted: dict, starts: dict, model: dict) -> dict[str, float]:
     """The operating levels of the fitted rates at the start's mean input u0: x* = (k4 u0 / k1)^2
     of one tank; x1* = (k4 u0 / k1)^2 and x2* = (k4 u0 / k3)^2 of two (k2 = k1)."""
+    fitted = plain(fitted)
     u0 = fitted["u0"]
     if "k3" not in fitted:
         return {"level": (fitted["k4"] * u0 / fitted["k1"]) ** 2}
     return {"level_upper": (fitted["k4"] * u0 / fitted["k1"]) ** 2, "level": (fitted["k4"] * u0 / fitted["k3"]) ** 2}
 
 
+def extend_named(data: dict, values: dict) -> dict:
+    """:func:`extend` of the values as the diagnosis names them (:func:`named`)."""
+    return extend(data, plain(values))
+
+
 def _reading(values: dict) -> str:
+    values = plain(values)
     if "k3" not in values:
         return (f"one tank: outflow k1 = {values['k1']:.4g}, inflow k4 = {values['k4']:.4g} per unit input; level "
                 f"{values['level']:.4g} at the mean input")
@@ -319,7 +342,9 @@ UNIT = "output units (the measured tank's level above its outlet at the mean inp
 
 HYPOTHESES = (
     Hypothesis("tank_outflow", "Square-root outflow (one tank)", "structure", "level", UNIT, SIGNATURE,
-               applies_to(1), _estimate(1), extend, ("k1", "k4"), reading=_reading, derive=derive),
+               applies_to(1), _estimate(1), extend_named, ("parameter k1", "parameter k4"), reading=_reading,
+               derive=derive),
     Hypothesis("cascaded_tanks", "Square-root outflow (two cascaded tanks)", "structure", "level", UNIT, SIGNATURE,
-               applies_to(2), _estimate(2), extend, ("k1", "k3", "k4"), reading=_reading, derive=derive),
+               applies_to(2), _estimate(2), extend_named, ("parameter k1", "parameter k3", "parameter k4"),
+               reading=_reading, derive=derive),
 )

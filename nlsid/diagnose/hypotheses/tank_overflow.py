@@ -35,8 +35,8 @@ import math
 import numpy as np
 
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db
-from nlsid.diagnose.hypotheses.tank_outflow import (SIGNATURE, applies_to, derive, extension, operating_point, pole_note,
-                                                    prefit, simulated, start_values)
+from nlsid.diagnose.hypotheses.tank_outflow import (PARAMETER, SIGNATURE, applies_to, derive, extension, named,
+                                                    operating_point, plain, pole_note, prefit, simulated, start_values)
 from nlsid.diagnose.hypotheses.tank_outflow import extend as extend_plain
 from nlsid.diagnose.simulation import steady_mean
 from nlsid.errors import InputError
@@ -50,7 +50,8 @@ NET = "-k1*sqrt(x1) + k4*u"
 def equations(values: dict) -> dict:
     """The equations model's own keys of the overflowing tanks of ``values`` (module docstring)."""
     x1max = float(values["x1max"])
-    return {"type": "equations", "states": {"x1": min(float(values["level_upper"]), x1max), "x2": float(values["level"])},
+    states = {"x1": min(float(values["level_upper"]), x1max), "x2": float(values["level"])}
+    return {"type": "equations", "states": states,
             "parameters": {k: float(values[k]) for k in ("k1", "k3", "k4", "x1max", "frac")},
             "derivatives": {"x1": f"where(x1 >= x1max, min({NET}, 0.0), {NET})",
                             "x2": f"k1*sqrt(x1) - k3*sqrt(x2) + where(x1 >= x1max, frac*max({NET}, 0.0), 0.0)"},
@@ -111,12 +112,18 @@ def _estimate(ctx: Context) -> Estimate | str:
     note = (f"linearisation of sqrt outflow at the mean input u0 = {u0:.4g}, the rim on a grid of the upper level's "
             f"percentiles and spill shares, pre-fitted ({sum(f[2] for f in fits)} simulations): the rim at "
             f"{values['x1max']:.4g}, {values['frac']:.3g} of the spill into the lower tank; {pole_note(values)}")
-    paths = {k: f"model.parameters.{k}" for k in ("k1", "k3", "k4", "x1max", "frac")}
+    paths = {PARAMETER + k: f"model.parameters.{k}" for k in ("k1", "k3", "k4", "x1max", "frac")}
     before = float(np.sum(ctx.target() ** 2))
-    return Estimate(values, {k: float("nan") for k in values}, explained_db(before, rss), note, paths=paths)
+    return Estimate(named(values), {k: float("nan") for k in named(values)}, explained_db(before, rss), note,
+                    paths=paths)
+
+
+def _extend(data: dict, values: dict) -> dict:
+    return extend(data, plain(values))
 
 
 def _reading(values: dict) -> str:
+    values = plain(values)
     return (f"two tanks (equal cross-sections, k2 = k1): outflows k1 = {values['k1']:.4g}, k3 = {values['k3']:.4g}, "
             f"inflow k4 = {values['k4']:.4g} per unit input; the upper tank overflows at x1max = "
             f"{values['x1max']:.4g} (on the scale of k2 = k1), {values['frac']:.3g} of the spill into the lower tank")
@@ -124,7 +131,8 @@ def _reading(values: dict) -> str:
 
 HYPOTHESES = (
     Hypothesis("cascaded_tanks_overflow", "Square-root outflow (two cascaded tanks), the upper one overflowing",
-               "structure", "x1max", "the upper tank's level (on the scale of equal cross-sections)",
+               "structure", "parameter x1max", "the upper tank's level (on the scale of equal cross-sections)",
                SIGNATURE + "; the response to a rising input capped at the largest levels (the upper tank spills)",
-               applies_to(2), _estimate, extend, ("k1", "k3", "k4", "x1max", "frac"), reading=_reading, derive=derive),
+               applies_to(2), _estimate, _extend, tuple(PARAMETER + k for k in ("k1", "k3", "k4", "x1max", "frac")),
+               reading=_reading, derive=derive),
 )
