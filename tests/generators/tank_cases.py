@@ -55,9 +55,10 @@ def linear_outflow(level: float):
 
 
 def tanks(u: np.ndarray, substeps: int, upper=sqrt_outflow, lower=sqrt_outflow, rim: float = math.inf,
-          frac: float = FRAC) -> np.ndarray:
-    """x2 at every sample of the columns of ``u`` (one run each), from the operating levels; RK4
-    of ``substeps`` steps per sample, u held; the levels kept at or above the tanks' floors.
+          frac: float = FRAC, measured: str = "x2") -> np.ndarray:
+    """x2 (or x1, ``measured``) at every sample of the columns of ``u`` (one run each), from the
+    operating levels; RK4 of ``substeps`` steps per sample, u held; the levels kept at or above
+    the tanks' floors.
 
     The upper tank at its ``rim`` (the mode of a step, fixed over it) cannot rise and spills
     ``frac`` of its excess inflow into the lower tank. A step that would carry the upper level
@@ -83,7 +84,7 @@ def tanks(u: np.ndarray, substeps: int, upper=sqrt_outflow, lower=sqrt_outflow, 
 
     out = np.empty_like(u)
     for n in range(u.shape[0]):
-        out[n] = x2
+        out[n] = x2 if measured == "x2" else x1
         v = u[n]
         for _ in range(substeps):
             full = x1 >= rim
@@ -120,13 +121,14 @@ def inputs(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 
 
 def recording(rng: np.random.Generator, ceiling: float = math.inf, rim: float = math.inf, step_limit: float = 1e-3,
-              **outflows) -> list[Run]:
-    """The runs as recorded: the lower level plus the sensor's offset and noise, clipped at the
-    sensor's ``ceiling``; the upper tank overflowing at ``rim``. The generator's step error (the
-    change when the step is halved) is asserted below ``step_limit`` times the noise."""
+              measured: str = "x2", **outflows) -> list[Run]:
+    """The runs as recorded: the lower level (the upper one, ``measured="x1"``: one tank) plus the
+    sensor's offset and noise, clipped at the sensor's ``ceiling``; the upper tank overflowing at
+    ``rim``. The generator's step error (the change when the step is halved) is asserted below
+    ``step_limit`` times the noise."""
     u, bins = inputs(rng)
-    y = tanks(u, SUBSTEPS, rim=rim, **outflows)
-    step_error = np.max(np.abs(y - tanks(u, 2 * SUBSTEPS, rim=rim, **outflows)))
+    y = tanks(u, SUBSTEPS, rim=rim, measured=measured, **outflows)
+    step_error = np.max(np.abs(y - tanks(u, 2 * SUBSTEPS, rim=rim, measured=measured, **outflows)))
     assert step_error < step_limit * NOISE, step_error
     white = rng.standard_normal(y.shape) * NOISE * math.sqrt(1 - AR**2)
     noise = scipy.signal.lfilter([1.0], [1.0, -AR], white, axis=0)
