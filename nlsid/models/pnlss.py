@@ -336,17 +336,19 @@ def lfr_start_rows(C: np.ndarray, D: float, inputs: int, where: str = "nonlinear
 
 
 def from_linear(ss: StateSpace, fs: float, state_degrees=(2, 3), output_degrees=(2, 3), with_input: bool = True,
-                input_offset: float = 0.0, output_offset: float = 0.0, lfr_inputs: int = 0) -> tuple[Pnlss, str]:
+                input_offset: float = 0.0, output_offset: float = 0.0, lfr_inputs: int = 0,
+                lfr_where: str = "lfr_inputs") -> tuple[Pnlss, str]:
     """A PNLSS model at ``fs`` whose linear part is ``ss`` (ZOH-discretised if continuous, a dead
     time as shift-register states, then balanced: :func:`balanced`) and whose nonlinear
     coefficients E, F are zero; and how the realisation was obtained. ``lfr_inputs`` > 0: the LFR
-    form with that many combinations z, started by :func:`lfr_start_rows`."""
+    form with that many combinations z, started by :func:`lfr_start_rows` (more than n + 1 refused,
+    an InputError naming ``lfr_where``)."""
     sd = check_degrees(state_degrees, "state_degrees")
     od = check_degrees(output_degrees, "output_degrees")
     realisation, how = balanced(discretised(ss, fs))
     n = realisation.order
     C = np.array(realisation.C, float)
-    Cz, Dz = lfr_start_rows(C, float(realisation.D), int(lfr_inputs)) if lfr_inputs else (None, None)
+    Cz, Dz = lfr_start_rows(C, float(realisation.D), int(lfr_inputs), lfr_where) if lfr_inputs else (None, None)
     variables, inputs = (n, with_input) if Cz is None else (Cz.shape[0], False)
     nz = exponents(variables, sd, inputs).shape[0]
     nh = exponents(variables, od, inputs).shape[0]

@@ -164,7 +164,7 @@ def start_model(model, fs: float, degrees, output_degrees, with_input: bool, nam
         raise InputError(f"{source}: model.output_timing", "a discrete PNLSS has no values between samples; fit the "
                                                            "linear start without output_timing")
     start, how = from_linear(plant.ss, fs, degrees, degrees if output_degrees is None else output_degrees,
-                             with_input, plant.offsets.input, plant.offsets.output, lfr)
+                             with_input, plant.offsets.input, plant.offsets.output, lfr, name("lfr"))
     start = start.replace(input_channels=tuple(plant.offsets.channels.items()),
                           zero_if_absent=tuple(sorted(plant.offsets.zero_if_absent)))
     return start, how, source, configs
