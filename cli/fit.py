@@ -12,13 +12,16 @@ from .options import map_option, parse_map, split_options
 
 @click.command(cls=StageCommand)
 @click.argument("bla_file", required=False, type=click.Path(dir_okay=False))
-@click.option("--order", default=None, metavar="NB/NA|auto", help="Numerator/denominator orders, or auto (scan and select).")
+@click.option("--order", default=None, metavar="NB/NA|auto",
+              help="Numerator/denominator orders, or auto (scan and select). N/N from 5 poles on is fitted by vector "
+                   "fitting, kept stable.")
 @click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,
               help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
 @click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
 @click.option("--max-order", type=click.IntRange(min=1), default=None,
-              help="Largest na scanned by --order auto. Default: 4, and up to 10 (nb = na-2..na) while no order "
-                   "reaches its cost bound.")
+              help="Largest na scanned by --order auto (polynomial fits of every nb <= na). Default: the poles "
+                   "counted by vector fitting (up to 40); fewer than 5: the polynomial scan up to 4, and up to 10 "
+                   "(nb = na-2..na) while no order reaches its cost bound.")
 @click.option("--level", type=click.IntRange(min=0), default=None, help="Level index in bla.h5 (required when it holds several).")
 @click.option("--plot", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG): data, model, residual, noise and nonlinear std.")
 @click.option("--model", "model_config", type=click.Path(dir_okay=False), default=None,

@@ -1,5 +1,11 @@
 """``nlsid fit bla.h5``: a transfer function fitted to one level of a BLA file, by a given or a
 selected order, with the report numbers (:mod:`nlsid.fit.tf_fit`, :mod:`nlsid.fit.order`).
+
+Many poles (VECTOR_FIT_POLES or more): a given order N/N is fitted by vector fitting
+(:mod:`nlsid.fit.tf_vector`), and ``--order auto`` without ``--max-order`` counts the poles the data
+support by vector fits first, choosing among them from VECTOR_FIT_POLES poles on
+(:mod:`nlsid.fit.order_poles`); fewer poles, or no count within the cost bound: the polynomial
+scan (:func:`nlsid.fit.order.select_order`).
 """
 
 from __future__ import annotations
@@ -11,7 +17,9 @@ from dataclasses import dataclass
 from nlsid.errors import InputError
 from nlsid.fit.bla_source import BLALevel, frf_from_bla
 from nlsid.fit.order import OrderSelection, select_order
+from nlsid.fit.order_poles import count_poles, select_many_poles
 from nlsid.fit.tf_fit import TFFit, fit_transfer_function
+from nlsid.fit.tf_vector import fit_vector
 
 _ORDER = re.compile(r"(\d+)/(\d+)")
 
@@ -79,6 +87,8 @@ class BLAFit:
 
 DEFAULT_MAX_ORDER = 4     # the orders --order auto scans when --max-order is not given ...
 EXTENDED_MAX_ORDER = 10   # ... and how far it goes on when none of them reaches its cost bound
+VECTOR_FIT_POLES = DEFAULT_MAX_ORDER + 1  # from this many poles N/N is fitted by vector fitting
+MAX_DELAY = 10            # --delay auto: 0..MAX_DELAY samples
 
 
 def fit_bla(path: str | os.PathLike, order: tuple[int, int] | None, domain: str, delay: int | None,
@@ -93,11 +103,43 @@ def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, dela
               max_order: int | None) -> BLAFit:
     """:func:`fit_bla` of a level already taken from its BLA (:mod:`nlsid.fit.bla_source`)."""
     if order is not None:
-        return BLAFit(source, fit_transfer_function(source.data, order[0], order[1], domain, delay), None)
+        nb, na = order
+        if nb == na >= VECTOR_FIT_POLES:
+            return BLAFit(source, _given_vector_fit(source.data, na, domain, delay), None)
+        return BLAFit(source, fit_transfer_function(source.data, nb, na, domain, delay), None)
     scanned = DEFAULT_MAX_ORDER if max_order is None else max_order
     if delay is None:
         delay = fit_transfer_function(source.data, scanned, scanned, domain, None).model.delay
-    selection = select_order(source.data, scanned, domain, delay,
-                             extend_to=EXTENDED_MAX_ORDER if max_order is None else None)
+    if max_order is not None:
+        selection = select_order(source.data, scanned, domain, delay)
+        return BLAFit(source, selection.fit, selection)
+    count = count_poles(source.data, delay)
+    few = count.accepted and count.fit.order < VECTOR_FIT_POLES
+    if count.accepted and not few:
+        selection = select_many_poles(source.data, count, domain)
+        if selection is not None:
+            return BLAFit(source, selection.fit, selection)
+    # fewer poles suffice: the polynomial scan, not beyond na = 4 while no order passes (the count
+    # says one does); no count within the bound: the polynomial scan as far as EXTENDED_MAX_ORDER
+    selection = select_order(source.data, scanned, domain, delay, extend_to=EXTENDED_MAX_ORDER,
+                             extend_unpassed=not few)
+    passed = any(r.eligible and r.accepted for r in selection.scan)
+    if few and not passed:
+        vector = select_many_poles(source.data, count, domain)
+        if vector is not None:
+            vector.reason += (f"; the polynomial scan up to na = {scanned} found no stable order within its bound "
+                              f"where the vector fits found {count.fit.order} poles")
+            return BLAFit(source, vector.fit, vector)
+    selection.reason += (f"; vector fits counted the poles first ({count.reason}), so the polynomial scan decided"
+                         if few else f"; vector fits counted the poles first ({count.reason}); none eligible "
+                                     "within its bound, so the polynomial scan decided")
     return BLAFit(source, selection.fit, selection)
+
+
+def _given_vector_fit(data, poles: int, domain: str, delay: int | None):
+    """A given order N/N of VECTOR_FIT_POLES poles or more, by vector fitting kept stable
+    (:func:`nlsid.fit.tf_vector.fit_vector`); ``delay`` None: the best cost over 0..10 samples."""
+    if delay is not None:
+        return fit_vector(data, poles, domain, delay)
+    return min((fit_vector(data, poles, domain, d) for d in range(MAX_DELAY + 1)), key=lambda f: f.cost)
 

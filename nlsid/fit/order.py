@@ -147,7 +147,7 @@ def line_correlation(data: FRFData, fit: TFFit) -> float:
     return max(1.0, 1.0 + 2.0 * sum(rho))
 
 
-def _nested_better(best: OrderResult, eligible: list[OrderResult], realizations: int | None,
+def nested_better(best: OrderResult, eligible: list[OrderResult], realizations: int | None,
                    correlation: float) -> OrderResult | None:
     """The order of fewest parameters, nesting ``best``, whose cost is lower than best's by more
     than its extra parameters explain (:func:`likelihood_ratio_bound`); None if there is none."""
@@ -170,10 +170,12 @@ def extension_orders(na: int) -> list[tuple[int, int]]:
 
 
 def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 0,
-                 extend_to: int | None = None) -> OrderSelection:
+                 extend_to: int | None = None, extend_unpassed: bool = True) -> OrderSelection:
     """Scan the candidate orders and choose one (module docstring); the reason is plain text.
     ``extend_to``: when no eligible order up to ``max_order`` is within its cost bound, go on
-    with :func:`extension_orders` of na = max_order + 1, ... up to ``extend_to``, until one is."""
+    with :func:`extension_orders` of na = max_order + 1, ... up to ``extend_to``, until one is
+    (``extend_unpassed`` False: not; the scan goes past ``max_order`` only to test larger nested
+    orders against one that passed)."""
     scan, fits = [], {}
     enough = None  # parameter count of the first stable order within its bound: larger ones fitted quickly
 
@@ -202,7 +204,7 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         scan_order(nb, na)
     first_max = scanned_to = max_order
     bounded = any(math.isfinite(r.cost_bound) for r in scan)
-    while enough is None and bounded and extend_to is not None and scanned_to < extend_to:
+    while enough is None and bounded and extend_unpassed and extend_to is not None and scanned_to < extend_to:
         scanned_to += 1
         for nb, na in extension_orders(scanned_to):
             scan_order(nb, na)
@@ -231,7 +233,7 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
             for nb, na in sorted(o for o in quick if o[0] >= best.nb and o[1] >= best.na):
                 scan_order(nb, na, thorough=True)  # a candidate now: fitted as thoroughly as best
             kappa = line_correlation(data, fits[(best.nb, best.na)])
-            step = _nested_better(best, [r for r in scan if r.eligible], data.realizations, kappa)
+            step = nested_better(best, [r for r in scan if r.eligible], data.realizations, kappa)
             if step is None:
                 break
             size = step.nb + step.na - best.nb - best.na

@@ -20,7 +20,7 @@ seconds at 20-40 poles, where the polynomial form's fits grow ill conditioned be
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -47,12 +47,14 @@ class PoleCandidate:
 
 @dataclass(frozen=True)
 class PoleSelection:
-    """The chosen fit, every scanned candidate, whether the choice is within its bound, and why."""
+    """The chosen fit, every scanned candidate, whether the choice is within its bound, and why;
+    ``fits`` holds the fit of every scanned order (poles -> :class:`VectorFit`)."""
 
     fit: VectorFit
     scan: list[PoleCandidate]
     accepted: bool
     reason: str
+    fits: dict = field(default_factory=dict)
 
 
 def _ordered(scan: dict[int, PoleCandidate]) -> list[PoleCandidate]:
@@ -116,11 +118,11 @@ def select_poles(data, max_poles: int = DEFAULT_MAX_POLES, domain: str = "z", st
         chosen = scan[high]
         return PoleSelection(fits[high], _ordered(scan), True,
                              f"{high} poles: the fewest whose cost {chosen.cost:.6g} is within its bound "
-                             f"{chosen.bound:.6g}" + (f" ({low} poles: above it)" if low else ""))
+                             f"{chosen.bound:.6g}" + (f" ({low} poles: above it)" if low else ""), fits)
     scan = _ordered(scan)
     ratio = [c.cost / c.bound if np.isfinite(c.bound) and c.bound > 0 else np.inf for c in scan]
     best = int(np.argmin(ratio)) if np.isfinite(np.min(ratio)) else int(np.argmin([c.cost for c in scan]))
     chosen = scan[best]
     return PoleSelection(fits[scan[best].poles], scan, False,
                          f"no order up to {top} poles has its cost within its bound; {chosen.poles} poles "
-                         f"come closest (cost {chosen.cost:.6g}, bound {chosen.bound:.6g})")
+                         f"come closest (cost {chosen.cost:.6g}, bound {chosen.bound:.6g})", fits)

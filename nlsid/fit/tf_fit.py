@@ -60,6 +60,7 @@ class TFFit:
     how: str = "free"             # free, integrator or stabilised (:func:`nlsid.fit.tf_stable.fit_stable`)
     note: str = ""                # why a stabilised or integrator fit was made
     free_pole: float = math.nan   # the free fit's largest |z| (z) or Re s (s), :func:`nlsid.fit.tf_stable.fit_stable`
+    vector: object = None         # the vector fit behind a fit of many poles (:mod:`nlsid.fit.tf_vector`), else None
 
     @property
     def n_theta(self) -> int:

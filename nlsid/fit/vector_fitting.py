@@ -71,6 +71,7 @@ NOISE_LEVEL_COST = 2.0          # a start whose cost is below this times the lin
 RELOCATION_TOLERANCE = 1e-10    # relative pole change (to the band scale) that ends the relocation
 SMALL_SIGMA_DIRECT = 1e-8       # |d~| below this: the relaxed step is degenerate, redo it with d~ = 1
 STABILITY_MARGIN = 1e-12        # a reflected pole on the boundary is moved this far inside
+REFINE_TOLERANCE = 1e-6         # a refinement step lowering V by less than this fraction of it ends the refinement
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,13 @@ class VectorFit:
         """theta = [Re p, Im p (pairs only), Re r, Im r (pairs only) per pole ..., d], the order of
         :attr:`covariance`."""
         return _pack(self.poles, self.residues, self.direct)
+
+    def with_parameters(self, theta: np.ndarray) -> "VectorFit":
+        """This fit with the parameters ``theta`` (the layout of :attr:`parameters`), the rest kept."""
+        from dataclasses import replace
+
+        poles, residues, direct = _unpack(np.asarray(theta, float), self.poles.imag > 0)
+        return replace(self, poles=poles, residues=residues, direct=direct)
 
     def all_poles(self) -> np.ndarray:
         """Every pole, each pair as both members."""
@@ -181,6 +189,19 @@ class VectorFit:
             B[i:i + m] = np.linalg.solve(phi - np.eye(m), block @ discrete.B[i:i + m])
             i += m
         return StateSpace(A, B, discrete.C.copy(), discrete.D, discrete=False, delay=discrete.delay)
+
+    def response_std(self, frequency: np.ndarray) -> np.ndarray:
+        """Standard deviation of the model's response at the frequencies (Hz) from :attr:`covariance`
+        by linear propagation: var G_k = g_k^T cov g_k for the real and the imaginary part summed,
+        g_k = dG(x_k)/dtheta (NaN without a covariance). The delay's factor has modulus 1."""
+        x = points(np.asarray(frequency, float), self.domain, self.fs)
+        if self.covariance is None:
+            return np.full(x.size, np.nan)
+        J = -_jacobian(self.parameters, self.poles.imag > 0, x, np.ones(x.size))
+        g_re, g_im = J[:x.size], J[x.size:]
+        variance = (np.einsum("ki,ij,kj->k", g_re, self.covariance, g_re)
+                    + np.einsum("ki,ij,kj->k", g_im, self.covariance, g_im))
+        return np.sqrt(np.maximum(variance, 0.0))
 
     def modes(self) -> list[dict]:
         """Each complex pair as a mode: natural frequency (Hz) and damping ratio of its continuous-time
@@ -316,11 +337,21 @@ def _lstsq(M: np.ndarray, y: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(M, axis=0)
     norm[norm == 0] = 1.0
     Ms = M / norm
-    Q, R = np.linalg.qr(Ms)
+    R, qy = _triangular(Ms, y)
     diagonal = np.abs(np.diag(R))
     if diagonal.size and diagonal.min() > 1e-13 * diagonal.max():
-        return solve_triangular(R, Q.T @ y) / norm
+        return solve_triangular(R, qy) / norm
     return np.linalg.lstsq(Ms, y, rcond=None)[0] / norm
+
+
+def _triangular(M: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R and Q^T y of M = Q R, from the triangular factor of [M, y] alone (Q is never formed: on
+    the tall systems of 10^4 lines that halves the work of a reduced QR)."""
+    from scipy.linalg import qr
+
+    n = M.shape[1]
+    R = qr(np.column_stack([M, y]), mode="r", overwrite_a=True, check_finite=False)[0]
+    return R[:n, :n], R[:n, n]
 
 
 def relocate(x: np.ndarray, G: np.ndarray, weight: np.ndarray, poles: np.ndarray) -> np.ndarray:
@@ -430,7 +461,11 @@ def _refine(x, G, weight, poles, residues, direct, iterations: int):
     ``iterations`` Jacobians. Each Jacobian J (columns scaled to unit norm) is factored once,
     J = Q R; the damped step for any lambda then solves the small problem
     [R; sqrt(lambda) I] delta = [-Q^T e; 0] (Moré 1978), so a rejected step costs no new QR of the
-    tall Jacobian. Stops when a step lowers V by less than 1e-12 of it."""
+    tall Jacobian. Stops when a step lowers V by less than REFINE_TOLERANCE of it: with noise
+    V ~ (1/2) chi^2 of about 2F degrees of freedom, so 1e-6 V is far below its spread sqrt(F) and the
+    likelihood-ratio bound of one parameter (4.5) that the order selection compares cost drops with
+    (measured on 18,000 lines: 6 poles converged at the first Jacobian, and 20 Jacobians followed,
+    each lowering V by less than 1e-3)."""
     pairs = poles.imag > 0
     theta = _pack(poles, residues, direct)
 
@@ -445,8 +480,7 @@ def _refine(x, G, weight, poles, residues, direct, iterations: int):
         J = _jacobian(theta, pairs, x, weight)
         norm = np.linalg.norm(J, axis=0)
         norm[norm == 0] = 1.0
-        Q, R = np.linalg.qr(J / norm)
-        qe = Q.T @ e
+        R, qe = _triangular(J / norm, e)
         n = theta.size
         improved = False
         for _ in range(30):
@@ -462,7 +496,7 @@ def _refine(x, G, weight, poles, residues, direct, iterations: int):
                 improved = True
                 break
             damping *= 4
-        if not improved or decrease < 1e-12 * cost:
+        if not improved or decrease < REFINE_TOLERANCE * cost:
             break
     return _unpack(theta, pairs)
 
@@ -548,7 +582,7 @@ def vector_fit(frequency: np.ndarray, G: np.ndarray, variance: np.ndarray | None
         already reaches the noise level (cost below NOISE_LEVEL_COST times the lines); the
         relocation of lower cost is kept.
     iterations : int
-        Upper bound of relocation steps.
+        Upper bound of relocation steps (0: the starting poles kept, only refined).
     refine : bool
         Run the Levenberg-Marquardt refinement of V.
     refine_evaluations : int
@@ -609,10 +643,12 @@ def _relocation(x: np.ndarray, G: np.ndarray, weight: np.ndarray, poles: np.ndar
                 iterations: int) -> tuple[np.ndarray, np.ndarray, float, float, int]:
     """Relocation steps from ``poles`` until they settle, the cost stops falling (by less than
     RELOCATION_STALL of it over three steps: in noise the poles jitter at the noise level) or
-    ``iterations`` are spent; the poles of the lowest cost met, the residues and d with them, that
-    cost V, and the steps taken."""
+    ``iterations`` are spent; the poles of the lowest cost met (the start's included: ``iterations``
+    = 0 keeps the start), the residues and d with them, that cost V, and the steps taken."""
     current = _reflect(poles, domain) if stable else poles
-    best = None
+    current = _canonical(current, 1e-12 * max(1.0, float(np.max(np.abs(current)))))
+    residues, direct = residues_for(x, G, weight, current)
+    best = (current, residues, direct, _cost(x, G, weight, current, residues, direct))  # no step: the start's
     history = []
     steps = 0
     for steps in range(1, iterations + 1):
@@ -624,7 +660,7 @@ def _relocation(x: np.ndarray, G: np.ndarray, weight: np.ndarray, poles: np.ndar
         current = new
         residues, direct = residues_for(x, G, weight, current)
         cost = _cost(x, G, weight, current, residues, direct)
-        if best is None or cost < best[3]:
+        if cost < best[3]:
             best = (current, residues, direct, cost)
         history.append(best[3])
         stalled = len(history) > 3 and history[-4] - history[-1] <= RELOCATION_STALL * history[-1]

@@ -146,12 +146,23 @@ class TransferFunctionFit:
 
     @property
     def model(self):
-        """The fitted :class:`nlsid.models.lti.TransferFunction` (``.config()`` is the ``model`` block)."""
+        """The fitted :class:`nlsid.models.lti.TransferFunction`, or for many poles its
+        :class:`nlsid.fit.modal_model.ModalModel` (:attr:`modal`); ``.config()`` is the ``model`` block."""
         return self.fitted.fit.model
 
     @property
+    def modal(self):
+        """The modal state space (:class:`nlsid.fit.modal_model.ModalModel`) of a fit of many poles whose
+        polynomial coefficients do not reproduce it in floating point, else None (the model is a
+        :class:`nlsid.models.lti.TransferFunction`)."""
+        from nlsid.fit.modal_model import ModalModel
+
+        return self.model if isinstance(self.model, ModalModel) else None
+
+    @property
     def num(self) -> np.ndarray:
-        """Numerator: descending powers of s (``domain="s"``) or ascending powers of z^-1 (``"z"``)."""
+        """Numerator: descending powers of s (``domain="s"``) or ascending powers of z^-1 (``"z"``)
+        (of a :attr:`modal` model: its polynomial coefficients, for reference only)."""
         return np.array(self.model.num, dtype=float)
 
     @property
@@ -208,7 +219,8 @@ class TransferFunctionFit:
     def header(self, report_name: str) -> list[str]:
         """The comment lines of the model YAML (``report_name``: the report file beside it)."""
         fit_, report, level = self.fitted.fit, self.report(), self.fitted.level
-        return [f"nlsid fit {self.source}: {fit_.nb}/{fit_.na} {self.domain}-domain transfer function, "
+        form = "transfer function" if self.modal is None else "transfer function as a modal state space"
+        return [f"nlsid fit {self.source}: {fit_.nb}/{fit_.na} {self.domain}-domain {form}, "
                 f"{report['stability']}" + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
                 f"cost {fit_.cost:.6g}, {cost_check(fit_)} ({fit_.lines} lines)",
                 f"weights: {level.weights}" if level.weighted
@@ -230,6 +242,8 @@ class TransferFunctionFit:
         if sampled or self.domain == "z":
             return self.model.response(frequency / self.fs, 1)
         s = 2j * np.pi * frequency
+        if self.modal is not None:
+            return self.modal.to_state_space().frequency_response(s) * np.exp(-s * self.delay_seconds)
         return np.polyval(self.num, s) / np.polyval(self.den, s) * np.exp(-s * self.delay_seconds)
 
     def _no_delay(self, where: str) -> None:
@@ -250,9 +264,14 @@ class TransferFunctionFit:
 
     def to_scipy(self):
         """The model as :class:`scipy.signal.lti` (``s``) or :class:`scipy.signal.dlti` (``z``, dt = 1/fs,
-        the dead time as poles at z = 0). A continuous model with a dead time is refused (no lti holds one)."""
+        the dead time as poles at z = 0). A continuous model with a dead time is refused (no lti holds one).
+        A :attr:`modal` model without dead time is given as its state space (A, B, C, D)."""
         from scipy import signal
 
+        if self.modal is not None and not self.delay:
+            ss = self.modal.to_state_space()
+            system = (ss.A, ss.B[:, None], ss.C[None, :], np.array([[ss.D]]))
+            return signal.dlti(*system, dt=1.0 / self.fs) if self.domain == "z" else signal.lti(*system)
         if self.domain == "z":
             num, den = self._z_polynomials()
             return signal.dlti(num, den, dt=1.0 / self.fs)
@@ -374,7 +393,9 @@ def fit_tf(b: BlaResult | str | os.PathLike, order=(2, 2), domain: str = "s", le
     delay : int or "auto"
         Dead time in samples, or the best of 0..10.
     max_order : int, optional
-        Largest na of ``order="auto"`` (default: 4, and up to 10 while no order reaches its bound).
+        Largest na of ``order="auto"`` (polynomial fits of every nb <= na). Default: the poles the
+        data support, counted by vector fitting up to 40 (``docs/commands.md``); fewer than 5: the
+        polynomial scan up to 4, and up to 10 while no order reaches its bound.
     names : dict, optional
         Argument -> how the caller calls it in messages (the command line passes its flags).
 

@@ -1,0 +1,120 @@
+"""Order selection where the data need many poles: vector fits of N poles, scanned as far as the data support.
+
+``--order auto`` first counts the poles the BLA supports with vector fits
+(:func:`nlsid.fit.pole_count.select_poles`: N = 1, 2, 4, ... doubling to the first N whose
+weighted cost lies within its bound, then bisection to the fewest, up to
+:data:`nlsid.fit.pole_count.DEFAULT_MAX_POLES` or the lines' limit). Each candidate is the model
+N/N (n_theta = 2N + 1) in pole-residue form, kept stable (:mod:`nlsid.fit.tf_vector`), whose
+conditioning does not degrade with N as the polynomial form's does (book ch. 7, Ex 60). When
+the fewest poles within the bound are more than the polynomial scan's ``fewest - 1`` (na = 4 by
+default), the choice is made among these fits by the rules of :mod:`nlsid.fit.order`: the eligible
+fit with the fewest parameters whose cost lies within its bound, then a nested fit of N + 1 or
+N + 2 poles instead where its cost is lower by more than its extra parameters fitting noise could
+lower it (:func:`nlsid.fit.order.nested_better`, the likelihood ratio), repeated from the order
+taken; each row with its held-out error (the fit repeated on every other line from its poles,
+:func:`nlsid.fit.tf_vector.holdout_error`). Otherwise (fewer poles suffice, or no number of poles
+reaches the bound: nonlinear distortions outside the weights, integrators the stable vector fit
+cannot place on the boundary) the polynomial scan decides, as without vector fitting.
+"""
+
+from __future__ import annotations
+
+import math
+
+from nlsid.errors import InputError
+from nlsid.fit.cost_statistics import ACCEPT_PROBABILITY, expected_cost
+from nlsid.fit.frf_data import FRFData
+from nlsid.fit.order import OrderResult, OrderSelection, likelihood_ratio_bound, line_correlation, nested_better
+from nlsid.fit.pole_count import DEFAULT_MAX_POLES, PoleSelection, select_poles
+from nlsid.fit.tf_fit import TFFit
+from nlsid.fit.tf_vector import from_vector_fit, holdout_error, on_boundary
+from nlsid.fit.vector_fitting import vector_fit
+
+NESTED_STEPS = 2  # poles beyond the order taken fitted to test it against larger nested orders
+
+
+def _row(fit: TFFit, data: FRFData) -> OrderResult:
+    return OrderResult(fit.nb, fit.na, fit.cost, fit.expected_cost, fit.cost_std, holdout_error(data, fit),
+                       fit.accepted, fit.cost_bound, fit.model.stability(), fit.how, fit.free_pole,
+                       fit.how == "stabilised" and on_boundary(fit))
+
+
+def count_poles(data: FRFData, delay: int = 0, max_poles: int = DEFAULT_MAX_POLES) -> PoleSelection:
+    """The pole count of the BLA (:func:`nlsid.fit.pole_count.select_poles`, stable ``z`` fits)."""
+    return select_poles(data, max_poles, "z", stable=True, delay=delay)
+
+
+def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
+                      max_poles: int = DEFAULT_MAX_POLES) -> OrderSelection | None:
+    """The choice among the vector fits of ``count`` (module docstring), nested orders up to
+    ``max_poles`` tested beside them, or None when none is eligible and within its bound (the
+    polynomial scan then decides)."""
+    top = min(max_poles, data.bins.size - 1)
+    fits: dict[int, TFFit] = {}
+    rows: dict[int, OrderResult] = {}
+    skipped: dict[int, str] = {}  # orders without an s model: why
+    delay = count.fit.delay
+
+    def add(n: int, vector=None) -> None:
+        if n in rows or n in skipped or n > top:
+            return
+        if vector is None:
+            vector = vector_fit(data.frequency, data.G, data.variance, n, "z", data.fs, stable=True, delay=delay)
+        try:
+            fits[n] = from_vector_fit(vector, data, domain, True)
+        except InputError as error:  # an s model needs a continuous equivalent of every pole
+            skipped[n] = error.what
+            return
+        rows[n] = _row(fits[n], data)
+
+    for n, vector in sorted(count.fits.items()):
+        add(n, vector)
+    eligible = [r for r in rows.values() if r.eligible]
+    passing = [r for r in eligible if r.accepted]
+    if not passing:
+        return None
+    best = min(passing, key=lambda r: (r.nb + r.na, r.holdout_error))
+    per_line = expected_cost(1, 0, data.realizations)[0]
+    lower = [r for r in eligible if r.na < best.na and r.cost_bound > 0]
+    visited = ", ".join(str(n) for n in count.fits)
+    reason = (f"{best.nb}/{best.na} is the smallest model among the stable fits whose cost {best.cost:.4g} lies "
+              f"within its statistical bound {best.cost_bound:.4g} (expected value {best.expected_cost:.4g} +- "
+              f"{best.cost_std:.3g}); held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
+    if lower:
+        reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
+                   "times its bound")
+    reason += (f"; the orders N/N were fitted by vector fitting in pole-residue form (poles kept stable), "
+               f"N = {visited} poles: doubling to the first within its bound, then bisection to the fewest ({count.reason}); "
+               "the polynomial form is ill conditioned at many poles")
+    while True:
+        for n in range(best.na + 1, best.na + NESTED_STEPS + 1):
+            add(n)
+        kappa = line_correlation(data, fits[best.na])
+        step = nested_better(best, [r for r in rows.values() if r.eligible], data.realizations, kappa)
+        if step is None:
+            break
+        size = step.nb + step.na - best.nb - best.na
+        shared = f", times {kappa:.3g} for the lines' correlated errors" if kappa > 1 else ""
+        reason += (f"; {step.nb}/{step.na} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower "
+                   f"than {best.nb}/{best.na}'s, more than {size} more parameters fitting noise "
+                   f"would lower it ({likelihood_ratio_bound(size, data.realizations, kappa):.3g}, likelihood "
+                   f"ratio at probability {ACCEPT_PROBABILITY}{shared})")
+        best = step
+    scanned = sorted(set(rows) | set(skipped))
+    extra = [n for n in scanned if n not in count.fits]
+    if extra:
+        reason += f"; {', '.join(map(str, extra))} poles fitted to test larger nested orders"
+    fit = fits[best.na]
+    reason += f"; {fit.note}"
+    refused = [r for r in rows.values() if not r.eligible]
+    if refused:
+        why = {r.na: "stabilised fit on the stability boundary" if r.boundary else f"{r.how} fit {r.stability}"
+               for r in refused}
+        reason += "; not eligible: " + ", ".join(f"{n}/{n} ({why[n]})" for n in sorted(why))
+    if skipped:
+        reason += "; not fitted in s: " + ", ".join(f"{n}/{n} ({skipped[n]})" for n in sorted(skipped))
+    scan = [rows[n] for n in sorted(rows)]
+    warnings = list(fit.warnings)
+    if not math.isfinite(best.cost_bound):
+        warnings.append("no finite cost bound: the choice rests on the held-out lines")
+    return OrderSelection(fit, scan, reason, warnings)
