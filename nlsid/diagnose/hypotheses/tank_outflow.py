@@ -76,6 +76,7 @@ PREFIT_STEPS = 12   # residual evaluations of a pre-fit (prefit), besides its Ja
 LEVEL_SWINGS = 1.0  # the operating level at least this many standard deviations of the recorded output
 KEPT = ("input_offset", "input_channels", "delay", "input_nonlinearity")
 PARAMETER = "parameter "  # the prefix of an equations parameter's name in a diagnosis (mechanics.linear_paths)
+EQUATION_PARAMETERS = ("k1", "k3", "k4", "x1max", "frac")  # the tanks' parameters, of both members
 
 
 def named(values: dict) -> dict:
@@ -87,9 +88,6 @@ def named(values: dict) -> dict:
 def plain(values: dict) -> dict:
     """The inverse of :func:`named`: ``parameter k1`` -> ``k1``."""
     return {k.removeprefix(PARAMETER): v for k, v in values.items()}
-
-
-EQUATION_PARAMETERS = ("k1", "k3", "k4", "x1max", "frac")
 
 
 def linear_poles(model: dict, fs: float) -> np.ndarray:
