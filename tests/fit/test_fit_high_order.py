@@ -30,15 +30,15 @@ MODES, FS, PERIOD, SIGMA = 12, 1000.0, 4096, 0.01
 BINS = np.arange(4, 1600)
 
 
-def _structure(seed: int) -> tuple[np.ndarray, np.ndarray]:
+def _structure(seed: int, modes: int = MODES) -> tuple[np.ndarray, np.ndarray]:
     """Poles (Im > 0 member of each pair) and the noisy FRF at BINS."""
     rng = np.random.default_rng(seed)
-    fn = np.geomspace(15.0, 350.0, MODES)
-    zeta = rng.uniform(0.01, 0.03, MODES)
+    fn = np.geomspace(15.0, 350.0, modes)
+    zeta = rng.uniform(0.01, 0.03, modes)
     wn = 2 * np.pi * fn
     poles = np.exp((-zeta * wn + 1j * wn * np.sqrt(1 - zeta**2)) / FS)
-    height = rng.uniform(0.5, 2.0, MODES)  # |G| of each mode at its peak, 50-200 noise std
-    residues = height * (1 - np.abs(poles)) * np.exp(1j * rng.uniform(-np.pi, np.pi, MODES))
+    height = rng.uniform(0.5, 2.0, modes)  # |G| of each mode at its peak, 50-200 noise std
+    residues = height * (1 - np.abs(poles)) * np.exp(1j * rng.uniform(-np.pi, np.pi, modes))
     z = np.exp(2j * np.pi * BINS / PERIOD)
     G0 = sum(r / (z - p) + np.conj(r) / (z - np.conj(p)) for p, r in zip(poles, residues))
     noise = SIGMA / np.sqrt(2) * (rng.standard_normal(BINS.size) + 1j * rng.standard_normal(BINS.size))
@@ -148,3 +148,26 @@ def test_a_continuous_model_of_many_poles_is_the_zero_order_hold_equivalent_of_t
     assert abs(cost - tf.cost) <= 1e-6 * tf.cost
     low, high = stats.chi2.ppf([0.0005, 0.9995], 2 * BINS.size - 49) / 2
     assert low <= cost <= high
+
+
+def test_a_vector_fit_written_as_a_transfer_function_has_the_polynomial_fits_uncertainty():
+    """Three modes (6 poles), where the polynomial fit 6/6 reaches the same minimum: the vector
+    fit's coefficients, carried over from poles and residues, agree with the polynomial fit's
+    as far as their costs do: near the minimum V - V_min = (1/2) d^T cov^-1 d, so a cost higher by
+    D puts the parameters at most sqrt(2 D) std from the minimum in every component (10 % margin
+    for the quadratic approximation), and their std (delta method from the pole-residue covariance)
+    with the polynomial fit's own Cramer-Rao std (1/2 (J^T J)^-1 in the coefficients) within 5 %:
+    the Gauss-Newton bound is invariant under a change of parameters at the same point, and the
+    two minima differ by far less than the noise moves them."""
+    from nlsid.fit.frf_data import FRFData
+    from nlsid.fit.tf_fit import fit_order
+    from nlsid.fit.tf_vector import fit_vector
+
+    _, G = _structure(seed=3, modes=3)
+    data = FRFData(BINS, G, np.full(BINS.size, SIGMA**2), FS, PERIOD)
+    polynomial, vector = fit_order(data, 6, 6, "z"), fit_vector(data, 6, "z")
+    assert vector.names == polynomial.names and vector.cost <= polynomial.cost + 1e-6
+    distance = np.sqrt(2 * (polynomial.cost - vector.cost)) * 1.1 + 0.01
+    assert np.all(np.abs(vector.values - polynomial.values) <= distance * polynomial.std)
+    assert np.allclose(vector.std, polynomial.std, rtol=0.05)
+    assert np.allclose(vector.response_std, polynomial.response_std, rtol=0.05)
