@@ -30,6 +30,19 @@ MODES, FS, PERIOD, SIGMA = 12, 1000.0, 4096, 0.01
 BINS = np.arange(4, 1600)
 
 
+DESIGN = f"""fs: {FS}
+seed: 3
+multisine:
+  period: {PERIOD}
+  band: [1.0, 390.0]
+  lines: full
+  realizations: 1
+  periods: 1
+  transient_periods: 4
+  rms_levels: [1.0]
+"""
+
+
 def _structure(seed: int, modes: int = MODES) -> tuple[np.ndarray, np.ndarray]:
     """Poles (Im > 0 member of each pair) and the noisy FRF at BINS."""
     rng = np.random.default_rng(seed)
@@ -110,6 +123,22 @@ def test_order_auto_finds_the_modes_of_a_lightly_damped_structure(run_cli, tmp_p
         assert abs(q.real - p.real) <= 5 * sd_re and abs(q.imag - p.imag) <= 5 * sd_im, (p, q, sd_re, sd_im)
     assert "vector fitting" in out["order_reason"] and "24/24" in out["order_reason"]
     assert seconds < 60  # about 7 s on one idle core; the bound leaves room for a shared machine
+    # nlsid simulate runs the written model unchanged: its steady-state FRF (numpy FFT of the last
+    # period) is the model's response at the excited lines, up to the transient left after four
+    # periods, at most max |p|^(4 N) of the slowest pole (asserted below 1e-6 of the response)
+    (tmp_path / "design.yaml").write_text(DESIGN)
+    design = run_cli("design", tmp_path / "design.yaml", "-o", tmp_path / "exc.h5")
+    assert design.exit_code == 0, design.stderr
+    sim = run_cli("simulate", tmp_path / "m.yaml", "--excitation", tmp_path / "exc.h5", "-o", tmp_path / "sim.h5")
+    assert sim.exit_code == 0, sim.stderr
+    from nlsid.io.recording import read_runs
+
+    run = read_runs(tmp_path / "sim.h5")[0]
+    lines = run.excited_bins
+    simulated = np.fft.fft(run.periods("y")[-1])[lines] / np.fft.fft(run.periods("u")[-1])[lines]
+    written = _response(model, np.exp(2j * np.pi * lines / PERIOD))
+    assert np.max(np.abs(poles)) ** (4 * PERIOD) < 1e-7
+    assert np.max(np.abs(simulated - written) / np.abs(written)) < 1e-6
 
 
 def test_a_given_high_order_is_fitted_stable(run_cli, tmp_path):
