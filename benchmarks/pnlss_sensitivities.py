@@ -3,8 +3,9 @@ finite differences of the same simulation; prints JSON.
 
 Two cases: the Duffing size of the yardstick (2 states, degrees 2 and 3 in the states and the input,
 7 x 8192 samples as one record) and the Wiener-Hammerstein size (6 states, same degrees, 80,000
-samples); a random stable model with small nonlinear coefficients, an arbitrary record (the
-initial state's columns included). For each:
+samples), and the yardstick's LFR form at that size (7 states, monomials of degrees 2 and 3 of 2
+combinations z = Cz x + Dz u, whose columns are included); a random stable model with small
+nonlinear coefficients, an arbitrary record (the initial state's columns included). For each:
 
 * ``max_relative_difference``: the largest over the columns of ||J_exact - J_fd|| / ||J_fd||
   (central differences, step 1e-5 relative: truncation and rounding both near 1e-10), on the first
@@ -35,8 +36,13 @@ from nlsid.simulate.pnlss_runs import Record, jacobian_blocks, simulate_record  
 from nlsid.models.pnlss import Pnlss, exponents  # noqa: E402
 
 
-def _model(n: int, rng) -> Pnlss:
+def _model(n: int, rng, lfr_inputs: int = 0) -> Pnlss:
     A = np.diag(np.linspace(0.9, 0.3, n)) + 0.02 * rng.standard_normal((n, n))
+    if lfr_inputs:
+        nz = exponents(lfr_inputs, (2, 3), False).shape[0]
+        Cz, Dz = rng.standard_normal((lfr_inputs, n)) / np.sqrt(n), rng.standard_normal(lfr_inputs)
+        return Pnlss(A, rng.standard_normal(n), rng.standard_normal(n), 0.1, 1e-2 * rng.standard_normal((n, nz)),
+                     1e-2 * rng.standard_normal(nz), 1.0, (2, 3), (2, 3), Cz=Cz, Dz=Dz)
     nz = exponents(n, (2, 3)).shape[0]
     return Pnlss(A, rng.standard_normal(n), rng.standard_normal(n), 0.1, 1e-3 * rng.standard_normal((n, nz)),
                  1e-3 * rng.standard_normal(nz), 1.0, (2, 3), (2, 3))
@@ -68,9 +74,9 @@ def _finite_differences(model, record, x0, relative=1e-5):
     return np.column_stack(columns)
 
 
-def case(name: str, n: int, samples: int, fd_samples: int) -> dict:
+def case(name: str, n: int, samples: int, fd_samples: int, lfr_inputs: int = 0) -> dict:
     rng = np.random.default_rng(0)
-    model = _model(n, rng)
+    model = _model(n, rng, lfr_inputs)
     u = 0.5 * rng.standard_normal(samples)
     record = Record(name, u, np.zeros(samples), None)
     x0 = 0.1 * rng.standard_normal(n)
@@ -90,7 +96,7 @@ def case(name: str, n: int, samples: int, fd_samples: int) -> dict:
     fd_seconds = (time.perf_counter() - clock) * samples / fd_samples
     relative = np.linalg.norm(exact_short - fd, axis=0) / np.linalg.norm(fd, axis=0)
     exact_seconds = min(times)
-    return {"case": name, "states": n, "samples": samples, "columns": int(width),
+    return {"case": name, "states": n, "lfr_inputs": lfr_inputs, "samples": samples, "columns": int(width),
             "fd_samples": fd_samples, "max_relative_difference": float(relative.max()),
             "exact_seconds": exact_seconds, "rate": samples * width / exact_seconds,
             "fd_seconds": fd_seconds, "speed_ratio": fd_seconds / exact_seconds,
@@ -99,7 +105,8 @@ def case(name: str, n: int, samples: int, fd_samples: int) -> dict:
 
 def main() -> None:
     start = os.getloadavg()
-    results = [case("duffing_size", 2, 7 * 8192, 8192), case("wiener_hammerstein_size", 6, 80000, 2000)]
+    results = [case("duffing_size", 2, 7 * 8192, 8192), case("wiener_hammerstein_size", 6, 80000, 2000),
+               case("wiener_hammerstein_size_lfr", 7, 80000, 2000, lfr_inputs=2)]
     print(json.dumps({"cases": results, "load_average": {"start": start, "end": os.getloadavg()}}, indent=2))
 
 

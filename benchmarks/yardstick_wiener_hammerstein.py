@@ -19,7 +19,11 @@ CPU seconds, its validation rms against sigma (dB above the floor; a model that 
 reaches about 10 log10(1 + p / N_e) dB), and the user's linear model's. ``load_average`` at start
 and end: the machine is shared.
 
-Usage: ``python benchmarks/yardstick_wiener_hammerstein.py [--nonlinearity polynomial|tanh] [--samples N]``
+With ``--diagnose`` the whole ``nlsid diagnose`` runs on the same records (the named causes, then
+the yardstick; the runs split as diagnose splits arbitrary records, by id alternately: r0 (80,000)
+and r2 (20,000) estimation, r1 (20,000) validation), and its wall and CPU seconds, status and headline are printed instead.
+
+Usage: ``python benchmarks/yardstick_wiener_hammerstein.py [--nonlinearity polynomial|tanh] [--samples N] [--diagnose]``
 """
 
 from __future__ import annotations
@@ -42,11 +46,13 @@ from nlsid.io.run import Run
 FS = 1.0
 B1, A1 = signal.cheby1(3, 0.5, 0.3)
 B2, A2 = signal.butter(3, 0.2)
+CONFIG = {"model": {"type": "transfer_function", "domain": "discrete", "num": np.polymul(B1, B2).tolist(),
+                    "den": np.polymul(A1, A2).tolist()}}  # the user's model: the linear cascade G2 G1
 STATIC = {"polynomial": lambda v: v - 0.15 * v ** 3, "tanh": np.tanh}
 
 
-def records(nonlinearity: str, samples: int, seed: int = 1) -> tuple[list[Run], list[Run], float]:
-    """(estimation runs, validation runs, sigma)."""
+def measured(nonlinearity: str, samples: int, seed: int = 1) -> tuple[list[Run], float]:
+    """The three records as recorded (estimation, early stopping, validation) and sigma."""
     rng = np.random.default_rng(seed)
     f = STATIC[nonlinearity]
     lengths = (samples, samples // 4, samples // 4)
@@ -56,19 +62,44 @@ def records(nonlinearity: str, samples: int, seed: int = 1) -> tuple[list[Run], 
         clean.append((u, signal.lfilter(B2, A2, f(signal.lfilter(B1, A1, u)))))
     sigma = 0.01 * float(np.std(clean[0][1]))
     runs = [Run(f"r{i}", FS, "arbitrary", u, y=y + sigma * rng.standard_normal(y.size)) for i, (u, y) in enumerate(clean)]
-    return whole(runs[:2]), whole(runs[2:]), sigma  # as diagnose compares arbitrary records: each whole
+    return runs, sigma
+
+
+def records(nonlinearity: str, samples: int, seed: int = 1) -> tuple[list[Run], list[Run], float]:
+    """(estimation runs, validation runs, sigma), each compared whole as diagnose compares arbitrary records."""
+    runs, sigma = measured(nonlinearity, samples, seed)
+    return whole(runs[:2]), whole(runs[2:]), sigma
+
+
+def whole_diagnosis(config: dict, nonlinearity: str, samples: int) -> dict:
+    """The whole diagnose (named causes and yardstick) on the records: time, status, headline."""
+    from nlsid.diagnose.diagnosis import diagnose
+
+    runs, sigma = measured(nonlinearity, samples)
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = diagnose(config, "user", runs, "wiener_hammerstein")
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    final = result.final_score()
+    y = result.yardstick
+    return {"wall_s": wall, "cpu_s": cpu, "status": result.verdict.status, "headline": result.headline(),
+            "sigma": sigma, "named_cause_validation_rms": None if final is None else final.error_rms,
+            "yardstick": y.summary() if y is not None else None}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--nonlinearity", choices=sorted(STATIC), default="polynomial")
     parser.add_argument("--samples", type=int, default=80000)
+    parser.add_argument("--diagnose", action="store_true")
     args = parser.parse_args()
     start_load = os.getloadavg()[0]
+    if args.diagnose:
+        out = whole_diagnosis(CONFIG, args.nonlinearity, args.samples)
+        out["load_average"] = [start_load, os.getloadavg()[0]]
+        print(json.dumps(out, indent=2, default=float))
+        return
     estimation, validation, sigma = records(args.nonlinearity, args.samples)
-    config = {"model": {"type": "transfer_function", "domain": "discrete", "num": np.polymul(B1, B2).tolist(),
-                        "den": np.polymul(A1, A2).tolist()}}
-    runner = ModelRunner.from_data(config, "user")
+    runner = ModelRunner.from_data(CONFIG, "user")
     val = [residual_of(run, y, "validation") for run, y in zip(validation, runner.simulate_each(validation))]
     linear_rms = math.sqrt(np.mean(np.concatenate([res.measured - res.model for res in val]) ** 2))
     wall, cpu = time.perf_counter(), time.process_time()
