@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from nlsid.errors import InputError
 from nlsid.fit.bla_source import BLALevel, frf_from_bla
 from nlsid.fit.order import OrderSelection, select_order
-from nlsid.fit.order_poles import count_poles, select_many_poles
+from nlsid.fit.order_poles import count_poles, count_poles_and_delay, select_many_poles
 from nlsid.fit.tf_fit import TFFit, fit_transfer_function
 from nlsid.fit.tf_vector import fit_vector
 
@@ -108,17 +108,29 @@ def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, dela
             return BLAFit(source, _given_vector_fit(source.data, na, domain, delay), None)
         return BLAFit(source, fit_transfer_function(source.data, nb, na, domain, delay), None)
     scanned = DEFAULT_MAX_ORDER if max_order is None else max_order
-    if delay is None:
-        delay = fit_transfer_function(source.data, scanned, scanned, domain, None).model.delay
     if max_order is not None:
+        if delay is None:
+            delay = fit_transfer_function(source.data, scanned, scanned, domain, None).model.delay
         selection = select_order(source.data, scanned, domain, delay)
         return BLAFit(source, selection.fit, selection)
-    count = count_poles(source.data, delay)
+    given_delay = delay is not None
+    count = count_poles(source.data, delay) if given_delay else count_poles_and_delay(source.data, MAX_DELAY)
+    delay = count.fit.delay
+    selection = _selection(source, count, scanned, domain, delay)
+    if not given_delay:
+        selection.reason += (f"; dead time {delay} samples: the longest of 0..{MAX_DELAY} whose vector fit of as "
+                             "many poles as the count without delay found has the lowest cost (within the likelihood-"
+                             "ratio bound of one parameter)")
+    return BLAFit(source, selection.fit, selection)
+
+
+def _selection(source: BLALevel, count, scanned: int, domain: str, delay: int) -> OrderSelection:
+    """``--order auto`` without ``--max-order`` after the pole count (module docstring)."""
     few = count.accepted and count.fit.order < VECTOR_FIT_POLES
     if count.accepted and not few:
         selection = select_many_poles(source.data, count, domain)
         if selection is not None:
-            return BLAFit(source, selection.fit, selection)
+            return selection
     # fewer poles suffice: the polynomial scan, not beyond na = 4 while no order passes (the count
     # says one does); no count within the bound: the polynomial scan as far as EXTENDED_MAX_ORDER
     selection = select_order(source.data, scanned, domain, delay, extend_to=EXTENDED_MAX_ORDER,
@@ -129,11 +141,11 @@ def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, dela
         if vector is not None:
             vector.reason += (f"; the polynomial scan up to na = {scanned} found no stable order within its bound "
                               f"where the vector fits found {count.fit.order} poles")
-            return BLAFit(source, vector.fit, vector)
+            return vector
     selection.reason += (f"; vector fits counted the poles first ({count.reason}), so the polynomial scan decided"
                          if few else f"; vector fits counted the poles first ({count.reason}); none eligible "
                                      "within its bound, so the polynomial scan decided")
-    return BLAFit(source, selection.fit, selection)
+    return selection
 
 
 def _given_vector_fit(data, poles: int, domain: str, delay: int | None):

@@ -58,22 +58,23 @@ def _structure(seed: int, modes: int = MODES) -> tuple[np.ndarray, np.ndarray]:
     return poles, G0 + noise
 
 
-def _write_bla(path, G: np.ndarray) -> None:
+def _write_bla(path, G: np.ndarray, bins: np.ndarray = BINS, variance: np.ndarray | None = None,
+               fs: float = FS, period: int = PERIOD) -> None:
     """A bla.h5 of one level in the layout nlsid.io.bla_file.read_bla reads: one realization of two
-    periods (no robust variance), the fast method's G and var_total = sigma^2 at every line."""
+    periods (no robust variance), the fast method's G and var_total (default sigma^2) at every line."""
     from nlsid.io.bla_file import FORMAT, FORMAT_VERSION
     from nlsid.io.result_file import create_result, put
 
     with create_result(path, FORMAT, FORMAT_VERSION, {"generator": "tests/fit/test_fit_high_order.py"}) as handle:
         handle.attrs["units"] = "{}"
         level = handle.create_group("levels").create_group("level_00")
-        level.attrs.update({"fs": FS, "period": PERIOD, "n_periods": 2, "n_realizations": 1})
-        put(level, "excited_bins", BINS.astype(np.int64))
-        put(level, "frequency", BINS * FS / PERIOD)
+        level.attrs.update({"fs": fs, "period": period, "n_periods": 2, "n_realizations": 1})
+        put(level, "excited_bins", bins.astype(np.int64))
+        put(level, "frequency", bins * fs / period)
         put(level.create_group("robust"), "G", G)
         fast = level.create_group("fast")
         put(fast, "G", G)
-        put(fast, "var_total", np.full(BINS.size, SIGMA**2))
+        put(fast, "var_total", np.full(bins.size, SIGMA**2) if variance is None else variance)
         level.create_group("lines")
 
 
@@ -200,3 +201,28 @@ def test_a_vector_fit_written_as_a_transfer_function_has_the_polynomial_fits_unc
     assert np.all(np.abs(vector.values - polynomial.values) <= distance * polynomial.std)
     assert np.allclose(vector.std, polynomial.std, rtol=0.05)
     assert np.allclose(vector.response_std, polynomial.response_std, rtol=0.05)
+
+
+def test_order_and_delay_auto_find_the_dead_time_the_data_hold(run_cli, tmp_path):
+    """A second-order Chebyshev I low-pass behind 3 samples of dead time (2000 lines of a period of
+    8192, noise 1 % of |G0| + 1e-4, variances exact), --order auto --delay auto: models with 1 or 2
+    samples hold the truth too (the numerator starting later), so their costs differ from the
+    3-sample one's by noise, while 4 samples cannot fit it; the longest delay within the
+    likelihood-ratio bound of the lowest cost is 3, and the polynomial scan then takes 2/2 with
+    its cost within the chi-square band."""
+    b, a = signal.cheby1(2, 3, 2 * 0.08)
+    period, bins = 8192, np.arange(1, 2001)
+    z = np.exp(2j * np.pi * bins / period)
+    G0 = np.polyval(b[::-1], 1 / z) / np.polyval(a[::-1], 1 / z) * z**-3
+    sigma = 0.01 * np.abs(G0) + 1e-4
+    rng = np.random.default_rng(6)
+    G = G0 + sigma / np.sqrt(2) * (rng.standard_normal(bins.size) + 1j * rng.standard_normal(bins.size))
+    _write_bla(tmp_path / "bla.h5", G, bins, sigma**2, 1.0, period)
+    result = run_cli("fit", tmp_path / "bla.h5", "--order", "auto", "--delay", "auto", "-o", tmp_path / "m.yaml",
+                     "--json")
+    assert result.exit_code == 0, (result.stdout, result.stderr)
+    out = result.json()
+    assert out["delay_samples"] == 3 and out["order"] == "2/2", out["order_reason"]
+    low, high = stats.chi2.ppf([0.0005, 0.9995], 2 * bins.size - 5) / 2
+    assert low <= out["cost"] <= high
+    assert "dead time 3 samples" in out["order_reason"]
