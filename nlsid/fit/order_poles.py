@@ -47,10 +47,10 @@ def count_poles(data: FRFData, delay: int = 0, max_poles: int = DEFAULT_MAX_POLE
 def count_poles_and_delay(data: FRFData, max_delay: int, max_poles: int = DEFAULT_MAX_POLES) -> PoleSelection:
     """The pole count with the dead time chosen too (``--delay auto``): the count without delay
     gives N poles (the fewest within the bound, or the closest); vector fits of N poles are made
-    with each dead time 0..``max_delay`` samples, and the count is repeated with the largest delay
-    whose cost is within :func:`nlsid.fit.order.likelihood_ratio_bound` of one parameter of the
-    lowest (when it is not 0). Why the largest: a model of N poles with d samples of delay holds
-    every model of delay d + 1 whose numerator has a degree less (b0 = 0), so delays short of the
+    with each dead time 0..``max_delay`` samples, and the count is repeated (when it is not 0) with
+    the largest delay whose cost is within :func:`nlsid.fit.order.likelihood_ratio_bound` of one
+    parameter of the lowest (the lowest itself where that bound is not finite, M = 2). Why the
+    largest: a model of N poles with d samples of delay holds every model of delay d + 1 whose numerator has a degree less (b0 = 0), so delays short of the
     true one fit as well, while one too long does not fit at all; their costs differ by noise,
     and the true delay is the one that leaves the fewest poles to the count."""
     count = count_poles(data, 0, max_poles)
@@ -58,6 +58,7 @@ def count_poles_and_delay(data: FRFData, max_delay: int, max_poles: int = DEFAUL
     costs = [count.fit.cost] + [vector_fit(data.frequency, data.G, data.variance, poles, "z", data.fs, stable=True,
                                            delay=d).cost for d in range(1, max_delay + 1)]
     tolerance = likelihood_ratio_bound(1, data.realizations)
+    tolerance = tolerance if math.isfinite(tolerance) else 0.0  # M = 2: no bound, the lowest cost alone
     best = max(d for d, cost in enumerate(costs) if cost <= min(costs) + tolerance)
     return count if best == 0 else count_poles(data, best, max_poles)
 
