@@ -91,7 +91,7 @@ def _delta_covariance(fit: VectorFit, domain: str) -> np.ndarray:
     return T @ fit.covariance @ T.T
 
 
-def from_vector_fit(fit: VectorFit, data: FRFData, domain: str, stable: bool, note: str = "") -> TFFit:
+def from_vector_fit(fit: VectorFit, data: FRFData, domain: str, stable: bool) -> TFFit:
     """The :class:`TFFit` of a ``z`` vector fit of ``data`` (module docstring), as a ``domain`` model."""
     N = fit.order
     modal = ModalModel(fit, domain)
@@ -130,7 +130,7 @@ def from_vector_fit(fit: VectorFit, data: FRFData, domain: str, stable: bool, no
         warnings.append(f"order {N}/{N}: the fitted model is unstable (nlsid simulate refuses it in open loop)")
     result = TFFit(model, N, N, names, np.asarray(values, float), np.asarray(covariance, float), cost, expected,
                    spread, F, response, fit.response_std(data.frequency), warnings,
-                   cost_bound(F, fit.n_parameters, data.realizations), 0, how, (note + "; " if note else "") + text,
+                   cost_bound(F, fit.n_parameters, data.realizations), 0, how, text,
                    float(np.max(np.abs(fit.all_poles()))) if domain == "z" else
                    float(np.max(modal.poles().real)), fit)
     return result
