@@ -8,7 +8,9 @@ Chebyshev low-pass G1, a static nonlinearity f, a third-order Butterworth low-pa
     v = G1 u,   w = f(v),   y = G2 w + e,
 
 f(v) = v - 0.15 v^3 (``--nonlinearity polynomial``: the LFR form with one combination
-z = v holds it exactly) or f(v) = tanh(v) (``tanh``: a cubic in z only approximates it), u white
+z = v holds it exactly), f(v) = v + 0.25 v^2 - 0.15 v^3 (``even``: its square adds a mean to y,
+which the fit's output offset takes up) or f(v) = tanh(v) (``tanh``: a cubic in z only
+approximates it), u white
 Gaussian of unit std, e white of std sigma = 1 % of y's rms. Records: estimation 80,000 samples,
 one of 20,000 of the same kind (the yardstick holds it out of the fit for early stopping), and a
 validation record of 20,000. The user's model: the linear cascade G2 G1 (discrete transfer
@@ -23,7 +25,7 @@ With ``--diagnose`` the whole ``nlsid diagnose`` runs on the same records (the n
 the yardstick; the runs split as diagnose splits arbitrary records, by id alternately: r0 (80,000)
 and r2 (20,000) estimation, r1 (20,000) validation), and its wall and CPU seconds, status and headline are printed instead.
 
-Usage: ``python benchmarks/yardstick_wiener_hammerstein.py [--nonlinearity polynomial|tanh] [--samples N] [--diagnose]``
+Usage: ``python benchmarks/yardstick_wiener_hammerstein.py [--nonlinearity polynomial|even|tanh] [--samples N] [--diagnose]``
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ B1, A1 = signal.cheby1(3, 0.5, 0.3)
 B2, A2 = signal.butter(3, 0.2)
 CONFIG = {"model": {"type": "transfer_function", "domain": "discrete", "num": np.polymul(B1, B2).tolist(),
                     "den": np.polymul(A1, A2).tolist()}}  # the user's model: the linear cascade G2 G1
-STATIC = {"polynomial": lambda v: v - 0.15 * v ** 3, "tanh": np.tanh}
+STATIC = {"polynomial": lambda v: v - 0.15 * v ** 3, "tanh": np.tanh, "even": lambda v: v + 0.25 * v ** 2 - 0.15 * v ** 3}
 
 
 def measured(nonlinearity: str, samples: int, seed: int = 1) -> tuple[list[Run], float]:

@@ -12,7 +12,7 @@ Its linear part starts from the user's model (the linear dynamics from u to y of
 mechanical model, forces and blocks left out; of a block structure its filters in series), ZOH-
 discretised at the runs' rate and balanced, with EXTRA_STATES more states (:func:`with_delay_states`)
 so that it can hold dynamics the user's model lacks (an input filter before a second-order
-model); its sensor offset is the one the nuisances found. The
+model); its sensor offset starts from the one the nuisances found and is fitted with it. The
 fit sees the estimation parts the hypotheses were fitted on (:func:`nlsid.diagnose.split.budgeted`).
 
 Overfitting is held back by early stopping (:func:`nlsid.fit.pnlss.fit_pnlss`: the iterate with
@@ -180,12 +180,12 @@ def _holdout(fit_runs: list[Run], val_runs: list[Run]) -> tuple[list[Run], list[
     """(fit runs, early-stopping runs, the rule in words).
 
     One estimation run is held out of the fit where its group (kind and level,
-    :func:`nlsid.io.feeds.excitation_key`) keeps another run in the fit: the fit then still sees
+    :func:`nlsid.feeds.excitation_key`) keeps another run in the fit: the fit then still sees
     every level, and the iterate is chosen on data the score never sees. Otherwise (every level
     has one estimation run: holding one out would make the model extrapolate in amplitude, and a
     polynomial model does that badly) the iterate is chosen on the validation runs themselves:
     one number (the iteration) picked on them, a mild optimism of the yardstick's score, stated."""
-    from nlsid.io.feeds import excitation_key
+    from nlsid.feeds import excitation_key
 
     keys = [excitation_key(run) for run in fit_runs]
     shared = [i for i, key in enumerate(keys) if keys.count(key) > 1]

@@ -3,7 +3,8 @@ error (Paduart et al., Automatica 46, 2010, Sec. 4):
 
     theta_hat = argmin_theta sum_runs sum_t (y_sim(t; theta) - y(t))^2,
 
-theta = the coefficients of A, B, C, D, E, F and the initial state of each arbitrary run.
+theta = the coefficients of A, B, C, D, E, F (Cz, Dz of the LFR form), the output offset (a constant
+is not a monomial; ``fit_offset``) and the initial state of each arbitrary run.
 
 * Start: a linear model (:func:`nlsid.models.pnlss.from_linear`: the BLA's fit, balanced), E = F = 0.
   Stage "linear": A, B, C, D (and the initial states) first, E and F held at zero; stage
@@ -186,18 +187,22 @@ def state_term_indices(model: Pnlss) -> np.ndarray:
 
 
 class _Problem:
-    """The cost and normal equations of one stage over the estimation records."""
+    """The cost and normal equations of one stage over the estimation records. LM parameter order:
+    the ``active`` coefficients of :func:`global_vector`, the output offset (with ``offset``), then
+    the initial state of each arbitrary record."""
 
-    def __init__(self, records_: list[Record], active: np.ndarray, bound: float):
+    def __init__(self, records_: list[Record], active: np.ndarray, bound: float, offset: bool = False):
         self.records = records_
         self.active = active
         self.bound = bound
+        self.offset = bool(offset)
+        self.globals = active.size + (1 if offset else 0)
         self.arbitrary = [i for i, r in enumerate(records_) if r.arbitrary]
         self.jacobian_seconds = 0.0
         self.jacobian_work = 0.0
 
     def size(self, model: Pnlss) -> int:
-        return self.active.size + model.order * len(self.arbitrary)
+        return self.globals + model.order * len(self.arbitrary)
 
     def unpack(self, base: Pnlss, theta0: np.ndarray, x0s: list, delta: np.ndarray) -> tuple[Pnlss, list]:
         n = base.order
@@ -205,8 +210,11 @@ class _Problem:
         theta[self.active] += delta[:self.active.size]
         x0s = [None if x is None else x.copy() for x in x0s]
         for k, i in enumerate(self.arbitrary):
-            x0s[i] = x0s[i] + delta[self.active.size + k * n:self.active.size + (k + 1) * n]
-        return with_vector(base, theta), x0s
+            x0s[i] = x0s[i] + delta[self.globals + k * n:self.globals + (k + 1) * n]
+        model = with_vector(base, theta)
+        if self.offset:
+            model = model.replace(output_offset=base.output_offset + float(delta[self.active.size]))
+        return model, x0s
 
     def cost(self, model: Pnlss, x0s: list) -> float:
         """Sum of squared simulation errors over the records (inf if one diverges)."""
@@ -228,7 +236,7 @@ class _Problem:
         every = self.active.size == global_vector(model).size
         if self.records[i].arbitrary:
             k = self.arbitrary.index(i)
-            x_cols = self.active.size + k * n + np.arange(n)
+            x_cols = self.globals + k * n + np.arange(n)
             columns = None if every else np.concatenate([np.arange(n), n + self.active])
             return columns, np.concatenate([x_cols, np.arange(self.active.size)])
         return (slice(n, None) if every else n + self.active), np.arange(self.active.size)
@@ -243,21 +251,32 @@ class _Problem:
         def one(i: int):
             columns, index = self._columns(model, i)
             block, gb, cost, work = np.zeros((index.size, index.size)), np.zeros(index.size), 0.0, 0
+            sums, e_sum, rows = np.zeros(index.size), 0.0, 0   # the offset's column of ones: its products
             for e, J in jacobian_blocks(model, self.records[i], x0s[i], self.bound):
                 Jc = J if columns is None else np.ascontiguousarray(J[:, columns])
                 block += dsyrk(1.0, Jc.T, trans=0, lower=0)  # J'J, upper triangle; Jc.T is Fortran-ordered
                 gb += Jc.T @ e
                 cost += float(e @ e)
                 work += Jc.shape[0] * Jc.shape[1]
-            return index, np.triu(block) + np.triu(block, 1).T, gb, cost, work
+                if self.offset:
+                    sums += Jc.sum(axis=0)
+                    e_sum += float(e.sum())
+                    rows += e.size
+            return index, np.triu(block) + np.triu(block, 1).T, gb, cost, work, sums, e_sum, rows
 
         p = self.size(model)
+        o = self.active.size  # the offset's place (with ``offset``)
         H, g, cost = np.zeros((p, p)), np.zeros(p), 0.0
-        for index, block, gb, part, work in in_threads(one, range(len(self.records))):
+        for index, block, gb, part, work, sums, e_sum, rows in in_threads(one, range(len(self.records))):
             H[np.ix_(index, index)] += block
             g[index] += gb
             cost += part
             self.jacobian_work += work
+            if self.offset:
+                H[o, index] += sums
+                H[index, o] += sums
+                H[o, o] += rows
+                g[o] += e_sum
         self.jacobian_seconds += time.perf_counter() - clock
         return H, g, cost
 
@@ -421,7 +440,7 @@ def _tamed(start: Pnlss, recs: list[Record], bound: float) -> tuple[Pnlss | None
 
 
 def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run] = (), max_iterations: int = 100,
-              linear_iterations: int | None = None, patience: int = 15) -> PnlssFit:
+              linear_iterations: int | None = None, patience: int = 15, fit_offset: bool = True) -> PnlssFit:
     """Fit a PNLSS model to the estimation runs from ``start`` (module docstring).
 
     Parameters
@@ -433,6 +452,9 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
         coefficients, else 0 (a nonlinear start is refined as a whole).
     patience : the fit stops after this many accepted iterates without a lower validation error
         during which the estimation error fell by less than 1 % (:func:`_overfitting`).
+    fit_offset : the output offset is a parameter of every stage, from the start's value (else it is
+        held): a constant in y that the start's offset misses (the mean that even monomials add,
+        a sensor offset) is otherwise fitted by a slow pole of the linear stage.
 
     Returns
     -------
@@ -469,13 +491,13 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
     x0s = [estimate_x0(model, rec, bound) if rec.arbitrary else None for rec in est]
     x0s = [np.zeros(model.order) if rec.arbitrary and x is None else x for rec, x in zip(est, x0s)]
     n_samples = sum(r.y.size for r in est)
-    full = _Problem(est, np.arange(global_vector(model).size), bound)
+    full = _Problem(est, np.arange(global_vector(model).size), bound, fit_offset)
     history = [Iteration("start", 0, math.sqrt(full.cost(model, x0s) / n_samples), validate(model), MU_START)]
     kept = [(model, x0s)]
     tamed_start, status = model, "converged"
     seconds, work = 0.0, 0.0
     if linear_iterations > 0 and not nonlinear_start:
-        problem = _Problem(est, linear_indices(model), bound)
+        problem = _Problem(est, linear_indices(model), bound, fit_offset)
         model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience)
         seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
     linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
@@ -485,7 +507,7 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
                      "output C x + D u (Wiener-like)" + (", the input, then single states" if model.lfr_inputs > 1 else "")
                      + ", each scaled to unit rms on the estimation runs")
     if max_iterations > 0 and model.with_input and not model.lfr and not nonlinear_start:
-        states = _Problem(est, state_term_indices(model), bound)
+        states = _Problem(est, state_term_indices(model), bound, fit_offset)
         model, x0s, status = _stage(states, model, x0s, "nonlinear_states", max_iterations, validate, history, kept,
                                     patience)
         seconds, work = seconds + states.jacobian_seconds, work + states.jacobian_work
