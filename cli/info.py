@@ -26,7 +26,7 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     \b
       nlsid info sample_data/stage.h5
     """
-    from nlsid.io.feeds import Survey
+    from nlsid.feeds import Survey
     from nlsid.io.recording import open_recording
 
     runs = []

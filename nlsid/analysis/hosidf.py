@@ -42,7 +42,7 @@ from typing import Iterable, Literal, Sequence
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.feeds import SineCell, check_cells, check_harmonics, check_sine_run, check_variance_counts
+from nlsid.feeds import SineCell, check_cells, check_harmonics, check_sine_run, check_variance_counts
 from nlsid.io.run import Run
 
 Variance = Literal["repeats", "periods", "both"]
@@ -74,7 +74,7 @@ class RunSpectra:
 
 
 def run_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str = "") -> RunSpectra:
-    """The spectra of one single-sine run; InputError for a bad run (:func:`nlsid.io.feeds.check_sine_run`)
+    """The spectra of one single-sine run; InputError for a bad run (:func:`nlsid.feeds.check_sine_run`)
     or harmonics above Nyquist."""
     where = f"{source}:/runs/{run.run_id}" if source else run.run_id
     line = check_sine_run(run, where, input_signal)

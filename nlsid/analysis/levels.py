@@ -30,7 +30,7 @@ from nlsid.analysis.period_stats import run_period_stats
 from nlsid.analysis.precision import negligible
 from nlsid.citations import BOOK
 from nlsid.errors import InputError
-from nlsid.io.feeds import BlaRuns, LevelShape
+from nlsid.feeds import BlaRuns, LevelShape
 from nlsid.io.run import Run
 
 
@@ -112,7 +112,7 @@ class LevelResult:
 class _LevelAccumulator:
     """Per-level state: the first run fixes the period, lines, periods and method.
 
-    The runs are checked before they get here, by :class:`nlsid.io.feeds.BlaRuns` (the checks
+    The runs are checked before they get here, by :class:`nlsid.feeds.BlaRuns` (the checks
     ``nlsid info`` runs too): one period, lines and P per level; that every excited line carries
     input is checked on the spectra :meth:`add` computes (:meth:`LevelShape.check_spectra`).
     """
@@ -133,7 +133,7 @@ class _LevelAccumulator:
         self.spectrum = SpectrumAccumulator(self.lines.period // 2 + 1)
 
     def add(self, run: Run, where: str) -> None:
-        """Accumulate one run that :class:`~nlsid.io.feeds.BlaRuns` has checked structurally, after
+        """Accumulate one run that :class:`~nlsid.feeds.BlaRuns` has checked structurally, after
         the input check on its spectra (errors name ``where``)."""
         stats = run_period_stats(run, self.use_reference)
         self.shape.check_spectra(stats.U, stats.R, where)
@@ -182,7 +182,7 @@ def analyse_runs(
 
     ``where`` names the run in error messages (e.g. ``rec.h5:/runs/ms_00``), ``source`` the
     recording. Runs that are not multisines are skipped with a warning. The runs are checked by
-    :class:`nlsid.io.feeds.BlaRuns`, the checks ``nlsid info`` reports; without
+    :class:`nlsid.feeds.BlaRuns`, the checks ``nlsid info`` reports; without
     ``require_multisine`` a stream without multisines gives no levels instead of an error.
     """
     if method not in METHOD_CHOICES:

@@ -250,7 +250,7 @@ def line_tests(residuals: list[Residual]) -> dict[str, dict]:
 
 def harmonic_tests(residuals: list[Residual], runs: list[Run]) -> list[dict]:
     """Residual at the harmonics of every sine (frequency, amplitude) of the sine runs (module docstring)."""
-    from nlsid.io.feeds import sine_bin
+    from nlsid.feeds import sine_bin
 
     groups: dict[tuple, list[tuple[Residual, int]]] = {}
     for res, run in zip(residuals, runs):

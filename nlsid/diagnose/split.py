@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from nlsid.io.feeds import check_repeated_excitation, excitation_key
+from nlsid.feeds import check_repeated_excitation, excitation_key
 from nlsid.io.ranges import RangeRun, SampleRange, check_sources, check_unique, cut, part, record
 from nlsid.io.run import Run
 

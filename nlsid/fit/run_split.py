@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from nlsid.errors import InputError
-from nlsid.io.feeds import check_run_count
+from nlsid.feeds import check_run_count
 from nlsid.io.ranges import SampleRange, check_sources, check_unique, cut
 from nlsid.io.run import Run
 

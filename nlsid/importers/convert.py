@@ -18,7 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.feeds import BlaRuns, sine_bin
+from nlsid.feeds import BlaRuns, sine_bin
 from nlsid.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
 from nlsid.importers.source import LAYOUTS, Record, Source, records_of
 from nlsid.io.ranges import SampleRange

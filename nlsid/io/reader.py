@@ -26,7 +26,7 @@ class RecordingReader(ABC):
 
     def output_error(self) -> InputError | None:
         """What opening the file with ``require_y=True`` refuses (an excitation: no measured output
-        y), or None. Shared by the reader and ``nlsid info`` (:mod:`nlsid.io.feeds`)."""
+        y), or None. Shared by the reader and ``nlsid info`` (:mod:`nlsid.feeds`)."""
         return None
 
     def run_where(self, run_id: str) -> str:

@@ -20,7 +20,7 @@ from nlsid.errors import InputError
 
 KINDS = ("multisine", "sine", "arbitrary")
 SIGNALS = ("u", "y", "r")
-#: A run without its measured output, read where one is required (also :mod:`nlsid.io.feeds`).
+#: A run without its measured output, read where one is required (also :mod:`nlsid.feeds`).
 MISSING_Y = "missing dataset 'y' (this is an excitation without a measured output?)"
 
 

@@ -385,7 +385,7 @@ def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, ch
              model, on_run: Callable | None) -> HosidfResult:
     from nlsid.analysis.hosidf import measured_hosidf, run_spectra
     from nlsid.analysis.linearity_cost import sweep as linearity_sweep
-    from nlsid.io.feeds import hosidf_input, no_sine_runs
+    from nlsid.feeds import hosidf_input, no_sine_runs
     from nlsid.io.units import common_units
 
     units_seen, skipped = [], []

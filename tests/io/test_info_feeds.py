@@ -3,7 +3,7 @@
 Each recording here is one that some stage rejects (u all zero, y missing, one realization where
 two are needed, sines only for bla, ...). For every stage the test runs the stage itself on the
 file and compares: info's ``feeds`` is the stage's exit code 0, info's ``reason`` is the stage's
-error line (nlsid.io.feeds holds the checks both run).
+error line (nlsid.feeds holds the checks both run).
 """
 
 from __future__ import annotations
