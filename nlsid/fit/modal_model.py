@@ -97,11 +97,15 @@ class ModalModel:
         return self._polynomials[1]
 
     def config(self) -> dict:
-        """The ``model`` block: ``state_space`` with A, B, C, D, its domain and its delay in seconds."""
+        """The ``model`` block: ``state_space`` with A, B, C, D, its domain, its delay in seconds and, in
+        ``z``, the sample rate ``fs``."""
         ss = self._state_space
-        return {"type": "state_space", "domain": "discrete" if self.domain == "z" else "continuous",
-                "A": [[float(x) for x in row] for row in ss.A], "B": [float(x) for x in ss.B],
-                "C": [float(x) for x in ss.C], "D": float(ss.D), "delay": self.delay / self.fs}
+        out = {"type": "state_space", "domain": "discrete" if self.domain == "z" else "continuous",
+               "A": [[float(x) for x in row] for row in ss.A], "B": [float(x) for x in ss.B],
+               "C": [float(x) for x in ss.C], "D": float(ss.D), "delay": self.delay / self.fs}
+        if self.domain == "z":  # its z refers to this rate (docs/configs.md, fs)
+            out["fs"] = float(self.fs)
+        return out
 
     def response(self, bins: np.ndarray, period: int) -> np.ndarray:
         """The response at the sample instants to line k of a period of N samples, times z^-delay:
