@@ -39,7 +39,7 @@ import time
 import numpy as np
 from scipy import signal
 
-from nlsid.diagnose.evidence import residual_of
+from nlsid.diagnose.residual import residual_of
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import whole
 from nlsid.diagnose.yardstick import fit_yardstick

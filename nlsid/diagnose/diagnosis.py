@@ -18,7 +18,8 @@ from typing import Callable
 
 from nlsid.diagnose import accuracy, nuisances
 from nlsid.diagnose import verdict as rules
-from nlsid.diagnose.evidence import Evidence, gather, verdict_dof
+from nlsid.diagnose.evidence import Evidence, gather
+from nlsid.diagnose.significance import verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.hypotheses.base import with_lti

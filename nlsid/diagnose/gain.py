@@ -18,7 +18,7 @@ lines but DC and Nyquist); with ``fit_on="u"`` (closed loop) of ``u - u_M`` in t
   outlasts the transient periods (friction settling on a sine) varies from period to period
   unless the model reproduces it. For the true model (and a correct extension) the estimate is
   its own error's noise, so ``error_rms / noise_rms`` squared follows the F distribution of
-  :func:`nlsid.diagnose.evidence.power_test`: 0 dB within a fraction of a dB at these degrees
+  :func:`nlsid.diagnose.significance.power_test`: 0 dB within a fraction of a dB at these degrees
   of freedom;
 - ``above_floor_db`` = 20 log10(error_rms / noise_rms): 0 dB is the best possible, and
   ``p_above_noise`` its p-value under that F distribution;
@@ -48,7 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.analysis.lines import EVEN, ODD, classify_lines
-from nlsid.diagnose.evidence import ALPHA, Residual, error_power, error_test, residual_of
+from nlsid.diagnose.residual import Residual, residual_of
+from nlsid.diagnose.significance import ALPHA, error_power, error_test
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.io.run import Run
 

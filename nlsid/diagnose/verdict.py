@@ -43,7 +43,7 @@ that only fits noise moves the ratio far less than an F variable spreads (the re
 conservative): a correct model's best noise fit stays well below that bar.
 
 Noise-free data (a zero noise floor, :mod:`nlsid.diagnose.evidence`): ``nu`` is then its upper
-limit, 2 per AC line of the validation runs (:func:`nlsid.diagnose.evidence.verdict_dof`), and an
+limit, 2 per AC line of the validation runs (:func:`nlsid.diagnose.significance.verdict_dof`), and an
 error power of exactly zero makes every ratio over it infinite (:func:`ratio`).
 """
 

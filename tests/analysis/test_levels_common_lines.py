@@ -28,7 +28,7 @@ import pytest
 from generators.bla_cases import multisine
 
 from nlsid.analysis.levels import INPUT_SHARE_SPREAD_DB, across_levels, analyse_runs, common_lines
-from nlsid.diagnose.evidence import level_findings
+from nlsid.diagnose.bla_comparison import level_findings
 from nlsid.io.result_file import json_safe
 from nlsid.io.run import Run
 

@@ -31,7 +31,7 @@ from scipy import signal
 from generators.bla_cases import multisine
 
 from nlsid.analysis.levels import across_levels, analyse_runs
-from nlsid.diagnose.evidence import level_findings
+from nlsid.diagnose.bla_comparison import level_findings
 from nlsid.io.bla_file import read_bla
 from nlsid.io.recording import write_recording
 from nlsid.io.run import Run

@@ -39,7 +39,7 @@ from scipy.signal import ss2tf
 from generators import independent_plant  # noqa: E402
 from generators.diagnose_cases import FS, MSD, NOISE, STAGE, TF, U_NOISE, excitation, with_closed_loop  # noqa: E402
 from nlsid.diagnose.diagnosis import diagnose  # noqa: E402
-from nlsid.diagnose.evidence import error_test  # noqa: E402
+from nlsid.diagnose.significance import error_test  # noqa: E402
 from nlsid.diagnose.gain import model_residuals, score  # noqa: E402
 from nlsid.diagnose.simulation import ModelRunner  # noqa: E402
 from nlsid.diagnose.verdict import NO_DISCREPANCY  # noqa: E402

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from nlsid.diagnose.evidence import residual_of
+from nlsid.diagnose.residual import residual_of
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import whole
 from nlsid.diagnose import yardstick
