@@ -92,6 +92,7 @@ def _print(result, output: str, delay=None, fit_on: str = "y") -> None:
         console.print(f"  - {line}", markup=False)
     if delay is not None:  # closed_loop.computation_delay: auto, chosen before the diagnosis
         console.print(f"  - {delay.statement()}", markup=False)
+    from nlsid.models.parameter_units import with_unit
     from nlsid.report.render_diagnosis import floor_text, split_findings
 
     rows, not_fitted = [], []
@@ -102,7 +103,8 @@ def _print(result, output: str, delay=None, fit_on: str = "y") -> None:
         main = o.hypothesis.main
         distortion = o.score.distortion_gain_db
         gain = f"{o.score.gain_db:+.1f}" if math.isfinite(o.score.gain_db) else "exact" if o.score.exact else "-"
-        rows.append([o.hypothesis.title, f"{main} = {o.estimate.values[main]:.4g}", gain,
+        value = with_unit(f"{main} = {o.estimate.values[main]:.4g}", o.unit(main, result.units))
+        rows.append([o.hypothesis.title, value, gain,
                      floor_text(o.score.summary()), "-" if math.isnan(distortion) else f"{distortion:+.1f}",
                      "winner" if o is result.winner else ""])
     if rows:

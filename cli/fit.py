@@ -13,8 +13,8 @@ from .options import map_option, parse_map, split_options
 @click.command(cls=StageCommand)
 @click.argument("bla_file", required=False, type=click.Path(dir_okay=False))
 @click.option("--order", default=None, metavar="NB/NA|auto",
-              help="Numerator/denominator orders, or auto (scan and select). N/N from 5 poles on is fitted by vector "
-                   "fitting, kept stable.")
+              help="Numerator/denominator orders, or auto (scan and select). Required with BLA_FILE: there is no "
+                   "default order. N/N from 5 poles on is fitted by vector fitting, kept stable.")
 @click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,
               help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
 @click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
@@ -175,8 +175,8 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
         return
     fitted = result.fitted
     console = settings().console
-    for name, value, std, start in zip(fitted.names, fitted.values, fitted.std, fitted.start):
-        console.print(f"  {name} = {value:.6g} +- {std:.2g} (start {start:.6g})")
+    for line in result.parameter_lines():
+        console.print(f"  {line}", markup=False)
     console.print(f"rms error of {fit_on} (fitted): estimation {fitted.estimation_rms:.4g} (start "
                   f"{fitted.start_estimation_rms:.4g}), validation {fitted.validation_rms:.4g} (start "
                   f"{fitted.start_validation_rms:.4g}); noise level {fitted.noise_rms_validation:.4g}")

@@ -32,6 +32,7 @@ from nlsid.diagnose.yardstick import Yardstick, fit_yardstick
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
+from nlsid.io.units import common_units
 from nlsid.simulate.channels import absent_notes
 from nlsid.simulate.threads import blas_in_one_thread
 
@@ -275,6 +276,7 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
     budget = budgeted(runs, roles, estimation_budget or math.inf, budget_above if estimation_budget else math.inf)
     first = current = last = _round(data, source, runs, roles, where, step, (), budget=budget, signal=fit_on)
+    first.units = common_units(run.units for run in runs)  # the parameters' units (nlsid.models.parameter_units)
     following = None  # the next round, where resolving a tie computed it already
     while True:
         if current.verdict.status == rules.AMBIGUOUS and len(first.chain) + 1 < MAX_CAUSES:

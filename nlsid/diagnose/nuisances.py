@@ -31,11 +31,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from nlsid.diagnose.simulation import MECHANICAL, ModelRunner
 from nlsid.io.run import Run
+from nlsid.models.parameter_units import with_unit
 
 KEYS = ("output_offset", "input_offset", "force_offset", "output_timing")  # the model keys of the nuisances
 MAX_EVALUATIONS = 40
@@ -57,10 +59,12 @@ class Nuisances:
         return {"values": dict(self.values), "std": dict(self.std), "notes": list(self.notes),
                 "initial_state": initial}
 
-    def findings(self) -> list[str]:
+    def findings(self, unit: Callable[[str], str | None] = lambda key: None) -> list[str]:
+        """The nuisances in words, each value with ``unit(key)`` where that is known."""
         out = []
         if self.values:
-            parts = ", ".join(f"{key} = {value:.4g} +- {self.std[key]:.2g}" for key, value in self.values.items())
+            parts = ", ".join(with_unit(f"{key} = {value:.4g} +- {self.std[key]:.2g}", unit(key))
+                              for key, value in self.values.items())
             out.append(f"nuisances estimated first (not causes): {parts}")
         if self.initial:
             largest = max(self.initial.values(), key=lambda state: state.transient_rms)

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Mapping
 
 from nlsid.diagnose import nuisances
 from nlsid.diagnose.gain import Score
 from nlsid.diagnose.hypotheses import Estimate, Hypothesis
 from nlsid.diagnose.hypotheses.linear_dynamics import is_coefficient
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
+from nlsid.models.parameter_units import unit_of, with_unit
 
 MOVED = 3.0  # standard errors by which a refined linear parameter differs from the model's to be named
 LINEAR_REFITS = ("wrong_mechanics", "wrong_dynamics")  # the linear part's refit alone (Outcome.generalizes)
@@ -46,13 +48,37 @@ class Outcome:
         freed = self.hypothesis.refits_linear and self.fitted_mechanics()
         return self.hypothesis.generalizes + (LINEAR_REFITS if freed else ())
 
-    def headline_values(self, stated: tuple[str, ...] = ()) -> str:
-        """The main parameter with its unit and the mechanics it moved, as the headline gives them;
-        the mechanics left out where an earlier step of the chain stated the same (``stated``)."""
+    def unit(self, name: str, units: Mapping[str, str]) -> str | None:
+        """The unit of the parameter ``name`` given the recording's ``units`` (signal -> unit), derived
+        from the extended model's structure (:mod:`nlsid.models.parameter_units`) at the parameter's
+        key path (or, for a value computed from the fit such as a Stribeck break-away ``fs``, at the
+        key of that name beside the hypothesis' own); None where that is unknown, never a guess. A
+        main parameter without a key path (a pole shift in %, a slope ratio) has the hypothesis' unit."""
+        path = self.paths.get(name) or self._beside(name)
+        if path is not None and self.extended is not None:
+            return unit_of(self.extended, path, units)
+        return self.hypothesis.unit if name == self.hypothesis.main else None
+
+    def _beside(self, name: str) -> str | None:
+        """The key ``name`` in the same item as one of the hypothesis' parameters, or None."""
+        for own in self.hypothesis.parameters:
+            path = self.paths.get(own)
+            if path and path.endswith(f".{own}"):
+                return f"{path[:-len(own)]}{name}"
+        return None
+
+    def units(self, units: Mapping[str, str]) -> dict[str, str | None]:
+        """:meth:`unit` of every estimated value (``summary.json`` ``units`` of a hypothesis)."""
+        return {name: self.unit(name, units) for name in (self.estimate.values if self.estimate else {})}
+
+    def headline_values(self, stated: tuple[str, ...] = (), units: Mapping[str, str] | None = None) -> str:
+        """The main parameter with its unit (:meth:`unit`, none where it is unknown) and the mechanics
+        it moved, as the headline gives them; the mechanics left out where an earlier step of the
+        chain stated the same (``stated``)."""
         h = self.hypothesis
-        main = f"{h.main} = {self.estimate.values[h.main]:.4g} {h.unit}"
+        main = with_unit(f"{h.main} = {self.estimate.values[h.main]:.4g}", self.unit(h.main, units or {}))
         moved = self.mechanics_changed()
-        return "; ".join(filter(None, [main, self.sides_text(), "" if moved in stated else moved]))
+        return "; ".join(filter(None, [main, self.sides_text(units), "" if moved in stated else moved]))
 
     def sides(self) -> dict | None:
         """A Coulomb-type friction law refined with a constant force on a free mass: the law with
@@ -71,14 +97,16 @@ class Outcome:
         std = math.sqrt(s0 ** 2 + (sc ** 2 if math.isfinite(sc) else 0.0))
         return {"fc_pos": fc - f0, "fc_neg": fc + f0, "std": std, "force": f0}
 
-    def sides_text(self) -> str:
-        """:meth:`sides` in words, or ""."""
+    def sides_text(self, units: Mapping[str, str] | None = None) -> str:
+        """:meth:`sides` in words, or "" (the forces in the unit of ``fc``, :meth:`unit`)."""
         s = self.sides()
         if s is None:
             return ""
-        return (f"its sides differ: fc_pos = {s['fc_pos']:.4g} and fc_neg = {s['fc_neg']:.4g} (+- {s['std']:.2g}) "
-                f"{self.hypothesis.unit}, or one fc with a constant force of {s['force']:.4g} (the data cannot "
-                "tell these apart)")
+        unit = self.unit("fc", units or {})
+        pair = with_unit(f"fc_pos = {s['fc_pos']:.4g} and fc_neg = {s['fc_neg']:.4g} (+- {s['std']:.2g})", unit)
+        force = with_unit(f"{s['force']:.4g}", unit)
+        return (f"its sides differ: {pair}, or one fc with a constant force of {force} (the data cannot tell "
+                "these apart)")
 
     def qualifier(self) -> str:
         """The fitted values' physical reading in a word or two ("hardening"), or ""."""
@@ -119,11 +147,16 @@ class Outcome:
                                                  f"corrected with it (by more than {MOVED:g} standard errors)"]))
         return text
 
-    def summary(self) -> dict:
+    def summary(self, units: Mapping[str, str] | None = None) -> dict:
+        """Its entry of ``summary.json`` ``hypotheses``; ``unit`` (of the main parameter) and
+        ``units`` (of every value, null where unknown) as :meth:`unit` derives them from the
+        recording's ``units``."""
         h = self.hypothesis
         out = {"name": h.name, "title": h.title, "family": h.family, "signature": h.signature,
-               "main_parameter": h.main, "unit": h.unit, "scored": self.score is not None, "reason": self.reason}
+               "main_parameter": h.main, "unit": self.unit(h.main, units or {}) or "",
+               "scored": self.score is not None, "reason": self.reason}
         if self.estimate is not None:
+            out.update(units=self.units(units or {}))
             out.update(values=self.estimate.values, std=self.estimate.std,
                        explained_on_estimation_db=self.estimate.explained_db, note=self.estimate.note)
         if self.score is not None:

@@ -16,6 +16,7 @@ from nlsid.diagnose.outcome import MOVED, Outcome
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, Budget
 from nlsid.diagnose.yardstick import FILE as BLACK_BOX
 from nlsid.diagnose.yardstick import Yardstick
+from nlsid.models.parameter_units import unit_of, with_unit
 
 
 @dataclass
@@ -36,6 +37,7 @@ class Diagnosis:
     yardstick: Yardstick | None = None  # the black-box model fitted to the same estimation data
     notes: list[str] = field(default_factory=list)  # on the runs as simulated (a channel taken as zero)
     signal: str = "y"  # the judged signal: the output y, or in closed loop the command u (diagnose --fit-on)
+    units: dict = field(default_factory=dict)  # the recording's (signal -> unit): the parameters' units
 
     @property
     def final(self) -> Outcome | None:
@@ -68,7 +70,8 @@ class Diagnosis:
                         "the noise floor is zero")
             if ev.overall.significant:  # the nuisances explain what the evidence saw
                 b = self.baseline
-                found = ", ".join(f"{k} = {v:.4g}" for k, v in self.nuisances.values.items())
+                found = ", ".join(with_unit(f"{k} = {v:.4g}", self.nuisance_unit(k))
+                                  for k, v in self.nuisances.values.items())
                 return (f"No significant discrepancy beyond the nuisances ({found}): with them the validation "
                         f"error is within the noise ({b.above_floor_db:+.1f} dB, p = {b.p_above_noise:.2g})")
             return (f"No significant discrepancy: the simulation error is within the noise "
@@ -79,7 +82,7 @@ class Diagnosis:
                     f"it, and no hypothesis lowers the validation error significantly{self._leading_text()}")
         if status in rules.NAMED:
             stated = [o.mechanics_changed() for o in self.chain]
-            causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(stated[:i]))})"
+            causes = ", then ".join(f"{o.named()} ({o.headline_values(tuple(stated[:i]), self.units)})"
                                     for i, o in enumerate(self.chain))
             final = self.final_score()
             several = len(self.chain) > 1
@@ -228,9 +231,16 @@ class Diagnosis:
             return []
         return nuisances.moved(self.nuisances, other.found, MOVED)
 
+    def nuisance_unit(self, key: str) -> str | None:
+        """The unit of the nuisance ``key`` (``model.<key>`` of the user's model,
+        :mod:`nlsid.models.parameter_units`), None where it is unknown."""
+        model = next((o.model for o in self.outcomes if o.model is not None), None)
+        return None if model is None else unit_of(model, f"model.{key}", self.units)
+
     def _nuisance_findings(self) -> list[str]:
         other = self.final or self.leading
-        out = [f"{m['key']} {m['before']:.4g} on the user's model but {m['after']:.4g} with {other.hypothesis.title} "
+        out = [f"{m['key']} {m['before']:.4g} on the user's model but "
+               f"{with_unit(format(m['after'], '.4g'), self.nuisance_unit(m['key']))} with {other.hypothesis.title} "
                f"({m['standard_errors']:.1f} standard errors apart): fitted without the effect it absorbed part of "
                "it, so the first value is not a fact about the converters" for m in self.moved_nuisances()]
         if self.verdict.status == rules.PARTLY_EXPLAINED and self.final.found is not None and self.final.found.values:
@@ -242,7 +252,7 @@ class Diagnosis:
     def _chain_summary(self) -> list[dict]:
         """Each accepted cause: its values, the gain over the model before it, the distance to the floor."""
         return [{"cause": o.hypothesis.name, "title": o.hypothesis.title, "qualifier": o.qualifier(),
-                 "values": o.estimate.values, "mechanics_changed": o.mechanics_changed(),
+                 "values": o.estimate.values, "units": o.units(self.units), "mechanics_changed": o.mechanics_changed(),
                  "std": o.estimate.std, "error_rms": o.score.error_rms, "gain_db": o.score.gain_db,
                  "above_floor_db": o.score.above_floor_db} for o in self.chain]
 
@@ -253,7 +263,8 @@ class Diagnosis:
         return self.budget.summary()
 
     def findings(self) -> list[str]:
-        out = list(self.notes) + self.nuisances.findings() + self._nuisance_findings() + self.evidence.findings()
+        out = (list(self.notes) + self.nuisances.findings(self.nuisance_unit) + self._nuisance_findings()
+               + self.evidence.findings())
         if self.budget is not None and self.budget.active:
             out.append(budget_note(self.budget, self.final is not None))
         if self.accuracy is not None:
@@ -291,7 +302,8 @@ class Diagnosis:
                  f"{self.model_source}"]
         for outcome in self.chain:
             for name, value in outcome.estimate.values.items():
-                lines.append(f"  {name} = {value:.6g} +- {outcome.estimate.std[name]:.2g} (one standard error)")
+                text = f"{name} = {value:.6g} +- {outcome.estimate.std[name]:.2g}"
+                lines.append(f"  {with_unit(text, outcome.unit(name, self.units))} (one standard error)")
         final = self.final_score()
         gain = f"{final.gain_db:+.1f} dB" if math.isfinite(final.gain_db) else "zero within numerical precision"
         lines.append(f"Validation error {final.error_rms:.4g} rms ({gain} against the original "
@@ -305,8 +317,8 @@ class Diagnosis:
         o, lead = self.leading, self.leading_summary()
         lines = [f"Leading candidate of nlsid diagnose, NOT a named cause (its gain is not significant): "
                  f"{o.hypothesis.title} added to {self.model_source}"]
-        lines += [f"  {name} = {value:.6g} +- {o.estimate.std[name]:.2g} (one standard error)"
-                  for name, value in o.estimate.values.items()]
+        lines += [f"  {with_unit(f'{name} = {value:.6g} +- {o.estimate.std[name]:.2g}', o.unit(name, self.units))} "
+                  "(one standard error)" for name, value in o.estimate.values.items()]
         lines.append(f"Validation error {o.score.error_rms:.4g} rms ({lead['gain_db']:+.1f} dB against the model with "
                      f"its nuisances; {lead['needed_db']:+.1f} dB needed to name it)")
         return lines
@@ -323,7 +335,7 @@ class Diagnosis:
         return {
             "headline": self.headline(), "fit_on": self.signal, "findings": self.findings(), "model": self.model_source,
             "split": split, "evidence": self.evidence.summary(), "original": self.original.summary(),
-            "verdict": self.verdict.summary(), "hypotheses": [o.summary() for o in self.outcomes],
+            "verdict": self.verdict.summary(), "hypotheses": [o.summary(self.units) for o in self.outcomes],
             "nuisances": {**self.nuisances.summary(), "moved": self.moved_nuisances()},
             "explanation": self.explanation(), "leading": self.leading_summary(),
             "yardstick": self.yardstick.summary() if self.yardstick is not None else None,

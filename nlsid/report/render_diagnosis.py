@@ -58,10 +58,11 @@ def _with_std(name: str, values: dict, std: dict, unit: str = "") -> str:
     return text + (f" {unit}" if unit else "")
 
 
-def _parameters(title: str, values: dict, std: dict, main: str | None, unit: str) -> str:
-    """``Coulomb friction: fc = 100.2 ± 0.17 N; with it, the model's damping = 20 ± 0.0017, ...``."""
-    first = [_with_std(main, values, std, unit)] if main in values else []
-    others = [_with_std(name, values, std) for name in values if name != main]
+def _parameters(title: str, values: dict, std: dict, main: str | None, units: dict) -> str:
+    """``Coulomb friction: fc = 100.2 ± 0.17 N; with it, the model's damping = 20 ± 0.0017 N s/m, ...``:
+    each value with its unit (``units``, summary.json's; none where it is unknown)."""
+    first = [_with_std(main, values, std, units.get(main) or "")] if main in values else []
+    others = [_with_std(name, values, std, units.get(name) or "") for name in values if name != main]
     if not first:
         return f"{title}: {', '.join(others)}"
     return f"{title}: {first[0]}" + (f"; with it, the model's {', '.join(others)}" if others else "")
@@ -69,19 +70,20 @@ def _parameters(title: str, values: dict, std: dict, main: str | None, unit: str
 
 def cause_lines(summary: dict) -> list[str]:
     """The named cause(s) with every estimated parameter ± one standard error, the main parameter
-    first with its unit: each step of the chain of causes, else the verdict's winner."""
+    first, each with its unit: each step of the chain of causes, else the verdict's winner."""
     by_name = {h.get("name"): h for h in summary["hypotheses"]}
     steps = summary.get("chain") or []
     if not steps:
         winner = by_name.get(summary["verdict"].get("winner"))
         steps = [{"cause": winner["name"], "title": winner["title"], "values": winner["values"],
-                  "std": winner.get("std") or {}}] if winner and winner.get("values") else []
+                  "std": winner.get("std") or {}, "units": winner.get("units") or {}}] \
+            if winner and winner.get("values") else []
     out = []
     for i, step in enumerate(steps):
         h = by_name.get(step.get("cause"), {})
         title = step.get("title") or step.get("cause", "-")
-        text = _parameters(title, step.get("values", {}), step.get("std") or {}, h.get("main_parameter"),
-                           h.get("unit", ""))
+        units = step.get("units") or h.get("units") or {h.get("main_parameter"): h.get("unit", "")}
+        text = _parameters(title, step.get("values", {}), step.get("std") or {}, h.get("main_parameter"), units)
         out.append((f"cause {i + 1}, " if len(steps) > 1 else "cause: ") + text + " (± one standard error)")
     return out
 
@@ -157,7 +159,9 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
         main = h["main_parameter"]
         value = h.get("values", {}).get(main)
         std = h.get("std", {}).get(main)
-        parameter = f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" if value is not None else "-"
+        unit = (h.get("units") or {}).get(main, h.get("unit")) or ""
+        parameter = (f"{main} = {number(value, '.4g')} ± {number(std, '.2g')}" + (f" {unit}" if unit else "")
+                     if value is not None else "-")
         rows.append([h["title"], parameter,
                      number(v and v["gain_db"], "+.1f"), floor_text(v),
                      number(v and v.get("distortion_gain_db"), "+.1f"),
@@ -234,8 +238,9 @@ def _error_table(summary: dict, units: Units) -> Table:
 
 
 def _values(step: dict) -> str:
-    std = step.get("std", {})
+    std, units = step.get("std", {}), step.get("units") or {}
     return "; ".join(f"{name} = {number(value, '.4g')}" + (f" ± {number(std[name], '.2g')}" if name in std else "")
+                     + (f" {units[name]}" if units.get(name) else "")
                      for name, value in step.get("values", {}).items()) or "-"
 
 

@@ -467,6 +467,9 @@ class ModelFit:
     computation_delay : nlsid.fit.computation_delay.DelayChoice or None
         Where the config asks for ``closed_loop.computation_delay: auto``: the delay chosen, every
         candidate's cost and whether the data decide it; ``fitted`` is the chosen delay's fit.
+    units : dict
+        The recording's units (signal -> unit, those every run fitted or validated on agrees on),
+        from which :attr:`parameter_units` derives each parameter's.
     """
 
     fitted: ExtensionFit
@@ -476,6 +479,23 @@ class ModelFit:
     inputs: list[str] = field(default_factory=list)
     allow_overlap: bool = False
     computation_delay: DelayChoice | None = None
+    units: dict = field(default_factory=dict)
+
+    @property
+    def parameter_units(self) -> dict[str, str | None]:
+        """Key path -> the free parameter's unit, from the recording's units and the model's
+        structure (:mod:`nlsid.models.parameter_units`): "" for a pure number, None where unknown."""
+        from nlsid.models.parameter_units import unit_of
+
+        return {name: unit_of(self.fitted.config, name, self.units) for name in self.fitted.names}
+
+    def parameter_lines(self) -> list[str]:
+        """``name = value +- std unit (start value)``, one per free parameter, as ``nlsid fit --model`` prints them."""
+        from nlsid.models.parameter_units import with_unit
+
+        result, units = self.fitted, self.parameter_units
+        return [f"{with_unit(f'{n} = {v:.6g} +- {s:.2g}', units[n])} (start {s0:.6g})"
+                for n, v, s, s0 in zip(result.names, result.values, result.std, result.start)]
 
     @property
     def names(self) -> list[str]:
@@ -491,8 +511,8 @@ class ModelFit:
 
     @property
     def parameters(self) -> dict[str, dict]:
-        """Name -> value, std, start, lower and upper bound."""
-        return self.fitted.summary()["parameters"]
+        """Name -> value, std, start, lower and upper bound, unit (:attr:`parameter_units`)."""
+        return self.summary()["parameters"]
 
     @property
     def config(self) -> dict:
@@ -532,14 +552,19 @@ class ModelFit:
     def summary(self) -> dict:
         """The ``nlsid fit --model --json`` summary without paths (``docs/formats.md``)."""
         choice = self.computation_delay
-        return {**self.fitted.summary(), "allow_overlap": self.allow_overlap,
+        summary = self.fitted.summary()
+        units = self.parameter_units
+        parameters = {name: {**entry, "unit": units.get(name)} for name, entry in summary["parameters"].items()}
+        return {**summary, "parameters": parameters, "units": dict(self.units), "allow_overlap": self.allow_overlap,
                 "computation_delay": None if choice is None else choice.summary()}
 
     def header(self, report_name: str) -> list[str]:
         """The comment lines of the fitted model's YAML (``report_name``: the report beside it)."""
-        result = self.fitted
+        from nlsid.models.parameter_units import with_unit
+
+        result, units = self.fitted, self.parameter_units
         return [f"nlsid fit --model {self.model_source} --data {self.data_source}",
-                "fitted: " + ", ".join(f"{n} = {v:.6g} +- {s:.2g}"
+                "fitted: " + ", ".join(with_unit(f"{n} = {v:.6g} +- {s:.2g}", units[n])
                                        for n, v, s in zip(result.names, result.values, result.std)),
                 f"validation rms error of {result.fit_on} {result.validation_rms:.4g} (noise "
                 f"{result.noise_rms_validation:.4g}); report: {report_name}"] + (
@@ -565,12 +590,13 @@ class ModelFit:
     def _repr_html_(self) -> str:
         from html import escape
 
-        result = self.fitted
-        rows = "".join(f"<tr><td>{escape(n)}</td><td>{v:.6g}</td><td>{s:.2g}</td><td>{s0:.6g}</td></tr>"
+        result, units = self.fitted, self.parameter_units
+        rows = "".join(f"<tr><td>{escape(n)}</td><td>{v:.6g}</td><td>{s:.2g}</td><td>{escape(units[n] or '')}</td>"
+                       f"<td>{s0:.6g}</td></tr>"
                        for n, v, s, s0 in zip(result.names, result.values, result.std, result.start))
         warnings = "".join(f"<li>{escape(w)}</li>" for w in result.warnings)
         return (f"<p><b>Model fit</b> of {escape(self.model_source)} to {escape(self.data_source)}</p>"
-                f"<table><tr><th>parameter</th><th>value</th><th>std</th><th>start</th></tr>{rows}</table>"
+                f"<table><tr><th>parameter</th><th>value</th><th>std</th><th>unit</th><th>start</th></tr>{rows}</table>"
                 f"<p>rms error of {escape(result.fit_on)}: estimation {result.estimation_rms:.4g} (start "
                 f"{result.start_estimation_rms:.4g}), validation {result.validation_rms:.4g} (start "
                 f"{result.start_validation_rms:.4g}); noise level {result.noise_rms_validation:.4g}</p>"
@@ -664,6 +690,7 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
     """
     from nlsid.fit.extension import JACOBIANS, fit_config
     from nlsid.fit.run_split import split_runs
+    from nlsid.io.units import common_units
 
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
@@ -684,10 +711,11 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
                           estimation_range=data.estimation, validation_range=data.validation, fit_on=fit_on,
                           where=data.where, jacobian=jacobian, source=source, lines=lines)
 
+    units = common_units(run.units for run in [*data.runs, *data.extra_runs])
     largest = candidates_of(config, source, lines)
     if largest is None:
-        return ModelFit(fit(config), source, data.where, configs, data.inputs, bool(allow_overlap))
+        return ModelFit(fit(config), source, data.where, configs, data.inputs, bool(allow_overlap), units=units)
     # computation_delay: auto, a discrete nuisance: one fit per candidate (nlsid.fit.computation_delay)
     estimation, _ = split_runs(data.runs, held, data.extra_runs, data.estimation, data.validation, data.where)
     fitted, choice = choose_delay(config, largest, fit, estimation, fit_on, "free parameters", source)
-    return ModelFit(fitted, source, data.where, configs, data.inputs, bool(allow_overlap), choice)
+    return ModelFit(fitted, source, data.where, configs, data.inputs, bool(allow_overlap), choice, units)

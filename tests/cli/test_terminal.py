@@ -83,6 +83,7 @@ def test_diagnose_prints_each_not_fitted_reason_once(monkeypatch):
     reason = "needs a mechanical model (a mass, a spring and a damper) with velocity as a state"
     fitted = SimpleNamespace(hypothesis=SimpleNamespace(title="cubic stiffness", main="k3"),
                              estimate=SimpleNamespace(values={"k3": 2.0e8}), reason="",
+                             unit=lambda name, units: "N/m^3" if units == {"u": "N", "y": "m"} else None,
                              score=SimpleNamespace(gain_db=27.3, exact=False, distortion_gain_db=12.0,
                                                    summary=lambda: {"above_floor_db": 0.2}))
     skipped = [SimpleNamespace(hypothesis=SimpleNamespace(title=f"hypothesis {i}", main="x"), reason=reason, score=None)
@@ -90,7 +91,7 @@ def test_diagnose_prints_each_not_fitted_reason_once(monkeypatch):
     nuisance = "nuisances estimated first (not causes): output_offset = 3.1e-06 +- 2.4e-05"
     fitted.estimate.note = "model.output_offset and model.output_timing: the data cannot tell these apart"
     result = SimpleNamespace(headline=lambda: "Cause: cubic stiffness", evidence=SimpleNamespace(findings=lambda: []),
-                             outcomes=[fitted, *skipped], winner=fitted,
+                             outcomes=[fitted, *skipped], winner=fitted, units={"u": "N", "y": "m"},
                              findings=lambda: [nuisance, "simulation error 0.0152 rms"])
     printed = {}
     for verbose in (0, 1):
@@ -107,7 +108,7 @@ def test_diagnose_prints_each_not_fitted_reason_once(monkeypatch):
     assert text.count("needs a mechanical") == 1  # seven rows' note said once
     assert "7 hypotheses: hypothesis 0, hypothesis 1" in " ".join(text.split())
     assert max(len(line) for line in text.splitlines()) <= WIDTH
-    _words_intact(text, ["stiffness", "k3", "2e+08", "winner", "mechanical", "velocity"])
+    _words_intact(text, ["stiffness", "k3", "2e+08", "N/m^3", "winner", "mechanical", "velocity"])
 
 
 def test_bare_nlsid_prints_a_readable_usage(run_cli):
