@@ -143,7 +143,22 @@ def _write_inputs_record(step: Step, stamped: dict) -> None:
 def run(pipeline: str, always: bool, as_json: bool) -> None:
     """Run a pipeline of stages, skipping steps whose outputs are newer than their inputs.
 
-    Example:
+    PIPELINE is a YAML file with two keys: `root`, the folder every path of the steps is relative
+    to (itself relative to the pipeline file; default: the pipeline file's folder), and `steps`,
+    a list of stage command lines as typed after `nlsid` (design, simulate, bla, hosidf, fit,
+    diagnose, report, import), each naming its output with -o. Every step is checked before the
+    first runs; then they run in order. A step whose outputs are newer than the files it reads
+    (and those unchanged since) is skipped (--always runs it anyway); the first failing step stops
+    the run with its own message and exit code.
+
+    Example (configs/pipeline_stage.yaml):
+
+    \b
+      root: ..
+      steps:
+        - design configs/stage_design.yaml -o out/excitation.h5
+        - bla sample_data/stage.h5 -o out/bla.h5
+        - fit out/bla.h5 --order 0/2 --domain s -o out/bla_model.yaml
 
     \b
       nlsid run configs/pipeline_stage.yaml
