@@ -57,16 +57,16 @@ def test_noise_free_frm_equals_the_truth(n_inputs, transform):
     assert np.max(result.std_total / np.abs(G0)) < 1e-10 and np.max(result.std_noise / np.abs(G0)) < 1e-10
 
 
-@pytest.mark.parametrize("sigma_u", [0.0, 0.03])
-def test_noise_std_per_entry_matches_theory(sigma_u):
+@pytest.mark.parametrize("n_u, sigma_u", [(2, 0.0), (2, 0.03), (3, 0.0)])
+def test_noise_std_per_entry_matches_theory(n_u, sigma_u):
     """The estimated noise variance of each entry over its expected value is chi2(d)/d with
-    d = 2 M E (P-1) per line (80 here), independent over lines: the band mean (d = 80 F = 2400) and
-    every line (Bonferroni over 4 x 30 lines) within their 1e-4 / 1e-3 two-sided chi-square bounds.
+    d = 2 M E (P-1) per line (80 for E = 2), independent over lines: the band mean (d = 80 F = 2400)
+    and every line (Bonferroni over the 2 n_u x 30 entries and lines) within their 1e-4 / 1e-3 two-sided chi-square bounds.
     With input noise of std s_u the first-order variance adds sum_r |G_ir|^2 s_u^2 to s_i^2 ((3-18));
     at 45 dB input SNR per line the second-order terms are below 1e-4 of it."""
-    M, P, n_u, period = 4, 6, 2, 256
+    M, P, period = 4, 6, 256
     bins = np.arange(5, 125, 4)
-    rms, sigma_y = np.array([1.0, 0.5]), np.array([0.02, 0.05])
+    rms, sigma_y = np.array([1.0, 0.5, 0.7])[:n_u], np.array([0.02, 0.05])
     filters = mimo_cases.system(2, n_u)
     u, y = measure(filters, bins, period, n_u, M, P, np.random.default_rng(2), rms=rms, sigma_y=sigma_y,
                    sigma_u=sigma_u)
@@ -251,3 +251,17 @@ def test_dependent_experiments_are_refused_and_nearly_dependent_ones_named():
     result = frm(near, near[:, :, :1] + 2 * near[:, :, 1:], bins)
     assert any("nearly dependent at 10 line" in w for w in result.warnings), result.warnings
     assert np.allclose(result.G[:, 0, :], [1, 2], rtol=1e-6)
+
+
+def test_one_realization_or_one_period_gives_what_it_can():
+    """M = 1: no total covariance; P = 1: no noise covariance; both said in the warnings, G still exact."""
+    period, bins = 64, np.arange(1, 30, 2)
+    filters = mimo_cases.system(2, 2)
+    G0 = mimo_cases.truth(filters, bins, period)
+    for M, P, missing in ((1, 3, "std_total"), (3, 1, "std_noise")):
+        u, y = measure(filters, bins, period, 2, M, P, np.random.default_rng(8))
+        result = frm(u, y, bins)
+        assert np.max(np.abs(result.G - G0) / np.abs(G0)) < 1e-10
+        assert np.all(np.isnan(getattr(result, missing)))
+        assert np.all(np.isnan(result.bounds.radius if M == 1 else result.noise_bounds.radius))
+        assert any(("M = 1" if M == 1 else "P = 1") in w for w in result.warnings), result.warnings
