@@ -54,6 +54,7 @@ import numpy as np
 
 from nlsid.analysis.confidence import Bounds, circle_bounds
 from nlsid.analysis.lines import EVEN, ODD, classify_lines
+from nlsid.citations import BOOK
 from nlsid.errors import InputError
 from nlsid.signals.orthogonal_multisine import check_bins
 
@@ -228,7 +229,7 @@ def _check_data(u: np.ndarray, y: np.ndarray) -> None:
     n_inputs, n_experiments = u.shape[2], u.shape[1]
     if n_experiments < n_inputs:
         raise InputError("u", f"{n_inputs} inputs need at least {n_inputs} experiments per realization "
-                              f"(book (6-116)), got {n_experiments}")
+                              f"({BOOK}, Eq. 6-116), got {n_experiments}")
 
 
 def _check_independent(condition: np.ndarray, frequency: np.ndarray) -> None:
@@ -237,7 +238,7 @@ def _check_independent(condition: np.ndarray, frequency: np.ndarray) -> None:
     if bad.size:
         raise InputError("u", f"the experiments' input vectors are linearly dependent at {bad.size} excited line(s) "
                               f"(from {frequency[bad[0]]:g} Hz; cond(U) >= {DEPENDENT:.0e}): G cannot be separated "
-                              "(book (6-116)); excite with orthogonal multisines")
+                              f"({BOOK}, Eq. 6-116); excite with orthogonal multisines")
 
 
 def _warnings(condition: np.ndarray, frequency: np.ndarray, M: int, P: int) -> list[str]:

@@ -265,3 +265,26 @@ def test_one_realization_or_one_period_gives_what_it_can():
         assert np.all(np.isnan(getattr(result, missing)))
         assert np.all(np.isnan(result.bounds.radius if M == 1 else result.noise_bounds.radius))
         assert any(("M = 1" if M == 1 else "P = 1") in w for w in result.warnings), result.warnings
+
+
+def test_more_experiments_than_inputs_is_the_least_squares_frm():
+    """Two inputs driven with the first two rows of a 3-input design (E = 3 orthogonal experiments):
+    G = Y U^+ equals the truth without noise, and with output noise its variance is
+    s_i^2 / (N P E |U_a|^2 M) (|U^+[e, a]|^2 = 1 / (E^2 |U_a|^2)), chi2 with d = 2 M E (P-1) per line."""
+    M, P, period, E = 4, 4, 256, 3
+    bins = np.arange(5, 125, 4)
+    filters = mimo_cases.system(2, 2)
+    rng = np.random.default_rng(9)
+    designs = [orthogonal_multisine(period, bins, E, rng=rng).signals()[:, :2] for _ in range(M)]  # (E, 2, N)
+    u = np.array([np.broadcast_to(d[:, :, None, :], (E, 2, P, period)) for d in designs])
+    v = np.array([mimo_cases.linear_outputs(filters, d, P) for d in designs])
+    G0 = mimo_cases.truth(filters, bins, period)
+    assert np.max(np.abs(frm(u, v, bins).G - G0) / np.abs(G0)) < 1e-10
+    sigma = 0.05
+    result = frm(u, v + sigma * rng.standard_normal(v.shape), bins)
+    expected = sigma**2 / (period * P * E * (1 / (2 * bins.size)) * M)
+    band = 2 * M * E * (P - 1) * bins.size
+    lo, hi = stats.chi2.ppf([1e-4 / 2, 1 - 1e-4 / 2], band) / band
+    ratio = (result.std_noise**2).mean(axis=0) / expected
+    assert np.all((lo < ratio) & (ratio < hi)), ratio
+    assert result.n_experiments == 3
