@@ -165,6 +165,29 @@ def period_spectra(x: np.ndarray) -> np.ndarray:
     return np.fft.rfft(x, axis=-1) * (1.0 / x.shape[-1])
 
 
+def line_spectra(spectra: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Period means and deviations at ``bins`` of period spectra (M, E, channels, P, K).
+
+    Returns the means as matrices (M, F, channels, E), one column per experiment, and the
+    deviations from them (M, F, E, P, channels).
+    """
+    x = spectra[..., bins]
+    mean = x.mean(axis=3)
+    return np.transpose(mean, (0, 3, 2, 1)), np.transpose(x - mean[:, :, :, None], (0, 4, 1, 3, 2))
+
+
+def scatter_covariance(g: np.ndarray) -> np.ndarray:
+    """Covariance of the mean of M vectors from their scatter: (M, F, n) -> (F, n, n) ((6-3)).
+
+    ``sum_m (g_m - g_bar)(g_m - g_bar)^H / (M (M-1))``; NaN for M = 1.
+    """
+    M = g.shape[0]
+    if M < 2:
+        return np.full(g.shape[1:] + g.shape[-1:], np.nan + 0j)
+    deviation = g - g.mean(axis=0)
+    return np.einsum("mfa,mfb->fab", deviation, np.conj(deviation)) / (M * (M - 1))
+
+
 def realization_frm(U: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``G = Y U^-1`` ((6-117)) for stacks of matrices U (..., n_u, E) and Y (..., n_y, E).
 
@@ -216,11 +239,29 @@ def entries(vec_values: np.ndarray, n_outputs: int) -> np.ndarray:
     return np.swapaxes(vec_values.reshape(vec_values.shape[:-1] + (n_inputs, n_outputs)), -1, -2)
 
 
+def _numeric(name: str, value) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(name, "expected a numeric array (realizations, experiments, channels, periods, "
+                               "samples)") from None
+
+
+def _number(name: str, value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InputError(name, f"expected a number, got {value!r}") from None
+
+
 def _check_data(u: np.ndarray, y: np.ndarray) -> None:
     for name, x in (("u", u), ("y", y)):
         if x.ndim != 5:
             raise InputError(name, f"expected an array (realizations, experiments, channels, periods, samples), "
                                    f"got {x.ndim} dimensions")
+        if 0 in x.shape:
+            raise InputError(name, f"expected at least one realization, experiment, channel, period and sample, "
+                                   f"got shape {x.shape}")
         if not np.all(np.isfinite(x)):
             raise InputError(name, "holds NaN or infinite samples")
     if u.shape[:2] != y.shape[:2] or u.shape[3:] != y.shape[3:]:
@@ -293,8 +334,9 @@ def frm(u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0, confidence:
     >>> np.round(frm(u, y, design.bins).G[0].real, 12)
     array([[1., 2.]])
     """
-    u, y = np.asarray(u, dtype=float), np.asarray(y, dtype=float)
+    u, y = _numeric("u", u), _numeric("y", y)
     _check_data(u, y)
+    confidence, fs = _number("confidence", confidence), _number("fs", fs)
     if not 0 < confidence < 1:
         raise InputError("confidence", f"expected a probability in (0, 1), got {confidence:g}")
     if not (np.isfinite(fs) and fs > 0):
@@ -303,27 +345,15 @@ def frm(u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0, confidence:
     n_y = y.shape[2]
     bins = check_bins(N, np.asarray(excited_bins))
     frequency = bins * (fs / N)
-    spectra_u, spectra_y = period_spectra(u), period_spectra(y)     # (M, E, channels, P, K)
-
-    def at(spectra: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Period means (M, K, channels, E) and deviations (M, K, E, P, channels) at bins k."""
-        x = spectra[..., k]
-        mean = x.mean(axis=3)
-        return np.transpose(mean, (0, 3, 2, 1)), np.transpose(x - mean[:, :, :, None], (0, 4, 1, 3, 2))
-
-    U, dU = at(spectra_u, bins)
-    Y, dY = at(spectra_y, bins)
+    spectra_y = period_spectra(y)                                    # (M, E, n_y, P, K)
+    U, dU = line_spectra(period_spectra(u), bins)
+    Y, dY = line_spectra(spectra_y, bins)
     condition = np.linalg.cond(U).max(axis=0)                        # worst realization per line
     _check_independent(condition, frequency)
     G_m, W = realization_frm(U, Y)                                   # (M, F, n_y, n_u), (M, F, E, n_u)
     C = residual_covariance(dU, dY, G_m)                             # (M, F, E, n_y, n_y)
     cov_noise = frm_noise_covariance(W, C).sum(axis=0) / M**2
-    g = np.swapaxes(G_m, -1, -2).reshape(M, bins.size, n_u * n_y)    # column-stacked vec
-    deviation = g - g.mean(axis=0)
-    if M >= 2:
-        cov_total = np.einsum("mfa,mfb->fab", deviation, np.conj(deviation)) / (M * (M - 1))
-    else:
-        cov_total = np.full((bins.size, n_u * n_y, n_u * n_y), np.nan + 0j)
+    cov_total = scatter_covariance(np.swapaxes(G_m, -1, -2).reshape(M, bins.size, n_u * n_y))
     G = G_m.mean(axis=0)
     var_noise = entries(np.real(np.diagonal(cov_noise, axis1=-2, axis2=-1)), n_y)
     var_total = entries(np.real(np.diagonal(cov_total, axis1=-2, axis2=-1)), n_y)

@@ -229,6 +229,9 @@ def test_bad_data_raise_input_errors_naming_the_argument():
         (dict(y=np.full(y.shape, np.nan)), "y:"),
         (dict(bins=[16]), "bins:"),                    # Nyquist
         (dict(confidence=1.0), "confidence:"),
+        (dict(confidence="high"), "confidence:"),
+        (dict(u=u[:0], y=y[:0]), "u:"),                # no realization
+        (dict(y=[["a"]]), "y:"),
     ]
     for change, where in cases:
         arguments = dict(u=u, y=y, excited_bins=[1, 3]) | {("excited_bins" if k == "bins" else k): v
