@@ -490,6 +490,14 @@ class TwoMassStageConfig(_PlantBlocks):
     force_offset: float = 0.0  # a constant force on the driven mass (where the actuator acts)
 
 
+class ForcePoint(FiniteModel):
+    """A point of a ``nonlinear_feedback``'s continuous ``state_space`` where a force may act: it
+    enters x' = ... - force F and reads the position ``position`` . x (a modal coordinate)."""
+
+    force: list[float] = Field(min_length=1)
+    position: list[float] = Field(min_length=1)
+
+
 class NonlinearFeedbackConfig(_PlantBlocks):
     """Forces fed back around an LTI ``linear`` from force to position: p = G (gain u - sum F), each
     F reading p (cubic or polynomial stiffness) or the velocity v (friction): v = p' for a continuous G, the
@@ -500,6 +508,7 @@ class NonlinearFeedbackConfig(_PlantBlocks):
     gain: float = 1.0
     output: Literal["position", "velocity"] = "position"
     nonlinearities: list[ForceConfig] = []
+    points: dict[str, ForcePoint] = {}  # further force points inside a continuous state_space (``at``)
     delay: NonNegative = 0.0
     force_offset: float = 0.0  # a constant force on the driven mass (where the actuator acts)
 

@@ -28,7 +28,7 @@ from nlsid.models import blocks, equations, forces
 from nlsid.models.blocks import StaticBlock, static_block
 from nlsid.models.controller import pid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
-from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage
+from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage, with_points
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,13 @@ def lti(config, where: str) -> StateSpace:
 
 def _mechanical(config, where: str) -> MechanicalPlant:
     if config.type == "nonlinear_feedback":
-        return force_feedback(lti(config.linear, f"{where}.linear"), config.gain, config.output, config.delay, where)
+        G = lti(config.linear, f"{where}.linear")
+        plant = force_feedback(G, config.gain, config.output, config.delay, where)
+        if config.points and (config.linear.type != "state_space" or G.discrete):
+            raise InputError(f"{where}.points", "needs a continuous state_space linear part (the points are given "
+                                                "in its state coordinates)")
+        points = {name: (p.force, p.position) for name, p in config.points.items()}
+        return with_points(plant, G.A, points, where) if points else plant
     if config.type == "mass_spring_damper":
         return mass_spring_damper(config.mass, config.damping, config.stiffness, config.gain, config.output,
                                   config.initial.position, config.initial.velocity, config.delay)

@@ -35,6 +35,11 @@ The velocity is a state read-out v = (C A) x exactly when C B = 0, i.e. G has re
 output be fed back. The single point where the forces act is named ``plant``. A discrete G(z)
 (the model ``nlsid fit`` writes) reads the velocity as the backward difference of the position
 (:func:`_discrete_feedback`).
+
+Inside a continuous state space further points may be named (:func:`with_points`): a force at
+point j enters along its own column b_j and reads its own row c_j, x' = A x + B (gain u - F) -
+b_j F_j, p_j = c_j x, v_j = c_j A x where c_j b_j = 0 (a modal coordinate of a modal realisation,
+a relative deflection), while the output stays C x.
 """
 
 from __future__ import annotations
@@ -129,6 +134,26 @@ def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where:
         StateSpace(G.A, gain * G.B, C, 0.0, False, delay), np.zeros(G.order),
         force_columns={"plant": G.B}, position_rows={"plant": G.C}, velocity_rows=velocity_rows,
     )
+
+
+def with_points(plant: MechanicalPlant, A: np.ndarray, points: dict[str, tuple[np.ndarray, np.ndarray]],
+                where: str) -> MechanicalPlant:
+    """``plant`` (a continuous :func:`force_feedback` with state matrix ``A``) with further force
+    points, name -> (column b, row c) in its state coordinates (module docstring): a force there
+    enters along -b and reads the position c x, and the velocity c A x where c b = 0."""
+    columns, positions, velocities = dict(plant.force_columns), dict(plant.position_rows), dict(plant.velocity_rows)
+    for name, (column, row) in points.items():
+        column, row = np.asarray(column, float), np.asarray(row, float)
+        if name in columns:
+            raise InputError(f"{where}.points.{name}", f"the name {name!r} is taken (the plant's own point)")
+        for key, vector in (("force", column), ("position", row)):
+            if vector.size != A.shape[0]:
+                raise InputError(f"{where}.points.{name}.{key}",
+                                 f"expected {A.shape[0]} numbers (the linear part's states), got {vector.size}")
+        columns[name], positions[name] = column, row
+        if abs(row @ column) <= 1e-12 * np.linalg.norm(row) * np.linalg.norm(column):
+            velocities[name] = row @ A
+    return MechanicalPlant(plant.ss, plant.x0, columns, positions, velocities, plant.difference, plant.no_velocity)
 
 
 def _discrete_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:

@@ -55,6 +55,14 @@ cubic_joint         odd distortion around the flexible mode   ``nonlinearities: 
                     of a two_mass_stage; residual like the    with ``at: joint`` (k3: k3 (p1 -
                     sensitivity to a cubic spring between     p2)^3 in the coupling, with the
                     the masses                                mechanics)
+modal_joint         odd distortion; one mode of a multi-mode  ``nonlinear_feedback`` around the
+                    LTI model (order >= 4) moves with the     model's modal state space (the
+                    level (the BLA's modes compared), the     moving mode first) with
+                    others stay                               ``cubic_stiffness`` at that mode's
+                                                              ``points`` entry (k3: k3 q^3 on
+                                                              its modal coordinate q; every
+                                                              mode's coefficients refined;
+                                                              modal_joint.py)
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
                     function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
                                                               with the linear coefficients)
@@ -141,7 +149,7 @@ from __future__ import annotations
 from nlsid.diagnose.hypotheses import (coupled_mode, delay, feedback, friction, input_blocks, linear_dynamics, mechanics,
                                        output_blocks, resonance, stiffness)
 from nlsid.diagnose.hypotheses import tank_outflow, tank_overflow, wiener_hammerstein
-from nlsid.diagnose.hypotheses import end_stops, hysteresis, joint
+from nlsid.diagnose.hypotheses import end_stops, hysteresis, joint, modal_joint
 from nlsid.diagnose.hypotheses import actuator_polynomial, friction_feedback, nonlinear_damping, output_saturation
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis
 
@@ -149,7 +157,7 @@ __all__ = ["LIBRARY", "Context", "Estimate", "Hypothesis", "by_name"]
 
 #: The hypotheses in the order they are tried (a family's simpler members first).
 LIBRARY: tuple[Hypothesis, ...] = (friction.HYPOTHESES + friction_feedback.HYPOTHESES + nonlinear_damping.HYPOTHESES
-                                   + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + end_stops.HYPOTHESES + joint.HYPOTHESES + feedback.HYPOTHESES
+                                   + stiffness.HYPOTHESES + hysteresis.HYPOTHESES + end_stops.HYPOTHESES + joint.HYPOTHESES + modal_joint.HYPOTHESES + feedback.HYPOTHESES
                                    + input_blocks.HYPOTHESES + actuator_polynomial.HYPOTHESES
                                    + output_blocks.HYPOTHESES + output_saturation.HYPOTHESES + wiener_hammerstein.HYPOTHESES + tank_outflow.HYPOTHESES + tank_overflow.HYPOTHESES
                                    + resonance.HYPOTHESES + mechanics.HYPOTHESES

@@ -1,0 +1,358 @@
+"""A nonlinear joint in modal form: a cubic spring on the modal coordinate of the one mode of a
+multi-mode LTI model whose frequency moves with the excitation level.
+
+Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4,
+strictly proper; a discrete one as its continuous equivalent, the exact inverse of its ZOH
+discretisation, :func:`nlsid.models.continuous_equivalent.zoh_inverse`) is diagonalised,
+A = V diag(lambda) V^-1, and each mode's residue r = (C v)(w B) (v the right, w the left
+eigenvector) written as a real block with its own modal coordinate q. A complex pair lambda,
+conj(lambda) becomes
+
+    q'' + 2 zeta w q' + w^2 q = u,   y_i = beta q + alpha q',
+
+w^2 = |lambda|^2, 2 zeta w = -2 Re(lambda), alpha = 2 Re(r), beta = -2 Re(r conj(lambda)) (from
+r / (s - lambda) + conj(r) / (s - conj(lambda)) = (alpha s + beta) / (s^2 + 2 zeta w s + w^2)),
+states (q, q'), input column (0, 1), output row (beta, alpha): a unit modal participation of the
+input, which fixes the scale of q and so the units of k3 (input units per q^3). A real pole p
+with residue r is the block q' = p q + u, y_i = r q. The blocks form a block-diagonal
+``state_space`` (continuous), the moving mode first (:func:`modal_state_space`).
+
+Hypothesis. The moving mode's block gets the force k3 q^3 against its motion:
+
+    q'' + 2 zeta w q' + w^2 q + k3 q^3 = u,
+
+a ``nonlinear_feedback`` around the modal state space whose force acts at the ``point`` of that
+mode (``points: {mode: {force: [0, 1, 0, ...], position: [1, 0, 0, ...]}}``, docs/configs.md):
+it reads q = (1, 0, ...) x and enters along -(0, 1, ...). k3 > 0 is a joint that stiffens with
+the mode's amplitude, k3 < 0 one that softens (the issue's torsion mode).
+
+Start value of k3 from the frequency shift. Equivalent linearisation of k3 q^3 replaces it by the
+stiffness k_eq = E{q k3 q^3} / E{q^2}. For a sine of amplitude A this is the describing function
+3/4 k3 A^2; for the random-phase multisines of the levels, whose modal coordinate is close to
+Gaussian with variance sigma^2, E{q^4} = 3 sigma^4 and k_eq = 3 k3 sigma^2. The mode's squared
+natural frequency at a level is then
+
+    (2 pi f_L)^2 = w0^2 + 3 k3 sigma_L^2,   so   df / f ~ 3/2 k3 sigma_L^2 / w0^2
+
+(3/8 k3 A^2 / w0^2 for a sine of amplitude A). With f_L (Hz) the mode's frequency in the BLA of
+level L (:func:`nlsid.analysis.modes.level_modes`, with its standard error se_L) and sigma_L^2 the
+variance of the model's modal coordinate on that level's estimation runs (the steady-state
+period of the mode's exact ZOH response to the input, :func:`modal_variance`), the weighted
+least-squares line f_L^2 = a + b sigma_L^2 (weights 1 / (2 f_L se_L)^2) gives
+
+    k3 = 4 pi^2 b / 3,   w0^2 = 4 pi^2 a,
+
+its standard error that of b (times the Birge ratio where the line misses the points beyond their
+errors). The moving mode's w^2 starts at w0^2, the frequency at zero amplitude (a model fitted to
+a BLA holds the mode where the levels it saw put it). The fit engine then refines k3 with every
+mode's w^2, 2 zeta w, alpha and beta (a real pole's p and r): the user's modes are a BLA's, biased
+by the joint, and a frozen linear part could not reach the floor.
+
+Which mode: the one whose frequency changes most significantly from the lowest level to the
+highest (the largest |change| / standard error among the significant ones), matched to the model's
+mode with the nearest natural frequency; the note names both. Not fitted where no mode moves
+significantly, where fewer than two levels give the mode's frequency, or where the model has no
+mode within :data:`MATCH` of it.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, spring
+from nlsid.diagnose.hypotheses.feedback import KEPT
+from nlsid.diagnose.simulation import ModelRunner, steady_mean
+from nlsid.errors import InputError
+from nlsid.models.lti import StateSpace
+
+MIN_ORDER = 4  # two modes at least: one mode is the mechanical templates' and the cubic feedback's case
+MATCH = 0.1  # a model's mode within this relative distance of the moving mode's frequency is that mode
+PAIR_TOLERANCE = 1e-9  # |Im lambda| / |lambda| below this: a real pole
+NEGLIGIBLE = 1e-6  # an output coefficient this small relative to the mode's other one is not refined
+POINT = "mode"  # the name of the force point of the moving mode
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One block of the modal form: a pair ``(alpha s + beta) / (s^2 + c1 s + w2)`` or a real pole
+    ``beta / (s - pole)`` (``alpha`` 0); ``pole`` is lambda (Im >= 0)."""
+
+    pole: complex
+    alpha: float
+    beta: float
+
+    @property
+    def pair(self) -> bool:
+        return self.pole.imag > 0
+
+    @property
+    def frequency_hz(self) -> float:
+        return abs(self.pole) / (2 * math.pi)
+
+
+def lti_of(runner: ModelRunner) -> StateSpace:
+    """The user's LTI model as a state space (dead time kept in ``delay``)."""
+    from nlsid.models.from_config import lti
+
+    return lti(runner.config.model, "model")
+
+
+def _applies(runner: ModelRunner) -> str | None:
+    if runner.kind not in ("state_space", "transfer_function", "zpk"):
+        return "needs a state_space, transfer_function or zpk model (the modes of an LTI model)"
+    order = lti_of(runner).order
+    if order < MIN_ORDER:
+        return f"needs a model of order >= {MIN_ORDER} (several modes); this one has {order}"
+    return None
+
+
+def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[str]]:
+    """The continuous, strictly proper model the modal form is made of, and notes: a discrete
+    model's direct feedthrough D set to 0 and its continuous equivalent (ZOH inverse); or why there
+    is none."""
+    from nlsid.models.continuous_equivalent import zoh_inverse
+
+    notes = []
+    if not ss.discrete:
+        if ss.D != 0:
+            return "the model has a direct feedthrough D (the modal form here is strictly proper)", notes
+        return ss, notes
+    if ss.D != 0:
+        notes.append(f"D = {ss.D:.3g} set to 0 (the part of the model a force-driven structure's ZOH equivalent is)")
+    equivalent = zoh_inverse(StateSpace(ss.A, ss.B, ss.C, 0.0, True, ss.delay, ss.fs), ss.fs or fs)
+    if isinstance(equivalent, str):
+        return f"the model has no continuous equivalent: {equivalent}", notes
+    notes.append("extended in continuous time (the model's exact ZOH equivalent)")
+    return equivalent, notes
+
+
+def modes_of(ss: StateSpace) -> list[Mode] | str:
+    """The modes of a continuous strictly proper ``ss`` by increasing natural frequency (module
+    docstring), or why it has no modal form (a defective or nearly defective A)."""
+    lam, V = np.linalg.eig(ss.A)
+    if np.linalg.cond(V) > 1e10:
+        return "its state matrix is (nearly) defective: no modal form"
+    W = np.linalg.inv(V)
+    residues = (ss.C @ V) * (W @ ss.B)
+    out = []
+    for p, r in zip(lam, residues):
+        if abs(p.imag) <= PAIR_TOLERANCE * abs(p):
+            out.append(Mode(complex(p.real, 0.0), 0.0, float(r.real)))
+        elif p.imag > 0:
+            out.append(Mode(complex(p), float(2 * r.real), float(-2 * (r * np.conj(p)).real)))
+    return sorted(out, key=lambda m: m.frequency_hz)
+
+
+def modal_state_space(modes: list[Mode]) -> dict:
+    """The block-diagonal modal ``state_space`` config of ``modes`` in their order (module
+    docstring): a pair's block [[0, 1], [-w^2, -2 zeta w]], input (0, 1), output (beta, alpha); a
+    real pole's [[p]], 1, beta."""
+    n = sum(2 if m.pair else 1 for m in modes)
+    A, B, C = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    j = 0
+    for m in modes:
+        if m.pair:
+            A[j, j + 1] = 1.0
+            A[j + 1, j], A[j + 1, j + 1] = -abs(m.pole) ** 2, 2 * m.pole.real
+            B[j + 1] = 1.0
+            C[j], C[j + 1] = m.beta, m.alpha
+            j += 2
+        else:
+            A[j, j], B[j], C[j] = m.pole.real, 1.0, m.beta
+            j += 1
+    return {"type": "state_space", "domain": "continuous", "A": A.tolist(), "B": B.tolist(), "C": C.tolist(),
+            "D": 0.0}
+
+
+def blocks(linear: dict) -> list[tuple[int, int]]:
+    """(first state, size) of every block of a modal ``state_space`` config written by
+    :func:`modal_state_space`: a pair where A[j][j + 1] = 1 and the input enters at j + 1 only."""
+    A, B = linear["A"], linear["B"]
+    out, j = [], 0
+    while j < len(B):
+        size = 2 if j + 1 < len(B) and A[j][j + 1] == 1.0 and B[j] == 0.0 else 1
+        out.append((j, size))
+        j += size
+    return out
+
+
+def modal_variance(run, pole: complex) -> float:
+    """Variance of the steady-state period of the modal coordinate q'' - 2 Re(p) q' + |p|^2 q = u
+    on ``run`` (u held over each sample: the exact ZOH response at the period's lines)."""
+    from scipy.linalg import expm
+
+    a = np.array([[0.0, 1.0], [-abs(pole) ** 2, 2 * pole.real]])
+    T = 1.0 / run.fs
+    M = np.zeros((3, 3))
+    M[:2, :2], M[:2, 2] = a * T, (0.0, T)
+    E = expm(M)
+    Phi, Gamma = E[:2, :2], E[:2, 2]
+    u = steady_mean(run, run.u)
+    U = np.fft.rfft(u - u.mean())
+    z = np.exp(2j * np.pi * np.arange(U.size) / u.size)
+    H = np.array([np.linalg.solve(zk * np.eye(2) - Phi, Gamma)[0] for zk in z])
+    q = np.fft.irfft(H * U, u.size)
+    return float(np.var(q))
+
+
+def moving_mode(ctx: Context) -> dict | str:
+    """The row of :func:`nlsid.analysis.modes.level_modes` of the measured levels whose frequency
+    changes most significantly, or why there is none."""
+    from nlsid.analysis.levels import common_lines
+    from nlsid.analysis.modes import level_modes
+
+    measured = list(ctx.bla_levels[0]) if ctx.bla_levels else []
+    if len(measured) < 2:
+        return "needs multisines at two levels or more (the mode's frequency compared between levels)"
+    rows = [row for row in level_modes(measured, common_lines(measured)) if row["frequency_significant"]]
+    if not rows:
+        return "no mode of the BLA moves significantly with the level"
+    return max(rows, key=lambda row: abs(row["frequency_change"]) / row["frequency_change_se"])
+
+
+def frequency_line(ctx: Context, row: dict, pole: complex) -> tuple[float, float, float, int] | str:
+    """(k3, its standard error, w0^2, levels used) of the line f_L^2 = a + b sigma_L^2 (module
+    docstring) over the levels where the mode is fitted and an estimation run has that level."""
+    f, se, var = [], [], []
+    for fit in row["levels"]:
+        if fit is None:
+            continue
+        members = [run for run in ctx.runs if run.level == fit["level"]]
+        if not members:
+            continue
+        f.append(fit["frequency_hz"])
+        se.append(fit["frequency_se_hz"])
+        var.append(float(np.mean([modal_variance(run, pole) for run in members])))
+    if len(f) < 2:
+        return "the mode's frequency is fitted at fewer than two levels of the estimation runs"
+    f, se, var = np.array(f), np.array(se), np.array(var)
+    weight = 1 / np.maximum(2 * f * se, 1e-12 * f**2)
+    X = np.column_stack([np.ones_like(var), var]) * weight[:, None]
+    y = f**2 * weight
+    (a, b), *_ = np.linalg.lstsq(X, y, rcond=None)
+    chi2 = float(np.sum((y - X @ np.array([a, b])) ** 2))
+    dof = f.size - 2
+    birge = max(1.0, chi2 / dof) if dof > 0 else 1.0
+    cov = np.linalg.pinv(X.T @ X) * birge
+    scale = 4 * math.pi**2 / 3
+    return scale * b, scale * math.sqrt(max(cov[1, 1], 0.0)), 4 * math.pi**2 * a, f.size
+
+
+def _estimate(ctx: Context) -> Estimate | str:
+    """Start values (module docstring)."""
+    ss, notes = continuous_model(lti_of(ctx.runner), ctx.runs[0].fs)
+    if isinstance(ss, str):
+        return f"not fitted: {ss}"
+    modes = modes_of(ss)
+    if isinstance(modes, str):
+        return f"not fitted: {modes}"
+    row = moving_mode(ctx)
+    if isinstance(row, str):
+        return f"not fitted: {row}"
+    f_moving = row["frequency_hz"]
+    pairs = [m for m in modes if m.pair]
+    if not pairs:
+        return "not fitted: the model has no resonance (no complex pole pair)"
+    mode = min(pairs, key=lambda m: abs(m.frequency_hz / f_moving - 1))
+    if abs(mode.frequency_hz / f_moving - 1) > MATCH:
+        return (f"not fitted: the BLA's mode at {f_moving:.4g} Hz moves with the level, and the model has no mode "
+                f"within {MATCH:.0%} of it")
+    line = frequency_line(ctx, row, mode.pole)
+    if isinstance(line, str):
+        return f"not fitted: {line}"
+    k3, k3_std, w0_squared, used = line
+    if not (k3 != 0 and w0_squared > 0):
+        return "not fitted: the mode's frequency does not change with the modal amplitude"
+    ordered = [mode] + [m for m in modes if m is not mode]
+    lti = modal_state_space(ordered)
+    A = lti["A"]
+    A[1][0] = -w0_squared
+    data = {**ctx.runner.data, "model": {**{k: v for k, v in ctx.runner.data["model"].items()
+                                            if k in KEPT}, **lti}}
+    values = {"k3": k3, **{name: float(_value(data, path)) for name, path in _paths(data).items() if name != "k3"}}
+    before = ctx.simulation_rss(ctx.runner.data)
+    try:
+        after = ctx.simulation_rss(_extend(data, values))
+    except InputError as exc:  # the start diverges: scored as explaining nothing
+        after, notes = before, [*notes, f"the start could not be simulated ({exc.what})"]
+    change = row["frequency_change"]
+    notes = [f"mode near {f_moving:.4g} Hz (the BLA's, frequency {change:+.2%} +- {row['frequency_change_se']:.2%} "
+             f"from level {row['from_level']:g} to {row['to_level']:g}), the model's at {mode.frequency_hz:.4g} Hz",
+             f"k3 = 4 pi^2 b / 3 from the line f^2 = a + b sigma^2 over {used} levels (sigma^2 the modal "
+             f"coordinate's variance): a {spring(k3)} spring, the mode started at "
+             f"{math.sqrt(w0_squared) / (2 * math.pi):.4g} Hz (zero amplitude)", *notes]
+    std = {name: math.nan for name in values}
+    std["k3"] = k3_std
+    return Estimate(values, std, explained_db(before, after), "; ".join(notes), lti=lti)
+
+
+def _value(data: dict, path: str) -> float:
+    from nlsid.fit.free_parameters import value_at
+
+    return value_at(data, path.replace("model.linear.", "model."))
+
+
+def _paths(data: dict) -> dict[str, str]:
+    """k3 and every block's coefficients (module docstring): a pair's -w^2 (``A[j+1][j]``),
+    -2 zeta w (``A[j+1][j+1]``), beta (``C[j]``) and alpha (``C[j+1]``), a real pole's p and r;
+    an output coefficient negligible beside the block's other (a displacement's alpha) left out.
+    ``data``: the config whose model is the modal state space (before or after the extension)."""
+    model = data["model"]
+    linear = model["linear"] if model["type"] == "nonlinear_feedback" else model
+    A, C = linear["A"], linear["C"]
+    out = {"k3": "model.nonlinearities[0].k3"}
+    for j, size in blocks(linear):
+        if size == 1:
+            names = [(f"A[{j}][{j}]", A[j][j]), (f"C[{j}]", C[j])]
+        else:
+            w = math.sqrt(abs(A[j + 1][j]))
+            beta, alpha = C[j], C[j + 1]
+            names = [(f"A[{j + 1}][{j}]", A[j + 1][j]), (f"A[{j + 1}][{j + 1}]", A[j + 1][j + 1])]
+            if abs(beta) > NEGLIGIBLE * abs(alpha) * w:
+                names.append((f"C[{j}]", beta))
+            if abs(alpha) * w > NEGLIGIBLE * abs(beta):
+                names.append((f"C[{j + 1}]", alpha))
+        out.update({name: f"model.linear.{name}" for name, value in names if value != 0})
+    return out
+
+
+def _extend(data: dict, values: dict) -> dict:
+    """The modal state space of ``data`` (the moving mode first) as the linear part of a
+    ``nonlinear_feedback`` with ``cubic_stiffness`` k3 at the moving mode's point."""
+    out = copy.deepcopy(data)
+    model = out["model"]
+    linear = {k: copy.deepcopy(model[k]) for k in ("type", "domain", "A", "B", "C")}
+    linear["D"] = 0.0
+    for name, value in values.items():
+        if name.startswith("A["):
+            r, c = (int(i) for i in name[2:-1].split("]["))
+            linear["A"][r][c] = float(value)
+        elif name.startswith("C["):
+            linear["C"][int(name[2:-1])] = float(value)
+    n = len(linear["B"])
+    force, position = [0.0] * n, [0.0] * n
+    force[1], position[0] = 1.0, 1.0
+    out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0,
+                    "points": {POINT: {"force": force, "position": position}},
+                    "nonlinearities": [{"type": "cubic_stiffness", "k3": float(values["k3"]), "at": POINT}],
+                    **{k: model[k] for k in KEPT if k in model}}
+    return out
+
+
+def _reading(values: dict) -> str:
+    w2 = -values["A[1][0]"] if "A[1][0]" in values else math.nan
+    return (f"a {spring(values['k3'])} cubic spring on the modal coordinate of the mode at "
+            f"{math.sqrt(w2) / (2 * math.pi):.4g} Hz (zero amplitude)")
+
+
+MODAL_JOINT = Hypothesis(
+    "modal_joint", "Cubic spring on one mode (a nonlinear joint in modal form)", "stiffness", "k3",
+    "input units / modal coordinate^3",
+    "odd distortion; one mode of a multi-mode model moves with the level; the rest stay",
+    _applies, _estimate, _extend, ("k3",), _paths, reading=_reading, qualifier=lambda values: spring(values["k3"]))
+
+HYPOTHESES = (MODAL_JOINT,)
