@@ -84,6 +84,26 @@ def _ticks(low: float, high: float, count: int = 5) -> list[float]:
     return [first + i * step for i in range(int((high - first) / step + 1e-9) + 1)]
 
 
+def _tick_label(value: float, step: float) -> str:
+    """A tick's value with the digits its step needs, so that neighbouring ticks never read alike
+    (0.5001, 0.5002, ... where ``.4g`` wrote 0.5 three times)."""
+    decimals = max(0, -math.floor(math.log10(step) + 1e-9))
+    if abs(value) < 1e6 and decimals <= 6:
+        return f"{value:.{decimals}f}"
+    digits = max(1, math.floor(math.log10(max(abs(value), step))) - math.floor(math.log10(step) + 1e-9) + 1)
+    return f"{value:.{digits}g}"
+
+
+def _unit(rows: list[dict], parameter: str) -> str:
+    """The parameter's unit where the results state one (all alike), else "unit not recorded"."""
+    units = {(row.get("parameters") or {}).get(parameter, {}).get("unit") for row in rows}
+    units.discard(None)
+    return units.pop() if len(units) == 1 else "unit not recorded"
+
+
+SINGLE_MOMENT = 60.0  # s either side of an axis whose recordings share one moment
+
+
 def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | None:
     """The parameter against recording time as inline SVG: one line per machine, error bars of
     one standard error, each point's recording, value and error in its tooltip."""
@@ -94,8 +114,8 @@ def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | No
     points = [p for values in data.values() for p in values]
     t0 = min(p[0] for p in points).timestamp()
     t1 = max(p[0] for p in points).timestamp()
-    if t1 == t0:
-        t0, t1 = t0 - 43200, t1 + 43200
+    if t1 == t0:  # one moment: a short axis around it, not a day
+        t0, t1 = t0 - SINGLE_MOMENT, t1 + SINGLE_MOMENT
     lows = [p[1] - (p[2] or 0.0) for p in points]
     highs = [p[1] + (p[2] or 0.0) for p in points]
     y0, y1 = min(lows), max(highs)
@@ -111,20 +131,22 @@ def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | No
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" width="100%" role="img" '
            f'aria-label="{_e(parameter)} against recording time" font-family="sans-serif" font-size="12">',
            f'<rect x="{left}" y="{top}" width="{width - left - right}" height="{height - top - bottom}" fill="none" stroke="#999"/>']
-    for value in _ticks(y0, y1):
+    ticks = _ticks(y0, y1)
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else abs(y1 - y0) or 1.0
+    for value in ticks:
         yy = y(value)
         out.append(f'<line x1="{left}" x2="{width - right}" y1="{yy:.1f}" y2="{yy:.1f}" stroke="#e3e7ec"/>'
-                   f'<text x="{left - 6}" y="{yy + 4:.1f}" text-anchor="end">{value:.4g}</text>')
-    span_days = (t1 - t0) / 86400
+                   f'<text x="{left - 6}" y="{yy + 4:.1f}" text-anchor="end">{_tick_label(value, step)}</text>')
+    span = t1 - t0
     for i in range(5):
-        moment = datetime.fromtimestamp(t0 + i * (t1 - t0) / 4, timezone.utc)
+        moment = datetime.fromtimestamp(t0 + i * span / 4, timezone.utc)
         xx = x(moment)
-        label = moment.strftime("%Y-%m-%d" if span_days >= 4 else "%m-%d %H:%M")
+        label = moment.strftime("%Y-%m-%d" if span >= 4 * 86400 else "%m-%d %H:%M" if span >= 3600 else "%H:%M:%S")
         out.append(f'<line x1="{xx:.1f}" x2="{xx:.1f}" y1="{height - bottom}" y2="{height - bottom + 5}" stroke="#999"/>'
                    f'<text x="{xx:.1f}" y="{height - bottom + 18}" text-anchor="middle">{label}</text>')
     out.append(f'<text x="{(left + width - right) / 2:.0f}" y="{height - 8}" text-anchor="middle">recorded (UTC)</text>'
                f'<text x="16" y="{(top + height - bottom) / 2:.0f}" text-anchor="middle" '
-               f'transform="rotate(-90 16 {(top + height - bottom) / 2:.0f})">{_e(parameter)}</text>')
+               f'transform="rotate(-90 16 {(top + height - bottom) / 2:.0f})">{_e(parameter)} ({_e(_unit(rows, parameter))})</text>')
     for index, (machine, values) in enumerate(data.items()):
         color = _PALETTE[index % len(_PALETTE)]
         thick = machine in drifting
