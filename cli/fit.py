@@ -52,6 +52,9 @@ from .options import map_option, parse_map, split_options
 @click.option("--states-only", is_flag=True, help="PNLSS: monomials of the states only (not of the input).")
 @click.option("--max-iterations", type=click.IntRange(min=0), default=100, show_default=True,
               help="PNLSS: Levenberg-Marquardt iterations of the nonlinear stage at most.")
+@click.option("--lfr", type=click.IntRange(min=1), default=None, metavar="N",
+              help="PNLSS: the nonlinear LFR form, monomials of N combinations z = Cz x + Dz u fitted with the rest "
+                   "(1 to states + 1; docs/pnlss.md), instead of monomials of the states and u.")
 @map_option
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Model config to write (YAML); the fit report goes beside it as <name>.fit.json.")
@@ -59,7 +62,7 @@ from .options import map_option, parse_map, split_options
 @json_option
 def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, data, validation, validate_on,
         estimation_range, validation_range, allow_overlap, fit_on, jacobian, start_estimate, workers, pnlss, degrees,
-        output_degrees, states_only, max_iterations, mapping, output, force, as_json) -> None:
+        output_degrees, states_only, max_iterations, lfr, mapping, output, force, as_json) -> None:
     """Fit parametric models: a transfer function to a BLA, or free parameters of a model to data.
 
     From a BLA: a rational transfer function B/A weighted by the BLA's total variance (sample
@@ -79,9 +82,10 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
       nlsid fit --model stage.yaml --data long.h5 --estimation-range 0:60000 --validation-range 60000: -o fitted.yaml
       nlsid fit --model axis.yaml --data estimation.h5 --validate-on validation.h5 --fit-on u -o fitted.yaml
       nlsid fit --pnlss --model model.yaml --data estimation.h5 --validate-on validation.h5 --degrees 2,3 -o pnlss.yaml
+      nlsid fit --pnlss --model model.yaml --data estimation.h5 --validate-on validation.h5 --lfr 1 -o pnlss.yaml
     """
     pnlss_options = {"--degrees": degrees != "2,3", "--output-degrees": output_degrees is not None,
-                     "--states-only": states_only, "--max-iterations": max_iterations != 100}
+                     "--states-only": states_only, "--max-iterations": max_iterations != 100, "--lfr": lfr is not None}
     if model_config is not None and data is not None and (pnlss or _is_pnlss(model_config)):
         if bla_file is not None or order is not None:
             raise InputError("nlsid fit", "give either BLA_FILE with --order, or --model with --data, not both")
@@ -92,8 +96,9 @@ def fit(bla_file, order, domain, delay, max_order, level, plot, model_config, da
                    if given]
         if refused:
             raise InputError(refused[0], "does not go with a PNLSS fit (--pnlss, or a --model of type pnlss)")
+        _check_lfr(lfr, states_only, model_config)
         _fit_pnlss(model_config, data, list(validation), validate_on, allow_overlap, degrees, output_degrees,
-                   states_only, max_iterations, parse_map(mapping), output, force, as_json)
+                   states_only, max_iterations, parse_map(mapping), output, force, as_json, lfr or 0)
         return
     if pnlss or any(pnlss_options.values()):
         flag = "--pnlss" if pnlss else next(f for f, given in pnlss_options.items() if given)
@@ -122,7 +127,7 @@ FLAGS = {"order": "--order", "domain": "--domain", "delay": "--delay", "max_orde
          "validation": "--validation", "estimation_range": "--estimation-range",
          "validation_range": "--validation-range", "allow_overlap": "--allow-overlap", "fit_on": "--fit-on",
          "jacobian": "--jacobian", "workers": "--workers", "free": "free", "degrees": "--degrees",
-         "output_degrees": "--output-degrees", "max_iterations": "--max-iterations"}
+         "output_degrees": "--output-degrees", "max_iterations": "--max-iterations", "lfr": "--lfr"}
 
 
 def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
@@ -200,8 +205,21 @@ def _is_pnlss(model_config) -> bool:
     return isinstance(model, dict) and model.get("type") == "pnlss"
 
 
+def _check_lfr(lfr, states_only, model_config) -> None:
+    """--lfr builds the LFR form from a linear --model: a pnlss --model keeps its own form (its
+    nonlinearity: section), and the LFR form's monomials are of z, never of u, so --states-only
+    has nothing to leave out."""
+    if lfr is None:
+        return
+    if _is_pnlss(model_config):
+        raise InputError("--lfr", f"builds the LFR form from a linear --model; {model_config} is a pnlss model, "
+                                  "refined in its own form (set nonlinearity: {form: lfr, inputs: N} in it instead)")
+    if states_only:
+        raise InputError("--states-only", "goes with the full form: the LFR form's monomials are of z = Cz x + Dz u")
+
+
 def _fit_pnlss(model_config, data, validation, validate_on, allow_overlap, degrees, output_degrees, states_only,
-               max_iterations, mapping, output, force, as_json) -> None:
+               max_iterations, mapping, output, force, as_json, lfr=0) -> None:
     from nlsid.io.atomic import check_writable
     from nlsid.io.fit_file import report_path
     from nlsid.io.provenance import provenance
@@ -211,7 +229,8 @@ def _fit_pnlss(model_config, data, validation, validate_on, allow_overlap, degre
     check_writable(report_path(output), force)
     result = fit_pnlss(model_config, data, validate_on=list(validate_on), validation=validation or None,
                        degrees=degrees, output_degrees=output_degrees, with_input=not states_only,
-                       max_iterations=max_iterations, allow_overlap=allow_overlap, mapping=mapping, names=FLAGS)
+                       max_iterations=max_iterations, allow_overlap=allow_overlap, mapping=mapping, names=FLAGS,
+                       lfr=lfr)
     result.write(output, force=force, provenance=provenance(config_paths=[model_config],
                                                             input_paths=[data, *validate_on]))
     if as_json:
@@ -223,8 +242,9 @@ def _fit_pnlss(model_config, data, validation, validate_on, allow_overlap, degre
     linear = fit_.best_of("linear") or fit_.iterations[0]
     linear_rms = "none" if linear.validation_rms is None else f"{linear.validation_rms:.4g}"
     model = fit_.model
+    form = f" of {model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if model.lfr else ""
     console.print(f"{output}: PNLSS (black box), {model.order} states, degrees {list(model.state_degrees)} / "
-                  f"{list(model.output_degrees)}, {model.n_parameters} coefficients")
+                  f"{list(model.output_degrees)}{form}, {model.n_parameters} coefficients")
     console.print(f"rms error: estimation {fit_.estimation_rms:.4g}, validation {validation_rms} (linear: "
                   f"{linear_rms}); {fit_.status}")
     console.print(f"chosen: {fit_.reason}")

@@ -155,11 +155,15 @@ def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
         return linear, nonlinear
     if model.type == "pnlss":  # the linear part A, B, C, D; E and F as polynomial terms (docs/pnlss.md)
         pnlss = from_config.model(config)
-        terms = [(name, {"type": f"polynomial terms of degrees {list(degrees)}", "monomials": int(coefficients.shape[-1]),
-                         "nonzero": int(np.count_nonzero(coefficients))})
+        variables = monomial_variables(pnlss)
+        terms = [(name, {"type": f"polynomial terms of degrees {list(degrees)} in the monomials of {variables}",
+                         "monomials": int(coefficients.shape[-1]), "nonzero": int(np.count_nonzero(coefficients)),
+                         "combinations": pnlss.lfr_inputs if pnlss.lfr else None})
                  for name, degrees, coefficients in (("E, state equation", pnlss.state_degrees, pnlss.E),
                                                      ("F, output equation", pnlss.output_degrees, pnlss.F)) if degrees]
-        return [Element("linear part A, B, C, D", pnlss.linear)], terms
+        linear = pnlss.linear
+        return [Element("linear part A, B, C, D", StateSpace(linear.A, linear.B, linear.C, linear.D, discrete=True,
+                                                             fs=pnlss.fs))], terms
     plant = from_config.plant(model, closed=config.closed_loop is not None)
     label = "linear plant" + (" (nonlinear forces removed)" if plant.forces else "")
     nonlinear = [(f"nonlinearities[{i}]", f.model_dump()) for i, f in enumerate(getattr(model, "nonlinearities", []))]
@@ -168,6 +172,15 @@ def _elements(config) -> tuple[list[Element], list[tuple[str, dict]]]:
         if block is not None:
             nonlinear.append((key, block.model_dump()))
     return [Element(label, plant.ss)], nonlinear
+
+
+def monomial_variables(pnlss) -> str:
+    """What a PNLSS model's monomials are of (``docs/pnlss.md``): the states and u, the states
+    alone, or, in the LFR form, the n_z combinations z = C_z x + D_z u."""
+    if pnlss.lfr:
+        count = pnlss.lfr_inputs
+        return f"z = Cz x + Dz u ({count} combination{'s' if count != 1 else ''})"
+    return "the states and u" if pnlss.with_input else "the states"
 
 
 #: a model config records no units: each element's gain is in its output's unit per unit of its input
