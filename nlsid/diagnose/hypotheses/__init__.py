@@ -63,6 +63,8 @@ modal_joint         odd distortion; one mode of a multi-mode  ``nonlinear_feedba
                                                               its modal coordinate q; every
                                                               mode's coefficients refined;
                                                               modal_joint.py)
+modal_damping       as modal_joint, the mode's damping        as modal_joint with ``cubic_damping``
+                    growing with the level                    (c3: c3 q'^3 on its modal velocity)
 cubic_feedback      as cubic_stiffness, for a transfer        ``nonlinear_feedback`` around the
                     function model (continuous or discrete)   model with ``cubic_stiffness`` (k3,
                                                               with the linear coefficients)

@@ -1,5 +1,5 @@
-"""A nonlinear joint in modal form: a cubic spring on the modal coordinate of the one mode of a
-multi-mode LTI model whose frequency moves with the excitation level.
+"""A nonlinear joint in modal form: a cubic spring (or damper) on the modal coordinate of the one
+mode of a multi-mode LTI model whose frequency (damping) moves with the excitation level.
 
 Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4,
 strictly proper; a discrete one as its continuous equivalent, the exact inverse of its ZOH
@@ -24,7 +24,7 @@ Hypothesis. The moving mode's block gets the force k3 q^3 against its motion:
 a ``nonlinear_feedback`` around the modal state space whose force acts at the ``point`` of that
 mode (``points: {mode: {force: [0, 1, 0, ...], position: [1, 0, 0, ...]}}``, docs/configs.md):
 it reads q = (1, 0, ...) x and enters along -(0, 1, ...). k3 > 0 is a joint that stiffens with
-the mode's amplitude, k3 < 0 one that softens (the issue's torsion mode).
+the mode's amplitude, k3 < 0 one that softens (a torsion mode that drops with the level).
 
 Start value of k3 from the frequency shift. Equivalent linearisation of k3 q^3 replaces it by the
 stiffness k_eq = E{q k3 q^3} / E{q^2}. For a sine of amplitude A this is the describing function
@@ -32,21 +32,31 @@ stiffness k_eq = E{q k3 q^3} / E{q^2}. For a sine of amplitude A this is the des
 Gaussian with variance sigma^2, E{q^4} = 3 sigma^4 and k_eq = 3 k3 sigma^2. The mode's squared
 natural frequency at a level is then
 
-    (2 pi f_L)^2 = w0^2 + 3 k3 sigma_L^2,   so   df / f ~ 3/2 k3 sigma_L^2 / w0^2
+    w_L^2 = (2 pi f_L)^2 = w0^2 + 3 k3 sigma_L^2,   so   df / f ~ 3/2 k3 sigma_L^2 / w0^2
 
 (3/8 k3 A^2 / w0^2 for a sine of amplitude A). With f_L (Hz) the mode's frequency in the BLA of
 level L (:func:`nlsid.analysis.modes.level_modes`, with its standard error se_L) and sigma_L^2 the
 variance of the model's modal coordinate on that level's estimation runs (the steady-state
 period of the mode's exact ZOH response to the input, :func:`modal_variance`), the weighted
-least-squares line f_L^2 = a + b sigma_L^2 (weights 1 / (2 f_L se_L)^2) gives
+least-squares line w_L^2 = a + b sigma_L^2 (weights 1 / (2 w_L se(w_L))) gives
 
-    k3 = 4 pi^2 b / 3,   w0^2 = 4 pi^2 a,
+    k3 = b / 3,   w0^2 = a,
 
-its standard error that of b (times the Birge ratio where the line misses the points beyond their
-errors). The moving mode's w^2 starts at w0^2, the frequency at zero amplitude (a model fitted to
-a BLA holds the mode where the levels it saw put it). The fit engine then refines k3 with every
-mode's w^2, 2 zeta w, alpha and beta (a real pole's p and r): the user's modes are a BLA's, biased
-by the joint, and a frozen linear part could not reach the floor.
+its standard error that of b / 3 (times the Birge ratio where the line misses the points beyond
+their errors). The moving mode's w^2 starts at w0^2, the frequency at zero amplitude (a model
+fitted to a BLA holds the mode where the levels it saw put it). The fit engine then refines k3
+with every mode's w^2, 2 zeta w, alpha and beta (a real pole's p and r): the user's modes are a
+BLA's, biased by the joint, and a frozen linear part could not reach the floor.
+
+A cubic damper on the same coordinate (``modal_damping``: c3 q'^3, ``cubic_damping`` at the point,
+reading the modal velocity q' = (1, 0, ...) A x = x_2) is the dissipative counterpart: its
+equivalent viscous damping is 3 c3 sigma_v^2 for a Gaussian modal velocity of variance
+sigma_v^2 (3/4 c3 V^2 for a sine of amplitude V), so the line 2 zeta_L w_L = c0 + b sigma_v,L^2
+over the levels (standard errors from those of zeta_L and f_L, first order) gives c3 = b / 3 and
+the block's 2 zeta w starts at c0. It is chosen by the mode whose damping changes most
+significantly, and is a member of the friction family with the dampings of
+:mod:`~nlsid.diagnose.hypotheses.nonlinear_damping` (a damping that falls with the level is not a
+cubic damper's: not fitted).
 
 Which mode: the one whose frequency changes most significantly from the lowest level to the
 highest (the largest |change| / standard error among the significant ones), matched to the model's
@@ -180,9 +190,10 @@ def blocks(linear: dict) -> list[tuple[int, int]]:
     return out
 
 
-def modal_variance(run, pole: complex) -> float:
+def modal_variance(run, pole: complex, derivative: int = 0) -> float:
     """Variance of the steady-state period of the modal coordinate q'' - 2 Re(p) q' + |p|^2 q = u
-    on ``run`` (u held over each sample: the exact ZOH response at the period's lines)."""
+    (``derivative`` 0) or of its velocity q' (1) on ``run`` (u held over each sample: the exact ZOH
+    response at the period's lines)."""
     from scipy.linalg import expm
 
     a = np.array([[0.0, 1.0], [-abs(pole) ** 2, 2 * pole.real]])
@@ -194,100 +205,133 @@ def modal_variance(run, pole: complex) -> float:
     u = steady_mean(run, run.u)
     U = np.fft.rfft(u - u.mean())
     z = np.exp(2j * np.pi * np.arange(U.size) / u.size)
-    H = np.array([np.linalg.solve(zk * np.eye(2) - Phi, Gamma)[0] for zk in z])
+    H = np.array([np.linalg.solve(zk * np.eye(2) - Phi, Gamma)[derivative] for zk in z])
     q = np.fft.irfft(H * U, u.size)
     return float(np.var(q))
 
 
-def moving_mode(ctx: Context) -> dict | str:
-    """The row of :func:`nlsid.analysis.modes.level_modes` of the measured levels whose frequency
-    changes most significantly, or why there is none."""
+def moving_mode(ctx: Context, quantity: str = "frequency") -> dict | str:
+    """The row of :func:`nlsid.analysis.modes.level_modes` of the measured levels whose
+    ``quantity`` (``frequency`` or ``damping``) changes most significantly, or why there is none."""
     from nlsid.analysis.levels import common_lines
     from nlsid.analysis.modes import level_modes
 
     measured = list(ctx.bla_levels[0]) if ctx.bla_levels else []
     if len(measured) < 2:
         return "needs multisines at two levels or more (the mode's frequency compared between levels)"
-    rows = [row for row in level_modes(measured, common_lines(measured)) if row["frequency_significant"]]
+    rows = [row for row in level_modes(measured, common_lines(measured)) if row[f"{quantity}_significant"]]
     if not rows:
-        return "no mode of the BLA moves significantly with the level"
-    return max(rows, key=lambda row: abs(row["frequency_change"]) / row["frequency_change_se"])
+        return f"no mode of the BLA changes its {quantity} significantly with the level"
+    return max(rows, key=lambda row: abs(row[f"{quantity}_change"]) / row[f"{quantity}_change_se"])
 
 
-def frequency_line(ctx: Context, row: dict, pole: complex) -> tuple[float, float, float, int] | str:
-    """(k3, its standard error, w0^2, levels used) of the line f_L^2 = a + b sigma_L^2 (module
-    docstring) over the levels where the mode is fitted and an estimation run has that level."""
-    f, se, var = [], [], []
+def level_line(ctx: Context, row: dict, pole: complex, effect: "Effect") -> tuple[float, float, float, int] | str:
+    """(slope, its standard error, intercept, levels used) of the weighted line y_L = a + b sigma_L^2
+    (module docstring) over the levels where the mode is fitted and an estimation run has that
+    level: for a cubic spring y = w_L^2 = (2 pi f_L)^2 against the variance of q, for a cubic
+    damper y = 2 zeta_L w_L against the variance of q'; the standard errors of y from those of
+    f_L and zeta_L (first order), times the Birge ratio where the line misses the points beyond them."""
+    y, se, var = [], [], []
     for fit in row["levels"]:
         if fit is None:
             continue
         members = [run for run in ctx.runs if run.level == fit["level"]]
         if not members:
             continue
-        f.append(fit["frequency_hz"])
-        se.append(fit["frequency_se_hz"])
-        var.append(float(np.mean([modal_variance(run, pole) for run in members])))
-    if len(f) < 2:
-        return "the mode's frequency is fitted at fewer than two levels of the estimation runs"
-    f, se, var = np.array(f), np.array(se), np.array(var)
-    weight = 1 / np.maximum(2 * f * se, 1e-12 * f**2)
-    X = np.column_stack([np.ones_like(var), var]) * weight[:, None]
-    y = f**2 * weight
-    (a, b), *_ = np.linalg.lstsq(X, y, rcond=None)
-    chi2 = float(np.sum((y - X @ np.array([a, b])) ** 2))
-    dof = f.size - 2
-    birge = max(1.0, chi2 / dof) if dof > 0 else 1.0
-    cov = np.linalg.pinv(X.T @ X) * birge
-    scale = 4 * math.pi**2 / 3
-    return scale * b, scale * math.sqrt(max(cov[1, 1], 0.0)), 4 * math.pi**2 * a, f.size
+        w, se_w = 2 * math.pi * fit["frequency_hz"], 2 * math.pi * fit["frequency_se_hz"]
+        if effect.derivative == 0:
+            y.append(w * w)
+            se.append(2 * w * se_w)
+        else:
+            y.append(2 * fit["damping"] * w)
+            se.append(2 * math.hypot(fit["damping_se"] * w, fit["damping"] * se_w))
+        var.append(float(np.mean([modal_variance(run, pole, effect.derivative) for run in members])))
+    if len(y) < 2:
+        return "the mode is fitted at fewer than two levels of the estimation runs"
+    y, se, var = np.array(y), np.array(se), np.array(var)
+    weight = 1 / np.maximum(se, 1e-12 * np.abs(y))
+    scale = float(np.max(var))  # the variances in units of the largest: columns of like size
+    X = np.column_stack([np.ones_like(var), var / scale]) * weight[:, None]
+    (a, b), *_ = np.linalg.lstsq(X, y * weight, rcond=None)
+    dof = y.size - 2
+    birge = max(1.0, float(np.sum((y * weight - X @ np.array([a, b])) ** 2)) / dof) if dof > 0 else 1.0
+    cov = np.linalg.inv(X.T @ X) * birge
+    return float(b) / scale, math.sqrt(max(float(cov[1, 1]), 0.0)) / scale, float(a), int(y.size)
 
 
-def _estimate(ctx: Context) -> Estimate | str:
-    """Start values (module docstring)."""
-    ss, notes = continuous_model(lti_of(ctx.runner), ctx.runs[0].fs)
-    if isinstance(ss, str):
-        return f"not fitted: {ss}"
-    modes = modes_of(ss)
-    if isinstance(modes, str):
-        return f"not fitted: {modes}"
-    row = moving_mode(ctx)
-    if isinstance(row, str):
-        return f"not fitted: {row}"
-    f_moving = row["frequency_hz"]
-    pairs = [m for m in modes if m.pair]
-    if not pairs:
-        return "not fitted: the model has no resonance (no complex pole pair)"
-    mode = min(pairs, key=lambda m: abs(m.frequency_hz / f_moving - 1))
-    if abs(mode.frequency_hz / f_moving - 1) > MATCH:
-        return (f"not fitted: the BLA's mode at {f_moving:.4g} Hz moves with the level, and the model has no mode "
-                f"within {MATCH:.0%} of it")
-    line = frequency_line(ctx, row, mode.pole)
-    if isinstance(line, str):
-        return f"not fitted: {line}"
-    k3, k3_std, w0_squared, used = line
-    if not (k3 != 0 and w0_squared > 0):
-        return "not fitted: the mode's frequency does not change with the modal amplitude"
-    ordered = [mode] + [m for m in modes if m is not mode]
-    lti = modal_state_space(ordered)
-    A = lti["A"]
-    A[1][0] = -w0_squared
-    data = {**ctx.runner.data, "model": {**{k: v for k, v in ctx.runner.data["model"].items()
-                                            if k in KEPT}, **lti}}
-    values = {"k3": k3, **{name: float(_value(data, path)) for name, path in _paths(data).items() if name != "k3"}}
-    before = ctx.simulation_rss(ctx.runner.data)
-    try:
-        after = ctx.simulation_rss(_extend(data, values))
-    except InputError as exc:  # the start diverges: scored as explaining nothing
-        after, notes = before, [*notes, f"the start could not be simulated ({exc.what})"]
-    change = row["frequency_change"]
-    notes = [f"mode near {f_moving:.4g} Hz (the BLA's, frequency {change:+.2%} +- {row['frequency_change_se']:.2%} "
-             f"from level {row['from_level']:g} to {row['to_level']:g}), the model's at {mode.frequency_hz:.4g} Hz",
-             f"k3 = 4 pi^2 b / 3 from the line f^2 = a + b sigma^2 over {used} levels (sigma^2 the modal "
-             f"coordinate's variance): a {spring(k3)} spring, the mode started at "
-             f"{math.sqrt(w0_squared) / (2 * math.pi):.4g} Hz (zero amplitude)", *notes]
-    std = {name: math.nan for name in values}
-    std["k3"] = k3_std
-    return Estimate(values, std, explained_db(before, after), "; ".join(notes), lti=lti)
+@dataclass(frozen=True)
+class Effect:
+    """A cubic force on the moving mode's coordinate: its config ``force`` type and ``parameter``,
+    the mode's ``quantity`` that moves (``frequency`` or ``damping``), the ``derivative`` of q it
+    reads (0: q, 1: q'), and the A entry its intercept starts (the block's -w^2 or -2 zeta w)."""
+
+    force: str
+    parameter: str
+    quantity: str
+    derivative: int
+    entry: str
+
+
+SPRING = Effect("cubic_stiffness", "k3", "frequency", 0, "A[1][0]")
+DAMPER = Effect("cubic_damping", "c3", "damping", 1, "A[1][1]")
+
+
+def _estimator(effect: Effect):
+    def estimate(ctx: Context) -> Estimate | str:
+        """Start values (module docstring)."""
+        ss, notes = continuous_model(lti_of(ctx.runner), ctx.runs[0].fs)
+        if isinstance(ss, str):
+            return f"not fitted: {ss}"
+        modes = modes_of(ss)
+        if isinstance(modes, str):
+            return f"not fitted: {modes}"
+        row = moving_mode(ctx, effect.quantity)
+        if isinstance(row, str):
+            return f"not fitted: {row}"
+        f_moving = row["frequency_hz"]
+        pairs = [m for m in modes if m.pair]
+        if not pairs:
+            return "not fitted: the model has no resonance (no complex pole pair)"
+        mode = min(pairs, key=lambda m: abs(m.frequency_hz / f_moving - 1))
+        if abs(mode.frequency_hz / f_moving - 1) > MATCH:
+            return (f"not fitted: the BLA's mode at {f_moving:.4g} Hz changes with the level, and the model has no "
+                    f"mode within {MATCH:.0%} of it")
+        line = level_line(ctx, row, mode.pole, effect)
+        if isinstance(line, str):
+            return f"not fitted: {line}"
+        slope, slope_std, intercept, used = line
+        value = slope / 3  # the equivalent stiffness (damping) 3 k3 sigma_q^2 (3 c3 sigma_v^2)
+        if not (value != 0 and intercept > 0):
+            return f"not fitted: the mode's {effect.quantity} does not change with the modal amplitude"
+        if effect is DAMPER and value < 0:
+            return "not fitted: the mode's damping falls with the level (a cubic damper raises it)"
+        lti = modal_state_space([mode] + [m for m in modes if m is not mode])
+        r, c = (int(i) for i in effect.entry[2:-1].split("]["))
+        lti["A"][r][c] = -intercept
+        data = {**ctx.runner.data, "model": {**{k: v for k, v in ctx.runner.data["model"].items() if k in KEPT},
+                                             **lti}}
+        paths = _paths_of(effect)(data)
+        values = {effect.parameter: value,
+                  **{name: float(_value(data, path)) for name, path in paths.items() if name != effect.parameter}}
+        before = ctx.simulation_rss(ctx.runner.data)
+        try:
+            after = ctx.simulation_rss(_extender(effect)(data, values))
+        except InputError as exc:  # the start diverges: scored as explaining nothing
+            after, notes = before, [*notes, f"the start could not be simulated ({exc.what})"]
+        change, change_se = row[f"{effect.quantity}_change"], row[f"{effect.quantity}_change_se"]
+        notes = [f"mode near {f_moving:.4g} Hz (the BLA's, {effect.quantity} {change:+.2%} +- {change_se:.2%} "
+                 f"from level {row['from_level']:g} to {row['to_level']:g}), the model's at {mode.frequency_hz:.4g} Hz",
+                 f"{effect.parameter} = b / 3 from the line {_line_text(effect)} over {used} levels", *notes]
+        std = {name: math.nan for name in values}
+        std[effect.parameter] = slope_std / 3
+        return Estimate(values, std, explained_db(before, after), "; ".join(notes), lti=lti)
+    return estimate
+
+
+def _line_text(effect: Effect) -> str:
+    if effect is SPRING:
+        return "w^2 = a + b sigma_q^2 (the mode's start at zero amplitude: w^2 = a)"
+    return "2 zeta w = a + b sigma_v^2 (the mode's start at zero amplitude: 2 zeta w = a)"
 
 
 def _value(data: dict, path: str) -> float:
@@ -296,63 +340,83 @@ def _value(data: dict, path: str) -> float:
     return value_at(data, path.replace("model.linear.", "model."))
 
 
-def _paths(data: dict) -> dict[str, str]:
-    """k3 and every block's coefficients (module docstring): a pair's -w^2 (``A[j+1][j]``),
-    -2 zeta w (``A[j+1][j+1]``), beta (``C[j]``) and alpha (``C[j+1]``), a real pole's p and r;
-    an output coefficient negligible beside the block's other (a displacement's alpha) left out.
-    ``data``: the config whose model is the modal state space (before or after the extension)."""
-    model = data["model"]
-    linear = model["linear"] if model["type"] == "nonlinear_feedback" else model
-    A, C = linear["A"], linear["C"]
-    out = {"k3": "model.nonlinearities[0].k3"}
-    for j, size in blocks(linear):
-        if size == 1:
-            names = [(f"A[{j}][{j}]", A[j][j]), (f"C[{j}]", C[j])]
-        else:
-            w = math.sqrt(abs(A[j + 1][j]))
-            beta, alpha = C[j], C[j + 1]
-            names = [(f"A[{j + 1}][{j}]", A[j + 1][j]), (f"A[{j + 1}][{j + 1}]", A[j + 1][j + 1])]
-            if abs(beta) > NEGLIGIBLE * abs(alpha) * w:
-                names.append((f"C[{j}]", beta))
-            if abs(alpha) * w > NEGLIGIBLE * abs(beta):
-                names.append((f"C[{j + 1}]", alpha))
-        out.update({name: f"model.linear.{name}" for name, value in names if value != 0})
-    return out
+def _paths_of(effect: Effect):
+    def paths(data: dict) -> dict[str, str]:
+        """The force's parameter and every block's coefficients (module docstring): a pair's -w^2
+        (``A[j+1][j]``), -2 zeta w (``A[j+1][j+1]``), beta (``C[j]``) and alpha (``C[j+1]``), a real
+        pole's p and r; an output coefficient negligible beside the block's other (a
+        displacement's alpha) left out. ``data``: the config whose model is the modal state space
+        (before or after the extension)."""
+        model = data["model"]
+        linear = model["linear"] if model["type"] == "nonlinear_feedback" else model
+        A, C = linear["A"], linear["C"]
+        out = {effect.parameter: f"model.nonlinearities[0].{effect.parameter}"}
+        for j, size in blocks(linear):
+            if size == 1:
+                names = [(f"A[{j}][{j}]", A[j][j]), (f"C[{j}]", C[j])]
+            else:
+                w = math.sqrt(abs(A[j + 1][j]))
+                beta, alpha = C[j], C[j + 1]
+                names = [(f"A[{j + 1}][{j}]", A[j + 1][j]), (f"A[{j + 1}][{j + 1}]", A[j + 1][j + 1])]
+                if abs(beta) > NEGLIGIBLE * abs(alpha) * w:
+                    names.append((f"C[{j}]", beta))
+                if abs(alpha) * w > NEGLIGIBLE * abs(beta):
+                    names.append((f"C[{j + 1}]", alpha))
+            out.update({name: f"model.linear.{name}" for name, value in names if value != 0})
+        return out
+    return paths
 
 
-def _extend(data: dict, values: dict) -> dict:
-    """The modal state space of ``data`` (the moving mode first) as the linear part of a
-    ``nonlinear_feedback`` with ``cubic_stiffness`` k3 at the moving mode's point."""
-    out = copy.deepcopy(data)
-    model = out["model"]
-    linear = {k: copy.deepcopy(model[k]) for k in ("type", "domain", "A", "B", "C")}
-    linear["D"] = 0.0
-    for name, value in values.items():
-        if name.startswith("A["):
-            r, c = (int(i) for i in name[2:-1].split("]["))
-            linear["A"][r][c] = float(value)
-        elif name.startswith("C["):
-            linear["C"][int(name[2:-1])] = float(value)
-    n = len(linear["B"])
-    force, position = [0.0] * n, [0.0] * n
-    force[1], position[0] = 1.0, 1.0
-    out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0,
-                    "points": {POINT: {"force": force, "position": position}},
-                    "nonlinearities": [{"type": "cubic_stiffness", "k3": float(values["k3"]), "at": POINT}],
-                    **{k: model[k] for k in KEPT if k in model}}
-    return out
+def _extender(effect: Effect):
+    def extend(data: dict, values: dict) -> dict:
+        """The modal state space of ``data`` (the moving mode first) as the linear part of a
+        ``nonlinear_feedback`` with the effect's force at the moving mode's point."""
+        out = copy.deepcopy(data)
+        model = out["model"]
+        linear = {k: copy.deepcopy(model[k]) for k in ("type", "domain", "A", "B", "C")}
+        linear["D"] = 0.0
+        for name, value in values.items():
+            if name.startswith("A["):
+                r, c = (int(i) for i in name[2:-1].split("]["))
+                linear["A"][r][c] = float(value)
+            elif name.startswith("C["):
+                linear["C"][int(name[2:-1])] = float(value)
+        n = len(linear["B"])
+        force, position = [0.0] * n, [0.0] * n
+        force[1], position[0] = 1.0, 1.0
+        out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0,
+                        "points": {POINT: {"force": force, "position": position}},
+                        "nonlinearities": [{"type": effect.force, effect.parameter: float(values[effect.parameter]),
+                                            "at": POINT}],
+                        **{k: model[k] for k in KEPT if k in model}}
+        return out
+    return extend
 
 
-def _reading(values: dict) -> str:
-    w2 = -values["A[1][0]"] if "A[1][0]" in values else math.nan
+def _frequency_hz(values: dict) -> float:
+    return math.sqrt(-values["A[1][0]"]) / (2 * math.pi) if values.get("A[1][0]", 0) < 0 else math.nan
+
+
+def _spring_reading(values: dict) -> str:
     return (f"a {spring(values['k3'])} cubic spring on the modal coordinate of the mode at "
-            f"{math.sqrt(w2) / (2 * math.pi):.4g} Hz (zero amplitude)")
+            f"{_frequency_hz(values):.4g} Hz (zero amplitude)")
+
+
+def _damper_reading(values: dict) -> str:
+    return f"a cubic damper on the modal velocity of the mode at {_frequency_hz(values):.4g} Hz"
 
 
 MODAL_JOINT = Hypothesis(
     "modal_joint", "Cubic spring on one mode (a nonlinear joint in modal form)", "stiffness", "k3",
     "input units / modal coordinate^3",
-    "odd distortion; one mode of a multi-mode model moves with the level; the rest stay",
-    _applies, _estimate, _extend, ("k3",), _paths, reading=_reading, qualifier=lambda values: spring(values["k3"]))
+    "odd distortion; the frequency of one mode of a multi-mode model moves with the level; the rest stay",
+    _applies, _estimator(SPRING), _extender(SPRING), ("k3",), _paths_of(SPRING), reading=_spring_reading,
+    qualifier=lambda values: spring(values["k3"]))
 
-HYPOTHESES = (MODAL_JOINT,)
+MODAL_DAMPING = Hypothesis(
+    "modal_damping", "Cubic damping on one mode (a dissipative joint in modal form)", "friction", "c3",
+    "input units / modal velocity^3",
+    "odd distortion; the damping of one mode of a multi-mode model grows with the level",
+    _applies, _estimator(DAMPER), _extender(DAMPER), ("c3",), _paths_of(DAMPER), reading=_damper_reading)
+
+HYPOTHESES = (MODAL_JOINT, MODAL_DAMPING)
