@@ -79,12 +79,13 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         emit_json({"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
                    "levels": summaries, "lpm_levels": lpm_summaries, "across_levels": across, "warnings": warnings})
         return
+    rms = _rms_header(result.units.get("u"))
     if summaries:
-        _print_table(output, summaries)
+        _print_table(output, summaries, rms)
     if across.get("modes"):
         _print_modes_table(output, across["modes"])
     if lpm_summaries:
-        _print_lpm_table(output, lpm_summaries)
+        _print_lpm_table(output, lpm_summaries, rms, first=len(summaries))
 
 
 FLAGS = {"method": "--method", "confidence": "--confidence", "lpm_lines": "--lpm-lines", "lpm_degree": "--lpm-degree"}
@@ -94,12 +95,18 @@ def _cell(value: float, fmt: str = ".1f") -> str:
     return "-" if value is None or value != value else format(value, fmt)
 
 
-def _print_table(output: str, summaries: list[dict]) -> None:
+def _rms_header(unit: str | None) -> str:
+    """The rms column's header, with u's unit where it is recorded."""
+    return f"u rms {unit}" if unit else "u rms"
+
+
+def _print_table(output: str, summaries: list[dict], rms: str) -> None:
+    """One row per level: its index (as ``fit --level`` takes it) beside its rms."""
     rows = []
-    for row in summaries:
+    for index, row in enumerate(summaries):
         spectrum = row["spectrum"]
         rows.append([
-            "-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
+            str(index), f"{row['u_rms']:.3g}",
             f"{row['realizations']} x {row['periods']}", row["method"], _cell(row["bla_db"]),
             _cell(row["nl_var_db"]),
             {"zero": "zero", "unknown": "unknown"}.get(row.get("noise_floor"), _cell(row["noise_var_db"])),
@@ -107,7 +114,7 @@ def _print_table(output: str, summaries: list[dict]) -> None:
             _cell(spectrum["odd_above_noise_db"]), _cell(spectrum["even_above_noise_db"]),
         ])
     # headers of words that wrap: "odd-even" would be cut to "odd-…" at 80 columns
-    header = ("level", "u rms", "M x P", "method", "|G| dB", "NL var", "noise var", "odd over even",
+    header = ("level", rms, "M x P", "method", "|G| dB", "NL var", "noise var", "odd over even",
               "odd over noise", "even over noise")
     settings().console.print(text_table(f"{output}: BLA per level (dB; variances relative to |G_BLA|^2)", header,
                                         rows))
@@ -129,13 +136,14 @@ def _print_modes_table(output: str, modes: list[dict]) -> None:
         ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"), rows, ruled=True))
 
 
-def _print_lpm_table(output: str, summaries: list[dict]) -> None:
+def _print_lpm_table(output: str, summaries: list[dict], rms: str, first: int) -> None:
+    """The levels of arbitrary runs, numbered after the ``first`` multisine levels (as ``fit --level`` counts)."""
     rows = []
-    for row in summaries:
+    for index, row in enumerate(summaries, start=first):
         lo, hi = row["band_hz"]
-        rows.append(["-" if row["level"] is None else f"{row['level']:g}", f"{row['u_rms']:.3g}",
+        rows.append([str(index), f"{row['u_rms']:.3g}",
                      str(row["realizations"]), row["method"], f"{lo:.4g}..{hi:.4g}", _cell(row["bla_db"]),
                      _cell(row["total_var_db"]), str(row["lpm"]["dof"])])
     settings().console.print(text_table(f"{output}: BLA of arbitrary runs by the Local Polynomial Method (dB)",
-                                        ("level", "u rms", "records", "method", "band Hz", "|G| dB",
+                                        ("level", rms, "records", "method", "band Hz", "|G| dB",
                                          "noise+NL var (upper bound)", "dof"), rows))

@@ -22,7 +22,9 @@ from .options import map_option, parse_map, split_options
               help="Largest na scanned by --order auto (polynomial fits of every nb <= na). Default: the poles "
                    "counted by vector fitting (up to 40); fewer than 5: the polynomial scan up to 4, and up to 10 "
                    "(nb = na-2..na) while no order reaches its cost bound.")
-@click.option("--level", type=click.IntRange(min=0), default=None, help="Level index in bla.h5 (required when it holds several).")
+@click.option("--level", type=click.IntRange(min=0), default=None,
+              help="Level index in bla.h5, as bla's tables and pages name it (\"level 1 (rms 2 N)\"); required when "
+                   "it holds several.")
 @click.option("--plot", type=click.Path(dir_okay=False), default=None, help="Write the figure (PNG): data, model, residual, noise and nonlinear std.")
 @click.option("--model", "model_config", type=click.Path(dir_okay=False), default=None,
               help="Model config with a free: section (fit its free parameters to --data).")
@@ -151,8 +153,8 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     if not result.fitted.level.weighted:
         console.print("unweighted least squares: the BLA is noise-free (zero variances); cost and std against the "
                       "numerical-precision floor")
-    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) cost {fit_.cost:.5g}, {cost_check(fit_)} over "
-                  f"{fit_.lines} lines")
+    console.print(f"{output}: {fit_.nb}/{fit_.na} ({domain}) fitted to {result.level_name}, cost {fit_.cost:.5g}, "
+                  f"{cost_check(fit_)} over {fit_.lines} lines", markup=False)
     console.print(f"order: {result.report()['order_reason']}")
     for name, value, std in zip(fit_.names, fit_.values, fit_.std):
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")

@@ -18,6 +18,7 @@ import io
 
 import numpy as np
 
+from nlsid.analysis.level_names import level_name
 from nlsid.analysis.levels import LevelResult, across_levels
 from nlsid.analysis.lines import EVEN, EXCITED, NONHARMONIC, ODD
 from nlsid.report.axes import (FIGURE_HEIGHT, band_limits, frequency_axis, legend_outside, phase_axis,
@@ -37,13 +38,15 @@ def _png(figure) -> bytes:
     return buffer.getvalue()
 
 
-def _title(level: LevelResult, units: Units) -> str:
-    name = "no level" if level.level is None else f"level {level.level:g}"
-    rms = units.value(format(level.u_rms, ".3g"), "u")
-    return f"{name}, u rms {rms}, M = {level.n_realizations}, P = {level.n_periods}"
+def _title(level: LevelResult, units: Units, index: int | None) -> str:
+    """``level 1 (rms 2 N), M = 3, P = 2`` (:mod:`nlsid.analysis.level_names`); without its index
+    the level is named by its rms alone."""
+    name = (level_name(index, level.u_rms, units.known.get("u")) if index is not None
+            else f"u rms {units.value(format(level.u_rms, '.3g'), 'u')}")
+    return f"{name}, M = {level.n_realizations}, P = {level.n_periods}"
 
 
-def spectrum_figure(level: LevelResult, units: Units):
+def spectrum_figure(level: LevelResult, units: Units, index: int | None = None):
     """Output spectrum (rms over realizations) with the line classes distinguished (seed 000 Fig. 3)."""
     figure, (axis,) = _figure()
     lines, spectrum = level.lines, level.spectrum
@@ -61,12 +64,12 @@ def spectrum_figure(level: LevelResult, units: Units):
     frequency_axis(axis, excited)
     band_limits(axis, excited)
     axis.set_ylabel(f"output power ({units.power_db('y')})")
-    axis.set_title(f"Output spectrum: {_title(level, units)}")
+    axis.set_title(f"Output spectrum: {_title(level, units, index)}")
     legend_outside(axis)
     return figure
 
 
-def bla_figure(level: LevelResult, units: Units):
+def bla_figure(level: LevelResult, units: Units, index: int | None = None):
     """|G_BLA| and phase with confidence bounds and noise / nonlinear standard deviations."""
     figure, (magnitude, phase) = _figure(2)
     robust, f = level.robust, level.lines.frequency(level.lines.excited)
@@ -83,7 +86,7 @@ def bla_figure(level: LevelResult, units: Units):
             magnitude.plot(f, power_db(level.fast.var_nl_even / level.fast.n_runs), "-.", color="tab:blue",
                            label="fast method: std nonlinear (even)")
     magnitude.set_ylabel(f"|G_BLA|, std ({units.ratio_db('y', 'u')})")
-    magnitude.set_title(f"BLA ({robust.method}): {_title(level, units)}")
+    magnitude.set_title(f"BLA ({robust.method}): {_title(level, units, index)}")
     # beside the axes: six curves spread over the whole height leave no free corner
     magnitude.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
     # wrapped to +-180 degrees: unwrapped, the noise of incoherent lines adds up to thousands of
@@ -100,9 +103,9 @@ def bla_figure(level: LevelResult, units: Units):
 def levels_figure(levels: list[LevelResult], units: Units):
     """|G_BLA| per level, and band-mean nonlinear and noise variances versus the rms input."""
     figure, (curves, trend) = _figure(2)
-    for level in levels:
+    for index, level in enumerate(levels):
         curves.plot(level.lines.frequency(level.lines.excited), power_db(np.abs(level.robust.G) ** 2),
-                    label=f"u rms {units.value(format(level.u_rms, '.3g'), 'u')}")
+                    label=level_name(index, level.u_rms, units.known.get("u")))
     frequency_axis(curves, np.concatenate([level.lines.frequency(level.lines.excited) for level in levels]))
     curves.set_ylabel(f"|G_BLA| ({units.ratio_db('y', 'u')})")
     legend_outside(curves)
@@ -125,10 +128,10 @@ def render_figures(levels: list[LevelResult], units: Units, lpm_levels=()) -> di
 
     out = {}
     for index, level in enumerate(levels):
-        out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level, units))
-        out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level, units))
+        out[f"spectrum_level_{index:02d}.png"] = _png(spectrum_figure(level, units, index))
+        out[f"bla_level_{index:02d}.png"] = _png(bla_figure(level, units, index))
     if levels:
         out["bla_vs_level.png"] = _png(levels_figure(levels, units))
     for index, level in enumerate(lpm_levels):
-        out[f"lpm_level_{index:02d}.png"] = _png(lpm_level_figure(level, units))
+        out[f"lpm_level_{index:02d}.png"] = _png(lpm_level_figure(level, units, len(levels) + index))
     return out

@@ -48,6 +48,7 @@ import numpy as np
 from nlsid.analysis.bla import RobustBLA, nonlinear_variance_missing
 from nlsid.analysis.confidence import Bounds
 from nlsid.analysis.fast_bla import FastBLA
+from nlsid.analysis.level_names import level_name
 from nlsid.analysis.levels import LevelResult
 from nlsid.analysis.lines import EVEN, ODD, classify_lines
 from nlsid.analysis.output_spectrum import OutputSpectrum
@@ -281,8 +282,9 @@ def level_verdict(across: dict, units: Units) -> str:
             f"(u rms {rows[0]['u_rms']:.3g} to {units.value(format(rows[-1]['u_rms'], '.3g'), 'u')})")
 
 
-def _name(summary: dict, index: int) -> str:
-    return f"level {summary['level']:g}" if summary["level"] is not None else f"level {index:02d}"
+def _name(summary: dict, index: int, units: Units) -> str:
+    """``level 1 (rms 2 N)``: the index ``fit --level`` takes and the input's rms (:mod:`nlsid.analysis.level_names`)."""
+    return level_name(index, summary.get("u_rms"), units.known.get("u"))
 
 
 def _tables(summaries: list[dict], across: dict, probability: float, units: Units) -> list[Table]:
@@ -291,12 +293,12 @@ def _tables(summaries: list[dict], across: dict, probability: float, units: Unit
     for i, s in enumerate(summaries):
         sp = s["spectrum"]
         unknown = {"zero": "zero", "unknown": "unknown (P = 1)"}.get(noise_floor(s), "-")
-        bla_rows.append([_name(s, i), number(s["u_rms"]), f"{s['realizations']} x {s['periods']}", s["method"],
+        bla_rows.append([str(i), number(s["u_rms"]), f"{s['realizations']} x {s['periods']}", s["method"],
                          str(s["excited_lines"]), number(s["bla_db"], ".1f"),
                          number(s["nl_var_db"], ".1f") if _finite(s["nl_var_db"]) or noise_floor(s) != "unknown" else unknown,
                          number(s["noise_var_db"], ".1f") if _finite(s["noise_var_db"]) else unknown, number(change[i].get("bla_change_mean_db"), "+.2f"),
                          number(change[i].get("bla_change_max_db"), "+.2f")])
-        spectrum_rows.append([_name(s, i), number(sp["excited_db"], ".1f"), number(sp["odd_db"], ".1f"),
+        spectrum_rows.append([_name(s, i, units), number(sp["excited_db"], ".1f"), number(sp["odd_db"], ".1f"),
                               number(sp["even_db"], ".1f"), number(sp["nonharmonic_db"], ".1f"),
                               number(sp["noise_db"], ".1f") if _finite(sp["noise_db"])
                               else {"zero": "zero", "unknown": "unknown (P = 1)"}.get(noise_floor(s), "-"),
@@ -305,13 +307,14 @@ def _tables(summaries: list[dict], across: dict, probability: float, units: Unit
                               number(sp["excited_above_odd_db"], ".1f")])
     return [
         Table("BLA per level (robust method)",
-              [units.label("level", "u"), units.label("u rms", "u"), "M x P", "method", "lines",
+              ["level", units.label("u rms", "u"), "M x P", "method", "lines",
                f"|G|² ({units.ratio_db('y', 'u')})", "NL var (dB re |G|²)", "noise var (dB re |G|²)",
                "ΔG mean dB", "ΔG max dB"], bla_rows,
               note=(f"|G|²: band mean of |G_BLA|². NL var: var(G_S) of one realization ({BOOK}, Eq. 6-7); "
                     f"noise var: var(N_G) of one period (Eq. 6-21); both relative to |G|². ΔG: 20 log10 "
                     f"|G/G_first level| (dB re 1, a ratio of like transfer functions), mean and largest over the "
-                    f"lines. Confidence bounds in the figures: {probability:.0%}.")),
+                    f"lines. Level: the index fit --level takes. Confidence bounds in the figures: "
+                    f"{probability:.0%}.")),
         Table(f"Output spectrum per level: band means in band ({units.power_db('y')})",
               ["level", "excited", "odd", "even", "non-harm.", "noise", "odd−even dB", "odd−noise dB",
                "even−noise dB", "excited−odd dB"], spectrum_rows,
@@ -343,14 +346,15 @@ def _figures(levels: list[LevelResult], summaries: list[dict], probability: floa
     if len(levels) > 1:
         out.append(figure(levels_figure(levels, units.for_figures()), _CAPTIONS["bla_vs_level"], "bla_vs_level"))
     for index in order:
-        name = _name(summaries[index], index)
+        name = _name(summaries[index], index, units)
         for key in ("spectrum", "bla"):
             caption = _CAPTIONS[key].format(name=name, p=probability)
             caption += {"unknown": " The noise is unknown at this level (one period per realization, P = 1): no "
                                    "noise level is drawn, and the bounds hold noise and distortion together.",
                         "zero": " The data are noise-free: the noise floor is zero (not drawn)."}.get(
                             noise_floor(summaries[index]), "")
-            out.append(figure(drawn[key](levels[index], units.for_figures()), caption, f"{key}_level_{index:02d}"))
+            out.append(figure(drawn[key](levels[index], units.for_figures(), index), caption,
+                              f"{key}_level_{index:02d}"))
     return out
 
 
@@ -374,15 +378,14 @@ def render_bla(path: Path) -> Page:
     distortion, findings = distortion_verdict(top, detection)
     headline = f"{distortion}; {level_verdict(across, units)}"
     spectrum = top["spectrum"]
-    findings = [f"verdict at the highest level ({_name(top, len(summaries) - 1)}, "
-                f"u rms {units.value(format(top['u_rms'], '.3g'), 'u')})"] + findings
+    findings = [f"verdict at the highest level, {_name(top, len(summaries) - 1, units)}"] + findings
     if _finite(spectrum["excited_above_odd_db"]) and not (noise_floor(top) == "zero"
                                                           and spectrum["excited_above_odd_db"] > -PRECISION_DB):
         findings.append(f"odd distortion {spectrum['excited_above_odd_db']:.0f} dB below the output at the "
                         "excited lines")
     findings.append(f"nonlinear variance of the BLA {_variance_text(top['nl_var_db'], top, nonlinear=True)}, noise "
                     f"variance {_variance_text(top['noise_var_db'], top)} relative to |G_BLA|² (band means)")
-    warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i)}: {w}" for i, s in enumerate(summaries)
+    warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i, units)}: {w}" for i, s in enumerate(summaries)
                                                   for w in s["warnings"]]
     lpm_figures, lpm_tables, lpm_warnings = _lpm_parts(data, probability, units)
     return Page(
@@ -409,22 +412,23 @@ def _lpm_parts(data: dict, probability: float, units: Units) -> tuple[list[Figur
     from nlsid.report.vector import figure
 
     figures, rows, warnings = [], [], []
+    first = len(data["levels"])  # the levels of arbitrary runs are numbered after the multisine levels
     for index, stored in enumerate(data["lpm_levels"]):
         summary = stored["attrs"]["summary"]
-        name = _name(summary, index)
-        figures.append(figure(lpm_figure(stored, probability, units.for_figures()),
+        name = _name(summary, first + index, units)
+        figures.append(figure(lpm_figure(stored, probability, units.for_figures(), first + index),
                               f"FRF of the arbitrary runs at {name} by the Local Polynomial Method ({BOOK}, "
                               f"Section 3.7) with its {probability:.0%} confidence "
                               "bounds, F(2, 2q) with q degrees of freedom. The red curve is the standard "
                               "deviation of the estimate: noise and nonlinear distortion together.",
                               f"lpm_level_{index:02d}"))
         lo, hi = summary["band_hz"]
-        rows.append([name, number(summary["u_rms"]), str(summary["realizations"]), summary["method"],
+        rows.append([str(first + index), number(summary["u_rms"]), str(summary["realizations"]), summary["method"],
                      f"{lo:.4g} .. {hi:.4g}", str(summary["excited_lines"]), number(summary["bla_db"], ".1f"),
                      number(summary["total_var_db"], ".1f"), str(summary["lpm"]["dof"])])
         warnings += [f"arbitrary {name}: {w}" for w in summary["warnings"]]
     tables = [Table("BLA of arbitrary runs per level (Local Polynomial Method)",
-                    [units.label("level", "u"), units.label("u rms", "u"), "records", "method", "band Hz", "lines",
+                    ["level", units.label("u rms", "u"), "records", "method", "band Hz", "lines",
                      f"|G|² ({units.ratio_db('y', 'u')})", "noise+NL var (dB re |G|², upper bound)", "dof q"], rows,
                     note="noise+NL var: band mean of the variance of G relative to |G|²; it bounds the noise "
                          "from above.")] if rows else []
@@ -438,7 +442,7 @@ def _lpm_page(path: Path, data: dict) -> Page:
     summaries = [stored["attrs"]["summary"] for stored in data["lpm_levels"]]
     figures, tables, warnings = _lpm_parts(data, probability, units)
     top = summaries[-1]
-    findings = [f"{_name(s, i)}: {s['realizations']} records, q = {s['lpm']['dof']} degrees of freedom, window "
+    findings = [f"{_name(s, i, units)}: {s['realizations']} records, q = {s['lpm']['dof']} degrees of freedom, window "
                 f"{s['lpm']['lines']} lines, degree {s['lpm']['degree']}" for i, s in enumerate(summaries)]
     return Page(kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
                 headline=lpm_headline(top, units), findings=findings, figures=figures, tables=tables,

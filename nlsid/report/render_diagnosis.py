@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from nlsid.analysis.level_names import level_name
 from nlsid.citations import BOOK, MOTION_STAGES
 from nlsid.report.html import Figure, Page, Table, number
 from nlsid.report.units import Units, units_of
@@ -24,6 +25,12 @@ from nlsid.report.units import Units, units_of
 
 def _level(value) -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:g}"
+
+
+def _level_of(rows: list[dict], units: Units) -> str:
+    """The highest of the levels ``rows`` (rising, as ``bla`` numbers them), named as every stage
+    names a level: ``level 2 (rms 4 N)`` (:mod:`nlsid.analysis.level_names`)."""
+    return level_name(len(rows) - 1, rows[-1].get("u_rms"), units.known.get("u"))
 
 
 def floor_text(score: dict | None) -> str:
@@ -121,13 +128,15 @@ def _figures(arrays: dict, units: Units, signal: str = "y") -> list[Figure]:
     if arrays["bla"]:
         top = arrays["bla"][-1]
         out.append(figure(plots.model_vs_bla(top, units),
-                          f"Model against the measured BLA at level {_level(top['level'])}. The band is the BLA's 95% "
+                          f"Model against the measured BLA at {_level_of(arrays['bla'], units)}. The band is the BLA's 95% "
                           f"confidence region ({BOOK}, Ex. 92); crosses mark lines where the model lies outside it.",
                           "model_vs_bla"))
     if arrays["spectrum"]:
         top = arrays["spectrum"][-1]
+        same = len(arrays["bla"]) == len(arrays["spectrum"])  # one BLA and one spectrum per level
+        top_name = _level_of(arrays["bla"], units) if same else f"level {_level(top['level'])}"
         out.append(figure(plots.spectrum(top, units),
-                          f"Output spectrum at level {_level(top['level'])}. Measured power at the excited, odd and "
+                          f"Output spectrum at {top_name}. Measured power at the excited, odd and "
                           "even lines, the model's at the same lines, and the noise variance (as in "
                           f"{MOTION_STAGES}, Fig. 3).", "spectrum"))
     if len(arrays["bla"]) > 1:
@@ -182,15 +191,16 @@ def _hypothesis_table(summary: dict, units: Units) -> Table:
 
 
 def _level_table(evidence: dict, units: Units) -> Table:
-    rows = [[_level(lines["level"]), number(lines["u_rms"]), f"{bla['outside_bounds']}/{bla['lines']}",
+    rows = [[str(index), number(lines["u_rms"]), f"{bla['outside_bounds']}/{bla['lines']}",
              number(bla["gain_error_max_db"], "+.1f"), number(bla["phase_error_max_deg"], "+.0f"),
              number(lines["excited"]["above_noise_db"], ".1f"), number(lines["odd"]["above_noise_db"], ".1f"),
              number(lines["even"]["above_noise_db"], ".1f")]
-            for lines, bla in zip(evidence["lines"], evidence["bla"])]
-    return Table("Residual per level", [units.label("level", "u"), units.label("u rms", "u"),
+            for index, (lines, bla) in enumerate(zip(evidence["lines"], evidence["bla"]))]
+    return Table("Residual per level", ["level", units.label("u rms", "u"),
                                         "model outside BLA bounds", "gain error dB", "phase error deg",
                                         "excited dB", "odd dB", "even dB"], rows,
-                 note="Gain and phase error: the largest of the measured BLA against the model's, 20 log10 "
+                 note="Level: its index as bla numbers the recording's multisine levels (fit --level). "
+                      "Gain and phase error: the largest of the measured BLA against the model's, 20 log10 "
                       "|G/G_model| (dB re 1, a ratio of like transfer functions) and its angle. Excited, odd, "
                       "even: residual power above the noise at the in-band lines of each class (dB re the noise "
                       "power).")

@@ -89,10 +89,20 @@ class BlaResult:
             raise InputError("BlaResult", f"holds {len(curves)} levels; take one of .levels or .lpm_levels")
         return curves[0]
 
+    def level_names(self) -> list[str]:
+        """Each level as every stage names it, ``level 1 (rms 2 N)`` (:mod:`nlsid.analysis.level_names`):
+        the multisine levels, then those of arbitrary runs, numbered as ``fit_tf(level=)`` takes them."""
+        from nlsid.analysis.level_names import level_name
+
+        return [level_name(i, level.u_rms, self.units.get("u")) for i, level in enumerate([*self.levels,
+                                                                                          *self.lpm_levels])]
+
     def messages(self) -> list[str]:
-        """Every warning, of the recording and of each level (``level NN: ...``)."""
-        return (self.warnings + [f"level {i:02d}: {w}" for i, level in enumerate(self.levels) for w in level.warnings]
-                + [f"arbitrary level {i:02d}: {w}" for i, level in enumerate(self.lpm_levels) for w in level.warnings])
+        """Every warning, of the recording and of each level (``level 1 (rms 2 N): ...``)."""
+        names = self.level_names()
+        lpm = [(names[len(self.levels) + i] + " (arbitrary runs)", level) for i, level in enumerate(self.lpm_levels)]
+        return self.warnings + [f"{name}: {w}" for name, level in [*zip(names, self.levels), *lpm]
+                                for w in level.warnings]
 
     def summary(self) -> dict:
         """Per level the scalars of ``docs/formats.md`` (``levels``, ``lpm_levels``), the
@@ -131,12 +141,12 @@ class BlaResult:
         from html import escape
 
         rows = []
-        for row in self.summary()["levels"]:
-            rows.append(f"<tr><td>{row['level']}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} x "
+        for index, row in enumerate(self.summary()["levels"]):
+            rows.append(f"<tr><td>{index}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} x "
                         f"{row['periods']}</td><td>{escape(row['method'])}</td><td>{row['bla_db']:.1f}</td>"
                         f"<td>{row['nl_var_db']:.1f}</td><td>{row['noise_var_db']:.1f}</td></tr>")
-        for row in self.summary()["lpm_levels"]:
-            rows.append(f"<tr><td>{row['level']}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} records</td>"
+        for index, row in enumerate(self.summary()["lpm_levels"], start=len(self.levels)):
+            rows.append(f"<tr><td>{index}</td><td>{row['u_rms']:.3g}</td><td>{row['realizations']} records</td>"
                         f"<td>{escape(row['method'])}</td><td>{row['bla_db']:.1f}</td><td colspan=2>"
                         f"{row['total_var_db']:.1f} (noise + NL)</td></tr>")
         warnings = "".join(f"<li>{escape(w)}</li>" for w in self.messages())

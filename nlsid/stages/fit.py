@@ -96,7 +96,7 @@ def _layout(result: BlaResult) -> tuple[list[dict], list[dict]]:
         levels.append({
             "name": f"level_{index:02d}",
             "attrs": {"n_realizations": int(level.n_realizations), "n_periods": int(level.n_periods),
-                      "period": int(lines.period), "fs": float(lines.fs)},
+                      "period": int(lines.period), "fs": float(lines.fs), "u_rms": float(level.u_rms)},
             "excited_bins": np.asarray(lines.excited).astype(np.int64),
             "robust": _arrays(level.robust, ("G", "var_total", "var_noise", "var_nl")),
             "fast": None if level.fast is None else _arrays(level.fast, ("G", "var_total")),
@@ -107,6 +107,7 @@ def _layout(result: BlaResult) -> tuple[list[dict], list[dict]]:
         lpm_levels.append({
             "name": f"level_{index:02d}",
             "attrs": {"fs": float(lpm.fs), "n_samples": int(lpm.n_samples), "dof": int(lpm.dof),
+                      "u_rms": float(level.u_rms),
                       "smoothing_lines": int(lpm.smoothing_lines), "smoothed_dof": float(lpm.smoothed_dof),
                       "half_width": int(lpm.half_width)},
             "bins": np.asarray(level.bins).astype(np.int64), "G": np.asarray(level.G),
@@ -118,7 +119,7 @@ def _layout(result: BlaResult) -> tuple[list[dict], list[dict]]:
 #: the keys of the fit report that ``nlsid fit BLA --json`` prints (besides the paths)
 JSON_KEYS = ("domain", "order", "delay_samples", "num", "den", "parameters", "cost", "expected_cost", "cost_std",
              "cost_bound", "weights", "weighted", "lines", "stable", "stability", "integrators", "fit", "fit_note",
-             "order_reason", "order_scan", "warnings")
+             "order_reason", "order_scan", "warnings", "level")
 
 
 @dataclass
@@ -137,12 +138,23 @@ class TransferFunctionFit:
         Signal -> unit of the recording behind the BLA (for the figure).
     inputs : list of str
         Files the fit comes from (its provenance).
+    level : dict
+        The level fitted: ``index`` (as ``level`` / ``--level`` take it) and ``rms`` (of u),
+        :func:`nlsid.analysis.level_names.level_summary`.
     """
 
     fitted: BLAFit
     source: str
     units: dict = field(default_factory=dict)
     inputs: list[str] = field(default_factory=list)
+    level: dict = field(default_factory=lambda: {"index": 0, "rms": None})
+
+    @property
+    def level_name(self) -> str:
+        """The level fitted as every stage names it: ``level 1 (rms 2 N)`` (:mod:`nlsid.analysis.level_names`)."""
+        from nlsid.analysis.level_names import level_name
+
+        return level_name(self.level["index"], self.level["rms"], self.units.get("u"))
 
     @property
     def model(self):
@@ -207,8 +219,9 @@ class TransferFunctionFit:
         return list(self.fitted.warnings)
 
     def report(self) -> dict:
-        """Every number of the fit report ``<model>.fit.json`` (``docs/formats.md``), without provenance."""
-        return self.fitted.report()
+        """Every number of the fit report ``<model>.fit.json`` (``docs/formats.md``), without provenance;
+        ``level``: the level fitted (:attr:`level`)."""
+        return {**self.fitted.report(), "level": dict(self.level)}
 
     def summary(self) -> dict:
         """The ``nlsid fit BLA --json`` summary without paths: order, coefficients, parameters with
@@ -220,7 +233,7 @@ class TransferFunctionFit:
         """The comment lines of the model YAML (``report_name``: the report file beside it)."""
         fit_, report, level = self.fitted.fit, self.report(), self.fitted.level
         form = "transfer function" if self.modal is None else "transfer function as a modal state space"
-        return [f"nlsid fit {self.source}: {fit_.nb}/{fit_.na} {self.domain}-domain {form}, "
+        return [f"nlsid fit {self.source}, {self.level_name}: {fit_.nb}/{fit_.na} {self.domain}-domain {form}, "
                 f"{report['stability']}" + (f" ({fit_.integrators} integrator(s))" if fit_.integrators else ""),
                 f"cost {fit_.cost:.6g}, {cost_check(fit_)} ({fit_.lines} lines)",
                 f"weights: {level.weights}" if level.weighted
@@ -304,7 +317,8 @@ class TransferFunctionFit:
 
         fit_, level = self.fitted.fit, self.fitted.level
         return tf_fit_png(level.data.frequency, level.data.G, fit_.response, fit_.response_std, level.noise_std,
-                          level.nl_std, f"{self.source}: {fit_.nb}/{fit_.na} ({self.domain})", Units(self.units))
+                          level.nl_std, f"{self.source}, {self.level_name}: {fit_.nb}/{fit_.na} ({self.domain})",
+                          Units(self.units))
 
     def plot(self):
         """The figure of :meth:`png` as a matplotlib figure (for a notebook)."""
@@ -348,7 +362,8 @@ class TransferFunctionFit:
                        for n, v, s in zip(fit_.names, fit_.values, fit_.std))
         warnings = "".join(f"<li>{escape(w)}</li>" for w in self.warnings)
         return (f"<p><b>Transfer function</b> {fit_.nb}/{fit_.na} ({self.domain}-domain, delay {self.delay} samples) "
-                f"fitted to {escape(self.source)}: {escape(self.model.stability())}; cost {fit_.cost:.5g}, "
+                f"fitted to {escape(self.source)}, {escape(self.level_name)}: {escape(self.model.stability())}; "
+                f"cost {fit_.cost:.5g}, "
                 f"{escape(cost_check(fit_))} over {fit_.lines} lines</p>"
                 f"<p>order: {escape(self.report()['order_reason'])}</p>"
                 f"<table><tr><th>parameter</th><th>value</th><th>std</th></tr>{rows}</table>"
@@ -428,6 +443,7 @@ def fit_tf(b: BlaResult | str | os.PathLike, order=(2, 2), domain: str = "s", le
             levels, lpm_levels = _layout(b)
             chosen = frf_from_levels(levels, lpm_levels, level, "BlaResult", option, "the BLA")
             source, units, inputs = f"BLA of {b.source}", dict(b.units), list(b.inputs)
+            taken = _taken(levels, lpm_levels, level)
         elif isinstance(b, (str, os.PathLike)):
             from nlsid.fit.bla_source import frf_from_levels
             from nlsid.io.bla_file import read_bla, read_units
@@ -435,13 +451,24 @@ def fit_tf(b: BlaResult | str | os.PathLike, order=(2, 2), domain: str = "s", le
             content = read_bla(b)
             chosen = frf_from_levels(content["levels"], content["lpm_levels"], level, str(b), option)
             source, units, inputs = str(b), read_units(b), [str(b)]
+            taken = _taken(content["levels"], content["lpm_levels"], level)
         else:
             raise InputError(names.get("b", "b"), "expected a BlaResult (nlsid.bla) or the path of a bla.h5 file, "
                                                   f"got {type(b).__name__}")
         fitted = fit_level(chosen, pair, domain, samples, max_order)
     except InputError as error:
         raise _renamed(error, names) from None
-    return TransferFunctionFit(fitted, source, units, inputs)
+    return TransferFunctionFit(fitted, source, units, inputs, taken)
+
+
+def _taken(levels: list[dict], lpm_levels: list[dict], level: int | None) -> dict:
+    """The level :func:`nlsid.fit.bla_source.frf_from_levels` took (its index: ``level``, or 0 where
+    the BLA holds one) as :func:`nlsid.analysis.level_names.level_summary` gives it."""
+    from nlsid.analysis.level_names import level_summary
+
+    index = 0 if level is None else int(level)
+    rms = [*levels, *lpm_levels][index]["attrs"].get("u_rms")
+    return level_summary(index, None if rms is None else float(rms))
 
 
 # ---------------------------------------------------------------------------------------------------
