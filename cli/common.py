@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -93,7 +94,13 @@ def _stderr_is_plain_file() -> bool:
 
 @contextlib.contextmanager
 def progress(description: str, total: int, kernels: bool = False) -> Iterator[Any]:
-    """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step()`` callable.
+    """A rich progress bar on stderr (hidden with ``--quiet``); yields a ``step(advance=1, total=None)``
+    callable: ``advance`` the work done since the last call (``step()``: one unit, as a stage of
+    equal steps counts), ``total`` the work now planned in all, where the stage plans as it goes
+    (``diagnose``: a further round adds its hypotheses, a hypothesis not fitted takes its share
+    back). The bar never shows more work done than planned. rich's time remaining is the work left
+    over the work done per second in the last 30 s; a change of the total alone is no work done
+    and leaves that speed as it was.
 
     ``kernels``: the stage simulates; when numba has yet to compile the kernels
     (:func:`kernels_not_compiled`) the bar says :data:`COMPILING_NOTE` until its first step, where
@@ -114,40 +121,64 @@ def progress(description: str, total: int, kernels: bool = False) -> Iterator[An
             import rich.console  # noqa: F401
             import rich.table  # noqa: F401
         try:
-            yield lambda advance=1: None
+            yield lambda advance=1, total=None: None
         finally:
             if not quiet:
                 sys.stderr.write("\n")
                 sys.stderr.flush()
         return
+    import time
+
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     bar = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
-        TimeRemainingColumn(),
+        TextColumn("{task.fields[remaining]}", style="progress.remaining"),
         console=Console(stderr=True),
         transient=True,
         disable=quiet,
     )
     with bar:
-        task = bar.add_task(f"{description}: {COMPILING_NOTE}" if compiling else description, total=total)
-        done, planned = 0, total
+        task = bar.add_task(f"{description}: {COMPILING_NOTE}" if compiling else description, total=total,
+                            remaining=remaining_text(None))
+        done, planned, first = 0, total, None  # first: the time and work done at the first work
 
-        def step(advance: int = 1) -> None:
-            # a stage that takes further rounds (diagnose's chain of causes) extends the bar by a round
-            nonlocal done, planned
-            if compiling and done == 0:
+        def step(advance: float = 1, total: float | None = None) -> None:
+            nonlocal done, planned, first
+            if compiling and done == 0 and advance > 0:  # the first work done: the kernels are compiled
                 bar.update(task, description=description)
             done += advance
-            if done > planned:
-                planned += total
-                bar.update(task, total=planned)
-            bar.advance(task, advance)
+            planned = max(done, planned if total is None else total)
+            now = time.monotonic()
+            if first is None and advance > 0:
+                first = (now, done)
+            left = None if first is None else time_remaining(done - first[1], now - first[0], planned - done)
+            bar.update(task, total=planned, completed=done, remaining=remaining_text(left))  # never beyond its total
 
         yield step
+
+
+def time_remaining(work: float, seconds: float, left: float) -> float | None:
+    """The time the work ``left`` takes at the speed of the ``work`` done in ``seconds``, or None
+    where no work was timed yet. The speed is the whole run's since its first work was done (the
+    time before it, numba compiling kernels, is no work; rich's own estimate, from the last 30 s,
+    starts over whenever the total changes, and a stage that plans as it goes changes it often)."""
+    if left <= 0:
+        return 0.0
+    if work <= 0 or seconds <= 0:
+        return None
+    return left * seconds / work
+
+
+def remaining_text(seconds: float | None) -> str:
+    """``seconds`` as rich's time-remaining column writes it (``0:01:15``; ``-:--:--`` unknown)."""
+    if seconds is None:
+        return "-:--:--"
+    minutes, whole = divmod(int(math.ceil(seconds)), 60)
+    return f"{minutes // 60}:{minutes % 60:02d}:{whole:02d}"
 
 
 def text_table(title: str, header: list[str] | tuple[str, ...], rows: list[list[str]], ruled: bool = False):

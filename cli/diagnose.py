@@ -67,7 +67,7 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
     inputs = diagnosis_inputs(model_path, data_path, list(validate_on), estimation_range, validation_range,
                               allow_overlap, workers, parse_map(mapping), False if no_yardstick else None, fit_on,
                               names=FLAGS)
-    with progress("diagnose", inputs.steps, kernels=True) as step:  # evidence, nuisances, each hypothesis
+    with progress("diagnose", inputs.steps, kernels=True) as step:  # counts work: each fit by its parameters
         result = inputs.run(progress=step)
     summary = result.summary()
     result.write(output, force=force, provenance=provenance(config_paths=[model_path],

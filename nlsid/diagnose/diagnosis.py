@@ -237,10 +237,45 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
 MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits the whole library)
 YARDSTICK = True  # whether diagnose() fits the black-box yardstick when its caller does not say
 
+# The work :func:`diagnose` reports to its ``step``, in units of one free parameter of a hypothesis'
+# fit (about five simulations of the estimation runs: a finite-difference Jacobian column for each of
+# the fit's evaluations; 4.7 on average over the 22 fits of the sample stage and of a two-cause
+# diagnosis, tests/diagnose/test_diagnose_chain.py). A fit's time per unit varied as much as its time
+# per simulation there (coefficient of variation 0.49 against 0.51 on the sample, 1.04 against 1.17
+# on the two-cause diagnosis: a friction law simulates slower than a polynomial), and the free
+# parameters are known before the fit. The other steps are weighed by their time against the
+# average unit of the same diagnosis (the sample's 0.72 s, the two-cause one's 0.17 s on 2 loaded cores).
+FIT_FREE_BESIDES = 5  # free parameters of a hypothesis' fit besides its own, expected before it is fitted
+#                       (the nuisances and the linear parameters it refines: 5 or 6 in 17 of those fits)
+EVIDENCE_WORK = 4  # a round's evidence (its simulation of every run, BLA, distortion; measured 2.5 and 16)
+NUISANCE_WORK = 1  # a round's nuisances (measured 1.1 and 1.4)
+YARDSTICK_WORK = 230  # the black-box yardstick's fit (measured 316 and 165: within 1.4 times of both)
+
+
+def fit_work(hypothesis: Hypothesis, carried: dict[str, str] | None = None) -> int:
+    """The work a hypothesis' fit is expected to take before it is fitted: its free parameters
+    (its own, :data:`FIT_FREE_BESIDES` and the ``carried`` parameters of earlier causes) + 1."""
+    return len(hypothesis.parameters) + FIT_FREE_BESIDES + len(carried or {}) + 1
+
+
+def round_work(runner: ModelRunner, accepted: tuple[str, ...] = (), carried: dict[str, str] | None = None
+               ) -> dict[str, int]:
+    """The expected work (:func:`fit_work`) of each hypothesis a round of ``runner``'s model may fit:
+    those of a family not ``accepted`` that apply to the model."""
+    return {h.name: fit_work(h, carried) for h in LIBRARY if h.family not in accepted and h.applies(runner) is None}
+
+
+def planned_work(data: dict, source: str, yardstick: bool | None = None) -> int:
+    """The work :func:`diagnose` plans before it starts: the first round's (evidence, nuisances and
+    :func:`round_work`) and the yardstick's (``yardstick``: as :func:`diagnose`'s argument)."""
+    wanted = YARDSTICK if yardstick is None else yardstick
+    work = round_work(ModelRunner.from_data(data, source))
+    return EVIDENCE_WORK + NUISANCE_WORK + sum(work.values()) + (YARDSTICK_WORK if wanted else 0)
+
 
 @blas_in_one_thread
 def diagnose(data: dict, source: str, runs: list[Run], where: str,
-             step: Callable[[str], None] | None = None, *, validate_on: list[Run] = (),
+             step: Callable[[str, int, int], None] | None = None, *, validate_on: list[Run] = (),
              estimation_range: SampleRange | None = None, validation_range: SampleRange | None = None,
              estimation_budget: int | None = BUDGET_SAMPLES, budget_above: int = BUDGET_ABOVE,
              yardstick: bool | None = None, fit_on: str = "y") -> Diagnosis:
@@ -270,8 +305,19 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     the evidence, the noise floor, the scores and the verdict are of it
     (:mod:`nlsid.diagnose.evidence`, "The judged signal"). ``u`` needs a model with a
     ``closed_loop`` (:func:`check_fit_on`).
+
+    ``step(name, work, planned)`` is told the progress in units of work (:func:`fit_work`): ``work``
+    done by the step ``name``, and ``planned``, the change of the work planned. The work planned
+    at the start (:func:`planned_work`) is the yardstick's and the first round's; each round plans
+    its own (``name`` ``"round"``, no work) with its evidence, nuisances and the hypotheses that
+    apply (:func:`round_work`). A hypothesis fitted does the work of its free parameters + 1 (the
+    difference from the work expected of it is added to the work planned); one not fitted (its
+    signature, the evidence or a simpler hypothesis at the noise floor rules it out) takes its
+    share back without work, as the yardstick not fitted does. The work done reaches the work
+    planned at the last step, ``"yardstick"``.
     """
-    step = step or (lambda name: None)
+    wanted = YARDSTICK if yardstick is None else yardstick
+    step = _planning(step or (lambda name, work, planned: None), YARDSTICK_WORK if wanted else 0)
     check_fit_on(fit_on, ModelRunner.from_data(data, source))  # the model is valid before the data are looked at
     runs, roles = assign(runs, where, validate_on, estimation_range, validation_range)
     budget = budgeted(runs, roles, estimation_budget or math.inf, budget_above if estimation_budget else math.inf)
@@ -296,12 +342,23 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
-    wanted = YARDSTICK if yardstick is None else yardstick
     first.yardstick = (_yardstick(first, data, source, runs, roles, budget) if wanted
                        else Yardstick("not fitted: not asked for (--no-yardstick)"))
-    step("yardstick")
+    work = YARDSTICK_WORK if first.yardstick.fitted else 0
+    step("yardstick", work, work - YARDSTICK_WORK if wanted else 0)
     judge_extent(first)
     return first
+
+
+def _planning(step: Callable[[str, int, int], None], work: int) -> Callable[[str, int, int], None]:
+    """``step`` with ``work`` added to the work planned by its first call (the first round's plan):
+    the whole plan told at once."""
+    pending = [work]
+
+    def planning(name: str, done: int, planned: int) -> None:
+        step(name, done, planned + (pending.pop() if pending else 0))
+
+    return planning
 
 
 SIGNALS = ("y", "u")  # the signals a diagnosis can judge: the output, or in closed loop the command
@@ -568,9 +625,11 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     in closed loop ``u``: :func:`diagnose`).
     """
     runner = ModelRunner.from_data(data, source)
+    expected = round_work(runner, accepted, carried)  # each hypothesis' share of the work (diagnose)
+    step("round", 0, EVIDENCE_WORK + NUISANCE_WORK + sum(expected.values()))
     evidence, _ = gather(runner, runs, roles, where, signal)
     by_id = {run.run_id: run for run in runs}
-    step("evidence")
+    step("evidence", EVIDENCE_WORK, 0)
     est = [res for res in evidence.residuals if res.role == ESTIMATION]
     val = [res for res in evidence.residuals if res.role == VALIDATION]
     est_runs, val_runs = [by_id[r.run_id] for r in est], [by_id[r.run_id] for r in val]
@@ -582,57 +641,62 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     with_nuisances = ModelRunner.from_data(adjusted, source)
     found = dataclasses.replace(found, initial=nuisances.initial_states(with_nuisances, est_runs + val_runs))
     baseline = score(val, model_residuals(with_nuisances, val_runs, val, signal))
-    step("nuisances")
+    step("nuisances", NUISANCE_WORK, 0)
     context = Context(runner, fit_runs, fit_residuals, [runner.internal(run) for run in fit_runs],
                       evidence.bla_levels, signal=signal)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
         outcome = Outcome(hypothesis, model=users or data)
         outcomes.append(outcome)
-        if hypothesis.family in accepted:
-            outcome.reason = f"not fitted: a {hypothesis.family} cause is already in the model (an earlier step)"
-            continue
-        reason = hypothesis.applies(runner)
-        if reason is not None:
-            outcome.reason = f"does not apply: {reason}"
-            continue
-        if evidence.exact:
-            outcome.reason = "not fitted: the model reproduces the noise-free data exactly (no residual to explain)"
-            continue
-        if evidence.constant_output:
-            outcome.reason = ("not fitted: the measured output is constant in every run (no response to the input "
-                              "to explain)")
-            continue
-        if hypothesis.distorts and evidence.distortion_testable and not (evidence.odd_seen or evidence.even_seen):
-            outcome.reason = ("not fitted: the detection lines show no nonlinear distortion (odd or even), "
-                              "which a nonlinearity of this kind would leave")
-            continue
-        simpler = sufficient_simpler(hypothesis, outcomes)
-        if simpler is not None:
-            reached = ("matches the data exactly" if simpler.score.exact
-                       else f"already reaches the noise floor (p = {simpler.score.p_above_noise:.2g})")
-            outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached} with fewer parameters, so this "
-                              "hypothesis cannot be significantly better")
-            continue
-        estimate = hypothesis.estimate(context)
-        if isinstance(estimate, str):
-            outcome.reason = estimate
-            continue
         try:
-            estimate, extended, outcome.free, outcome.paths, outcome.found = refine(
-                hypothesis, adjusted, estimate, fit_runs, source, data, carried, signal)
-        except InputError as exc:
-            outcome.reason = f"the fit failed: {exc}"
-            continue
-        if hypothesis.parameters and all(math.isinf(estimate.std.get(n, 0.0)) for n in hypothesis.parameters):
-            outcome.reason = ("not a cause: at its fitted values none of its parameters has an effect on the "
-                              "estimation runs (a limit beyond the signal's range), so any gain is the re-fit of "
-                              "the rest of the model")
-            continue
-        outcome.estimate = context.fitted[hypothesis.name] = estimate
-        outcome.extended = context.extended[hypothesis.name] = extended
-        _score(outcome, runner, val_runs, val, signal)
-        step(hypothesis.name)
+            if hypothesis.family in accepted:
+                outcome.reason = f"not fitted: a {hypothesis.family} cause is already in the model (an earlier step)"
+                continue
+            reason = hypothesis.applies(runner)
+            if reason is not None:
+                outcome.reason = f"does not apply: {reason}"
+                continue
+            if evidence.exact:
+                outcome.reason = "not fitted: the model reproduces the noise-free data exactly (no residual to explain)"
+                continue
+            if evidence.constant_output:
+                outcome.reason = ("not fitted: the measured output is constant in every run (no response to the input "
+                                  "to explain)")
+                continue
+            if hypothesis.distorts and evidence.distortion_testable and not (evidence.odd_seen or evidence.even_seen):
+                outcome.reason = ("not fitted: the detection lines show no nonlinear distortion (odd or even), "
+                                  "which a nonlinearity of this kind would leave")
+                continue
+            simpler = sufficient_simpler(hypothesis, outcomes)
+            if simpler is not None:
+                reached = ("matches the data exactly" if simpler.score.exact
+                           else f"already reaches the noise floor (p = {simpler.score.p_above_noise:.2g})")
+                outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached} with fewer parameters, so this "
+                                  "hypothesis cannot be significantly better")
+                continue
+            estimate = hypothesis.estimate(context)
+            if isinstance(estimate, str):
+                outcome.reason = estimate
+                continue
+            try:
+                estimate, extended, outcome.free, outcome.paths, outcome.found = refine(
+                    hypothesis, adjusted, estimate, fit_runs, source, data, carried, signal)
+            except InputError as exc:
+                outcome.reason = f"the fit failed: {exc}"
+                continue
+            if hypothesis.parameters and all(math.isinf(estimate.std.get(n, 0.0)) for n in hypothesis.parameters):
+                outcome.reason = ("not a cause: at its fitted values none of its parameters has an effect on the "
+                                  "estimation runs (a limit beyond the signal's range), so any gain is the re-fit of "
+                                  "the rest of the model")
+                continue
+            outcome.estimate = context.fitted[hypothesis.name] = estimate
+            outcome.extended = context.extended[hypothesis.name] = extended
+            _score(outcome, runner, val_runs, val, signal)
+        finally:  # whichever way the hypothesis ended: its work done, or its share taken back
+            if hypothesis.name in expected:
+                fitted = bool(outcome.free) or outcome.estimate is not None
+                work = len(outcome.free) + 1 if fitted else 0
+                step(hypothesis.name, work, work - expected[hypothesis.name])
     outcomes.sort(key=_rank)
     verdict = _decide(evidence, found, baseline, outcomes, val)
     samples = sum(res.period * res.n_periods for res in val)

@@ -11,6 +11,7 @@ when its gain is significant.
 
 from __future__ import annotations
 
+import inspect
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -230,14 +231,15 @@ class DiagnosisInputs:
 
     @property
     def steps(self) -> int:
-        """The progress steps of one round of :meth:`run` at most: the evidence, the nuisances, each
-        hypothesis."""
-        from nlsid.diagnose.hypotheses import LIBRARY
+        """The work :meth:`run` plans before it starts, in the units it reports to ``progress``: the
+        first round's and the yardstick's (:func:`nlsid.diagnose.diagnosis.planned_work`); a progress
+        bar opens with it as its total."""
+        from nlsid.diagnose.diagnosis import planned_work
 
-        return len(LIBRARY) + 3
+        return planned_work(self.config, self.model_source, self.yardstick)
 
-    def run(self, progress: Callable[[], None] | None = None) -> DiagnosisResult:
-        """Diagnose; ``progress`` is called without arguments after each step (:attr:`steps`)."""
+    def run(self, progress: Callable[..., None] | None = None) -> DiagnosisResult:
+        """Diagnose; ``progress`` is told the work done and planned (:func:`progress_calls`)."""
         from nlsid.diagnose import verdict as rules
         from nlsid.diagnose.computation_delay import resolve as resolve_delay
         from nlsid.diagnose.result import BLACK_BOX, CANDIDATE
@@ -246,11 +248,11 @@ class DiagnosisInputs:
         from nlsid.io.units import common_units
         from nlsid.simulate.threads import default_threads
 
-        tick = progress or (lambda: None)
+        tick = progress_calls(progress)
         with default_threads(self.workers):
             config, delay = resolve_delay(self.config, self.model_source, self.runs, self.where, self.extra,
                                           self.estimation, self.validation, self.fit_on)
-            result = run_diagnosis(config, self.model_source, self.runs, self.where, step=lambda name: tick(),
+            result = run_diagnosis(config, self.model_source, self.runs, self.where, step=tick,
                                    validate_on=self.extra, estimation_range=self.estimation,
                                    validation_range=self.validation, yardstick=self.yardstick, fit_on=self.fit_on)
         final = result.final
@@ -265,6 +267,36 @@ class DiagnosisInputs:
             others[CANDIDATE] = extended_yaml(result.leading.extended, result.candidate_header())
         units = common_units(run.units for run in [*self.runs, *self.extra])
         return DiagnosisResult(result, extended, units, self.configs, self.inputs, self.allow_overlap, others, delay)
+
+
+def progress_calls(progress: Callable[..., None] | None) -> Callable[[str, int, int], None]:
+    """The diagnosis' ``step(name, work, planned)`` (:func:`nlsid.diagnose.diagnosis.diagnose`) as
+    calls of a progress callable.
+
+    A ``progress`` that accepts the keywords ``advance`` and ``total`` is called at each step with
+    ``advance``, the work done since its last call, and ``total``, the work planned in all so far
+    (both whole numbers; ``advance`` 0 where a round plans its work or a hypothesis not fitted takes
+    its share back). The work done never exceeds ``total`` and reaches it at the last call. Any
+    other callable is called without arguments after the evidence, the nuisances and each
+    hypothesis fitted, in every round, and after the yardstick (fitted or not)."""
+    if progress is None:
+        return lambda name, work, planned: None
+    try:
+        inspect.signature(progress).bind(advance=0, total=0)
+        counts = True
+    except (TypeError, ValueError):  # ValueError: a callable without a signature, called as before
+        counts = False
+    total = 0
+
+    def step(name: str, work: int, planned: int) -> None:
+        nonlocal total
+        total += planned
+        if counts:
+            progress(advance=work, total=total)
+        elif work > 0 or name == "yardstick":
+            progress()
+
+    return step
 
 
 def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:
@@ -321,7 +353,7 @@ def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None
 
 def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
              validation_range=None, allow_overlap: bool = False, workers: int | None = None,
-             mapping: Mapping[str, str] | None = None, progress: Callable[[], None] | None = None,
+             mapping: Mapping[str, str] | None = None, progress: Callable[..., None] | None = None,
              yardstick: bool | None = None, fit_on: str = "y", *,
              names: Mapping[str, str] | None = None) -> DiagnosisResult:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
@@ -353,9 +385,13 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
     mapping : dict, optional
         Signals of a foreign MCAP log (``u``/``y``/``r`` -> topic/field).
     progress : callable, optional
-        Called without arguments after each step: the evidence, the nuisances, each hypothesis
-        scored (a hypothesis that cannot apply is passed without a call), in every round, and the
-        yardstick.
+        Told the progress in units of work (a hypothesis' fit counts its free parameters + 1, the
+        yardstick about 300): a callable accepting the keywords ``advance`` and ``total`` is called
+        at each step with the work done since its last call and the work planned in all so far
+        (which a further round raises by the hypotheses it will try and a hypothesis not fitted
+        lowers by its share; the work done reaches it at the last call); any other callable is
+        called without arguments after the evidence, the nuisances and each hypothesis fitted, in
+        every round, and after the yardstick (:func:`progress_calls`).
     yardstick : bool, optional
         Fit the black-box yardstick (:mod:`nlsid.diagnose.yardstick`; default True): how much of
         the error a flexible model reaches beside the named causes. False saves its fit (seconds
