@@ -33,6 +33,12 @@ coulomb_feedback    as coulomb, for a transfer function       ``nonlinear_feedba
                     model (its output read as position or     model (or model / s, ``output:
                     velocity, whichever explains more)        velocity``) with ``coulomb`` (fc,
                                                               the linear coefficients)
+stribeck_feedback   as stribeck, for a transfer function      ``nonlinear_feedback`` with
+                    model (from the coulomb_feedback fit)     ``stribeck`` (fs, fc, vs; fs refined
+                                                              as peak; the linear coefficients)
+lugre_feedback      as lugre, for a transfer function model   ``nonlinear_feedback`` with ``lugre``
+                    (from the stribeck_feedback fit)          (sigma0, fc, fs, vs; the linear
+                                                              coefficients)
 quadratic_damping   odd distortion; damping grows with        ``nonlinearities: quadratic_damping``
                     level; residual like the response to      (c2), or fed back around a transfer
                     the force -v abs(v)                       function as coulomb_feedback
@@ -51,6 +57,10 @@ end_stops           distortion at the largest levels only;    ``nonlinearities: 
                     residual force where the position is      cs, upper_stop and/or lower_stop:
                     beyond an edge (contact)                  the keys stiffness, damping,
                                                               upper, lower)
+end_stops_feedback  as end_stops, for a transfer function     ``nonlinear_feedback`` with
+                    model (its output read as the position)   ``end_stop`` (ks, cs, the edges,
+                                                              the linear coefficients; the edges
+                                                              as recorded: upper_seen, lower_seen)
 cubic_joint         odd distortion around the flexible mode   ``nonlinearities: cubic_stiffness``
                     of a two_mass_stage; residual like the    with ``at: joint`` (k3: k3 (p1 -
                     sensitivity to a cubic spring between     p2)^3 in the coupling, with the

@@ -96,8 +96,14 @@ def _signature_stribeck(ctx: Context) -> Estimate | str:
                     f"vs the median model speed")
 
 def _beyond_coulomb(ctx: Context) -> dict[str, float] | None:
+    """:func:`beyond_coulomb` of the Coulomb law on the driven mass."""
+    return beyond_coulomb(ctx, "coulomb")
+
+
+def beyond_coulomb(ctx: Context, coulomb_name: str, internal: list[dict] | None = None) -> dict[str, float] | None:
     """Stribeck start values from what the fitted Coulomb law leaves: the residual of the Coulomb
-    hypothesis' extended model regressed on the model's responses to the forces the Stribeck law
+    hypothesis ``coulomb_name``'s extended model (its last force the Coulomb law: on the driven
+    mass, or fed back around a transfer function) regressed on the model's responses to the forces the Stribeck law
     adds to it, sign(v) w(v) (fs - fc) + sign(v) (1 - w(v)) (fc' - fc) with w = e^{-(|v|/vs)^2}
     and v the extended model's velocity. vs is the point of a log grid (:data:`BEYOND_GRID` values
     from 1e-2 to 1 times the rms velocity) of least residual with fs > fc' > 0, the responses
@@ -106,13 +112,15 @@ def _beyond_coulomb(ctx: Context) -> dict[str, float] | None:
     which a sticking mass follows. The nominal model's velocities, which the signature regresses
     on, have no stick phases, and a break-away peak acts where the mass sticks or nearly does: on
     the battery's Stribeck case (vs 0.002 m/s) the signature put vs at 0.031 and this at 0.0036.
-    None when Coulomb was not fitted or no grid point has a break-away peak."""
-    extended, coulomb = ctx.extended.get("coulomb"), ctx.fitted.get("coulomb")
+    ``internal``: the Coulomb model's signals on the runs where its runner does not give them (a
+    force fed back around a transfer function). None when Coulomb was not fitted or no grid point
+    has a break-away peak."""
+    extended, coulomb = ctx.extended.get(coulomb_name), ctx.fitted.get(coulomb_name)
     if extended is None or coulomb is None:
         return None
     runner = ctx.runner.with_changes(extended)
     left = [steady_mean(run, ctx.measured(run)) - steady_mean(run, x) for run, x in zip(ctx.runs, ctx.simulated(runner))]
-    along = Context(runner, ctx.runs, left, [runner.internal(run) for run in ctx.runs], signal=ctx.signal)
+    along = Context(runner, ctx.runs, left, internal or [runner.internal(run) for run in ctx.runs], signal=ctx.signal)
     if needs(along, "velocity"):
         return None
     without = copy.deepcopy(extended)
@@ -135,7 +143,7 @@ def _beyond_coulomb(ctx: Context) -> dict[str, float] | None:
     return None if final is None else final[1]
 
 
-def _noise_share(ctx: Context, parameters: int) -> float:
+def noise_share(ctx: Context, parameters: int) -> float:
     """The share of a residual sum of squares of the estimation runs that ``parameters`` more
     parameters lower by fitting noise alone, at most, at level ALPHA: the RSS is sigma^2
     chi^2(n) over n residual samples, and they take sigma^2 chi^2(parameters) of it."""
@@ -150,7 +158,7 @@ def _estimate_stribeck(ctx: Context) -> Estimate | str:
     one next to the fitted Coulomb law (its fc, fs = NEAR_COULOMB fc, the signature's vs) and of
     one regressed on what the Coulomb law leaves (:func:`_beyond_coulomb`), all with the linear
     mechanics the Coulomb fit refined; the start next to the Coulomb law unless another lowers
-    the error by more than fitting noise could (:func:`_noise_share`: on Coulomb data the regressed
+    the error by more than fitting noise could (:func:`noise_share`: on Coulomb data the regressed
     start was 3e-7 better, and its refinement moved fs 2 % off fc along a valley of the damping).
     A Stribeck law with fs = fc is Coulomb's, so
     where friction is Coulomb-like (the break-away peak small or absent) the refinement starts
@@ -170,7 +178,7 @@ def _estimate_stribeck(ctx: Context) -> Estimate | str:
               "beyond": _beyond_coulomb(ctx)}
     costs = {name: ctx.simulation_rss(_extend_stribeck(base, start)) for name, start in starts.items() if start}
     chosen = min(costs, key=costs.get)
-    if costs[chosen] > costs["near"] * (1 - _noise_share(ctx, 3)):
+    if costs[chosen] > costs["near"] * (1 - noise_share(ctx, 3)):
         chosen = "near"  # no better than the Coulomb law by more than its three parameters fitting noise
     if chosen == "signature":
         return dataclasses.replace(signature, note=f"{signature.note}; mechanics from the Coulomb fit",
@@ -220,7 +228,7 @@ def _estimate_lugre(ctx: Context) -> Estimate | str:
                     f"levels {origin}, mechanics from the Stribeck fit; sigma0 on a grid of presliding deflections",
                     starts=mechanics or None)
 
-def _as_peak(values: dict) -> dict:
+def as_peak(values: dict) -> dict:
     """The levels with the break-away as its excess over sliding, ``peak`` = fs - fc, in place of fs."""
     out = dict(values)
     if "fs" in out:
@@ -228,26 +236,26 @@ def _as_peak(values: dict) -> dict:
     return out
 
 
-def _peaked(estimate: Estimate | str) -> Estimate | str:
+def peaked(estimate: Estimate | str) -> Estimate | str:
     """A Stribeck or LuGre start (fs > fc) with ``peak`` = fs - fc beside fs: the parameter refined
-    (:func:`_break_away`)."""
+    (:func:`break_away`)."""
     if isinstance(estimate, str):
         return estimate
     values = {**estimate.values, "peak": estimate.values["fs"] - estimate.values["fc"]}
     return dataclasses.replace(estimate, values=values, std={**estimate.std, "peak": float("nan")})
 
 
-def _break_away(fitted: dict, starts: dict, model: dict) -> dict:
+def break_away(fitted: dict, starts: dict, model: dict) -> dict:
     """fs = fc + peak of the fitted law."""
     return {"fs": fitted["fc"] + fitted["peak"]}
 
 
 def _extend_stribeck(data: dict, values: dict) -> dict:
-    return add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, _as_peak(values))
+    return add_force({"type": "stribeck", "delta": STRIBECK_DELTA})(data, as_peak(values))
 
 
 def _extend_lugre(data: dict, values: dict) -> dict:
-    return add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0})(data, _as_peak(values))
+    return add_force({"type": "lugre", "sigma1": 0.0, "sigma2": 0.0})(data, as_peak(values))
 
 
 COULOMB = Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
@@ -255,10 +263,10 @@ COULOMB = Hypothesis("coulomb", "Coulomb friction", "friction", "fc", "N",
                mechanical, _estimate_coulomb, add_force({"type": "coulomb"}), ("fc",), force_paths(("fc",)))
 STRIBECK = Hypothesis("stribeck", "Stribeck friction", "friction", "fs", "N",
                "as Coulomb friction, with a break-away peak at low velocity",
-               mechanical, lambda ctx: _peaked(_estimate_stribeck(ctx)), _extend_stribeck, ("peak", "fc", "vs"),
-               force_paths(("peak", "fc", "vs")), derive=_break_away)
+               mechanical, lambda ctx: peaked(_estimate_stribeck(ctx)), _extend_stribeck, ("peak", "fc", "vs"),
+               force_paths(("peak", "fc", "vs")), derive=break_away)
 LUGRE = Hypothesis("lugre", "LuGre friction", "friction", "sigma0", "N/m",
                "as Stribeck friction, with presliding: a stiff friction force (bristles) after each velocity "
-               "reversal", mechanical, lambda ctx: _peaked(_estimate_lugre(ctx)), _extend_lugre,
-               ("sigma0", "fc", "peak", "vs"), force_paths(("sigma0", "fc", "peak", "vs")), derive=_break_away)
+               "reversal", mechanical, lambda ctx: peaked(_estimate_lugre(ctx)), _extend_lugre,
+               ("sigma0", "fc", "peak", "vs"), force_paths(("sigma0", "fc", "peak", "vs")), derive=break_away)
 HYPOTHESES = (COULOMB, STRIBECK, LUGRE)

@@ -30,6 +30,7 @@ model's trajectory needs the loop, which the probe of this module does not close
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -73,11 +74,38 @@ def _continuous(ctx: Context) -> tuple[dict | str, list[str]]:
     model = ctx.runner.data["model"]
     if model.get("domain", "continuous") != "discrete":
         return {"num": [float(v) for v in model["num"]], "den": [float(v) for v in model["den"]]}, []
-    equivalent = continuous_transfer_function([0.0, *model["num"][1:]], model["den"], ctx.runs[0].fs)
+    fs = ctx.runs[0].fs
+    equivalent = continuous_transfer_function([0.0, *model["num"][1:]], model["den"], fs)
     if isinstance(equivalent, str):
         return f"the discrete model has no continuous equivalent: {equivalent}", []
-    return {"num": equivalent["num"], "den": equivalent["den"]}, ["extended in continuous time (the model's exact "
-                                                                  "ZOH equivalent)"]
+    notes = ["extended in continuous time (the model's exact ZOH equivalent)"]
+    num, den = [float(v) for v in equivalent["num"]], [float(v) for v in equivalent["den"]]
+    lead = _negligible_lead(num, den, fs)
+    if lead is not None:
+        num = num[1:]
+        notes.append(f"its numerator's leading term {lead:.3g} dropped (a zero beyond the band, less than "
+                     f"{NEGLIGIBLE_LEAD:.0%} of the numerator at the Nyquist frequency: a force accelerates)")
+    return {"num": num, "den": den}, notes
+
+
+NEGLIGIBLE_LEAD = 0.1  # a leading numerator term this small at the Nyquist frequency is the fit's noise (_negligible_lead)
+
+
+def _negligible_lead(num: list[float], den: list[float], fs: float) -> float | None:
+    """The leading numerator coefficient of a continuous equivalent of relative degree 1 where it
+    is negligible, else None: its term at the Nyquist frequency w = pi fs within NEGLIGIBLE_LEAD of
+    the rest of the numerator there (a zero far beyond the band). A transfer function fitted to
+    a force-to-position record (``nlsid fit``, b0 = 0) has a continuous equivalent with such a term
+    (on the tests' Stribeck record -0.077 s against 9635, a zero at 20 kHz): kept, it gives the
+    model relative degree 1, and the force would be fed back in discrete time, held over whole
+    samples (the Coulomb feedback stopped 37 dB above the floor); dropped, the feedback is
+    continuous and the refinement of the linear part takes what the term did in the band."""
+    trimmed = np.trim_zeros(np.asarray(num, float), "f")
+    if trimmed.size < 2 or np.trim_zeros(np.asarray(den, float), "f").size - trimmed.size != 1:
+        return None
+    s = 1j * np.pi * fs
+    lead = abs(trimmed[0] * s ** (trimmed.size - 1))
+    return float(trimmed[0]) if lead <= NEGLIGIBLE_LEAD * abs(np.polyval(trimmed[1:], s)) else None
 
 
 def _relative_degree(linear: dict) -> int:
@@ -156,9 +184,85 @@ def estimate(ctx: Context, laws: list[Callable[[np.ndarray], np.ndarray]], names
                     lti={"type": "transfer_function", **chosen.linear, "output": chosen.output})
 
 
-def extender(force: dict, names: tuple[str, ...]) -> Callable[[dict, dict], dict]:
+def positions(ctx: Context, chosen: Reading) -> list[np.ndarray] | str:
+    """The position of every run along the nominal trajectory of a ``position`` reading (the output
+    of its linear part, without the model's output offset or block), or why there is none (a
+    velocity reading: its position, the integral, has no origin the model fixes)."""
+    if chosen.output != "position":
+        return "needs the model's output read as a position (it has a zero at s = 0: a velocity)"
+    return _probe(ctx, chosen.linear)
+
+
+def stiffened(linear: dict, c: float) -> np.ndarray:
+    """The denominator of G / (1 + c G) for a transfer function config ``linear``, den + c num
+    aligned by its domain (powers of s from the right, of z^-1 from the left): y = G (u - c y - F)
+    is y = G / (1 + c G) (u - F), a linear spring c moved into the linear part."""
+    num, den = np.asarray(linear["num"], float), np.asarray(linear["den"], float)
+    if linear.get("domain") == "discrete":
+        return den + c * np.pad(num, (0, max(den.size - num.size, 0)))[:den.size]
+    return den + c * np.pad(num, (max(den.size - num.size, 0), 0))[-den.size:]
+
+
+def internal(ctx: Context, extended: dict) -> list[dict[str, np.ndarray]] | str:
+    """The position and velocity of the moving part of the ``nonlinear_feedback`` model
+    ``extended`` on every estimation run (open loop: copies of it that output them, from rest,
+    without output block), or why there are none."""
+    from nlsid.errors import InputError
+
+    out = [{} for _ in ctx.runs]
+    for signal in ("position", "velocity"):
+        data = copy.deepcopy(extended)
+        data["model"]["output"] = signal
+        data["model"].pop("output_nonlinearity", None)
+        try:
+            runner = ctx.runner.with_changes(data)
+        except InputError as exc:
+            return f"the model has no {signal} read-out: {exc.what}"
+        for signals, run in zip(out, ctx.runs):
+            signals[signal] = runner.simulate(dataclasses.replace(run, y=None)).y
+    return out
+
+
+@dataclass(frozen=True)
+class Fitted:
+    """A fitted feedback hypothesis as a richer one starts from it: its linear part (an ``lti`` for
+    :class:`~nlsid.diagnose.hypotheses.base.Estimate`, with the reading's ``output``), those
+    coefficients by parameter name (``num[i]``, ``den[i]``: :func:`paths`), its force and the
+    nuisances it was refined with (model key -> value), and its extended config."""
+
+    lti: dict
+    coefficients: dict[str, float]
+    force: dict
+    nuisances: dict[str, float]
+    extended: dict
+
+
+def fitted(ctx: Context, name: str) -> Fitted | None:
+    """The fit of the feedback hypothesis ``name`` (its extended config, one force), None where it
+    was not fitted."""
+    from nlsid.diagnose.nuisances import KEYS as NUISANCE_KEYS
+
+    extended = ctx.extended.get(name)
+    if extended is None:
+        return None
+    model = extended["model"]
+    linear = model["linear"]
+    lti = {"type": "transfer_function", "num": [float(c) for c in linear["num"]],
+           "den": [float(c) for c in linear["den"]], "domain": linear.get("domain", "continuous"),
+           "output": model.get("output", "position")}
+    coefficients = {n: float(lti[n[:3]][int(n[4:-1])]) for n in paths(())({"model": lti})}
+    nuisances = {k: float(model[k]) for k in NUISANCE_KEYS if k in model}
+    return Fitted(lti, coefficients, dict(model["nonlinearities"][-1]), nuisances, extended)
+
+
+def extender(force: dict, names: tuple[str, ...], keys: dict[str, str] | None = None
+             ) -> Callable[[dict, dict], dict]:
     """The extension: the model (its LTI part as the estimate's ``lti`` left it, with the reading's
-    ``output``) as the linear part of a ``nonlinear_feedback`` with the force ``force``."""
+    ``output``) as the linear part of a ``nonlinear_feedback`` with the force ``force``, its
+    parameters ``names`` (those of them in the values) written at their ``keys`` (parameter ->
+    the force's key; default the name itself)."""
+    keys = keys or {}
+
     def extend(data: dict, values: dict) -> dict:
         out = copy.deepcopy(data)
         model = out["model"]
@@ -167,17 +271,21 @@ def extender(force: dict, names: tuple[str, ...]) -> Callable[[dict, dict], dict
                      for key in ("num", "den")}}
         out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0,
                         "output": model.get("output", "position"),
-                        "nonlinearities": [{**force, **{n: float(values[n]) for n in names}}],
+                        "nonlinearities": [{**force, **{keys.get(n, n): float(values[n]) for n in names
+                                                         if n in values}}],
                         **{k: model[k] for k in KEPT if k in model}}
         return out
     return extend
 
 
-def paths(names: tuple[str, ...]) -> Callable[[dict], dict[str, str]]:
-    """The force's ``names`` and the linear part's nonzero coefficients (but den[0])."""
+def paths(names: tuple[str, ...], keys: dict[str, str] | None = None) -> Callable[[dict], dict[str, str]]:
+    """The force's ``names`` (at their ``keys``, as :func:`extender`) and the linear part's nonzero
+    coefficients (but den[0])."""
+    keys = keys or {}
+
     def of(data: dict) -> dict[str, str]:
         model = data["model"]
-        out = {n: f"model.nonlinearities[0].{n}" for n in names}
+        out = {n: f"model.nonlinearities[0].{keys.get(n, n)}" for n in names}
         out.update({f"num[{i}]": f"model.linear.num[{i}]" for i, c in enumerate(model["num"]) if c != 0})
         out.update({f"den[{i}]": f"model.linear.den[{i}]" for i, c in enumerate(model["den"]) if i and c != 0})
         return out
