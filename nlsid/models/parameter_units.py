@@ -288,8 +288,12 @@ def _model_table(model: dict, units: Mapping[str, str], out: dict) -> None:
         out[where + (key,)] = damping
     out[where + ("stiffness",)] = stiffness
     for i, item in enumerate(model.get("nonlinearities") or []):
-        if isinstance(item, dict):
-            _force_table(item, where + ("nonlinearities", i), F, X, out)
+        if not isinstance(item, dict):
+            continue
+        # a force at a named point of a nonlinear_feedback (``points``: a modal coordinate, say)
+        # reads a coordinate and enters along a column whose scales are the model's, not y's or u's
+        elsewhere = kind == "nonlinear_feedback" and item.get("at", "plant") != "plant"
+        _force_table(item, where + ("nonlinearities", i), None if elsewhere else F, None if elsewhere else X, out)
     if kind == "nonlinear_feedback" and isinstance(model.get("linear"), dict):
         out[where + ("linear", "fs")] = {"Hz": 1}
 

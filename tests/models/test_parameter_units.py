@@ -186,6 +186,18 @@ def test_feedback_around_a_transfer_function_is_in_units_of_u():
     assert unit_of(around, "model.linear.num[0]", {"u": "V", "y": "m"}) is None
 
 
+def test_a_force_at_a_modal_point_has_no_unit():
+    """A force at a named point of nonlinear_feedback (a modal coordinate q of a state space) reads q,
+    whose scale is the realisation's, not y's: its k3 has no unit (y's would be wrong)."""
+    modal = {"model": {"type": "nonlinear_feedback", "gain": 1.0,
+                       "linear": {"type": "state_space", "A": [[0, 1], [-100, -1]], "B": [0, 1], "C": [1, 0]},
+                       "points": {"mode": {"force": [0, 1], "position": [1, 0]}},
+                       "nonlinearities": [{"type": "cubic_stiffness", "k3": 5.0, "at": "mode"},
+                                          {"type": "cubic_stiffness", "k3": 2.0}]}}
+    assert unit_of(modal, "model.nonlinearities[0].k3", SI) is None
+    assert unit_of(modal, "model.nonlinearities[1].k3", SI) == "N/m^3"  # at the plant: y's position
+
+
 def test_models_whose_units_the_structure_does_not_fix_get_none():
     equations = {"model": {"type": "equations", "states": {"h": 0.0}, "parameters": {"k1": 0.1},
                            "derivatives": {"h": "-k1 * sqrt(h) + u"}, "output": "h"}}
