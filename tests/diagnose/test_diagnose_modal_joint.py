@@ -132,3 +132,7 @@ def test_a_cubic_on_one_mode_is_named_at_that_mode():
     assert f_joint == pytest.approx(cases.FREQUENCIES_HZ[cases.MOVING], rel=0.005), f_joint
     assert model["nonlinearities"][0]["at"] == "mode" and model["points"]["mode"]["position"][0] == 1.0
     assert abs(result.final_score().above_floor_db) < 3.0, result.headline()
+    outcomes = {o.hypothesis.name: o for o in result.outcomes}
+    assert "mode near 20.9" in outcomes["modal_joint"].estimate.note  # the BLA's moving mode, at the truth's 21 Hz
+    assert outcomes["modal_damping"].score is None  # the spring leaves the mode's damping: not fitted
+    assert "damping significantly" in outcomes["modal_damping"].reason, outcomes["modal_damping"].reason
