@@ -25,8 +25,9 @@ import numpy as np
 import pytest
 
 from generators import modal_cases as cases
+from generators.exact_zoh import zoh
 from nlsid.diagnose.diagnosis import diagnose
-from nlsid.diagnose.hypotheses.modal_joint import modal_state_space, modes_of
+from nlsid.diagnose.hypotheses.modal_joint import continuous_model, modal_state_space, modes_of
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.errors import InputError
 from nlsid.models.lti import StateSpace
@@ -71,6 +72,18 @@ def test_the_modal_form_has_the_model_s_response():
     expected = _frequency_response(A, B, C, s)
     got = _frequency_response(np.array(config["A"]), np.array(config["B"]), np.array(config["C"]), s)
     assert np.max(np.abs(got - expected) / np.abs(expected)) < 1e-9
+
+
+def test_a_feedthrough_beyond_rounding_is_not_dropped():
+    """A discrete model's D is set to 0 where it is a fit's rounding (1e-7 of the peak), refused
+    where it is the output's own (an acceleration's: 30 % of the peak)."""
+    A, B, C = cases.blocks()
+    Phi, Gamma = zoh(A, B, 1 / cases.FS)
+    peak = np.max(np.abs(_frequency_response(Phi, Gamma, C, np.exp(2j * np.pi * np.linspace(0, 0.5, 4096)))))
+    small = continuous_model(StateSpace(Phi, Gamma, C, 1e-7 * peak, True, 0.0, cases.FS), cases.FS)
+    assert isinstance(small[0], StateSpace) and small[0].D == 0 and "set to 0" in small[1][0]
+    large, _ = continuous_model(StateSpace(Phi, Gamma, C, 0.3 * peak, True, 0.0, cases.FS), cases.FS)
+    assert isinstance(large, str) and "30.0% of its peak response" in large, large
 
 
 def _frequency_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -82,6 +82,7 @@ from nlsid.models.lti import StateSpace
 MIN_ORDER = 4  # two modes at least: one mode is the mechanical templates' and the cubic feedback's case
 MATCH = 0.1  # a model's mode within this relative distance of the moving mode's frequency is that mode
 PAIR_TOLERANCE = 1e-9  # |Im lambda| / |lambda| below this: a real pole
+FEEDTHROUGH = 0.01  # a discrete D above this share of the peak response is an output's own feedthrough, not a fit's rounding
 NEGLIGIBLE = 1e-6  # an output coefficient this small relative to the mode's other one is not refined
 POINT = "mode"  # the name of the force point of the moving mode
 
@@ -129,15 +130,29 @@ def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[
     notes = []
     if not ss.discrete:
         if ss.D != 0:
-            return "the model has a direct feedthrough D (the modal form here is strictly proper)", notes
+            return ("the model has a direct feedthrough D (an acceleration output?): a force on a modal coordinate "
+                    "would reach the output through it, which the modal form here (strictly proper) does not write"), notes
         return ss, notes
     if ss.D != 0:
-        notes.append(f"D = {ss.D:.3g} set to 0 (the part of the model a force-driven structure's ZOH equivalent is)")
+        share = abs(ss.D) / peak_gain(ss)
+        if share > FEEDTHROUGH:
+            return (f"the model's direct feedthrough D is {share:.1%} of its peak response (an acceleration output?): "
+                    "a force on a modal coordinate would reach the output through it, which the modal form here "
+                    "(strictly proper) does not write"), notes
+        notes.append(f"D = {ss.D:.3g} ({share:.2%} of the peak response) set to 0 (the part of the model a "
+                     "force-driven structure's ZOH equivalent is)")
     equivalent = zoh_inverse(StateSpace(ss.A, ss.B, ss.C, 0.0, True, ss.delay, ss.fs), ss.fs or fs)
     if isinstance(equivalent, str):
         return f"the model has no continuous equivalent: {equivalent}", notes
     notes.append("extended in continuous time (the model's exact ZOH equivalent)")
     return equivalent, notes
+
+
+def peak_gain(ss: StateSpace) -> float:
+    """max |G - D| (the dynamics without the feedthrough) of a discrete ``ss`` on 512 frequencies up
+    to the Nyquist frequency and at its poles' angles (the resonances' peaks)."""
+    angles = np.concatenate([np.linspace(0.0, np.pi, 512), np.abs(np.angle(ss.poles()))])
+    return float(np.max(np.abs(ss.frequency_response(np.exp(1j * angles)) - ss.D)))
 
 
 def modes_of(ss: StateSpace) -> list[Mode] | str:
