@@ -7,8 +7,8 @@ Modal superposition (unit modal input participation, the output's participation 
 
 u held over each sample (zero-order hold), from rest. The linear modes are stepped exactly
 (the block exponential of Van Loan 1978, tests/generators/exact_zoh.py); the mode with a cubic
-spring or damper (k3 or c3 != 0) by the classical Runge-Kutta method with ``substeps`` steps per sample, all runs at once
-(:func:`response`; the caller checks the step by halving it).
+spring or damper (k3 or c3 != 0) by the classical Runge-Kutta method with ``substeps`` steps per
+sample, all runs at once (:func:`response`; the caller checks the step by halving it).
 
 The excitation (:func:`recording`): random-odd multisines (odd lines up to MAX_HZ of an N-sample
 period at FS, one in three dropped at random as a detection line) at the given rms levels, one

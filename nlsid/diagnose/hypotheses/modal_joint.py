@@ -82,7 +82,7 @@ from nlsid.models.lti import StateSpace
 MIN_ORDER = 4  # two modes at least: one mode is the mechanical templates' and the cubic feedback's case
 MATCH = 0.1  # a model's mode within this relative distance of the moving mode's frequency is that mode
 PAIR_TOLERANCE = 1e-9  # |Im lambda| / |lambda| below this: a real pole
-FEEDTHROUGH = 0.01  # a discrete D above this share of the peak response is an output's own feedthrough, not a fit's rounding
+FEEDTHROUGH = 0.01  # a discrete D above this share of the peak response is the output's own, not a fit's rounding
 NEGLIGIBLE = 1e-6  # an output coefficient this small relative to the mode's other one is not refined
 POINT = "mode"  # the name of the force point of the moving mode
 
@@ -130,8 +130,9 @@ def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[
     notes = []
     if not ss.discrete:
         if ss.D != 0:
-            return ("the model has a direct feedthrough D (an acceleration output?): a force on a modal coordinate "
-                    "would reach the output through it, which the modal form here (strictly proper) does not write"), notes
+            return ("the model has a direct feedthrough D (an acceleration output?): a force on a modal "
+                    "coordinate would reach the output through it, which the modal form here (strictly proper) "
+                    "does not write"), notes
         return ss, notes
     if ss.D != 0:
         share = abs(ss.D) / peak_gain(ss)
