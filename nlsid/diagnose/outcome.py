@@ -55,8 +55,8 @@ class Outcome:
         key of that name beside the hypothesis' own); None where that is unknown, never a guess. A
         main parameter without a key path (a pole shift in %, a slope ratio) has the hypothesis' unit."""
         path = self.paths.get(name) or self._beside(name)
-        if path is not None and self.extended is not None:
-            return unit_of(self.extended, path, units)
+        if path is not None:  # without the extended model its structure is not known
+            return unit_of(self.extended, path, units) if self.extended is not None else None
         return self.hypothesis.unit if name == self.hypothesis.main else None
 
     def _beside(self, name: str) -> str | None:
