@@ -21,6 +21,21 @@ model's stiffness (:data:`SPLITS`) with the model's stiffness lowered by k / 2: 
 the data holds a spring between the small-stroke stiffness (its own plus k) and the large-stroke
 one (its own), near the middle at strokes of about zmax, which the grid spans.
 
+The exponent n of the Bouc-Wen state (z' = v - beta |v| |z|^(n-1) z - gamma v |z|^n) sets how
+sharply the force yields: n = 1 a smooth knee, larger n a sharper one, tending to an elastic-plastic
+spring. ``hysteresis`` and ``hysteresis_feedback`` hold n = 1 (their note says so);
+``hysteresis_exponent`` frees it, from the fit of either (its mechanics or linear part, its
+nuisances): n on a grid (:data:`EXPONENTS`), gamma / beta on :data:`GAMMA_SHARES` (the n = 1
+fit may end at gamma = beta, a corner of the admissible loops, where a sharper knee wants a
+larger n), the bound zmax = (1 / (beta + gamma))^(1/n) and k at the fitted ones or near them
+(:data:`BOUND_RATIOS`, :data:`K_RATIOS`: fitted with n = 1 they are not those of a sharper knee),
+the least simulation error the start, then k, beta,
+gamma and n refined with the rest (n >= 1: a trial below is a rejected step). It is the same family
+with one parameter more, so the verdict names it only where it is significantly better than n = 1
+(:mod:`nlsid.diagnose.verdict`), and it is not fitted where n = 1 already reaches the noise floor.
+(A is held at 1 for every n: z -> c z maps (A, beta, gamma, k) to (c A, c^(1-n) beta, c^(1-n)
+gamma, k / c), the same force.)
+
 What tells it from its neighbours: a cubic spring stiffens (or softens) with the level but keeps
 no memory (its force is a function of p, the loop has no area); a backlash at the input delays
 the force by a play that is the same at every level; the Bouc-Wen force depends on the path
@@ -31,11 +46,15 @@ cubic spring (the same family, one parameter against three) only when it is sign
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from nlsid.diagnose.hypotheses import velocity_feedback
 from nlsid.diagnose.hypotheses.base import Context, Estimate, Hypothesis, explained_db, with_lti
 from nlsid.diagnose.hypotheses.mass_forces import add_force, force_paths, needs
+from nlsid.diagnose.hypotheses.mechanics import linear_paths
+from nlsid.diagnose.nuisances import KEYS as NUISANCE_KEYS
 from nlsid.diagnose.simulation import ModelRunner
 
 BOUND_SHARES = (0.3, 0.6, 1.2, 2.4)  # zmax over the model's rms position, on the start grid
@@ -90,7 +109,8 @@ def _with_keys(data: dict, values: dict[str, float]) -> dict:
 def _reading(values: dict) -> str:
     bound = 1.0 / (values["beta"] + values["gamma"])
     return (f"a hysteretic spring of initial stiffness {values['k']:.4g} whose force yields towards "
-            f"{values['k'] * bound:.4g} beyond a stroke of about {bound:.3g} (zmax = 1 / (beta + gamma))")
+            f"{values['k'] * bound:.4g} beyond a stroke of about {bound:.3g} (zmax = 1 / (beta + gamma); the exponent n "
+            "held at 1, hysteresis_exponent frees it)")
 
 
 HYSTERESIS = Hypothesis(
@@ -154,4 +174,76 @@ HYSTERESIS_FEEDBACK = Hypothesis(
     velocity_feedback.applies, _estimate_feedback, velocity_feedback.extender({"type": "bouc_wen"}, ("k", "beta", "gamma")),
     ("k", "beta", "gamma"), velocity_feedback.paths(("k", "beta", "gamma")), reading=_reading)
 
-HYPOTHESES = (HYSTERESIS, HYSTERESIS_FEEDBACK)
+EXPONENTS = (1.5, 2.0, 2.5, 3.0)  # n on the start grid of hysteresis_exponent
+BOUND_RATIOS = (1.0, 1.15)    # its bound of z over the n = 1 fit's (a sharper knee yields later)
+K_RATIOS = (0.8, 1.0)         # its k over the n = 1 fit's
+FORCE = ("k", "beta", "gamma", "n")
+
+
+def _exponent_applies(runner: ModelRunner) -> str | None:
+    if _applies(runner) is None or velocity_feedback.applies(runner) is None:
+        return None
+    return "needs a mass_spring_damper model or an open-loop transfer_function (where hysteresis applies)"
+
+
+def _on_transfer_function(data: dict) -> bool:
+    return data["model"]["type"] == "transfer_function"
+
+
+def _extend_exponent(data: dict, values: dict) -> dict:
+    if _on_transfer_function(data):
+        return velocity_feedback.extender({"type": "bouc_wen"}, FORCE)(data, values)
+    return add_force({"type": "bouc_wen"})(data, {k: values[k] for k in FORCE})
+
+
+def _exponent_paths(data: dict) -> dict[str, str]:
+    return velocity_feedback.paths(FORCE)(data) if _on_transfer_function(data) else force_paths(FORCE)(data)
+
+
+def _estimate_exponent(ctx: Context) -> Estimate | str:
+    """Start values (module docstring): from the fitted hysteresis (n = 1) of the model's kind."""
+    around = _on_transfer_function(ctx.runner.data)
+    name = "hysteresis_feedback" if around else "hysteresis"
+    extended, fitted = ctx.extended.get(name), ctx.fitted.get(name)
+    if extended is None or fitted is None:
+        return f"needs the fit of {name} (n = 1) to start from"
+    model = extended["model"]
+    force = model["nonlinearities"][-1]
+    nuisances = {k: float(model[k]) for k in NUISANCE_KEYS if k in model}
+    if around:
+        simpler = velocity_feedback.fitted(ctx, name)
+        base, coefficients, lti, starts = (with_lti(ctx.runner.data, simpler.lti), simpler.coefficients,
+                                           simpler.lti, nuisances)
+    else:
+        mechanics = {k: float(model[k]) for k in linear_paths(ctx.runner.data)}
+        base, coefficients, lti, starts = (_with_keys(ctx.runner.data, mechanics), {}, None,
+                                           {**mechanics, **nuisances})
+    bound = 1.0 / (float(force["beta"]) + float(force["gamma"]))
+    candidates = []
+    for n, share, wider, softer in itertools.product(EXPONENTS, GAMMA_SHARES, BOUND_RATIOS, K_RATIOS):
+        beta = (wider * bound) ** -n / (1.0 + share)  # (1 / (beta + gamma))^(1/n) = wider x the fitted bound
+        values = {"k": softer * float(force["k"]), "beta": beta, "gamma": share * beta, "n": n, **coefficients}
+        extended_start = _extend_exponent(base, values)
+        extended_start["model"].update(starts)
+        candidates.append((ctx.simulation_rss(extended_start), values))
+    cost, values = min(candidates, key=lambda c: c[0])
+    note = (f"from the fit of {name} (n = 1): n = {values['n']:g}, gamma / beta = {values['gamma'] / values['beta']:.2g}, "
+            f"k and the bound of z near the fit's, the least simulation error of a grid of {len(candidates)} (no "
+            "standard errors)")
+    return Estimate(values, {k: float("nan") for k in values}, explained_db(float(np.sum(ctx.target() ** 2)), cost),
+                    note, lti=lti, starts=starts)
+
+
+def _reading_exponent(values: dict) -> str:
+    bound = (1.0 / (values["beta"] + values["gamma"])) ** (1.0 / values["n"])
+    return (f"a hysteretic spring of initial stiffness {values['k']:.4g} yielding towards {values['k'] * bound:.4g} "
+            f"beyond a stroke of about {bound:.3g}, with the exponent n = {values['n']:.3g} (1 a smooth knee, larger "
+            "a sharper one)")
+
+
+HYSTERESIS_EXPONENT = Hypothesis(
+    "hysteresis_exponent", "Hysteresis (Bouc-Wen force with its exponent n)", "stiffness", "n", "",
+    "as hysteresis, the force yielding more sharply (or smoothly) than n = 1 allows",
+    _exponent_applies, _estimate_exponent, _extend_exponent, FORCE, _exponent_paths, reading=_reading_exponent)
+
+HYPOTHESES = (HYSTERESIS, HYSTERESIS_FEEDBACK, HYSTERESIS_EXPONENT)
