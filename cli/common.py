@@ -98,9 +98,8 @@ def progress(description: str, total: int, kernels: bool = False) -> Iterator[An
     callable: ``advance`` the work done since the last call (``step()``: one unit, as a stage of
     equal steps counts), ``total`` the work now planned in all, where the stage plans as it goes
     (``diagnose``: a further round adds its hypotheses, a hypothesis not fitted takes its share
-    back). The bar never shows more work done than planned. rich's time remaining is the work left
-    over the work done per second in the last 30 s; a change of the total alone is no work done
-    and leaves that speed as it was.
+    back). The bar never shows more work done than planned; its time remaining is
+    :func:`time_remaining` (a change of the total alone is no work done and leaves the speed as it was).
 
     ``kernels``: the stage simulates; when numba has yet to compile the kernels
     (:func:`kernels_not_compiled`) the bar says :data:`COMPILING_NOTE` until its first step, where
