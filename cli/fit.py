@@ -19,9 +19,10 @@ from .options import map_option, parse_map, split_options
               help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
 @click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
 @click.option("--max-order", type=click.IntRange(min=1), default=None,
-              help="Largest na scanned by --order auto (polynomial fits of every nb <= na). Default: the poles "
-                   "counted by vector fitting (up to 40); fewer than 5: the polynomial scan up to 4, and up to 10 "
-                   "(nb = na-2..na) while no order reaches its cost bound.")
+              help="Largest na --order auto may choose. From 5: the poles counted by vector fitting up to it (the "
+                   "result says so where the cap is reached), fewer than 5 poles needed: the polynomial scan; below "
+                   "5: the polynomial scan of every nb <= na <= it. Default: the count up to 40; fewer than 5: the "
+                   "polynomial scan up to 4, and up to 10 (nb = na-2..na) while no order reaches its cost bound.")
 @click.option("--level", type=click.IntRange(min=0), default=None,
               help="Level index in bla.h5, as bla's tables and pages name it (\"level 1 (rms 2 N)\"); required when "
                    "it holds several.")

@@ -2,10 +2,14 @@
 selected order, with the report numbers (:mod:`nlsid.fit.tf_fit`, :mod:`nlsid.fit.order`).
 
 Many poles (VECTOR_FIT_POLES or more): a given order N/N is fitted by vector fitting
-(:mod:`nlsid.fit.tf_vector`), and ``--order auto`` without ``--max-order`` counts the poles the data
-support by vector fits first, choosing among them from VECTOR_FIT_POLES poles on
+(:mod:`nlsid.fit.tf_vector`), and ``--order auto`` counts the poles the data support by vector fits
+first (up to ``--max-order`` where it is VECTOR_FIT_POLES or more, else up to
+:data:`nlsid.fit.pole_count.DEFAULT_MAX_POLES`), choosing among them from VECTOR_FIT_POLES poles on
 (:mod:`nlsid.fit.order_poles`); fewer poles, or no count within the cost bound: the polynomial
-scan (:func:`nlsid.fit.order.select_order`).
+scan (:func:`nlsid.fit.order.select_order`), not beyond ``--max-order``. Where the count stops at
+``--max-order`` with the cost still falling, the closest vector fit is taken and the result says
+that the cap was reached (:func:`nlsid.fit.order_poles.select_at_cap`). A ``--max-order`` below
+VECTOR_FIT_POLES: the polynomial scan of every nb <= na <= max_order alone.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ from dataclasses import dataclass
 from nlsid.errors import InputError
 from nlsid.fit.bla_source import BLALevel, frf_from_bla
 from nlsid.fit.order import OrderSelection, select_order
-from nlsid.fit.order_poles import count_poles, count_poles_and_delay, select_many_poles
+from nlsid.fit.order_poles import cap_reached, count_poles, count_poles_and_delay, select_at_cap, select_many_poles
+from nlsid.fit.pole_count import DEFAULT_MAX_POLES
 from nlsid.fit.tf_fit import TFFit, fit_transfer_function
 from nlsid.fit.tf_vector import fit_vector
 
@@ -93,9 +98,11 @@ MAX_DELAY = 10            # --delay auto: 0..MAX_DELAY samples
 
 def fit_bla(path: str | os.PathLike, order: tuple[int, int] | None, domain: str, delay: int | None,
             max_order: int | None, level: int | None) -> BLAFit:
-    """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``; ``max_order``
-    None: up to DEFAULT_MAX_ORDER, beyond it up to EXTENDED_MAX_ORDER where no order reaches its
-    cost bound (:func:`nlsid.fit.order.select_order`)."""
+    """Fit the order given (or select one, ``order=None``) to a level of ``bla.h5``: the pole count
+    by vector fits up to ``max_order`` poles (None: DEFAULT_MAX_POLES), the polynomial scan where
+    fewer than VECTOR_FIT_POLES suffice (up to DEFAULT_MAX_ORDER, beyond it up to EXTENDED_MAX_ORDER
+    where no order reaches its cost bound, never beyond ``max_order``); a ``max_order`` below
+    VECTOR_FIT_POLES: the polynomial scan alone (:func:`nlsid.fit.order.select_order`)."""
     return fit_level(frf_from_bla(path, level), order, domain, delay, max_order)
 
 
@@ -107,16 +114,17 @@ def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, dela
         if nb == na >= VECTOR_FIT_POLES:
             return BLAFit(source, _given_vector_fit(source.data, na, domain, delay), None)
         return BLAFit(source, fit_transfer_function(source.data, nb, na, domain, delay), None)
-    scanned = DEFAULT_MAX_ORDER if max_order is None else max_order
-    if max_order is not None:
+    if max_order is not None and max_order < VECTOR_FIT_POLES:
         if delay is None:
-            delay = fit_transfer_function(source.data, scanned, scanned, domain, None).model.delay
-        selection = select_order(source.data, scanned, domain, delay)
+            delay = fit_transfer_function(source.data, max_order, max_order, domain, None).model.delay
+        selection = select_order(source.data, max_order, domain, delay)
         return BLAFit(source, selection.fit, selection)
+    cap = DEFAULT_MAX_POLES if max_order is None else max_order
     given_delay = delay is not None
-    count = count_poles(source.data, delay) if given_delay else count_poles_and_delay(source.data, MAX_DELAY)
+    count = (count_poles(source.data, delay, cap) if given_delay
+             else count_poles_and_delay(source.data, MAX_DELAY, cap))
     delay = count.fit.delay
-    selection = _selection(source, count, scanned, domain, delay)
+    selection = _selection(source, count, domain, delay, max_order)
     if not given_delay:
         selection.reason += (f"; dead time {delay} samples: the longest of 0..{MAX_DELAY} whose vector fit of as "
                              "many poles as the count without delay found has the lowest cost (within the likelihood-"
@@ -124,20 +132,27 @@ def fit_level(source: BLALevel, order: tuple[int, int] | None, domain: str, dela
     return BLAFit(source, selection.fit, selection)
 
 
-def _selection(source: BLALevel, count, scanned: int, domain: str, delay: int) -> OrderSelection:
-    """``--order auto`` without ``--max-order`` after the pole count (module docstring)."""
+def _selection(source: BLALevel, count, domain: str, delay: int, max_order: int | None) -> OrderSelection:
+    """``--order auto`` after the pole count (module docstring); ``max_order``: None or at least
+    VECTOR_FIT_POLES, the cap of every scan."""
+    cap = DEFAULT_MAX_POLES if max_order is None else max_order
     few = count.accepted and count.fit.order < VECTOR_FIT_POLES
     if count.accepted and not few:
-        selection = select_many_poles(source.data, count, domain)
+        selection = select_many_poles(source.data, count, domain, cap)
+        if selection is not None:
+            return selection
+    if max_order is not None and cap_reached(count, source.data, cap):
+        selection = select_at_cap(source.data, count, domain, cap)
         if selection is not None:
             return selection
     # fewer poles suffice: the polynomial scan, not beyond na = 4 while no order passes (the count
     # says one does); no count within the bound: the polynomial scan as far as EXTENDED_MAX_ORDER
-    selection = select_order(source.data, scanned, domain, delay, extend_to=EXTENDED_MAX_ORDER,
+    scanned = DEFAULT_MAX_ORDER
+    selection = select_order(source.data, scanned, domain, delay, extend_to=min(EXTENDED_MAX_ORDER, cap),
                              extend_unpassed=not few)
     passed = any(r.eligible and r.accepted for r in selection.scan)
     if few and not passed:
-        vector = select_many_poles(source.data, count, domain)
+        vector = select_many_poles(source.data, count, domain, cap)
         if vector is not None:
             vector.reason += (f"; the polynomial scan up to na = {scanned} found no stable order within its bound "
                               f"where the vector fits found {count.fit.order} poles")

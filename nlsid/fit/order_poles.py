@@ -63,32 +63,61 @@ def count_poles_and_delay(data: FRFData, max_delay: int, max_poles: int = DEFAUL
     return count if best == 0 else count_poles(data, best, max_poles)
 
 
+class VectorRows:
+    """Stable vector fits of N poles at the count's dead time, each as a row of the order scan
+    (:class:`nlsid.fit.order.OrderResult`), fitted once: the count's fits first, further ones up to
+    ``top`` poles on demand (:meth:`add`). An ``s`` model needs a continuous equivalent of every
+    pole; an order without one is kept in ``skipped`` with the reason."""
+
+    def __init__(self, data: FRFData, count: PoleSelection, domain: str, top: int):
+        self.data, self.domain, self.top, self.delay = data, domain, top, count.fit.delay
+        self.fits: dict[int, TFFit] = {}
+        self.rows: dict[int, OrderResult] = {}
+        self.skipped: dict[int, str] = {}
+        for n, vector in sorted(count.fits.items()):
+            self.add(n, vector)
+
+    def add(self, n: int, vector=None) -> None:
+        """Fit N = ``n`` poles (or take ``vector``, its vector fit) unless done or above ``top``."""
+        if n in self.rows or n in self.skipped or n > self.top:
+            return
+        data = self.data
+        if vector is None:
+            vector = vector_fit(data.frequency, data.G, data.variance, n, "z", data.fs, stable=True, delay=self.delay)
+        try:
+            self.fits[n] = from_vector_fit(vector, data, self.domain, True)
+        except InputError as error:
+            self.skipped[n] = error.what
+            return
+        self.rows[n] = _row(self.fits[n], data)
+
+    def eligible(self) -> list[OrderResult]:
+        return [r for r in self.rows.values() if r.eligible]
+
+    def notes(self) -> str:
+        """The orders not eligible and those without an s model, with why ('' if none)."""
+        out = ""
+        refused = [r for r in self.rows.values() if not r.eligible]
+        if refused:
+            why = {r.na: "stabilised fit on the stability boundary" if r.boundary else f"{r.how} fit {r.stability}"
+                   for r in refused}
+            out += "; not eligible: " + ", ".join(f"{n}/{n} ({why[n]})" for n in sorted(why))
+        if self.skipped:
+            out += "; not fitted in s: " + ", ".join(f"{n}/{n} ({self.skipped[n]})" for n in sorted(self.skipped))
+        return out
+
+    def scan(self) -> list[OrderResult]:
+        return [self.rows[n] for n in sorted(self.rows)]
+
+
 def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
                       max_poles: int = DEFAULT_MAX_POLES) -> OrderSelection | None:
     """The choice among the vector fits of ``count`` (module docstring), nested orders up to
     ``max_poles`` tested beside them, or None when none is eligible and within its bound (the
     polynomial scan then decides)."""
-    top = min(max_poles, data.bins.size - 1)
-    fits: dict[int, TFFit] = {}
-    rows: dict[int, OrderResult] = {}
-    skipped: dict[int, str] = {}  # orders without an s model: why
-    delay = count.fit.delay
-
-    def add(n: int, vector=None) -> None:
-        if n in rows or n in skipped or n > top:
-            return
-        if vector is None:
-            vector = vector_fit(data.frequency, data.G, data.variance, n, "z", data.fs, stable=True, delay=delay)
-        try:
-            fits[n] = from_vector_fit(vector, data, domain, True)
-        except InputError as error:  # an s model needs a continuous equivalent of every pole
-            skipped[n] = error.what
-            return
-        rows[n] = _row(fits[n], data)
-
-    for n, vector in sorted(count.fits.items()):
-        add(n, vector)
-    eligible = [r for r in rows.values() if r.eligible]
+    fitted = VectorRows(data, count, domain, min(max_poles, data.bins.size - 1))
+    fits, rows, skipped, add = fitted.fits, fitted.rows, fitted.skipped, fitted.add
+    eligible = fitted.eligible()
     passing = [r for r in eligible if r.accepted]
     if not passing:
         return None
@@ -109,7 +138,7 @@ def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
         for n in range(best.na + 1, best.na + NESTED_STEPS + 1):
             add(n)
         kappa = line_correlation(data, fits[best.na])
-        step = nested_better(best, [r for r in rows.values() if r.eligible], data.realizations, kappa)
+        step = nested_better(best, fitted.eligible(), data.realizations, kappa)
         if step is None:
             break
         size = step.nb + step.na - best.nb - best.na
@@ -125,15 +154,46 @@ def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
         reason += f"; {', '.join(map(str, extra))} poles fitted to test larger nested orders"
     fit = fits[best.na]
     reason += f"; {fit.note}"
-    refused = [r for r in rows.values() if not r.eligible]
-    if refused:
-        why = {r.na: "stabilised fit on the stability boundary" if r.boundary else f"{r.how} fit {r.stability}"
-               for r in refused}
-        reason += "; not eligible: " + ", ".join(f"{n}/{n} ({why[n]})" for n in sorted(why))
-    if skipped:
-        reason += "; not fitted in s: " + ", ".join(f"{n}/{n} ({skipped[n]})" for n in sorted(skipped))
-    scan = [rows[n] for n in sorted(rows)]
+    reason += fitted.notes()
+    scan = fitted.scan()
     warnings = list(fit.warnings)
     if not math.isfinite(best.cost_bound):
         warnings.append("no finite cost bound: the choice rests on the held-out lines")
     return OrderSelection(fit, scan, reason, warnings)
+
+
+def cap_reached(count: PoleSelection, data: FRFData, cap: int) -> bool:
+    """Whether the count stopped at the cap with the data asking for more: no fit up to ``cap``
+    poles (or the lines' limit) lies within its bound, and the one closest to its bound is the
+    largest scanned, so the cost still fell with every added pole. Where a smaller one came
+    closer, more poles did not help (a misfit that is not a missing pole: nonlinear distortion
+    outside the weights, an integrator the stable fit cannot place)."""
+    return not count.accepted and count.fit.order == min(cap, data.bins.size - 1)
+
+
+def select_at_cap(data: FRFData, count: PoleSelection, domain: str, cap: int) -> OrderSelection | None:
+    """``--order auto`` with a largest order ``cap`` that :func:`cap_reached`: of the count's stable
+    vector fits, the eligible one whose cost is the smallest multiple of its bound (the closest to
+    the noise floor, usually the cap itself), with a reason and a warning saying that the cap was
+    reached; None when no fit is eligible."""
+    fitted = VectorRows(data, count, domain, min(cap, data.bins.size - 1))
+    eligible = fitted.eligible()
+    if not eligible:
+        return None
+
+    def ratio(r: OrderResult) -> float:
+        return r.cost / r.cost_bound if math.isfinite(r.cost_bound) and r.cost_bound > 0 else math.inf
+
+    best = min(eligible, key=lambda r: (ratio(r), r.cost))
+    fit = fitted.fits[best.na]
+    visited = ", ".join(str(n) for n in count.fits)
+    reason = (f"the cap of {cap} poles was reached: no stable model of up to {fitted.top} poles has its cost within "
+              f"its bound, and the cost still fell with every added pole ({count.reason}); {best.nb}/{best.na} comes "
+              f"closest, cost {best.cost:.4g}, {ratio(best):.3g} times its bound {best.cost_bound:.4g}; "
+              f"held-out lines {best.holdout_error:.3g} per line; the orders N/N were fitted by vector fitting in "
+              f"pole-residue form (poles kept stable), N = {visited} poles; {fit.note}" + fitted.notes())
+    warnings = list(fit.warnings) + [
+        f"the cap of {cap} poles was reached: the {best.nb}/{best.na} model misses the BLA by more than its noise "
+        f"(cost {ratio(best):.3g} times its bound); the data support more poles (raise the largest order, or leave "
+        f"it out: the count goes up to {DEFAULT_MAX_POLES})"]
+    return OrderSelection(fit, fitted.scan(), reason, warnings)
