@@ -408,8 +408,9 @@ def fit_tf(b: BlaResult | str | os.PathLike, order=(2, 2), domain: str = "s", le
     delay : int or "auto"
         Dead time in samples, or the best of 0..10.
     max_order : int, optional
-        Largest na of ``order="auto"`` (polynomial fits of every nb <= na). Default: the poles the
-        data support, counted by vector fitting up to 40 (``docs/commands.md``); fewer than 5: the
+        Largest na of ``order="auto"``: from 5, the poles counted by vector fitting up to it (the
+        reason and a warning say where the cap is reached), below 5 the polynomial scan of every
+        nb <= na <= it. Default: the count up to 40 (``docs/commands.md``); fewer than 5 poles: the
         polynomial scan up to 4, and up to 10 while no order reaches its bound.
     names : dict, optional
         Argument -> how the caller calls it in messages (the command line passes its flags).
