@@ -61,10 +61,11 @@ def test_the_terminal_table_names_the_judged_signal(monkeypatch):
     fitted = SimpleNamespace(hypothesis=SimpleNamespace(title="Coulomb friction", main="fc"),
                              estimate=SimpleNamespace(values={"fc": 20.4}, note=""), reason="",
                              score=SimpleNamespace(gain_db=41.2, exact=False, distortion_gain_db=float("nan"),
-                                                   summary=lambda: {"above_floor_db": float("nan")}))
+                                                   summary=lambda: {"above_floor_db": float("nan")}),
+                             unit=lambda name, units: "V")
     result = SimpleNamespace(headline=lambda: "Cause: Coulomb friction [judged on u]",
                              evidence=SimpleNamespace(findings=lambda: []), outcomes=[fitted], winner=fitted,
-                             findings=lambda: [])
+                             findings=lambda: [], units={"u": "V", "y": "m"})
     shown = {}
     for signal in ("y", "u"):
         buffer = io.StringIO()
