@@ -130,13 +130,33 @@ def _force_offset_seen(model: dict) -> bool:
     """A constant force differs from a sensor offset in open loop only where the mechanics has no
     spring to the ground to turn it into a constant displacement (a free mass: friction then sees
     it), or a force reads the position (a cubic or polynomial spring): velocity-only forces on a
-    sprung mass see the same motion about a shifted rest position."""
+    sprung mass see the same motion about a shifted rest position. Around a transfer function
+    (``nonlinear_feedback``) the spring is a static gain of the linear part (:func:`_sprung`); an
+    end stop there keeps the force offset (with the edges free it is a direction of the fit, which
+    the refinement needed to reach the floor: nlsid/diagnose/hypotheses/end_stops.py)."""
     forces = model.get("nonlinearities") or []
     if not forces:
         return False
     if any(f.get("type") in POSITION_FORCES for f in forces):
         return True
+    if model["type"] == "nonlinear_feedback":
+        return any(f.get("type") == "end_stop" for f in forces) or not _sprung(model["linear"])
     return model["type"] != "mass_spring_damper" or float(model.get("stiffness", 0.0)) == 0.0
+
+
+def _sprung(lti: dict) -> bool:
+    """A transfer function config with a finite nonzero static gain, after cancelling the factors
+    s (a continuous G / s with G(0) = 0, as the velocity reading of a sprung mass is) common to its
+    numerator and denominator; other LTI configs are not judged (False)."""
+    if lti.get("type") != "transfer_function":
+        return False
+    num, den = np.asarray(lti["num"], float), np.asarray(lti["den"], float)
+    if lti.get("domain") == "discrete":
+        return bool(den.sum() != 0.0 and num.sum() != 0.0)
+    num, den = np.trim_zeros(num, "f"), np.trim_zeros(den, "f")
+    while num.size > 1 and den.size > 1 and num[-1] == 0.0 and den[-1] == 0.0:
+        num, den = num[:-1], den[:-1]
+    return bool(num.size and den[-1] != 0.0 and num[-1] != 0.0)
 
 
 def free_nuisances(runner: ModelRunner, runs: list[Run], timing: bool = True) -> dict:
