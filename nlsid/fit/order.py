@@ -157,6 +157,17 @@ def nested_better(best: OrderResult, eligible: list[OrderResult], realizations: 
     return min(better, key=lambda q: (q.nb + q.na, q.cost)) if better else None
 
 
+def nested_reason(best: OrderResult, step: OrderResult, realizations: int | None, kappa: float) -> str:
+    """Why the larger nested order ``step`` replaces ``best`` (:func:`nested_better`), for the
+    order scan's reason: its cost drop against what its extra parameters fitting noise would give."""
+    size = step.nb + step.na - best.nb - best.na
+    shared = f", times {kappa:.3g} for the lines' correlated errors" if kappa > 1 else ""
+    return (f"; {step.nb}/{step.na} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower "
+            f"than {best.nb}/{best.na}'s, more than {size} more parameter{'s' * (size > 1)} fitting noise "
+            f"would lower it ({likelihood_ratio_bound(size, realizations, kappa):.3g}, likelihood "
+            f"ratio at probability {ACCEPT_PROBABILITY}{shared})")
+
+
 def _refusal(r: OrderResult) -> str:
     if r.how == "stabilised" and (r.boundary or r.stability == "marginal"):
         return "unstable free fit; the stabilised fit ends on the stability boundary"
@@ -236,12 +247,7 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
             step = nested_better(best, [r for r in scan if r.eligible], data.realizations, kappa)
             if step is None:
                 break
-            size = step.nb + step.na - best.nb - best.na
-            shared = f", times {kappa:.3g} for the lines' correlated errors" if kappa > 1 else ""
-            reason += (f"; {step.nb}/{step.na} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower "
-                       f"than {best.nb}/{best.na}'s, more than {size} more parameter{'s' * (size > 1)} fitting noise "
-                       f"would lower it ({likelihood_ratio_bound(size, data.realizations, kappa):.3g}, likelihood "
-                       f"ratio at probability {ACCEPT_PROBABILITY}{shared})")
+            reason += nested_reason(best, step, data.realizations, kappa)
             best = step
     elif eligible and not any(math.isfinite(r.cost_bound) for r in eligible):
         best = min(eligible, key=lambda r: r.holdout_error)

@@ -22,9 +22,10 @@ from __future__ import annotations
 import math
 
 from nlsid.errors import InputError
-from nlsid.fit.cost_statistics import ACCEPT_PROBABILITY, expected_cost
+from nlsid.fit.cost_statistics import expected_cost
 from nlsid.fit.frf_data import FRFData
-from nlsid.fit.order import OrderResult, OrderSelection, likelihood_ratio_bound, line_correlation, nested_better
+from nlsid.fit.order import (OrderResult, OrderSelection, likelihood_ratio_bound, line_correlation, nested_better,
+                             nested_reason)
 from nlsid.fit.pole_count import DEFAULT_MAX_POLES, PoleSelection, select_poles
 from nlsid.fit.tf_fit import TFFit
 from nlsid.fit.tf_vector import from_vector_fit, holdout_error, on_boundary
@@ -141,12 +142,7 @@ def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
         step = nested_better(best, fitted.eligible(), data.realizations, kappa)
         if step is None:
             break
-        size = step.nb + step.na - best.nb - best.na
-        shared = f", times {kappa:.3g} for the lines' correlated errors" if kappa > 1 else ""
-        reason += (f"; {step.nb}/{step.na} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower "
-                   f"than {best.nb}/{best.na}'s, more than {size} more parameters fitting noise "
-                   f"would lower it ({likelihood_ratio_bound(size, data.realizations, kappa):.3g}, likelihood "
-                   f"ratio at probability {ACCEPT_PROBABILITY}{shared})")
+        reason += nested_reason(best, step, data.realizations, kappa)
         best = step
     scanned = sorted(set(rows) | set(skipped))
     extra = [n for n in scanned if n not in count.fits]
