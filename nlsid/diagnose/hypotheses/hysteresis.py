@@ -109,8 +109,8 @@ def _with_keys(data: dict, values: dict[str, float]) -> dict:
 def _reading(values: dict) -> str:
     bound = 1.0 / (values["beta"] + values["gamma"])
     return (f"a hysteretic spring of initial stiffness {values['k']:.4g} whose force yields towards "
-            f"{values['k'] * bound:.4g} beyond a stroke of about {bound:.3g} (zmax = 1 / (beta + gamma); the exponent n "
-            "held at 1, hysteresis_exponent frees it)")
+            f"{values['k'] * bound:.4g} beyond a stroke of about {bound:.3g} (zmax = 1 / (beta + gamma); the "
+            "exponent n held at 1, hysteresis_exponent frees it)")
 
 
 HYSTERESIS = Hypothesis(
@@ -227,8 +227,8 @@ def _estimate_exponent(ctx: Context) -> Estimate | str:
         extended_start["model"].update(starts)
         candidates.append((ctx.simulation_rss(extended_start), values))
     cost, values = min(candidates, key=lambda c: c[0])
-    note = (f"from the fit of {name} (n = 1): n = {values['n']:g}, gamma / beta = {values['gamma'] / values['beta']:.2g}, "
-            f"k and the bound of z near the fit's, the least simulation error of a grid of {len(candidates)} (no "
+    note = (f"from the fit of {name} (n = 1): n = {values['n']:g}, gamma / beta = "
+            f"{values['gamma'] / values['beta']:.2g}, k and the bound of z near the fit's, the least simulation error of a grid of {len(candidates)} (no "
             "standard errors)")
     return Estimate(values, {k: float("nan") for k in values}, explained_db(float(np.sum(ctx.target() ** 2)), cost),
                     note, lti=lti, starts=starts)

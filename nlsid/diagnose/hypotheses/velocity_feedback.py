@@ -88,7 +88,7 @@ def _continuous(ctx: Context) -> tuple[dict | str, list[str]]:
     return {"num": num, "den": den}, notes
 
 
-NEGLIGIBLE_LEAD = 0.1  # a leading numerator term this small at the Nyquist frequency is the fit's noise (_negligible_lead)
+NEGLIGIBLE_LEAD = 0.1  # a leading numerator term this small at Nyquist is the fit's noise (_negligible_lead)
 
 
 def _negligible_lead(num: list[float], den: list[float], fs: float) -> float | None:
