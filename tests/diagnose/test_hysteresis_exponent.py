@@ -13,7 +13,8 @@ loops); freed, n is named, the gain over n = 1 far beyond the verdict's F thresh
 Measured when written: hysteresis 34.5 dB, hysteresis_exponent 46.2 dB (3.2 dB above the floor),
 n = 2.29: the refinement stops at its budget of cost evaluations on the ridge between n and the
 bound of z (k within 2.5 %, the bound within 1.5 %), so n is asserted above 1.5 only, the
-sharper knee the data show, not to 10 %.
+sharper knee the data show, not to 10 %. With 80 evaluations (``diagnosis.FIT_STEPS``, 25) the
+same refinement reaches n = 2.007, k within 0.1 %, 0.7 dB below the floor.
 """
 
 from __future__ import annotations
