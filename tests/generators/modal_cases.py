@@ -11,9 +11,10 @@ spring or damper (k3 or c3 != 0) by the classical Runge-Kutta method with ``subs
 sample, all runs at once (:func:`response`; the caller checks the step by halving it).
 
 The excitation (:func:`recording`): random-odd multisines (odd lines up to MAX_HZ of an N-sample
-period at FS, one in three dropped at random as a detection line) at the given rms levels, one
-transient period and two steady ones, two realizations a level. The recorded output carries what
-a real measurement adds: a sensor offset, coloured noise (white noise through
+period at FS, one in three dropped at random as a detection line, the same grid in every
+recording: the BLAs of all levels are compared on the lines excited at every level) at the given
+rms levels, one transient period and two steady ones, two realizations a level. The recorded
+output carries what a real measurement adds: a sensor offset, coloured noise (white noise through
 0.6 / (1 - 0.8 z^-1), standard deviation ``noise``) and a mains line (a 50 Hz sine of amplitude
 MAINS, on an unexcited even line).
 
@@ -43,6 +44,7 @@ LEVELS, HELD_OUT = (0.25, 0.5, 0.75, 1.0), (0.375, 0.875)  # rms of u: the recor
 NOISE = 1e-6  # coloured noise std: -57 dB of the highest level's output, -45 dB of the lowest's
 OFFSET = 2e-4
 MAINS = 6e-7
+GRID_SEED = 7  # the excited lines' random grid (commands)
 OFF = 0.03  # the user's model: every coefficient of the linear part off by this (user_model)
 
 
@@ -119,10 +121,11 @@ def user_model(off: float = OFF, seed: int = 5) -> dict:
 
 
 def commands(seed: int, levels: tuple[float, ...], realizations: int) -> tuple[list[tuple], np.ndarray]:
-    """(level, realization, u) of every run and the excited bins."""
-    rng = np.random.default_rng(seed)
+    """(level, realization, u) of every run and the excited bins: one design (the grid of GRID_SEED,
+    the same for every recording, as one experiment's multisines share it), the phases of ``seed``."""
     lines = np.arange(1, int(MAX_HZ * N / FS), 2)
-    bins, _ = random_grid(lines, 3, rng)
+    bins, _ = random_grid(lines, 3, np.random.default_rng(GRID_SEED))
+    rng = np.random.default_rng(seed)
     out = [(level, m, np.tile(synthesize(N, bins, flat_amplitudes(bins.size, level), random_phases(bins.size, rng)),
                               PERIODS + TRANSIENT))
            for level in levels for m in range(realizations)]
