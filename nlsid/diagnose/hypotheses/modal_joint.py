@@ -265,6 +265,8 @@ def level_line(ctx: Context, row: dict, pole: complex, effect: "Effect") -> tupl
     if len(y) < 2:
         return "the mode is fitted at fewer than two levels of the estimation runs"
     y, se, var = np.array(y), np.array(se), np.array(var)
+    if not (np.all(np.isfinite(y)) and np.ptp(var) > 0):
+        return "the modal amplitude is the same at every level where the mode is fitted"
     weight = 1 / np.maximum(se, 1e-12 * np.abs(y))
     scale = float(np.max(var))  # the variances in units of the largest: columns of like size
     X = np.column_stack([np.ones_like(var), var / scale]) * weight[:, None]
