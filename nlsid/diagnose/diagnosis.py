@@ -269,6 +269,10 @@ def planned_work(data: dict, source: str, yardstick: bool | None = None) -> int:
     """The work :func:`diagnose` plans before it starts: the first round's (evidence, nuisances and
     :func:`round_work`) and the yardstick's (``yardstick``: as :func:`diagnose`'s argument)."""
     wanted = YARDSTICK if yardstick is None else yardstick
+    loop = data.get("closed_loop")
+    if isinstance(loop, dict) and isinstance(loop.get("computation_delay"), (str, dict)):
+        # computation_delay: auto is chosen later, from the data; which hypotheses apply does not depend on it
+        data = {**data, "closed_loop": {**loop, "computation_delay": 0}}
     work = round_work(ModelRunner.from_data(data, source))
     return EVIDENCE_WORK + NUISANCE_WORK + sum(work.values()) + (YARDSTICK_WORK if wanted else 0)
 
@@ -644,6 +648,7 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
     step("nuisances", NUISANCE_WORK, 0)
     context = Context(runner, fit_runs, fit_residuals, [runner.internal(run) for run in fit_runs],
                       evidence.bla_levels, signal=signal)
+    dof = verdict_dof(val)
     outcomes = []
     for hypothesis in _by_parameters(LIBRARY):
         outcome = Outcome(hypothesis, model=users or data)
@@ -674,7 +679,11 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
                 outcome.reason = (f"not fitted: {simpler.hypothesis.title} {reached} with fewer parameters, so this "
                                   "hypothesis cannot be significantly better")
                 continue
-            estimate = hypothesis.estimate(context)
+            try:
+                estimate = hypothesis.estimate(context)
+            except InputError as exc:  # a start whose simulation the model refuses (diverges): no start, said
+                outcome.reason = f"no start estimate: {exc}"
+                continue
             if isinstance(estimate, str):
                 outcome.reason = estimate
                 continue
@@ -692,6 +701,10 @@ def _round(data: dict, source: str, runs: list[Run], roles: dict[str, str], wher
             outcome.estimate = context.fitted[hypothesis.name] = estimate
             outcome.extended = context.extended[hypothesis.name] = extended
             _score(outcome, runner, val_runs, val, signal)
+            if outcome.score is not None:
+                context.errors[hypothesis.name] = outcome.score.error_rms
+                context.improves[hypothesis.name] = rules.suggestive(
+                    rules.ratio(baseline.error_rms ** 2, outcome.score.error_rms ** 2), dof)
         finally:  # whichever way the hypothesis ended: its work done, or its share taken back
             if hypothesis.name in expected:
                 fitted = bool(outcome.free) or outcome.estimate is not None

@@ -79,8 +79,9 @@ def test_verdict_and_tables_state_the_summary_numbers_alike(diagnosis):
     side = "below" if floor < 0 else "above"
     (winner,) = [h for h in summary["hypotheses"] if h["name"] == summary["verdict"]["winner"]]
     main = winner["main_parameter"]
+    unit = f" {winner['unit']}" if winner["unit"] else ""  # none where the recording's units leave it unknown
     assert verdict_headline(page) == (
-        f"Cause: {winner['title']} ({main} = {winner['values'][main]:.4g} {winner['unit']}); the extended model's "
+        f"Cause: {winner['title']} ({main} = {winner['values'][main]:.4g}{unit}); the extended model's "
         f"validation error is {gain['gain_db']:.1f} dB smaller, {abs(floor):.1f} dB {side} the noise floor")
     # the hypotheses table says the same, with the same sign convention, and the distortion as a dB change
     row = _table(page, "Hypotheses, ranked by validation error")[0]
@@ -109,7 +110,8 @@ def test_the_verdict_leads_with_the_cause_and_keeps_settings_in_the_details(diag
     verdict = seen["diagnosis", 1280]["verdict"]["text"]
     (winner,) = [h for h in summary["hypotheses"] if h["name"] == summary["verdict"]["winner"]]
     main = winner["main_parameter"]
-    assert (f"{main} = {winner['values'][main]:.4g} ± {winner['std'][main]:.2g} {winner['unit']}") in verdict
+    unit = f" {winner['unit']}" if winner["unit"] else ""  # none where the recording's units leave it unknown
+    assert (f"{main} = {winner['values'][main]:.4g} ± {winner['std'][main]:.2g}{unit}") in verdict
     assert "validation error against the noise floor: original model" in verdict
     for internal in ("nuisances estimated first", "sub-steps", "model.", "singular value", "% of its value"):
         assert internal not in verdict, internal

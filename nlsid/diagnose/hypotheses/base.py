@@ -18,7 +18,11 @@ class Context:
     """What the estimates need: the nominal model, the estimation runs, their residual periods, the
     model's internal signals on them (full length), the BLA levels (measured, model) and the
     final estimates of the hypotheses before this one in :data:`LIBRARY`, by name, with their
-    extended configs (every fitted value written in, nuisances too) in ``extended``.
+    extended configs (every fitted value written in, nuisances too) in ``extended`` and, in
+    ``improves``, whether each one's gain over the model on the validation runs is at least
+    suggestive (:func:`nlsid.diagnose.verdict.suggestive`), and in ``errors`` its validation error:
+    a costly richer member of a family that starts from a simpler one's fit need not be sought
+    where the simpler one does not lead (:meth:`leads`).
 
     ``signal`` is the judged signal, the output ``y`` or in closed loop the command ``u``
     (``diagnose --fit-on``): the residuals, :meth:`simulation_rss` and :meth:`response` are of
@@ -32,6 +36,14 @@ class Context:
     fitted: dict = field(default_factory=dict)
     extended: dict = field(default_factory=dict)
     signal: str = "y"
+    improves: dict = field(default_factory=dict)  # name -> whether its validation gain on the model is suggestive
+    errors: dict = field(default_factory=dict)  # name -> its validation error (rms)
+
+    def leads(self, name: str) -> bool:
+        """Whether hypothesis ``name`` is fitted, lowers the validation error at least suggestively,
+        and has the lowest validation error of the hypotheses fitted so far."""
+        return bool(self.improves.get(name)) and self.errors[name] <= min(self.errors.values())
+
 
     def target(self) -> np.ndarray:
         return np.concatenate(self.residuals)

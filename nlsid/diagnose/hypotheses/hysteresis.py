@@ -32,7 +32,9 @@ larger n), the bound zmax = (1 / (beta + gamma))^(1/n) and k at the fitted ones 
 the least simulation error the start, then k, beta,
 gamma and n refined with the rest (n >= 1: a trial below is a rejected step). It is the same family
 with one parameter more, so the verdict names it only where it is significantly better than n = 1
-(:mod:`nlsid.diagnose.verdict`), and it is not fitted where n = 1 already reaches the noise floor.
+(:mod:`nlsid.diagnose.verdict`); it is not fitted where n = 1 already reaches the noise floor, nor
+where n = 1 does not lead the hypotheses fitted before it (a suggestive gain and the lowest validation
+error: its fits at a non-integer n cost minutes, spent only where the family is the likely cause).
 (A is held at 1 for every n: z -> c z maps (A, beta, gamma, k) to (c A, c^(1-n) beta, c^(1-n)
 gamma, k / c), the same force.)
 
@@ -207,6 +209,10 @@ def _estimate_exponent(ctx: Context) -> Estimate | str:
     extended, fitted = ctx.extended.get(name), ctx.fitted.get(name)
     if extended is None or fitted is None:
         return f"needs the fit of {name} (n = 1) to start from"
+    if not ctx.leads(name):
+        return (f"not fitted: {name} (n = 1) does not lead (it lowers the validation error less than another "
+                "hypothesis, or not even suggestively), so no exponent of its knee is sought (its fits at a "
+                "non-integer n cost minutes)")
     model = extended["model"]
     force = model["nonlinearities"][-1]
     nuisances = {k: float(model[k]) for k in NUISANCE_KEYS if k in model}
