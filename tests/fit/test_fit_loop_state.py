@@ -25,6 +25,15 @@ AXIS = {
 }
 
 
+def assert_the_axis(summary: dict) -> None:
+    """Mass, viscous, Coulomb and offset (force_offset = -OFFSET) within 1 % of the truth."""
+    values = {name: p["value"] for name, p in summary["parameters"].items()}
+    assert values["model.mass"] == pytest.approx(E.MASS, rel=0.01)
+    assert values["model.damping"] == pytest.approx(E.VISCOUS, rel=0.01)
+    assert values["model.nonlinearities[0].fc"] == pytest.approx(E.COULOMB, rel=0.01)
+    assert values["model.force_offset"] == pytest.approx(-E.OFFSET, rel=0.01)
+
+
 def test_fit_on_u_of_a_record_that_starts_in_motion(run_cli, tmp_path):
     r = E.move_profile(*E.ESTIMATION_MOVES)
     u, y = E.closed_loop(r)
@@ -39,11 +48,7 @@ def test_fit_on_u_of_a_record_that_starts_in_motion(run_cli, tmp_path):
                      "--validation-range", f"{run.n_samples * 2 // 3}:{run.n_samples}", "-o", tmp_path / "fitted.yaml")
     assert result.exit_code == 0, result.stderr
     summary = result.json()
-    values = {name: p["value"] for name, p in summary["parameters"].items()}
-    assert values["model.mass"] == pytest.approx(E.MASS, rel=0.01)
-    assert values["model.damping"] == pytest.approx(E.VISCOUS, rel=0.01)
-    assert values["model.nonlinearities[0].fc"] == pytest.approx(E.COULOMB, rel=0.01)
-    assert values["model.force_offset"] == pytest.approx(-E.OFFSET, rel=0.01)
+    assert_the_axis(summary)
     # the state reported for the record: the drive's memory is the two encoder readings before it
     state = next(r["initial_state"] for r in summary["runs"] if r["role"] == "estimation")
     assert state["controller"] == pytest.approx([y[k0 - 1], y[k0 - 2]], abs=5 * E.ENCODER)
@@ -78,11 +83,7 @@ def test_fit_on_u_with_pulses_added_to_the_command_of_a_record_in_motion(run_cli
                      "-o", tmp_path / "fitted.yaml")
     assert result.exit_code == 0, result.stderr
     summary = result.json()
-    values = {name: p["value"] for name, p in summary["parameters"].items()}
-    assert values["model.mass"] == pytest.approx(E.MASS, rel=0.01)
-    assert values["model.damping"] == pytest.approx(E.VISCOUS, rel=0.01)
-    assert values["model.nonlinearities[0].fc"] == pytest.approx(E.COULOMB, rel=0.01)
-    assert values["model.force_offset"] == pytest.approx(-E.OFFSET, rel=0.01)
+    assert_the_axis(summary)
     # the validation part's command error is the encoder's: its quantisation through the drive,
     # q / sqrt(12) sqrt((kp kv + kv fs / 2)^2 + (kv fs / 2)^2) = 2.9 mV rms (tests/simulate/test_excitation_channels.py)
     sigma_u = E.ENCODER / np.sqrt(12) * np.hypot(E.KP * E.KV + E.KV * E.FS / 2, E.KV * E.FS / 2)
