@@ -157,6 +157,19 @@ def nested_better(best: OrderResult, eligible: list[OrderResult], realizations: 
     return min(better, key=lambda q: (q.nb + q.na, q.cost)) if better else None
 
 
+def smallest_reason(best: OrderResult, lower: list[OrderResult], per_line: float) -> str:
+    """Why ``best`` is chosen: the fewest parameters among the stable fits within their cost bound,
+    its held-out error against ``per_line`` (its expected value), and how far the ``lower`` orders
+    stay above their bounds."""
+    reason = (f"{best.nb}/{best.na} is the smallest model among the stable fits whose cost {best.cost:.4g} lies "
+              f"within its statistical bound {best.cost_bound:.4g} (expected value {best.expected_cost:.4g} +- "
+              f"{best.cost_std:.3g}); held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
+    if lower:
+        reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
+                   "times its bound")
+    return reason
+
+
 def nested_reason(best: OrderResult, step: OrderResult, realizations: int | None, kappa: float) -> str:
     """Why the larger nested order ``step`` replaces ``best`` (:func:`nested_better`), for the
     order scan's reason: its cost drop against what its extra parameters fitting noise would give."""
@@ -230,12 +243,7 @@ def select_order(data: FRFData, max_order: int, domain: str = "z", delay: int = 
         fewest = min(r.nb + r.na for r in passing)
         best = min((r for r in passing if r.nb + r.na == fewest), key=lambda r: r.holdout_error)
         lower = [r for r in eligible if r.nb + r.na < fewest and r.cost_bound > 0]
-        reason = (f"{best.nb}/{best.na} is the smallest model among the stable fits whose cost {best.cost:.4g} lies "
-                  f"within its statistical bound {best.cost_bound:.4g} (expected value {best.expected_cost:.4g} +- "
-                  f"{best.cost_std:.3g}); held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
-        if lower:
-            reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
-                       "times its bound")
+        reason = smallest_reason(best, lower, per_line)
         while True:
             if extend_to is not None and best.na + 1 > scanned_to and scanned_to < extend_to:
                 scanned_to += 1  # the next na, to test a larger nested order against best

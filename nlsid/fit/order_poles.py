@@ -25,7 +25,7 @@ from nlsid.errors import InputError
 from nlsid.fit.cost_statistics import expected_cost
 from nlsid.fit.frf_data import FRFData
 from nlsid.fit.order import (OrderResult, OrderSelection, likelihood_ratio_bound, line_correlation, nested_better,
-                             nested_reason)
+                             nested_reason, smallest_reason)
 from nlsid.fit.pole_count import DEFAULT_MAX_POLES, PoleSelection, select_poles
 from nlsid.fit.tf_fit import TFFit
 from nlsid.fit.tf_vector import from_vector_fit, holdout_error, on_boundary
@@ -126,12 +126,7 @@ def select_many_poles(data: FRFData, count: PoleSelection, domain: str = "z",
     per_line = expected_cost(1, 0, data.realizations)[0]
     lower = [r for r in eligible if r.na < best.na and r.cost_bound > 0]
     visited = ", ".join(str(n) for n in count.fits)
-    reason = (f"{best.nb}/{best.na} is the smallest model among the stable fits whose cost {best.cost:.4g} lies "
-              f"within its statistical bound {best.cost_bound:.4g} (expected value {best.expected_cost:.4g} +- "
-              f"{best.cost_std:.3g}); held-out lines {best.holdout_error:.3g} per line (about {per_line:.2f} expected)")
-    if lower:
-        reason += (f"; every smaller stable model's cost is at least {min(r.cost / r.cost_bound for r in lower):.3g} "
-                   "times its bound")
+    reason = smallest_reason(best, lower, per_line)
     reason += (f"; the orders N/N were fitted by vector fitting in pole-residue form (poles kept stable), "
                f"N = {visited} poles: doubling to the first within its bound, then bisection to the fewest ({count.reason}); "
                "the polynomial form is ill conditioned at many poles")
