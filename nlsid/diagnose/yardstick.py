@@ -228,14 +228,15 @@ def affordable(order: int, samples: int) -> tuple[int, tuple[int, ...], int] | N
 def iterations(model, runs: list[Run]) -> int:
     """The nonlinear stage's iterations the fit may take: :data:`SENSITIVITY_WORK` over the work of
     one iteration's sensitivities (the samples simulated, a periodic run's steady-state lead-in
-    included, times the parameters: a lightly damped model needs up to 20 periods of lead-in per
-    period measured), within [MIN_ITERATIONS, MAX_ITERATIONS]."""
+    included, times the parameters: a lightly damped model needs up to 20 periods of lead-in
+    ahead of the mean period it is fitted on, :mod:`nlsid.simulate.pnlss_runs`), within
+    [MIN_ITERATIONS, MAX_ITERATIONS]."""
     from nlsid.simulate.pnlss_runs import lead_periods
 
     simulated = 0
     for run in runs:
         if run.period is not None and run.n_periods >= 1:
-            simulated += (lead_periods(model, run.period) + run.n_periods) * run.period
+            simulated += (lead_periods(model, run.period) + 1) * run.period
         else:
             simulated += run.n_samples
     per_iteration = max(simulated * model.n_parameters, 1)

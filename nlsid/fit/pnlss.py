@@ -21,9 +21,12 @@ is not a monomial; ``fit_offset``) and the initial state of each arbitrary run.
   the output does not change, and numerically void ones). lambda = mu s_max; an accepted step
   divides mu by 3, a rejected one multiplies it by 10. A trial whose simulation leaves the bound
   (:data:`BOUND_FACTOR` times the largest state of the start) or is not finite is rejected.
-* Periodic runs: simulated in periodic steady state (their first steady period repeated ahead as
-  a lead-in: as many periods as the linear part needs to decay to 1e-6, at least 1, at most 20,
-  the lead samples discarded); arbitrary runs: from their initial state, a parameter of the fit.
+* Periodic runs: their mean steady period, weighted by the periods averaged (the same cost,
+  Jacobian and rms as over every period, at a fraction of the work:
+  :mod:`nlsid.simulate.pnlss_runs`), simulated in periodic steady state (the period repeated
+  ahead as a lead-in: as many periods as the linear part needs to decay to 1e-6, at least 1, at
+  most 20, the lead samples discarded); arbitrary runs: from their initial state, a parameter of
+  the fit.
 * Early stopping (the number of iterations, hence how far the nonlinear terms are fitted, chosen
   on validation data): every accepted iterate is simulated on the validation runs (their initial
   states fitted to their output, arbitrary ones; periodic ones in steady state) and the iterate
@@ -31,6 +34,11 @@ is not a monomial; ``fit_offset``) and the initial state of each arbitrary run.
   fit stops after ``patience`` iterates without a lower one in which the estimation error fell by
   less than PROGRESS (overfitting, not a plateau: :func:`_overfitting`). Without validation runs the result is the
   last iterate (the lowest estimation error).
+* At the noise floor: where every validation run is periodic with two periods or more, their
+  noise is known (the spread of the periods about their mean: :meth:`Record.floor`), and so is
+  the validation rms a model without error would have, sigma. The fit stops, with every later
+  stage, at the first iterate whose validation rms is within AT_FLOOR_DB of it: later iterates
+  could lower it by less than that, and only by fitting the validation noise.
 """
 
 from __future__ import annotations
@@ -55,6 +63,8 @@ MAX_REJECTED = 14        # rejected trials per iteration before the fit stops (m
 CONVERGED = 1e-10        # relative cost decrease below which an accepted step ends the stage
 WORSE = 1.25            # a validation rms this much above the lowest is overfitting, whatever the estimation error does
 PROGRESS = 0.01          # early stopping needs the estimation rms to fall less than this over the patience
+AT_FLOOR_DB = 0.1        # a validation rms this close to the validation runs' noise ends the fit
+AT_FLOOR = "at the noise floor"
 
 
 @dataclass
@@ -223,8 +233,7 @@ class _Problem:
             y = simulate_record(model, rec, x0, self.bound)
             if y is None:
                 return math.inf
-            e = y - rec.y
-            return float(e @ e)
+            return rec.squared_error(y - rec.y)
 
         total = sum(in_threads(one, list(zip(self.records, x0s))))
         return total if math.isfinite(total) else math.inf
@@ -252,7 +261,8 @@ class _Problem:
             columns, index = self._columns(model, i)
             block, gb, cost, work = np.zeros((index.size, index.size)), np.zeros(index.size), 0.0, 0
             sums, e_sum, rows = np.zeros(index.size), 0.0, 0   # the offset's column of ones: its products
-            for e, J in jacobian_blocks(model, self.records[i], x0s[i], self.bound):
+            record = self.records[i]
+            for e, J in jacobian_blocks(model, record, x0s[i], self.bound):
                 Jc = J if columns is None else np.ascontiguousarray(J[:, columns])
                 block += dsyrk(1.0, Jc.T, trans=0, lower=0)  # J'J, upper triangle; Jc.T is Fortran-ordered
                 gb += Jc.T @ e
@@ -262,7 +272,9 @@ class _Problem:
                     sums += Jc.sum(axis=0)
                     e_sum += float(e.sum())
                     rows += e.size
-            return index, np.triu(block) + np.triu(block, 1).T, gb, cost, work, sums, e_sum, rows
+            w = record.weight  # a mean period stands for its P periods (nlsid.simulate.pnlss_runs)
+            block = np.triu(block) + np.triu(block, 1).T
+            return index, w * block, w * gb, w * cost + record.within, work, w * sums, w * e_sum, w * rows
 
         p = self.size(model)
         o = self.active.size  # the offset's place (with ``offset``)
@@ -319,15 +331,16 @@ class _Decomposed:
 
 
 def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterations: int, validate,
-           history: list, kept: list, patience: int) -> tuple[Pnlss, list, str]:
+           history: list, kept: list, patience: int, floor: float | None = None) -> tuple[Pnlss, list, str]:
     """Levenberg-Marquardt iterations of one stage from ``model``; appends each accepted iterate to
     ``history`` and its (model, initial states) to ``kept``. Returns the last model, its initial
-    states and how the stage ended."""
+    states and how the stage ended. ``floor``: the validation rms of a model without error
+    (:func:`validation_floor`), where known."""
     mu = MU_START
     stage_start = len(history)
     theta0 = global_vector(model)
     H, g, cost = problem.normal_equations(model, x0s)
-    n_samples = sum(r.y.size for r in problem.records)
+    n_samples = sum(r.samples for r in problem.records)
     for number in range(1, max_iterations + 1):
         decomposed = _Decomposed.of(H, g)
         trial_cost = math.inf
@@ -346,6 +359,8 @@ def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iteration
         kept.append((model, x0s))
         if decrease < CONVERGED:
             return model, x0s, "converged"
+        if at_floor(history[-1], floor):
+            return model, x0s, AT_FLOOR
         if _overfitting(history, patience, stage_start):
             return model, x0s, "stopped early"
         H, g, cost = problem.normal_equations(model, x0s)
@@ -365,6 +380,26 @@ def _overfitting(history: list[Iteration], patience: int, stage_start: int) -> b
         return False
     stalled = current.estimation_rms > (1 - PROGRESS) * history[-1 - patience].estimation_rms
     return stalled or current.validation_rms > WORSE * best.validation_rms
+
+
+def validation_floor(val: Sequence[Record]) -> float | None:
+    """The validation rms of a model without error: sqrt of the records' noise variances averaged
+    over the samples they stand for (:meth:`Record.floor`); None unless every record has one."""
+    floors = [rec.floor() for rec in val]
+    if not floors or any(f is None for f in floors):
+        return None
+    return math.sqrt(sum(f * rec.samples for f, rec in zip(floors, val)) / sum(rec.samples for rec in val))
+
+
+def at_floor(iterate: Iteration, floor: float | None) -> bool:
+    """The iterate's validation rms is within AT_FLOOR_DB of ``floor`` (module docstring)."""
+    return (floor is not None and iterate.validation_rms is not None
+            and iterate.validation_rms <= floor * 10 ** (AT_FLOOR_DB / 20))
+
+
+def _floor_note(floor: float) -> str:
+    return (f"the validation error reached the validation runs' noise ({floor:.6g} rms) within {AT_FLOOR_DB:g} dB: "
+            "the fit stopped there")
 
 
 def _best(history: list[Iteration], stage: str | None = None) -> int:
@@ -490,17 +525,22 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
 
     x0s = [estimate_x0(model, rec, bound) if rec.arbitrary else None for rec in est]
     x0s = [np.zeros(model.order) if rec.arbitrary and x is None else x for rec, x in zip(est, x0s)]
-    n_samples = sum(r.y.size for r in est)
+    n_samples = sum(r.samples for r in est)
     full = _Problem(est, np.arange(global_vector(model).size), bound, fit_offset)
     history = [Iteration("start", 0, math.sqrt(full.cost(model, x0s) / n_samples), validate(model), MU_START)]
     kept = [(model, x0s)]
-    tamed_start, status = model, "converged"
+    floor = validation_floor(val)
+    tamed_start, status = model, AT_FLOOR if at_floor(history[0], floor) else "converged"
     seconds, work = 0.0, 0.0
-    if linear_iterations > 0 and not nonlinear_start:
+    if linear_iterations > 0 and not nonlinear_start and status != AT_FLOOR:
         problem = _Problem(est, linear_indices(model), bound, fit_offset)
-        model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience)
+        model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience,
+                                    floor)
         seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
     linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
+    if status == AT_FLOOR:
+        max_iterations = 0  # nothing left to reach (module docstring)
+        notes.append(_floor_note(floor))
     if max_iterations > 0 and model.lfr and not nonlinear_start:
         model = lfr_combinations(model, est, x0s)
         notes.append(f"LFR form: the {model.lfr_inputs} combination(s) z = Cz x + Dz u started as the linear model's "
@@ -509,11 +549,14 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
     if max_iterations > 0 and model.with_input and not model.lfr and not nonlinear_start:
         states = _Problem(est, state_term_indices(model), bound, fit_offset)
         model, x0s, status = _stage(states, model, x0s, "nonlinear_states", max_iterations, validate, history, kept,
-                                    patience)
+                                    patience, floor)
         seconds, work = seconds + states.jacobian_seconds, work + states.jacobian_work
-    if max_iterations > 0 and model.E.size + model.F.size:
-        model, x0s, status = _stage(full, model, x0s, "nonlinear", max_iterations, validate, history, kept, patience)
+    if max_iterations > 0 and model.E.size + model.F.size and status != AT_FLOOR:
+        model, x0s, status = _stage(full, model, x0s, "nonlinear", max_iterations, validate, history, kept, patience,
+                                    floor)
         seconds, work = seconds + full.jacobian_seconds, work + full.jacobian_work
+    if status == AT_FLOOR and max_iterations > 0:
+        notes.append(_floor_note(floor))
     chosen = _best(history)
     item = history[chosen]
     if val:

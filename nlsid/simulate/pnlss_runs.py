@@ -1,8 +1,14 @@
 """A PNLSS model (:mod:`nlsid.models.pnlss`) on measured runs as they were measured, and the
 exact sensitivities of its output (``docs/pnlss.md``).
 
-* A periodic run: its steady-state periods, simulated in periodic steady state: its first steady
-  period repeated ahead as a lead-in (:func:`lead_periods`), whose output is discarded.
+* A periodic run: its mean steady-state period, simulated in periodic steady state: the period
+  repeated ahead as a lead-in (:func:`lead_periods`), whose output is discarded. With P >= 2
+  steady periods y_p and the model's periodic response y_sim,
+  sum_p ||y_sim - y_p||^2 = P ||y_sim - mean_p y_p||^2 + sum_p ||y_p - mean_p y_p||^2,
+  so the record keeps the mean period, its weight P and the last sum (``within``, which does not
+  depend on the model): costs, Jacobians and rms values over the mean period, weighted, are those
+  of every period, at 1/P of the simulation and of the normal matrix's work. The input is the
+  mean period too (its measurement noise averaged like the output's).
 * An arbitrary run: whole, from an initial state x0, fitted to its measured output over its first
   :func:`transient_samples` (:func:`estimate_x0`: Gauss-Newton on x0 alone, with the x0 columns of
   the exact sensitivities).
@@ -38,31 +44,53 @@ DIVERGED = 1e150  # a state beyond this has diverged (as the other models' simul
 
 @dataclass(eq=False)
 class Record:
-    """A run prepared for the fit: ``u`` (steady part of a periodic run, or the whole arbitrary
-    record), the measured ``y`` over it, ``period`` (None: arbitrary, its initial state fitted)."""
+    """A run prepared for the fit: ``u`` (the mean steady-state period of a periodic run, or the
+    whole arbitrary record), the measured ``y`` over it, ``period`` (None: arbitrary, its initial
+    state fitted); ``weight``, the periods averaged (P), and ``within``, sum_p ||y_p - mean y||^2
+    over them (module docstring): a squared error e'e over the record stands for
+    ``weight * e'e + within`` over the run's periods."""
 
     run_id: str
     u: np.ndarray
     y: np.ndarray
     period: int | None
+    weight: int = 1
+    within: float = 0.0
 
     @property
     def arbitrary(self) -> bool:
         return self.period is None
 
+    @property
+    def samples(self) -> int:
+        """The run's samples the record stands for (``weight`` x its own)."""
+        return self.weight * int(self.y.size)
+
+    def squared_error(self, e: np.ndarray) -> float:
+        """The squared error over the run's samples of the residual ``e`` over the record."""
+        return self.weight * float(e @ e) + self.within
+
+    def floor(self) -> float | None:
+        """The noise variance per sample, from the spread of the periods about their mean
+        (within / ((P - 1) N)); None for an arbitrary record or a single period."""
+        if self.weight < 2:
+            return None
+        return self.within / ((self.weight - 1) * self.y.size)
+
 
 def records(runs: Sequence[Run], where: str) -> list[Record]:
-    """The runs as :class:`Record`: a periodic run's steady-state periods (whole periods after its
-    transient periods), an arbitrary run whole; each needs a measured y."""
+    """The runs as :class:`Record`: a periodic run's mean steady-state period (of the whole periods
+    after its transient periods, with their count and spread: module docstring), an arbitrary run
+    whole; each needs a measured y."""
     out = []
     for run in runs:
         if run.y is None:
             raise InputError(f"{where}: run {run.run_id}", "has no measured output y")
         if run.period is not None and run.n_periods >= 1:
-            start = run.transient_periods * run.period
-            stop = start + run.n_periods * run.period
-            out.append(Record(run.run_id, np.ascontiguousarray(run.u[start:stop], dtype=float),
-                              np.ascontiguousarray(run.y[start:stop], dtype=float), int(run.period)))
+            u, y = run.periods("u").astype(float), run.periods("y").astype(float)
+            mean = y.mean(axis=0)
+            out.append(Record(run.run_id, np.ascontiguousarray(u.mean(axis=0)), np.ascontiguousarray(mean),
+                              int(run.period), run.n_periods, float(np.sum((y - mean) ** 2))))
         else:
             out.append(Record(run.run_id, np.ascontiguousarray(run.u, dtype=float),
                               np.ascontiguousarray(run.y, dtype=float), None))
@@ -192,8 +220,8 @@ def rms_on(model: Pnlss, recs: Sequence[Record], bound: float, starts: dict | No
         y = simulate_record(model, rec, x0, bound)
         if y is None:
             return math.inf
-        total += float(np.sum((y - rec.y) ** 2))
-        count += rec.y.size
+        total += rec.squared_error(y - rec.y)
+        count += rec.samples
     return math.sqrt(total / count) if count else math.inf
 
 
