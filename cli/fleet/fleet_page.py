@@ -20,7 +20,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from urllib.parse import quote
 
-from .results import cause_key, cause_text, count_causes, counts, series
+from .results import DIFFER, NOT_RECORDED, cause_key, cause_text, count_causes, counts, parameter_unit, series
 
 _SORT_SCRIPT = """
 document.querySelectorAll('table.sortable').forEach(function (table) {
@@ -94,13 +94,6 @@ def _tick_label(value: float, step: float) -> str:
     return f"{value:.{digits}g}"
 
 
-def _unit(rows: list[dict], parameter: str) -> str:
-    """The parameter's unit where the results state one (all alike), else "unit not recorded"."""
-    units = {(row.get("parameters") or {}).get(parameter, {}).get("unit") for row in rows}
-    units.discard(None)
-    return units.pop() if len(units) == 1 else "unit not recorded"
-
-
 SINGLE_MOMENT = 60.0  # s either side of an axis whose recordings share one moment
 
 
@@ -146,7 +139,7 @@ def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | No
                    f'<text x="{xx:.1f}" y="{height - bottom + 18}" text-anchor="middle">{label}</text>')
     out.append(f'<text x="{(left + width - right) / 2:.0f}" y="{height - 8}" text-anchor="middle">recorded (UTC)</text>'
                f'<text x="16" y="{(top + height - bottom) / 2:.0f}" text-anchor="middle" '
-               f'transform="rotate(-90 16 {(top + height - bottom) / 2:.0f})">{_e(parameter)} ({_e(_unit(rows, parameter))})</text>')
+               f'transform="rotate(-90 16 {(top + height - bottom) / 2:.0f})">{_e(parameter)} ({_e(parameter_unit(rows, parameter))})</text>')
     for index, (machine, values) in enumerate(data.items()):
         color = _PALETTE[index % len(_PALETTE)]
         thick = machine in drifting
@@ -201,7 +194,10 @@ def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: l
                      _num(d["last_value"])[0], _num(d["slope_per_day"])[0], _num(d["slope_std"], ".2g")[0],
                      _num(d["change_over_span"])[0], _num(d["p_value"], ".2g")[0], "drifts" if d["drifts"] else ""]
             lines.append(f'<tr class="{"drifts" if d["drifts"] else ""}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
-        table = ("<table><caption>Drift per machine (least-squares line against time)</caption><thead><tr>"
+        unit = parameter_unit(rows, parameter)
+        scale = unit if unit == NOT_RECORDED or unit.startswith(DIFFER) else f"values in {unit}, slopes in {unit} per day"
+        table = ("<table><caption>Drift per machine (least-squares line against time; "
+                 f"{_e(scale)})</caption><thead><tr>"
                  "<th>machine</th><th>recordings</th><th>first</th><th>last</th><th>slope per day</th><th>std</th>"
                  "<th>change over span</th><th>p</th><th></th></tr></thead><tbody>" + "".join(lines) + "</tbody></table>")
         if not drift:
@@ -209,7 +205,7 @@ def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: l
         trend = f"<h2>{_e(parameter)} over time</h2>{figure}{table}"
 
     header = ["recording", "machine", "recorded", "status", "verdict", "causes", "gain dB", "above floor dB", "seconds",
-              *([parameter, "std"] if parameter else []), "error"]
+              *([f"{parameter} ({parameter_unit(rows, parameter)})", "std"] if parameter else []), "error"]
     body = []
     for row in rows:
         link = _link(row)

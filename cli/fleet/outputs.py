@@ -2,6 +2,11 @@
 parameters and standard errors, the gain and the distance to the noise floor (from the last
 ``diagnose`` step's ``summary.json``), the parameters of ``fit`` reports, and the last headline.
 
+Each parameter carries its unit as the output states it (``summary.json`` ``hypotheses[].units``,
+the fit report's ``parameters[].unit``, derived by :mod:`nlsid.models.parameter_units` from the
+recording's units): a text, ``""`` for a pure number, None where none is stated (a transfer
+function's coefficients, a signal without a recorded unit).
+
 Parameter names (the columns of ``results.csv`` and ``--param``):
 
 - a cause named by ``diagnose``: ``<hypothesis>.<parameter>``, e.g. ``coulomb.fc``;
@@ -38,6 +43,23 @@ def fallback_facts(recording: Path) -> dict:
     return {"recorded": moment, "recorded_from": "mtime" if moment else None, "machine": None}
 
 
+def _unit(text) -> str | None:
+    """A recorded unit: a text (``""`` a pure number), None where the output states none."""
+    return text if isinstance(text, str) else None
+
+
+def value_units(hypothesis: dict) -> dict[str, str | None]:
+    """The unit of each estimated value of a ``summary.json`` hypothesis: its ``units`` (null where
+    unknown); a summary without them gives the main parameter its ``unit`` (an empty ``unit`` there
+    means none was derived, not a pure number)."""
+    stated = hypothesis.get("units")
+    values = hypothesis.get("values") or {}
+    if isinstance(stated, dict):
+        return {key: _unit(stated.get(key)) for key in values}
+    main = hypothesis.get("main_parameter")
+    return {key: (hypothesis.get("unit") or None) if key == main else None for key in values}
+
+
 def diagnosis_fields(summary: dict) -> dict:
     """Verdict, causes, their parameters, gain and distance to the floor of a diagnosis summary."""
     verdict = summary.get("verdict") or {}
@@ -48,11 +70,11 @@ def diagnosis_fields(summary: dict) -> dict:
     for name in names:
         h = hypotheses.get(name, {})
         values, std = h.get("values") or {}, h.get("std") or {}
+        units = value_units(h)
         causes.append({"name": name, "title": h.get("title", name), "main_parameter": h.get("main_parameter"),
-                       "unit": h.get("unit"), "values": values, "std": std})
+                       "unit": units.get(h.get("main_parameter")), "units": units, "values": values, "std": std})
         for key, value in values.items():
-            unit = h.get("unit") if key == h.get("main_parameter") else None
-            parameters[f"{name}.{key}"] = {"value": _finite(value), "std": _finite(std.get(key)), "unit": unit,
+            parameters[f"{name}.{key}"] = {"value": _finite(value), "std": _finite(std.get(key)), "unit": units.get(key),
                                            "source": "diagnose"}
     gain = summary.get("gain") or None
     original = summary.get("original") or {}
@@ -73,8 +95,8 @@ def fit_parameters(report: dict, report_path: Path, taken: set[str]) -> dict:
         if not isinstance(entry, dict):
             continue
         name = key if key not in taken else f"{report_path.name.removesuffix('.fit.json')}:{key}"
-        out[name] = {"value": _finite(entry.get("value")), "std": _finite(entry.get("std")), "unit": None,
-                     "source": "fit"}
+        out[name] = {"value": _finite(entry.get("value")), "std": _finite(entry.get("std")),
+                     "unit": _unit(entry.get("unit")), "source": "fit"}
     return out
 
 

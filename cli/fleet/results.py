@@ -45,14 +45,16 @@ def _number(value, spec: str = ".4g") -> str:
 
 
 def cause_text(causes: list[dict]) -> str:
-    """``coulomb: fc = 0.4999 ± 1.4e-06 N`` per cause (main parameter first), joined by ``; ``."""
+    """``coulomb: fc = 0.4999 ± 1.4e-06 N`` per cause (main parameter first), each value with its
+    unit where one is recorded, joined by ``; ``."""
     parts = []
     for cause in causes:
         values, std = cause.get("values") or {}, cause.get("std") or {}
+        units = cause.get("units") or {cause.get("main_parameter"): cause.get("unit")}
         keys = sorted(values, key=lambda k: (k != cause.get("main_parameter"), k))
         items = []
         for key in keys:
-            unit = f" {cause['unit']}" if key == cause.get("main_parameter") and cause.get("unit") else ""
+            unit = f" {units[key]}" if units.get(key) else ""
             error = f" ± {_number(std.get(key), '.2g')}" if std.get(key) is not None else ""
             items.append(f"{key} = {_number(values[key])}{error}{unit}")
         parts.append(f"{cause['name']}: {', '.join(items)}" if items else cause["name"])
@@ -64,19 +66,46 @@ def parameter_names(rows: list[dict]) -> list[str]:
 
 
 def csv_text(rows: list[dict]) -> str:
-    """``results.csv``: the fixed columns, then ``P`` and ``std(P)`` for every parameter P found."""
+    """``results.csv``: the fixed columns, then ``P``, ``std(P)`` and ``unit(P)`` for every
+    parameter P found (the unit as the row's output states it, :func:`unit_cell`)."""
     names = parameter_names(rows)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([*FIXED_COLUMNS, *[c for name in names for c in (name, f"std({name})")]])
+    writer.writerow([*FIXED_COLUMNS, *[c for name in names for c in (name, f"std({name})", f"unit({name})")]])
     for row in rows:
         flat = dict(row, causes="|".join(c["name"] for c in row["causes"]), cause_parameters=cause_text(row["causes"]))
         cells = ["" if flat.get(c) is None else flat[c] for c in FIXED_COLUMNS]
         for name in names:
             entry = row["parameters"].get(name) or {}
-            cells += [_repr(entry.get("value")), _repr(entry.get("std"))]
+            cells += [_repr(entry.get("value")), _repr(entry.get("std")), unit_cell(entry.get("unit"))]
         writer.writerow([_repr(c) if isinstance(c, float) else c for c in cells])
     return buffer.getvalue()
+
+
+PURE_NUMBER = "1"  # the unit cell of a pure number (a gain of N per N), as SI writes it
+NOT_RECORDED = "unit not recorded"
+DIFFER = "units differ: "
+
+
+def unit_cell(unit: str | None) -> str:
+    """A unit as ``results.csv`` writes it: the text, ``1`` for a pure number, empty where none
+    is recorded."""
+    if unit is None:
+        return ""
+    return unit or PURE_NUMBER
+
+
+def parameter_unit(rows: list[dict], parameter: str) -> str:
+    """The unit of a parameter across the rows that have it, as the fleet figure's axis states it:
+    the one unit they record (``1`` for a pure number), ``unit not recorded`` where none does, and
+    ``units differ: A, B`` where rows record different ones (recordings of other units)."""
+    units = {(row.get("parameters") or {}).get(parameter, {}).get("unit") for row in rows
+             if parameter in (row.get("parameters") or {})}
+    units.discard(None)
+    if not units:
+        return NOT_RECORDED
+    texts = sorted(unit_cell(u) for u in units)
+    return texts[0] if len(texts) == 1 else DIFFER + ", ".join(texts)
 
 
 def _repr(value) -> str:

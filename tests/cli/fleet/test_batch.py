@@ -80,11 +80,13 @@ def test_a_fleet_with_a_corrupt_recording_and_a_drifting_machine(run_cli, projec
             assert row["recorded"] == f"2026-05-0{night + 1}T22:00:00+00:00"
             assert float(row[FIT_PARAMETER]) == pytest.approx(fc, rel=0.01)
             assert 0 < float(row[f"std({FIT_PARAMETER})"]) < 0.01 * fc
+            assert row[f"unit({FIT_PARAMETER})"] == "N"  # a friction force in u's unit (gain 1, u in N)
             folder = fleet / machine / f"night{night}"
             assert {p.name for p in folder.iterdir()} == {"bla.h5", "fitted.yaml", "fitted.fit.json", "log.txt", "task.json"}
             assert ".partial-" not in (folder / "task.json").read_text()  # paths name the final folder
     records = jsonl_of(fleet)
     assert records["B/night2"]["parameters"][FIT_PARAMETER]["source"] == "fit"
+    assert records["B/night2"]["parameters"][FIT_PARAMETER]["unit"] == "N"
     assert [s["status"] for s in records["B/night2"]["steps"]] == ["ran", "ran"]
     assert [s["status"] for s in records["B/corrupt"]["steps"]] == ["failed (2)"]  # fit never ran
 
@@ -97,6 +99,7 @@ def test_a_fleet_with_a_corrupt_recording_and_a_drifting_machine(run_cli, projec
 
     page = (fleet / "fleet.html").read_text()
     assert "<svg" in page and "stage-B (drifts)" in page and 'table class="sortable"' in page
+    assert page.count(f"{FIT_PARAMETER} (N)") == 2  # the figure's axis and the results table's column
     assert "<script>" in page and "http://" not in page.replace("http://www.w3.org/2000/svg", "")
     assert all(name in page for name in rows)
     assert work_folders(fleet) == []
@@ -200,6 +203,9 @@ def test_a_diagnosis_whose_check_fails_still_gets_its_report(run_cli, project):
     assert flat["causes"] == "coulomb"
     assert flat["cause_parameters"].startswith(f"coulomb: fc = {fc['value']:.4g} ± {fc['std']:.2g} N, ")
     assert "mass = " in flat["cause_parameters"]
+    # fc is a force in u's unit (N); the recordings carry no unit on y, so the mass (N s^2 / y) has none
+    assert fc["unit"] == "N" and flat["unit(coulomb.fc)"] == "N"
+    assert row["parameters"]["coulomb.mass"]["unit"] is None and flat["unit(coulomb.mass)"] == ""
     assert float(flat["coulomb.fc"]) == fc["value"] and float(flat["std(coulomb.fc)"]) == fc["std"]
     page = (fleet / "fleet.html").read_text()
     assert "Coulomb friction" in page and 'href="night2/report.html"' in page
