@@ -6,8 +6,12 @@ Layout::
     /runs/<run-id>/   attrs fs, kind, period, transient_periods, realization, level, frequency,
                       excited_bins, params; datasets u, y, r (attr unit)
     /runs/<run-id>/channels/<name>   further measured channels (attr unit); version 2, absent if none
+/runs/<run-id>    attrs inputs, outputs: names of the inputs and outputs (version 3), absent for
+                  one input u and one output y
 
 Version 1 files (no channels) are read as before: their ``channels`` member, if any, is ignored.
+A file is written as version 3 only when some run has several inputs or outputs; the ``inputs``
+and ``outputs`` attributes of an older file are ignored.
 """
 
 from __future__ import annotations
@@ -25,10 +29,11 @@ from h5py import h5a, h5d, h5o, h5s, h5t
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import SIGNALS, Run, check_channel_name, make_run
+from nlsid.io.run import IO_DEFAULTS, SIGNALS, Run, check_channel_name, make_run
 
 FORMAT_VERSION = 2
-READ_VERSIONS = (1, 2)  # version 2 added /runs/<run-id>/channels
+MIMO_FORMAT_VERSION = 3  # written when some run has several inputs or outputs
+READ_VERSIONS = (1, 2, 3)  # version 2 added /runs/<run-id>/channels, version 3 the run attrs inputs, outputs
 FORMATS = ("recording", "excitation")
 
 # What h5py raises for a damaged file (HDF5 library errors, found by tests/cli/test_fuzz_inputs.py):
@@ -155,6 +160,8 @@ class HDF5Recording(RecordingReader):
         with hdf5_damage(where):
             group = self._runs[run_id]
             attrs = dict(group.attrs)
+            if self.version < MIMO_FORMAT_VERSION:
+                attrs = {key: value for key, value in attrs.items() if key not in IO_DEFAULTS}
             present = [name for name in SIGNALS if name in group]
             extra = self.version >= 2 and "channels" in group
         units: dict[str, str] = {}
@@ -206,7 +213,8 @@ def write_hdf5_recording(
 ) -> Path:
     """Write runs in the recording format, atomically, one run at a time (runs may be a generator).
 
-    The file is an ``"excitation"`` when some run lacks ``y`` and a ``"recording"`` otherwise.
+    The file is an ``"excitation"`` when some run lacks ``y`` and a ``"recording"`` otherwise,
+    of format version 3 when some run has several inputs or outputs and version 2 otherwise.
     Floats are stored uncompressed float64 (measurement floats compress about 1.1x only).
     """
     with atomic_path(path, force) as tmp:
@@ -215,18 +223,21 @@ def write_hdf5_recording(
             if provenance is not None:
                 handle.attrs["provenance"] = json.dumps(provenance, sort_keys=True)
             group = handle.create_group("runs")
-            complete = True
+            complete, mimo = True, False
             for run in runs:
                 _write_run(group, run)
                 complete = complete and run.y is not None
+                mimo = mimo or run.is_mimo
             handle.attrs["nlsid_format"] = "recording" if complete else "excitation"
+            if mimo:
+                handle.attrs["nlsid_format_version"] = MIMO_FORMAT_VERSION
     return Path(path)
 
 
 def _write_run(parent: h5py.Group, run: Run) -> None:
     group = parent.create_group(run.run_id)
     for key, value in run.attrs().items():
-        group.attrs[key] = value
+        group.attrs[key] = np.array(value, dtype=h5py.string_dtype()) if key in IO_DEFAULTS else value
     for name in SIGNALS:
         signal = getattr(run, name)
         if signal is not None:

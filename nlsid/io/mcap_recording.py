@@ -10,7 +10,12 @@ Layout (every message JSON-encoded, every channel with a JSON schema, zstd-compr
                        sample index ``start``, ``data`` = base64 of little-endian IEEE 754 float64
     /nlsid/channel/<name>  sample blocks of a further measured channel (version 2)
 
-Version 1 files (no channels) are read as before: a ``channels`` field of their run messages is ignored.
+The run message's ``inputs`` and ``outputs`` (version 3) name the inputs and outputs of a run with
+several, as the HDF5 run attributes do; a file is version 3 only when some run has them.
+Version 1 files (no channels) are read as before: a ``channels`` field of their run messages is
+ignored, as are ``inputs`` and ``outputs`` before version 3. The run schema stored in the file is
+that of version 2, whose properties are not exclusive: its text (and so a file of runs with one
+input and one output) is unchanged by version 3.
 
 Time line: log times are nanoseconds on a synthetic clock; they do not say when the data were
 measured (the recording format does not carry that). The first run starts at ``t0 = 0``; each
@@ -42,10 +47,11 @@ from nlsid.io.atomic import atomic_path
 from nlsid.io.mcap_file import channels_by_topic, checked, open_mcap
 from nlsid.io.mcap_foreign import read_foreign_run, unmapped_output
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import SIGNALS, Run, check_channel_name, make_run
+from nlsid.io.run import IO_DEFAULTS, SIGNALS, Run, check_channel_name, make_run
 
 FORMAT_VERSION = 2
-READ_VERSIONS = ("1", "2")  # version 2 added channels
+MIMO_FORMAT_VERSION = 3  # written when some run has several inputs or outputs
+READ_VERSIONS = ("1", "2", "3")  # version 2 added channels, version 3 the run fields inputs, outputs
 FORMATS = ("recording", "excitation")
 METADATA_NAME = "nlsid"
 RUN_TOPIC = "/nlsid/run"
@@ -189,6 +195,8 @@ class MCAPRecording(RecordingReader):
         topics = {name: SIGNAL_TOPICS[name] for name in names} | {name: CHANNEL_TOPIC + name for name in channel_names}
         samples = self._read_signals(run_id, topics, n_samples, start, end)
         attrs = {k: v for k, v in meta.items() if k not in _OWN_KEYS}
+        if self.version < MIMO_FORMAT_VERSION:
+            attrs = {k: v for k, v in attrs.items() if k not in IO_DEFAULTS}
         if "params" in attrs and not isinstance(attrs["params"], str):
             attrs["params"] = json.dumps(attrs["params"])
         signals = {name: samples[name] for name in names}
@@ -280,21 +288,24 @@ def write_mcap_recording(
 ) -> Path:
     """Write runs in the MCAP layout above, atomically, one run at a time (runs may be a generator).
 
-    The file is an ``"excitation"`` when some run lacks ``y`` and a ``"recording"`` otherwise.
+    The file is an ``"excitation"`` when some run lacks ``y`` and a ``"recording"`` otherwise,
+    of format version 3 when some run has several inputs or outputs and version 2 otherwise.
     """
     with atomic_path(path, force) as tmp, open(tmp, "wb") as handle:
         writer = Writer(handle, compression=CompressionType.ZSTD)
         writer.start(profile="", library=f"nlsid {__version__}")
         channels = _Channels(writer)
-        t0, complete, seen = 0, True, set()
+        t0, complete, mimo, seen = 0, True, False, set()
         for run in runs:
             if run.run_id in seen:
                 raise InputError(str(path), f"run id {run.run_id!r} given twice")
             seen.add(run.run_id)
             _write_run(writer, channels, run, t0)
             complete = complete and run.y is not None
+            mimo = mimo or run.is_mimo
             t0 = _next_start(t0, run)
-        meta = {"nlsid_format": "recording" if complete else "excitation", "nlsid_format_version": str(FORMAT_VERSION)}
+        version = MIMO_FORMAT_VERSION if mimo else FORMAT_VERSION
+        meta = {"nlsid_format": "recording" if complete else "excitation", "nlsid_format_version": str(version)}
         if provenance is not None:
             meta["provenance"] = json.dumps(provenance, sort_keys=True)
         writer.add_metadata(METADATA_NAME, meta)

@@ -12,7 +12,7 @@ from typing import Iterable
 
 from nlsid.errors import InputError
 from nlsid.io.hdf5_recording import HDF5Recording, write_hdf5_recording
-from nlsid.io.run import SIGNALS, Run, check_channel_name
+from nlsid.io.run import SIGNALS, Run, check_channel_name, check_io_names
 
 MCAP_MAGIC = b"\x89MCAP"
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -64,7 +64,8 @@ def write_recording(path: str | os.PathLike, runs: Iterable[Run], provenance: di
 
     A run with a NaN or Inf sample is refused (InputError naming the run and signal or channel)
     and nothing is written: no stage writes non-finite samples as if they were measured or designed.
-    Neither is a channel whose name the readers refuse.
+    Neither is a channel whose name the readers refuse, nor inputs or outputs that are not u (y)
+    followed by channels of the run.
     """
     runs = _finite(path, runs)
     if Path(path).suffix.lower() == ".mcap":
@@ -81,6 +82,7 @@ def _finite(path: str | os.PathLike, runs: Iterable[Run]) -> Iterable[Run]:
     for run in runs:
         for name in run.channels:
             check_channel_name(name, f"{path}:/runs/{run.run_id}/channels/{name}")
+        check_io_names(tuple(run.inputs), tuple(run.outputs), run.channels, f"{path}:/runs/{run.run_id}")
         named = [(name, getattr(run, name)) for name in SIGNALS] + [(f"channels/{k}", v) for k, v in run.channels.items()]
         for name, signal in named:
             if signal is None:

@@ -1,5 +1,6 @@
 """One run of a recording: a continuous record of u, y (and r, and further measured channels) with
-its excitation metadata.
+its excitation metadata, and which of its signals are the inputs and outputs of a system with
+several of them.
 
 This is the in-memory form of the recording format of ``docs/formats.md``. The HDF5 and MCAP
 readers both parse their attributes through :func:`parse_run_attrs` and check the arrays through
@@ -12,7 +13,7 @@ import json
 import math
 import re
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
@@ -20,6 +21,8 @@ from nlsid.errors import InputError
 
 KINDS = ("multisine", "sine", "arbitrary")
 SIGNALS = ("u", "y", "r")
+#: The run attributes naming inputs and outputs (format version 3) and their defaults, the first name of each.
+IO_DEFAULTS = {"inputs": ("u",), "outputs": ("y",)}
 #: A run without its measured output, read where one is required (also :mod:`nlsid.feeds`).
 MISSING_Y = "missing dataset 'y' (this is an excitation without a measured output?)"
 
@@ -32,6 +35,10 @@ class Run:
     measurement); ``r`` is the reference of closed-loop experiments. ``channels`` holds further
     measured signals by name (e.g. ``d``, a force pulse injected by the rig), each as long as
     ``u``; ``units`` may give the unit of a channel as of a signal.
+
+    ``inputs`` and ``outputs`` name the system's inputs and outputs in order: ``u`` (``y``) first,
+    then channels of the run. A run of a single-input single-output system keeps the defaults
+    ``("u",)`` and ``("y",)``; :meth:`input_matrix` and :meth:`output_matrix` stack them.
     """
 
     run_id: str
@@ -49,6 +56,8 @@ class Run:
     params: dict = field(default_factory=dict)
     units: dict = field(default_factory=dict)
     channels: dict[str, np.ndarray] = field(default_factory=dict)
+    inputs: tuple[str, ...] = ("u",)
+    outputs: tuple[str, ...] = ("y",)
 
     @property
     def n_samples(self) -> int:
@@ -71,6 +80,28 @@ class Run:
         start = self.transient_periods * self.period
         return x[start:].reshape(self.n_periods, self.period)
 
+    @property
+    def is_mimo(self) -> bool:
+        """Whether the run names more than one input or output (a format version 3 run)."""
+        return len(self.inputs) > 1 or len(self.outputs) > 1
+
+    def named_signal(self, name: str) -> np.ndarray:
+        """Signal ``u``, ``y`` or ``r``, or channel ``name``: the samples of one named input or output."""
+        x = getattr(self, name) if name in SIGNALS else self.channels.get(name)
+        if x is None:
+            if name == "y":
+                raise InputError(self.run_id, MISSING_Y)
+            raise InputError(self.run_id, f"run has no signal or channel '{name}'")
+        return x
+
+    def input_matrix(self) -> np.ndarray:
+        """The inputs as an (n_inputs, n) array, row i the samples of ``inputs[i]``."""
+        return np.stack([self.named_signal(name) for name in self.inputs])
+
+    def output_matrix(self) -> np.ndarray:
+        """The outputs as an (n_outputs, n) array, row i the samples of ``outputs[i]``."""
+        return np.stack([self.named_signal(name) for name in self.outputs])
+
     def attrs(self) -> dict[str, Any]:
         """The run's attributes as written to a file (the inverse of :func:`parse_run_attrs`)."""
         out: dict[str, Any] = {"fs": float(self.fs), "kind": self.kind}
@@ -87,6 +118,9 @@ class Run:
             out["excited_bins"] = np.asarray(self.excited_bins, dtype=np.int64)
         if self.params:
             out["params"] = json.dumps(self.params, sort_keys=True)
+        for key, default in IO_DEFAULTS.items():
+            if tuple(getattr(self, key)) != default:
+                out[key] = list(getattr(self, key))
         return out
 
 
@@ -161,7 +195,43 @@ def parse_run_attrs(run_id: str, attrs: Mapping, where: str) -> dict[str, Any]:
         raise InputError(f"{where}.frequency", f"must lie in (0, fs/2 = {fs / 2:g}) Hz, got {out['frequency']:g}")
     out["excited_bins"] = _bins(attrs, where, period, required=kind == "multisine")
     out["params"] = _params(attrs, where)
+    for key, default in IO_DEFAULTS.items():
+        out[key] = _names(attrs, key, where, default)
     return out
+
+
+def _names(attrs: Mapping, key: str, where: str, default: tuple[str, ...]) -> tuple[str, ...]:
+    """A list of signal and channel names (text, or a 1-D array of text as h5py reads it)."""
+    if key not in attrs:
+        return default
+    raw = attrs[key]
+    items = [raw] if isinstance(raw, (str, bytes)) else raw
+    try:
+        names = [_scalar(item) for item in np.asarray(items, dtype=object).reshape(-1)] \
+            if np.ndim(items) == 1 else None
+    except (TypeError, ValueError):
+        names = None
+    if not names or not all(isinstance(name, str) for name in names):
+        raise InputError(f"{where}.{key}", f"expected a non-empty list of names, e.g. {list(default) + ['x2']}, got {raw!r}")
+    return tuple(names)
+
+
+def check_io_names(inputs: tuple[str, ...], outputs: tuple[str, ...], channels: Iterable[str], where: str) -> None:
+    """Check a run's ``inputs`` and ``outputs``: ``u`` (``y``) first, then channels of the run, no
+    name twice (within or across the two lists). ``where`` names the run (``WHERE.inputs`` in messages)."""
+    channels = set(channels)
+    seen: set[str] = set()
+    for key, names in (("inputs", inputs), ("outputs", outputs)):
+        first = IO_DEFAULTS[key][0]
+        if names[0] != first:
+            raise InputError(f"{where}.{key}", f"the first of the {key} must be {first!r}, got {list(names)}")
+        for name in names:
+            if name in seen:
+                raise InputError(f"{where}.{key}", f"{name!r} is named twice among the inputs and outputs {list(inputs) + list(outputs)}")
+            seen.add(name)
+            if name != first and name not in channels:
+                found = ", ".join(sorted(channels)) or "none"
+                raise InputError(f"{where}.{key}", f"{name!r} is not a channel of the run (channels: {found})")
 
 
 def _bins(attrs: Mapping, where: str, period: int | None, required: bool) -> np.ndarray | None:
@@ -265,6 +335,7 @@ def make_run(
 
     Each channel (errors name ``WHERE/channels/NAME``) must have a valid name and be a 1-D real
     array of finite numbers as long as u; this is the one check of channels for every format.
+    The attributes ``inputs`` and ``outputs`` must name u (y) and then channels of the run.
     """
     kw = parse_run_attrs(run_id, attrs, where)
     if "u" not in signals:
@@ -280,4 +351,5 @@ def make_run(
         checked[name] = validate_signal(x, at)
         if checked[name].shape[0] != arrays["u"].shape[0]:
             raise InputError(at, f"channel has {checked[name].shape[0]} samples, u has {arrays['u'].shape[0]}")
+    check_io_names(kw["inputs"], kw["outputs"], checked, where)
     return Run(**kw, **arrays, units=dict(units or {}), channels=checked)

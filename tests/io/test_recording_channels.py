@@ -132,10 +132,10 @@ def test_version_1_hdf5_reads_unchanged(tmp_path, run_cli):
 
 
 def test_newer_version_is_refused_in_one_line(tmp_path, run_cli):
-    _v1_hdf5(tmp_path / "v3.h5", version=3)
-    run_cli("info", tmp_path / "v3.h5").assert_one_line_error("v3.h5", "nlsid_format_version is 3, expected 1 or 2")
-    _write_mcap(tmp_path / "v3.mcap", "3", {"u": np.ones(64)})
-    run_cli("info", tmp_path / "v3.mcap").assert_one_line_error("v3.mcap", "nlsid_format_version must be '1' or '2', got '3'")
+    _v1_hdf5(tmp_path / "v4.h5", version=4)
+    run_cli("info", tmp_path / "v4.h5").assert_one_line_error("v4.h5", "nlsid_format_version is 4, expected 1 or 2 or 3")
+    _write_mcap(tmp_path / "v4.mcap", "4", {"u": np.ones(64)})
+    run_cli("info", tmp_path / "v4.mcap").assert_one_line_error("v4.mcap", "nlsid_format_version must be '1' or '2' or '3', got '4'")
 
 
 def _write_mcap(path, version: str, signals: dict[str, np.ndarray], channels: dict[str, np.ndarray] | None = None,
