@@ -33,12 +33,35 @@ class InputError(NlsidError, ValueError):
     function, so the message reads ``where: what``. It is a ``ValueError``, as scipy's and numpy's
     errors of a bad argument are, so ``except ValueError`` in a user's script catches it.
 
+    Parameters
+    ----------
+    where : str
+        The file (with its key path or dataset), or the argument, at fault; "" for none.
+    what : str
+        What was expected and what was found.
+
+    Attributes
+    ----------
+    where, what : str
+        The two parts, each on one line: newlines and other control characters are written as
+        escapes (``\\x0a``), so a name quoted from a user's file cannot break the message's line.
+    exit_code : int
+        2, the command line's exit code of bad input (:data:`EXIT_BAD_INPUT`).
+
     Examples
     --------
     >>> from nlsid.errors import InputError
     >>> error = InputError("confidence", "expected a probability in (0, 1), got 1.5")
     >>> str(error), isinstance(error, ValueError)
     ('confidence: expected a probability in (0, 1), got 1.5', True)
+    >>> InputError("stage.h5:/runs/a\\nb", "no y").where
+    'stage.h5:/runs/a\\\\x0ab'
+    >>> import nlsid
+    >>> try:
+    ...     nlsid.design({"fs": -1.0, "multisine": {"period": 100, "band": [1.0, 10.0]}})
+    ... except nlsid.InputError as error:
+    ...     print(error.where, error.exit_code)
+    fs 2
     """
 
     def __init__(self, where: str, what: str):
