@@ -680,10 +680,33 @@ ModelConfig = Annotated[
     Union[
         TransferFunctionPlant, ZPKPlant, StateSpacePlant, MassSpringDamperConfig, TwoMassStageConfig,
         NonlinearFeedbackConfig, WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
-        EquationsConfig, PnlssConfig,
+        EquationsConfig, PnlssConfig, "HybridConfig",
     ],
     Field(discriminator="type"),
 ]
+
+
+class HybridConfig(FiniteModel):
+    """A physical model with a black-box term in parallel (``docs/configs.md``, "Hybrid";
+    ``docs/pnlss.md``): y = y_physical(u) + y_black_box(u), both driven by the same u. ``physical``
+    is any model of this language but a pnlss or hybrid one (the readable part); ``black_box`` a
+    pnlss model (its offsets and input channels its own), discrete at the runs' rate."""
+
+    type: Literal["hybrid"]
+    physical: ModelConfig
+    black_box: PnlssConfig
+
+    @field_validator("physical")
+    @classmethod
+    def _physical_part(cls, physical):
+        if physical.type in ("pnlss", "hybrid"):
+            raise ValueError(f"a {physical.type} model is not a physical part; give the physical model here (a "
+                             "transfer function, a mechanical template, a block structure, equations) and the PNLSS "
+                             "model under black_box")
+        return physical
+
+
+HybridConfig.model_rebuild()
 
 
 class PIDConfig(FiniteModel):

@@ -230,13 +230,18 @@ STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
 
 
 def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equations]:
-    """The plant, structure or equations model of a whole config."""
+    """The plant, structure or equations model of a whole config (a PNLSS model,
+    :class:`nlsid.models.pnlss.Pnlss`; a hybrid one, :class:`nlsid.models.hybrid.Hybrid`)."""
     if config.model.type == "pnlss":
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not a pnlss model")
         from nlsid.models.pnlss import build
 
         return build(config.model)
+    if config.model.type == "hybrid":  # a physical model with a PNLSS term in parallel
+        from nlsid.models.hybrid import build as build_hybrid
+
+        return build_hybrid(config)
     if config.model.type == "equations":
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not an equations model "

@@ -13,6 +13,7 @@ import dataclasses
 
 from nlsid.io.run import Run
 from nlsid.models.equations import Equations
+from nlsid.models.hybrid import Hybrid, simulate_hybrid
 from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
@@ -37,6 +38,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     noise = noise or Noise.zero(run.n_samples)
     if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
         return simulate_pnlss(model, run, substeps, noise, steady)
+    if isinstance(model, Hybrid):  # each part as measured (nlsid.models.hybrid)
+        return simulate_hybrid(model, run, substeps, noise, steady)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
         original, m = run, count * run.period
@@ -63,8 +66,8 @@ def fitted_initial_state(model: Plant | Structure | Equations, loop: ClosedLoop 
     """The initial state :func:`simulate_run` with ``steady`` fits to the start of ``run`` (an
     :class:`~nlsid.simulate.initial_state.InitialState`, in closed loop a
     :class:`~nlsid.simulate.loop_state.LoopState`), None where it fits none: a periodic run, a run
-    without a measured y, a model written as equations or a PNLSS model (their own initial states)."""
-    if run.period is not None or run.y is None or isinstance(model, (Equations, Pnlss)):
+    without a measured y, a model written as equations, a PNLSS or a hybrid model (their own initial states)."""
+    if run.period is not None or run.y is None or isinstance(model, (Equations, Pnlss, Hybrid)):
         return None
     if loop is not None:
         return estimate_loop(model, loop, run, substeps)

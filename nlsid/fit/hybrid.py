@@ -1,0 +1,118 @@
+"""Fitting the black-box term of a hybrid model (:mod:`nlsid.models.hybrid`) with its physical part
+held (derivation in ``docs/pnlss.md``, "The hybrid model").
+
+The term's target is what the physical part leaves of the measured output, the residual
+r = y - y_p on the estimation runs (:func:`residual_run`). It starts from a PNLSS model already
+fitted to the same data as a whole (the diagnosis' yardstick), whose state equation
+(A, B, E; Cz, Dz of the LFR form) is kept: its state trajectory x[t] on the recorded u does not
+depend on the output equation, in which
+
+    r[t] ~ C x[t] + D u[t] + F eta(x[t], u[t]) + c
+
+is linear in (C, D, F, c), so the output equation that fits r best along that trajectory is the
+solution of a linear least-squares problem (:func:`output_equation`). From there every coefficient
+is refined by :func:`nlsid.fit.pnlss.fit_pnlss` on r (the physical parameters stay as they are:
+the readable part is not moved by the black box).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Sequence
+
+import numpy as np
+
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+from nlsid.models.pnlss import Pnlss
+
+
+def residual_run(run: Run, physical: np.ndarray) -> Run:
+    """``run`` with its measured y replaced by y - ``physical`` (the physical part's output on it,
+    as long as y): the signal the black-box term is fitted to."""
+    if run.y is None:
+        raise InputError(f"run {run.run_id}", "has no measured output y")
+    physical = np.asarray(physical, dtype=float)
+    if physical.shape != run.y.shape:
+        raise InputError(f"run {run.run_id}", f"the physical part's output has {physical.size} samples, the run "
+                                              f"{run.y.size}")
+    return dataclasses.replace(run, y=np.asarray(run.y, dtype=float) - physical)
+
+
+def output_monomials(model: Pnlss, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """eta(v[t]) for every sample (rows) and monomial of the output equation (columns, in the
+    order of ``model.output_exponents``), v = M x + N u the monomials' variables
+    (:meth:`Pnlss.mixing`); ``u`` the input as the kernels drive the model (its offset added)."""
+    M, N = model.mixing()
+    v = x @ np.asarray(M, dtype=float).T + np.outer(u, N)
+    out = np.ones((x.shape[0], model.output_exponents.shape[0]))
+    for k, row in enumerate(model.output_exponents):
+        for j in np.flatnonzero(row):
+            out[:, k] *= v[:, j] ** int(row[j])
+    return out
+
+
+def _trajectory(model: Pnlss, record) -> tuple[np.ndarray, np.ndarray, int]:
+    """(x, u, first): the states and driven input over ``record`` simulated from rest (a periodic
+    record in steady state: its lead-in dropped), and the first sample of them the least squares
+    use (an arbitrary record's start, where the trajectory from rest has not forgotten the unknown
+    initial state, is left out: :func:`nlsid.simulate.pnlss_runs.transient_samples`, at most half
+    the record)."""
+    from nlsid.simulate.pnlss_kernels import states
+    from nlsid.simulate.pnlss_runs import driven_input, transient_samples
+
+    u, lead = driven_input(model, record)
+    x = np.zeros((u.size, model.order))
+    states(*model.kernel_matrices(), u, np.zeros(model.order), x)
+    first = transient_samples(model, record.y.size // 2) if record.arbitrary else 0
+    return x[lead:], u[lead:], first
+
+
+def output_equation(model: Pnlss, runs: Sequence[Run], where: str = "estimation") -> tuple[Pnlss, float]:
+    """``model`` with its output equation (C, D, F and the output offset c) fitted to the runs'
+    measured y by linear least squares along its state trajectory (module docstring); A, B, E (and
+    Cz, Dz) kept. A periodic run counts by its mean steady period, weighted by its periods (the
+    cost of every period: :mod:`nlsid.simulate.pnlss_runs`). Returns the model and the rms of its
+    error over the samples fitted.
+
+    The columns [x, u, eta, 1] are scaled to unit norm before the solve (its conditioning is then
+    that of the signals' correlations, not of their sizes). Raises InputError if the state
+    trajectory is not finite (the state equation diverges on these inputs)."""
+    from nlsid.simulate.pnlss_runs import records
+
+    rows, targets = [], []
+    for record in records(runs, where):
+        x, u, first = _trajectory(model, record)
+        if not np.all(np.isfinite(x)):
+            raise InputError(f"{where}: run {record.run_id}", "the black box's state equation diverges on its input")
+        weight = math.sqrt(record.weight)
+        rows.append(weight * np.hstack([x, u[:, None], output_monomials(model, x, u), np.ones((u.size, 1))])[first:])
+        targets.append(weight * record.y[first:])
+    Phi, r = np.vstack(rows), np.concatenate(targets)
+    scale = np.linalg.norm(Phi, axis=0)
+    scale[~(scale > 0)] = 1.0
+    theta = np.linalg.lstsq(Phi / scale, r, rcond=None)[0] / scale
+    n = model.order
+    fitted = model.replace(C=theta[:n].copy(), D=float(theta[n]), F=theta[n + 1:-1].copy(),
+                           output_offset=float(theta[-1]))
+    error = Phi @ theta - r
+    return fitted, float(math.sqrt(error @ error / max(r.size, 1)))
+
+
+def fit_black_box(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run] = (), max_iterations: int = 100,
+                  patience: int = 15):
+    """The black-box term fitted to the residual runs ``estimation`` (:func:`residual_run`; early
+    stopping on ``validation``, residual runs too): its output equation from ``start`` by
+    :func:`output_equation`, then every coefficient by :func:`nlsid.fit.pnlss.fit_pnlss` (no
+    separate linear stage: the start is a whole model). Returns the
+    :class:`nlsid.fit.pnlss.PnlssFit`, its first note the start's least-squares error."""
+    from nlsid.fit.pnlss import fit_pnlss
+
+    begun, rms = output_equation(start, estimation)
+    fit = fit_pnlss(begun, estimation, validation, max_iterations=max_iterations, linear_iterations=0,
+                    patience=patience)
+    fit.notes.insert(0, f"started from the state equation (A, B, E) of a PNLSS model fitted to the whole output, "
+                        f"its output equation (C, D, F, offset) fitted to the residual by linear least squares "
+                        f"(rms {rms:.6g} on the estimation runs)")
+    return fit
