@@ -29,7 +29,10 @@ Around a transfer function model (``end_stops_feedback``): y = G (u - F(p, v)), 
 ``nonlinear_feedback`` with an ``end_stop`` force (gain 1: ks in input units per output unit, cs
 per output unit per second) and G's coefficients refined with it
 (:mod:`~nlsid.diagnose.hypotheses.velocity_feedback`). The stops read the position, so the model's
-output must be one (a G from force to position of relative degree >= 2, or its ZOH equivalent's);
+output must be one (a G from force to position of relative degree >= 2, or its ZOH equivalent's;
+where a discrete G's equivalent has relative degree 1, its numerator's leading term dropped,
+:func:`velocity_feedback.degree_two`: around G(z) itself the stops stopped 34 dB above the floor
+on the tests' record fitted in z, with the term dropped 0.8 dB, as from a continuous fit);
 the signature is the template's with the position and velocity along the model's trajectory and
 the force's responses G (-F), and a linear spring c y regressed with the stop, the linear part
 started at G / (1 + c G): a G fitted to the data holds part of the stops' stiffness (on the tests'
@@ -192,7 +195,7 @@ def _estimate_feedback(ctx: Context) -> Estimate | str:
     """Start values around a transfer function (module docstring): the template's, the forces'
     responses those of the model at its input (gain 1), with a linear spring c regressed with the
     stop and the linear part started at G / (1 + c G)."""
-    found = velocity_feedback.reading(ctx)
+    found = velocity_feedback.reading(ctx, accelerates=True)
     if isinstance(found, str):
         return found
     chosen, notes = found
