@@ -62,6 +62,33 @@ class BlaResult:
         Probability of the confidence bounds.
     source : str
         Where the runs came from (a path, or ``"recording"``).
+    inputs : list of str
+        The recording file behind the result, if any (the provenance of :meth:`write`).
+
+    Examples
+    --------
+    The BLA of a mass-spring-damper, excited by four realizations of two periods at one level:
+
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 200.0, "seed": 1, "multisine": {"period": 200, "band": [1.0, 40.0],
+    ...                     "realizations": 4, "periods": 2, "transient_periods": 3, "rms_levels": [1.0]}})
+    >>> plant = nlsid.Model.from_dict({"model": {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0,
+    ...                                          "stiffness": 2000.0}, "disturbances": {"y_noise": 1e-6, "seed": 3}})
+    >>> b = nlsid.bla(plant.simulate(exc))
+    >>> len(b.levels), b.lpm_levels, b.confidence, b.source
+    (1, [], 0.95, 'recording')
+    >>> row = b.summary()["levels"][0]
+    >>> row["realizations"], row["periods"], row["excited_lines"] == len(exc.design["multisine"]["excited_bins"])
+    (4, 2, True)
+    >>> bool(np.array_equal(b.frequency, np.array(exc.design["multisine"]["excited_bins"]) * 200.0 / 200))
+    True
+    >>> b.G.shape == b.frequency.shape == b.levels[0].robust.var_noise.shape
+    True
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     print(b.write(os.path.join(folder, "bla.h5")).name)
+    bla.h5
     """
 
     levels: list[LevelResult]
@@ -204,6 +231,36 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     ------
     nlsid.InputError
         A bad argument (named), or runs the methods cannot take (the message says why).
+
+    Examples
+    --------
+    A linear plant's BLA is its frequency response: here that of the mass-spring-damper
+    1/(m s^2 + c s + k) seen through the zero-order hold, as it is simulated (and sampled on a
+    machine). Three transient periods let its slowest mode (decay rate c/2m = 5/s) die out to
+    e^-15. The output noise sigma = 1e-6 then is the only error: a multisine of rms a on F lines
+    has |U(k)| = N a / sqrt(2 F) in an N-sample DFT, so each of the M P period ratios Y/U has
+    noise variance 2 F sigma^2 / (N a^2), and their mean 1/(M P) of it. A complex Gaussian error
+    exceeds five of its standard deviations with probability exp(-25):
+
+    >>> import numpy as np
+    >>> from scipy import signal
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 200.0, "seed": 1, "multisine": {"period": 200, "band": [1.0, 40.0],
+    ...                     "realizations": 4, "periods": 2, "transient_periods": 3, "rms_levels": [1.0]}})
+    >>> plant = nlsid.Model.from_dict({"model": {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0,
+    ...                                          "stiffness": 2000.0}, "disturbances": {"y_noise": 1e-6, "seed": 3}})
+    >>> b = nlsid.bla(plant.simulate(exc))
+    >>> num, den, _ = signal.cont2discrete(([1.0], [2.0, 20.0, 2000.0]), 1 / 200.0)  # 1/(m s^2 + c s + k)
+    >>> G = signal.freqz(num.ravel(), den, worN=b.frequency, fs=200.0)[1]
+    >>> F, N, M, P = len(b.frequency), 200, 4, 2
+    >>> std = np.sqrt(2 * F * 1e-6**2 / (N * 1.0**2) / (M * P))
+    >>> bool(np.all(np.abs(b.G - G) < 5 * std))
+    True
+    >>> try:
+    ...     nlsid.bla(exc)  # an excitation has no measured y
+    ... except nlsid.InputError as error:
+    ...     print(error)
+    ms_l00_m00: run has no signal 'y'
     """
     from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
     from nlsid.io.units import common_units

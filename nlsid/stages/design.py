@@ -38,6 +38,28 @@ class Excitation(Recording):
         Tool, version and the config file with its SHA-256 (no config file for a dict).
     path : None
         No file holds the runs until :meth:`write`.
+
+    Examples
+    --------
+    Two realizations of a multisine and a grid of two sines; each run lasts its
+    ``transient_periods + periods`` periods, which the duration adds up:
+
+    >>> import os, tempfile
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 100.0, "seed": 1,
+    ...                     "multisine": {"period": 100, "band": [1.0, 20.0], "realizations": 2, "periods": 2,
+    ...                                   "transient_periods": 1, "rms_levels": [0.5]},
+    ...                     "sines": {"period": 100, "frequencies": [2.0, 5.0], "amplitudes": [1.0], "repeats": 1,
+    ...                               "periods": 2, "transient_periods": 1}})
+    >>> isinstance(exc, nlsid.Recording), exc.run_ids
+    (True, ['ms_l00_m00', 'ms_l00_m01', 'sine_f000_a00_r00', 'sine_f001_a00_r00'])
+    >>> exc.design["runs"], exc.design["duration_s"] == 4 * (1 + 2) * 100 / 100.0
+    (4, True)
+    >>> exc.design["sines"]["frequencies"], exc.signals, exc.path
+    ([2.0, 5.0], ['u'], None)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     print(len(nlsid.read(exc.write(os.path.join(folder, "excitation.h5")))))
+    4
     """
 
     design: dict = field(default_factory=dict)

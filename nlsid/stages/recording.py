@@ -62,6 +62,7 @@ class Recording:
 
     @property
     def run_ids(self) -> list[str]:
+        """The runs' ids, in order."""
         return [run.run_id for run in self.runs]
 
     @property
@@ -144,6 +145,29 @@ def read(path: str | os.PathLike, mapping: Mapping[str, str] | None = None, requ
     ------
     nlsid.InputError
         The file is missing, not a recording, or a run breaks the format (the message names it).
+
+    Examples
+    --------
+    A designed excitation written and read back (``sample_data/stage.h5`` reads alike):
+
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 100.0, "seed": 1, "multisine": {"period": 100, "band": [1.0, 20.0],
+    ...                                                            "realizations": 2, "periods": 2,
+    ...                                                            "rms_levels": [1.0]}})
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     rec = nlsid.read(exc.write(os.path.join(folder, "excitation.h5")))
+    ...     print(rec.path.endswith("excitation.h5"), rec.run_ids, rec.fs, rec.signals)
+    True ['ms_l00_m00', 'ms_l00_m01'] 100.0 ['u']
+    >>> run = rec["ms_l00_m01"]
+    >>> run.kind, run.period, run.n_periods, bool(np.array_equal(run.u, exc[1].u))
+    ('multisine', 100, 2, True)
+    >>> try:
+    ...     nlsid.read("no_such_file.h5")
+    ... except nlsid.InputError as error:
+    ...     print(error.where)
+    no_such_file.h5
     """
     from nlsid.io.recording import open_recording
 
