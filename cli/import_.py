@@ -19,6 +19,10 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @click.option("--channel", "channels", metavar="NAME=SOURCE", multiple=True,
               help="A further measured channel NAME (e.g. d, a force the rig injects), from SOURCE named like --u "
                    "(column, variable, dataset or /topic:field). Repeat per channel.")
+@click.option("--inputs", "inputs", metavar="NAMES", help="The inputs of a system with several, comma-separated names in the "
+              "recording: u, then --channel names (e.g. u,u2). Default: u.")
+@click.option("--outputs", "outputs", metavar="NAMES", help="The outputs of a system with several, comma-separated names in the "
+              "recording: y, then --channel names (e.g. y,acc_1,acc_2). Default: y.")
 @click.option("--time", "time", metavar="NAME", help="Time vector in seconds (CSV, MAT, HDF5; a CSV header may say ms, us, ns or min: `time (ms)`); "
                                                           "fs is derived and checked uniform.")
 @click.option("--fs", type=click.FloatRange(min=0, min_open=True), help="Sample rate in Hz (overrides time vectors, CSV sample-rate columns and MCAP log times).")
@@ -41,7 +45,7 @@ from .common import StageCommand, emit_json, force_option, json_option, settings
 @force_option
 @json_option
 def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None, r: str | None, channels: tuple[str, ...],
-            time: str | None, fs: float | None,
+            inputs: str | None, outputs: str | None, time: str | None, fs: float | None,
             period: int | None, transient_periods: int, split: bool, layout: str, units: tuple[str, ...],
             crop: str | None, decimate: int, skip_rows: int | None, fmt: str | None, force: bool, as_json: bool) -> None:
     """Import measured data from CSV/TSV, MATLAB .mat, plain HDF5 or foreign MCAP files.
@@ -62,6 +66,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
       nlsid import old_toolbox.mat --u data.u --y data.y --fs 2048 -o recording.h5
       nlsid import log.mcap --u /cmd:effort --y /joint_states:position -o recording.h5
       nlsid import rig.csv --u u --y y --channel d=force -o recording.h5
+      nlsid import gvt.csv --u F --y A1 --channel a2=A2 --channel a3=A3 --outputs y,a2,a3 -o recording.h5
       nlsid import uval.mat yval.mat --fs 610.35 -o recording.h5
     """
     from nlsid.io.atomic import RECORDING_SUFFIXES, check_suffix, check_writable
@@ -75,7 +80,8 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
     names = {key: value for key, value in (("u", u), ("y", y), ("r", r)) if value is not None}
     options = ImportOptions(names=names, channels=_channels(channels), time=time, fs=fs, period=period, transient_periods=transient_periods,
                             split=split, layout=layout, format=fmt, units=_pairs(units, "--unit", "UNIT", "u=N"),
-                            crop=parse_range(crop, "--range"), decimate=decimate, skip_rows=skip_rows)
+                            crop=parse_range(crop, "--range"), decimate=decimate, skip_rows=skip_rows,
+                            inputs=_names(inputs, "--inputs", "u"), outputs=_names(outputs, "--outputs", "y"))
     imported = import_file(list(sources), options)
     record = provenance(input_paths=list(sources))
     record["import"] = provenance_record(imported, options)
@@ -84,6 +90,7 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
         "output": output, "source": sources[0], "sources": list(sources), "format": imported.source.format, "fs": imported.fs,
         "fs_from": imported.fs_from, "signals": sorted(set(imported.source.arrays) & {"u", "y", "r"}),
         "channels": sorted({name for run in imported.runs for name in run.channels}), "records": imported.records,
+        "inputs": list(options.inputs), "outputs": list(options.outputs),
         "runs": len(imported.runs), "run_ids": [run.run_id for run in imported.runs],
         "notes": imported.notes, "units": _run_units(imported.runs),
         **_csv_layout(imported.sources or [imported.source]),
@@ -92,6 +99,16 @@ def import_(sources: tuple[str, ...], output: str, u: str | None, y: str | None,
         emit_json(summary)
     else:
         _print(summary)
+
+
+def _names(text: str | None, option: str, first: str) -> tuple[str, ...]:
+    """``--inputs u,u2`` as ``("u", "u2")``; ``(first,)`` when not given (the importer checks the names)."""
+    if text is None:
+        return (first,)
+    names = tuple(name.strip() for name in text.split(","))
+    if not all(names):
+        raise InputError(option, f"expected comma-separated names such as {first},{first}2, got {text!r}")
+    return names
 
 
 def _channels(items: tuple[str, ...]) -> dict[str, str]:

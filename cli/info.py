@@ -16,7 +16,8 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     """Check a recording (HDF5 or MCAP) against the format, list its runs and the stages it can feed.
 
     Every run is read and validated, so a zero exit code means every later stage can read it.
-    Each run's signals (u, y, r) and further measured channels are listed.
+    Each run's signals (u, y, r) and further measured channels are listed, and, when some run has
+    several, the inputs and outputs of each run.
     Each stage that reads recordings (bla, hosidf, diagnose, fit --model, simulate --excitation)
     is then checked with the stage's own checks: whether the file can feed it, the stage's error
     when not, and notes on what depends on options (for the default options).
@@ -43,6 +44,7 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
                 "excited_lines": None if run.excited_bins is None else int(run.excited_bins.size),
                 "signals": [name for name in ("u", "y", "r") if getattr(run, name) is not None],
                 "channels": sorted(run.channels), "params": run.params,
+                "inputs": list(run.inputs), "outputs": list(run.outputs),
             })
     stages = {stage: verdict.summary() for stage, verdict in survey.verdicts().items()}
     if as_json:
@@ -58,11 +60,17 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
     channels = any(row["channels"] for row in runs)
     if channels:
         table.add_column("channels", overflow="fold")  # names in full, one a line
+    mimo = any(len(row["inputs"]) > 1 or len(row["outputs"]) > 1 for row in runs)
+    if mimo:
+        table.add_column("inputs", overflow="fold")
+        table.add_column("outputs", overflow="fold")
     for row in runs:
         cells = [Text(_cell(row[c])) for c in ("run", "kind", "fs", "period", "periods", "level", "frequency")]
         cells.append(",".join(row["signals"]))
         if channels:
             cells.append(Text("\n".join(row["channels"]) or "-"))
+        if mimo:
+            cells += [Text("\n".join(row["inputs"])), Text("\n".join(row["outputs"]))]  # one a line
         table.add_row(*cells)
     console = settings().console
     console.print(table)

@@ -22,7 +22,7 @@ from nlsid.feeds import BlaRuns, sine_bin
 from nlsid.importers.several import SAME_RATE_TOL, distinct_paths, merge, spread, unique_stems
 from nlsid.importers.source import LAYOUTS, Record, Source, records_of
 from nlsid.io.ranges import SampleRange
-from nlsid.io.run import CHANNEL_KEY, Run, check_channel_name, make_run
+from nlsid.io.run import CHANNEL_KEY, IO_DEFAULTS, Run, check_channel_name, check_names, make_run
 from nlsid.signals.inference import Inference, infer_excitation
 
 FORMATS = ("csv", "mat", "hdf5", "mcap")
@@ -39,7 +39,9 @@ class ImportOptions:
     name in the file (like ``names`` of u, y, r); ``units``: signal or channel name -> its unit
     (overrides a unit the file gives); ``crop``: the samples of each source record kept (before
     decimation); ``decimate``: keep every K-th sample after an anti-alias filter
-    (:mod:`nlsid.importers.resample`); ``skip_rows``: lines above a CSV header (None: found)."""
+    (:mod:`nlsid.importers.resample`); ``skip_rows``: lines above a CSV header (None: found);
+    ``inputs`` and ``outputs``: the names of the system's inputs and outputs in the recording
+    (u, y first, then channels), set on every run."""
 
     names: dict[str, str]
     channels: dict[str, str] = field(default_factory=dict)
@@ -54,6 +56,8 @@ class ImportOptions:
     crop: SampleRange | None = None
     decimate: int = 1
     skip_rows: int | None = None
+    inputs: tuple[str, ...] = IO_DEFAULTS["inputs"]
+    outputs: tuple[str, ...] = IO_DEFAULTS["outputs"]
 
 
 @dataclass
@@ -192,7 +196,19 @@ def import_file(path: str | Path | Sequence[str | Path], options: ImportOptions)
         out.runs.extend(runs)
         out.records.append({"record": record.name, "inferred_from": driver, "inference": inference.report(),
                             "runs": [run.run_id for run in runs]})
+    for run in out.runs:
+        _declare_inputs_outputs(run, options)
     return out
+
+
+def _declare_inputs_outputs(run: Run, options: ImportOptions) -> None:
+    """Set ``options.inputs`` and ``options.outputs`` on ``run``: u (y) first, then channels of the
+    run, each once (an InputError names ``--inputs`` or ``--outputs``)."""
+    seen: set[str] = set()
+    for key in IO_DEFAULTS:
+        names = tuple(getattr(options, key))
+        check_names(key, names, set(run.channels), seen, f"--{key} {','.join(names)}")
+        setattr(run, key, names)
 
 
 def _read_records(paths: list[Path], options: ImportOptions) -> tuple[Imported, list[Record], dict[str, str]]:
@@ -384,6 +400,9 @@ def describe_overrides(options: ImportOptions) -> dict:
         out["decimate"] = options.decimate
     if options.skip_rows is not None:
         out["skip_rows"] = options.skip_rows
+    for key, default in IO_DEFAULTS.items():
+        if tuple(getattr(options, key)) != default:
+            out[key] = list(getattr(options, key))
     return out
 
 

@@ -7,7 +7,8 @@
   channel per record, ``NAME_0``, ``NAME_1``, ... (:func:`matrix_channels`).
 - Signals whose matrices differ in shape do not pair into records: they are refused with the
   ``NAME[i]`` options that pick one record (:func:`check_pairing`); a matrix as u, y or r beside
-  signals of another shape would be several inputs or outputs, which a recording does not hold.
+  signals of another shape would be several inputs or outputs: u or y and channels, named with
+  ``--inputs``/``--outputs``.
 - Every other variable of the file is surveyed (:func:`survey`): one named as a sample rate or
   interval (:data:`nlsid.importers.source.RATE_NAME`, ``INTERVAL_NAME``) is a rate variable of
   the source; numeric scalars are kept to be listed when no sample rate is found; the rest, and the
@@ -121,7 +122,8 @@ def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarra
     """Refuse signals that are matrices of several records unless every signal has the same shape
     (records side by side); say how to pick one record of each matrix with ``NAME[i]``, or to
     import it as channels. A matrix given as u, y or r beside signals of another shape would be
-    several inputs or outputs (MIMO), which the recordings do not hold."""
+    several inputs or outputs (MIMO): one record as u or y, the others as channels listed with
+    ``--inputs``/``--outputs``."""
     shapes = {}
     for key, value in values.items():
         if key == "time":
@@ -138,7 +140,8 @@ def check_pairing(path: Path, names: dict[str, str], values: dict[str, np.ndarra
     single = {key: all(shapes[k][0] == 1 for k in ("u", "y", "r") if k in shapes and k != key) for key in shapes}
     hints = [_pick_hint(key, names[key], records, single[key]) for key, (records, _) in shapes.items() if records > 1]
     mimo = [option(key, names[key]) for key, (records, _) in shapes.items() if records > 1 and key in ("u", "y", "r")]
-    why = (f"{' and '.join(mimo)}: several inputs or outputs (MIMO) are not supported yet; " if mimo else "")
+    why = (f"{' and '.join(mimo)}: several inputs or outputs (MIMO) are u or y and channels, listed with "
+           "--inputs u,NAME,... or --outputs y,NAME,...; " if mimo else "")
     raise InputError(str(path), f"matrices of inconsistent size: {detail}; {why}name one record (from 0, across the "
                                 f"shorter axis) of a matrix: {'; '.join(hints)}")
 

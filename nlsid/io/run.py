@@ -222,16 +222,23 @@ def check_io_names(inputs: tuple[str, ...], outputs: tuple[str, ...], channels: 
     channels = set(channels)
     seen: set[str] = set()
     for key, names in (("inputs", inputs), ("outputs", outputs)):
-        first = IO_DEFAULTS[key][0]
-        if names[0] != first:
-            raise InputError(f"{where}.{key}", f"the first of the {key} must be {first!r}, got {list(names)}")
-        for name in names:
-            if name in seen:
-                raise InputError(f"{where}.{key}", f"{name!r} is named twice among the inputs and outputs {list(inputs) + list(outputs)}")
-            seen.add(name)
-            if name != first and name not in channels:
-                found = ", ".join(sorted(channels)) or "none"
-                raise InputError(f"{where}.{key}", f"{name!r} is not a channel of the run (channels: {found})")
+        check_names(key, names, channels, seen, f"{where}.{key}")
+
+
+def check_names(key: str, names: tuple[str, ...], channels: set[str], seen: set[str], where: str) -> None:
+    """Check the list ``key`` (``inputs`` or ``outputs``) of names: ``u`` (``y``) first, then
+    ``channels``, none of ``seen`` (the names of the other list, checked first), which it extends.
+    Errors name ``where`` (a run's attribute, or an option)."""
+    first = IO_DEFAULTS[key][0]
+    if not names or names[0] != first:
+        raise InputError(where, f"the first of the {key} must be {first!r}, got {list(names)}")
+    for name in names:
+        if name in seen:
+            raise InputError(where, f"{name!r} is named twice among the inputs and outputs")
+        seen.add(name)
+        if name != first and name not in channels:
+            found = ", ".join(sorted(channels)) or "none"
+            raise InputError(where, f"{name!r} is not a channel of the run (channels: {found})")
 
 
 def _bins(attrs: Mapping, where: str, period: int | None, required: bool) -> np.ndarray | None:

@@ -236,7 +236,7 @@ def test_matrix_signal_with_a_vector_input_is_refused_with_the_choice(run_cli, t
     result = run_cli("import", source, "--u", "Force", "--y", "Acceleration", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, "matrices of inconsistent size",
                    f"bench.mat:Force is {N} samples x 1 record(s)", f"bench.mat:Acceleration is {N} samples x 3 record(s)",
-                   "--y Acceleration: several inputs or outputs (MIMO) are not supported yet",
+                   "--y Acceleration: several inputs or outputs (MIMO) are u or y and channels, listed with --inputs",
                    "all of them as channels Acceleration_0 .. Acceleration_2: --channel Acceleration=Acceleration",
                    "--y Acceleration[0]", "--channel Acceleration_1=Acceleration[1]",
                    "--channel Acceleration_2=Acceleration[2]")

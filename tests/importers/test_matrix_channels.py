@@ -3,8 +3,9 @@
 A benchmark's ``Acceleration`` of 3 x N (three sensors) beside a vector ``Force`` is imported with
 ``--channel acc=Acceleration`` as the channels ``acc_0``, ``acc_1``, ``acc_2`` (record i as
 ``Acceleration[i]`` picks it: the slice across the shorter axis, so an N x 3 matrix gives its
-columns). Given as u or y, the same matrix would be several inputs or outputs (MIMO), which a
-recording does not hold: refused in one line that names its shape and both ways out.
+columns). Given as u or y, the same matrix would be several inputs or outputs (MIMO), which are u
+or y and channels named with --inputs/--outputs: refused in one line that names its shape and the
+ways out.
 
 Every file is written here (scipy.io.savemat, h5py); the signals are white noise, so each record is
 one ``arbitrary`` run holding every sample unchanged: each channel must equal the matrix record the
@@ -88,7 +89,7 @@ def test_a_matrix_as_input_or_output_is_refused_naming_the_ways_out(run_cli, tmp
     other = "--y" if option == "--u" else "--u"
     result = run_cli("import", source, option, "Acceleration", other, "Force", "-o", tmp_path / "rec.h5")
     assert_refused(result, tmp_path, source, f"Acceleration is {N} samples x 3 record(s)",
-                   f"{option} Acceleration: several inputs or outputs (MIMO) are not supported yet",
+                   f"{option} Acceleration: several inputs or outputs (MIMO) are u or y and channels, listed with --inputs",
                    f"{option} Acceleration[0] (records 0..2",
                    "all of them as channels Acceleration_0 .. Acceleration_2: --channel Acceleration=Acceleration")
 
