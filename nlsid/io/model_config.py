@@ -492,10 +492,13 @@ class TwoMassStageConfig(_PlantBlocks):
 
 class ForcePoint(FiniteModel):
     """A point of a ``nonlinear_feedback``'s continuous ``state_space`` where a force may act: it
-    enters x' = ... - force F and reads the position ``position`` . x (a modal coordinate)."""
+    enters x' = ... - force F and reads the position ``position`` . x (a modal coordinate), and
+    reaches the output directly by y = ... - feedthrough F (an acceleration output: the force
+    accelerates the coordinate the output reads)."""
 
     force: list[float] = Field(min_length=1)
     position: list[float] = Field(min_length=1)
+    feedthrough: float = 0.0
 
 
 class NonlinearFeedbackConfig(_PlantBlocks):

@@ -40,6 +40,7 @@ class Force:
     column: np.ndarray
     row: np.ndarray
     difference: bool = False  # the row is a backward difference per sample (times fs: a velocity)
+    output: float = 0.0  # its direct term in the output, y = ... - output F (an acceleration output)
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,18 @@ def _mechanical(config, where: str) -> MechanicalPlant:
         if config.points and (config.linear.type != "state_space" or G.discrete):
             raise InputError(f"{where}.points", "needs a continuous state_space linear part (the points are given "
                                                 "in its state coordinates)")
-        points = {name: (p.force, p.position) for name, p in config.points.items()}
+        if G.D != 0:  # an acceleration output: no force where u enters (mechanical.py)
+            if not config.points:
+                raise InputError(f"{where}.linear", "the linear part must be strictly proper (D = 0), or with its "
+                                                    "direct feedthrough (an acceleration output) have its forces at "
+                                                    "points (model.points)")
+            for i, force in enumerate(config.nonlinearities):
+                if (force.at or "plant") == "plant":
+                    raise InputError(f"{where}.nonlinearities[{i}].at",
+                                     "the linear part has a direct feedthrough D: a force where u enters would reach "
+                                     "the output through D in the instant it is read; expected one of the points "
+                                     f"({', '.join(config.points)})")
+        points = {name: (p.force, p.position, p.feedthrough) for name, p in config.points.items()}
         return with_points(plant, G.A, points, where) if points else plant
     if config.type == "mass_spring_damper":
         return mass_spring_damper(config.mass, config.damping, config.stiffness, config.gain, config.output,
@@ -156,7 +168,8 @@ def _force(config, plant: MechanicalPlant, where: str) -> Force:
     if at not in rows:
         raise InputError(where, f"a {config.type} force reads the velocity, which "
                          + (plant.no_velocity or "needs a linear part of relative degree >= 2 (force to position; C B = 0)"))
-    return Force(kind, params, plant.force_columns[at], rows[at], plant.difference and not position)
+    return Force(kind, params, plant.force_columns[at], rows[at], plant.difference and not position,
+                 plant.force_outputs.get(at, 0.0))
 
 
 def _offsets(config) -> Offsets:

@@ -40,6 +40,14 @@ Inside a continuous state space further points may be named (:func:`with_points`
 point j enters along its own column b_j and reads its own row c_j, x' = A x + B (gain u - F) -
 b_j F_j, p_j = c_j x, v_j = c_j A x where c_j b_j = 0 (a modal coordinate of a modal realisation,
 a relative deflection), while the output stays C x.
+
+An acceleration output (a structure driven by a force, its accelerations measured) has relative
+degree 0: G(s) = C (sI - A)^-1 B + D. Such a G is taken (continuous, ``output: position``, the
+output y = C x + D gain u) where its forces act at points only: a force where u enters would
+reach the output through D in the instant the output is read, an algebraic loop for a force read
+from that output. A force at a point may reach the output directly as well, y = C x + D gain u -
+sum_j d_j F_j (its feedthrough d_j: the acceleration it gives the coordinate the output reads,
+:mod:`nlsid.diagnose.hypotheses.modal_joint`).
 """
 
 from __future__ import annotations
@@ -63,6 +71,7 @@ class MechanicalPlant:
     velocity_rows: dict[str, np.ndarray] = field(default_factory=dict)   # mass -> v = row . x
     difference: bool = False  # velocity rows are backward differences per sample (times fs: a velocity)
     no_velocity: str = ""     # why there is no velocity read-out (when velocity_rows is empty)
+    force_outputs: dict[str, float] = field(default_factory=dict)  # mass -> d: the output gets - d F directly
 
     @property
     def masses(self) -> list[str]:
@@ -115,11 +124,15 @@ def two_mass_stage(motor_mass: float, load_mass: float, stiffness: float, dampin
 
 
 def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:
-    """Forces fed back around a strictly proper G from force to position (module docstring)."""
+    """Forces fed back around a G from force to position (module docstring): strictly proper, or
+    continuous with a feedthrough D and a position output (an acceleration output, its forces at
+    points: the caller sees to that)."""
     if G.delay:
         raise InputError(f"{where}.linear.delay", f"put the actuator dead time on {where}.delay")
-    if G.D != 0 or G.order == 0:
-        raise InputError(f"{where}.linear", "the linear part (force to position) must be strictly proper (D = 0)")
+    if G.order == 0 or (G.D != 0 and (G.discrete or output != "position")):
+        raise InputError(f"{where}.linear", "the linear part (force to position) must be strictly proper (D = 0); "
+                                            "a direct feedthrough (an acceleration output) is taken with a continuous "
+                                            "linear part, output: position and the forces at points")
     if G.discrete:
         return _discrete_feedback(G, gain, output, delay, where)
     C_velocity = G.C @ G.A
@@ -131,18 +144,20 @@ def force_feedback(G: StateSpace, gain: float, output: str, delay: float, where:
                                             "(force to position; C B = 0)")
     C = G.C if output == "position" else C_velocity
     return MechanicalPlant(
-        StateSpace(G.A, gain * G.B, C, 0.0, False, delay), np.zeros(G.order),
+        StateSpace(G.A, gain * G.B, C, gain * G.D, False, delay), np.zeros(G.order),
         force_columns={"plant": G.B}, position_rows={"plant": G.C}, velocity_rows=velocity_rows,
     )
 
 
-def with_points(plant: MechanicalPlant, A: np.ndarray, points: dict[str, tuple[np.ndarray, np.ndarray]],
-                where: str) -> MechanicalPlant:
+def with_points(plant: MechanicalPlant, A: np.ndarray,
+                points: dict[str, tuple[np.ndarray, np.ndarray, float]], where: str) -> MechanicalPlant:
     """``plant`` (a continuous :func:`force_feedback` with state matrix ``A``) with further force
-    points, name -> (column b, row c) in its state coordinates (module docstring): a force there
-    enters along -b and reads the position c x, and the velocity c A x where c b = 0."""
+    points, name -> (column b, row c, feedthrough d) in its state coordinates (module docstring): a
+    force there enters along -b, reads the position c x, and the velocity c A x where c b = 0, and
+    adds - d F to the output."""
     columns, positions, velocities = dict(plant.force_columns), dict(plant.position_rows), dict(plant.velocity_rows)
-    for name, (column, row) in points.items():
+    outputs = dict(plant.force_outputs)
+    for name, (column, row, feedthrough) in points.items():
         column, row = np.asarray(column, float), np.asarray(row, float)
         if name in columns:
             raise InputError(f"{where}.points.{name}", f"the name {name!r} is taken (the plant's own point)")
@@ -151,9 +166,12 @@ def with_points(plant: MechanicalPlant, A: np.ndarray, points: dict[str, tuple[n
                 raise InputError(f"{where}.points.{name}.{key}",
                                  f"expected {A.shape[0]} numbers (the linear part's states), got {vector.size}")
         columns[name], positions[name] = column, row
+        if feedthrough:
+            outputs[name] = float(feedthrough)
         if abs(row @ column) <= 1e-12 * np.linalg.norm(row) * np.linalg.norm(column):
             velocities[name] = row @ A
-    return MechanicalPlant(plant.ss, plant.x0, columns, positions, velocities, plant.difference, plant.no_velocity)
+    return MechanicalPlant(plant.ss, plant.x0, columns, positions, velocities, plant.difference, plant.no_velocity,
+                           outputs)
 
 
 def _discrete_feedback(G: StateSpace, gain: float, output: str, delay: float, where: str) -> MechanicalPlant:

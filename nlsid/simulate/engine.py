@@ -125,6 +125,36 @@ def readout(ss: StateSpace, force_columns: np.ndarray, h: float, substeps: int, 
     return ss.C @ Phi_t, float(ss.C @ Gamma_t + ss.D), np.array(rows).reshape(len(rows), E)
 
 
+def with_feedthrough(c_f: np.ndarray, outputs: np.ndarray, substeps: int, phi: float) -> np.ndarray:
+    """``c_f`` (:func:`readout`) with each force's direct term in the output, y(t) = ... - d_e F_e(t)
+    at t = phi Ts (an acceleration output, :mod:`nlsid.models.mechanical`).
+
+    The kernel holds F_e over each sub-step j at its value at the sub-step's middle, (j + 1/2) h,
+    to O(h^2) (the laws' mid-point and mean rules, :mod:`nlsid.models.forces`); F_e(t) is the
+    straight line through the two middles nearest t (extrapolated before the first and after the
+    last), of the same second order, on rows j, j + 1 of c_f: weights 1 - x, x with
+    x = t / h - (j + 1/2). One sub-step gives the held force itself (first order).
+    """
+    if not np.any(outputs):
+        return c_f
+    if substeps == 1:
+        weights = {0: 1.0}
+    else:
+        at = phi * substeps - 0.5  # t in sub-steps from the first sub-step's middle
+        j = min(max(math.floor(at), 0), substeps - 2)
+        weights = {j: 1.0 - (at - j), j + 1: at - j}
+    out = np.zeros((max(c_f.shape[0], max(weights) + 1), outputs.size))
+    out[:c_f.shape[0]] = c_f
+    for j, weight in weights.items():
+        out[j] += weight * outputs
+    return out
+
+
+def _force_outputs(plant: Plant) -> np.ndarray:
+    """Each force's direct term in the output (:attr:`nlsid.models.from_config.Force.output`)."""
+    return np.array([f.output for f in plant.forces], dtype=float)
+
+
 def _force_rows(plant: Plant, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of the forces, (E, n): a backward-difference row times fs is a velocity."""
     n = plant.ss.order
@@ -136,13 +166,15 @@ def _force_rows(plant: Plant, fs: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _kernel_arguments(Phi, Gu, ss: StateSpace, x0, kinds, params, rows, columns, substeps: int, h: float,
                       shift: Timing, fs: float, controller, r, ff, u, process, y_noise,
-                      input_block=_IDENTITY, output_block=_IDENTITY, p_bias: float = 0.0) -> tuple:
+                      input_block=_IDENTITY, output_block=_IDENTITY, p_bias: float = 0.0, outputs=_EMPTY_1) -> tuple:
     """The arguments of the kernel's ``loop`` (:func:`nlsid.simulate.kernels._make_loop`) but its
-    two output arrays, in its order, as the kernel takes them (float64, C-ordered)."""
+    two output arrays, in its order, as the kernel takes them (float64, C-ordered); ``outputs``
+    the forces' direct terms in the output (:func:`with_feedthrough`)."""
     n_el = len(kinds)
     force_gammas = columns if ss.discrete else (zoh(ss.A, columns.T.copy(), h)[1].T.copy() if n_el else columns)
     prop = propagation(Phi, Gu, rows, force_gammas, substeps)
     c_x, c_p, c_f = readout(ss, columns, h, substeps, shift.phi, fs)
+    c_f = with_feedthrough(c_f, np.asarray(outputs, dtype=float), substeps, shift.phi)
     closed = controller is not None
     Ac, Bc, Cc, Dc = controller if closed else (_EMPTY_2, np.zeros((0, 2)), _EMPTY_1, np.zeros(2))
     return (_f64(prop.phi), _f64(prop.gamma), _f64(ss.C), _f64(x0), kinds, _f64(params),
@@ -273,8 +305,9 @@ def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: i
     controller = None
     r = ff = _EMPTY_1
     if loop is not None:
-        if ss.D != 0:
-            raise InputError("model", "a closed loop needs a strictly proper plant (no direct feed-through D)")
+        if ss.D != 0 or np.any(_force_outputs(plant)):
+            raise InputError("model", "a closed loop needs a strictly proper plant (no direct feed-through D, "
+                                      "no force point with a feedthrough)")
         controller = _controller(loop, fs)
         worst = np.max(np.abs(closed_loop_poles(ss, controller, fs, shift)), initial=0.0)
         if worst >= 1.0:
@@ -292,7 +325,7 @@ def plant_arguments(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: i
     rows, columns = _force_rows(plant, fs)
     return (Phi, Gu, ss, x0, kinds, params, rows, columns, m, h, shift, fs, controller, r, ff, run.u,
             process, noise.y + plant.offsets.output,
-            plant.input_block, plant.output_block, plant.force_bias)
+            plant.input_block, plant.output_block, plant.force_bias, _force_outputs(plant))
 
 
 def simulate_plant(plant: Plant, loop: ClosedLoop | None, run: Run, substeps: int | None, noise: Noise,

@@ -76,15 +76,16 @@ def test_the_modal_form_has_the_model_s_response():
 
 
 def test_a_feedthrough_beyond_rounding_is_not_dropped():
-    """A discrete model's D is set to 0 where it is a fit's rounding (1e-7 of the peak), refused
-    where it is the output's own (an acceleration's: 30 % of the peak)."""
+    """A discrete model's D is set to 0 where it is a fit's rounding (1e-7 of the peak), kept where
+    it is the output's own (an acceleration's: 30 % of the peak; the ZOH passes D unchanged)."""
     A, B, C = cases.blocks()
     Phi, Gamma = zoh(A, B, 1 / cases.FS)
     peak = np.max(np.abs(_frequency_response(Phi, Gamma, C, np.exp(2j * np.pi * np.linspace(0, 0.5, 4096)))))
     small = continuous_model(StateSpace(Phi, Gamma, C, 1e-7 * peak, True, 0.0, cases.FS), cases.FS)
     assert isinstance(small[0], StateSpace) and small[0].D == 0 and "set to 0" in small[1][0]
-    large, _ = continuous_model(StateSpace(Phi, Gamma, C, 0.3 * peak, True, 0.0, cases.FS), cases.FS)
-    assert isinstance(large, str) and "30.0% of its peak response" in large, large
+    large, notes = continuous_model(StateSpace(Phi, Gamma, C, 0.3 * peak, True, 0.0, cases.FS), cases.FS)
+    assert isinstance(large, StateSpace) and not large.discrete and large.D == 0.3 * peak
+    assert "acceleration output" in notes[0] and "30.0% of the peak response" in notes[0], notes
 
 
 def _frequency_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, s: np.ndarray) -> np.ndarray:

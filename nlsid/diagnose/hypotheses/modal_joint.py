@@ -1,10 +1,10 @@
 """A nonlinear joint in modal form: a cubic spring (or damper) on the modal coordinate of the one
 mode of a multi-mode LTI model whose frequency (damping) moves with the excitation level.
 
-Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4,
-strictly proper; a discrete one as its continuous equivalent, the exact inverse of its ZOH
-discretisation, :func:`nlsid.models.continuous_equivalent.zoh_inverse`) is diagonalised,
-A = V diag(lambda) V^-1, and each mode's residue r = (C v)(w B) (v the right, w the left
+Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4;
+a discrete one as its continuous equivalent, the exact inverse of its ZOH discretisation,
+:func:`nlsid.models.continuous_equivalent.zoh_inverse`, its D unchanged: the ZOH equivalent of
+(A, B, C, D) is (Phi, Gamma, C, D)) is diagonalised, A = V diag(lambda) V^-1, and each mode's residue r = (C v)(w B) (v the right, w the left
 eigenvector) written as a real block with its own modal coordinate q. A complex pair lambda,
 conj(lambda) becomes
 
@@ -15,7 +15,27 @@ r / (s - lambda) + conj(r) / (s - conj(lambda)) = (alpha s + beta) / (s^2 + 2 ze
 states (q, q'), input column (0, 1), output row (beta, alpha): a unit modal participation of the
 input, which fixes the scale of q and so the units of k3 (input units per q^3). A real pole p
 with residue r is the block q' = p q + u, y_i = r q. The blocks form a block-diagonal
-``state_space`` (continuous), the moving mode first (:func:`modal_state_space`).
+``state_space`` (continuous) with the model's D, the moving mode first (:func:`modal_state_space`).
+
+Acceleration output. A structure driven by a force whose accelerations are measured (a
+ground-vibration test) has a transfer function of relative degree 0, G = D + sum of the blocks:
+each mode's output is a combination of its coordinate's acceleration, velocity and
+displacement, y_i = a2 q'' + a1 q' + a0 q, and with q'' = u - 2 zeta w q' - w^2 q - f (f a force
+on that coordinate, below)
+
+    y_i = a2 u + (a1 - 2 zeta w a2) q' + (a0 - w^2 a2) q - a2 f = a2 u + alpha q' + beta q - a2 f:
+
+the force reaches the output through the dynamics (alpha, beta) and directly, by the
+acceleration a2 f it takes from the coordinate. The linear response fixes alpha, beta and the
+sum of the a2 (D), not each mode's a2. An accelerometer reads accelerations only: each mode's
+response is c s^2 / (s^2 + 2 zeta w s + w^2) = c - c (2 zeta w s + w^2) / (s^2 + 2 zeta w s + w^2),
+so alpha = -2 zeta w c, beta = -w^2 c, D = sum c, and a mode's a2 = c = -beta / w^2 (a0 = 0: no
+static response, which an acceleration has not; the velocity part a1 = alpha + 2 zeta w a2 a
+fitted alpha may hold stays a state read-out). The force point of the moving mode therefore
+gets the feedthrough d = a2 = -beta / w^2 (``points: {mode: {..., feedthrough: d}}``: y = C x +
+D u - d f), refined with D and the rest. A model whose D is at most :data:`FEEDTHROUGH` of its
+peak response |G - D| (a fit's rounding of a position or velocity output, which has no a2) has
+its D set to 0 and no feedthrough (:func:`continuous_model`).
 
 Hypothesis. The moving mode's block gets the force k3 q^3 against its motion:
 
@@ -23,7 +43,8 @@ Hypothesis. The moving mode's block gets the force k3 q^3 against its motion:
 
 a ``nonlinear_feedback`` around the modal state space whose force acts at the ``point`` of that
 mode (``points: {mode: {force: [0, 1, 0, ...], position: [1, 0, 0, ...]}}``, docs/configs.md):
-it reads q = (1, 0, ...) x and enters along -(0, 1, ...). k3 > 0 is a joint that stiffens with
+it reads q = (1, 0, ...) x and enters along -(0, 1, ...) (and reaches an acceleration output
+directly, above). k3 > 0 is a joint that stiffens with
 the mode's amplitude, k3 < 0 one that softens (a torsion mode that drops with the level).
 
 Start value of k3 from the frequency shift. Equivalent linearisation of k3 q^3 replaces it by the
@@ -85,6 +106,7 @@ PAIR_TOLERANCE = 1e-9  # |Im lambda| / |lambda| below this: a real pole
 FEEDTHROUGH = 0.01  # a discrete D above this share of the peak response is the output's own, not a fit's rounding
 NEGLIGIBLE = 1e-6  # an output coefficient this small relative to the mode's other one is not refined
 POINT = "mode"  # the name of the force point of the moving mode
+FEEDTHROUGH_KEY = "feedthrough"  # the point's direct term to an acceleration output, and its parameter's name
 
 
 @dataclass(frozen=True)
@@ -122,27 +144,26 @@ def _applies(runner: ModelRunner) -> str | None:
 
 
 def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[str]]:
-    """The continuous, strictly proper model the modal form is made of, and notes: a discrete
-    model's direct feedthrough D set to 0 and its continuous equivalent (ZOH inverse); or why there
-    is none."""
+    """The continuous model the modal form is made of, and notes; or why there is none. Its direct
+    feedthrough D is an acceleration output's where it exceeds :data:`FEEDTHROUGH` of the peak
+    response (kept: module docstring), a fit's rounding below (set to 0); a discrete model is
+    replaced by its continuous equivalent (ZOH inverse, D unchanged)."""
     from nlsid.models.continuous_equivalent import zoh_inverse
 
     notes = []
-    if not ss.discrete:
-        if ss.D != 0:
-            return ("the model has a direct feedthrough D (an acceleration output?): a force on a modal "
-                    "coordinate would reach the output through it, which the modal form here (strictly proper) "
-                    "does not write"), notes
-        return ss, notes
-    if ss.D != 0:
-        share = abs(ss.D) / peak_gain(ss)
+    D = ss.D
+    if D != 0:
+        share = abs(D) / peak_gain(ss)
         if share > FEEDTHROUGH:
-            return (f"the model's direct feedthrough D is {share:.1%} of its peak response (an acceleration output?): "
-                    "a force on a modal coordinate would reach the output through it, which the modal form here "
-                    "(strictly proper) does not write"), notes
-        notes.append(f"D = {ss.D:.3g} ({share:.2%} of the peak response) set to 0 (the part of the model a "
-                     "force-driven structure's ZOH equivalent is)")
-    equivalent = zoh_inverse(StateSpace(ss.A, ss.B, ss.C, 0.0, True, ss.delay, ss.fs), ss.fs or fs)
+            notes.append(f"an acceleration output: D = {D:.3g} ({share:.1%} of the peak response) kept, the moving "
+                         "mode's force reaching the output through its acceleration too")
+        else:
+            D = 0.0
+            notes.append(f"D = {ss.D:.3g} ({share:.2%} of the peak response) set to 0 (a fit's rounding: the output "
+                         "is no acceleration)")
+    if not ss.discrete:
+        return StateSpace(ss.A, ss.B, ss.C, D, False, ss.delay, ss.fs), notes
+    equivalent = zoh_inverse(StateSpace(ss.A, ss.B, ss.C, D, True, ss.delay, ss.fs), ss.fs or fs)
     if isinstance(equivalent, str):
         return f"the model has no continuous equivalent: {equivalent}", notes
     notes.append("extended in continuous time (the model's exact ZOH equivalent)")
@@ -150,10 +171,16 @@ def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[
 
 
 def peak_gain(ss: StateSpace) -> float:
-    """max |G - D| (the dynamics without the feedthrough) of a discrete ``ss`` on 512 frequencies up
-    to the Nyquist frequency and at its poles' angles (the resonances' peaks)."""
-    angles = np.concatenate([np.linspace(0.0, np.pi, 512), np.abs(np.angle(ss.poles()))])
-    return float(np.max(np.abs(ss.frequency_response(np.exp(1j * angles)) - ss.D)))
+    """max |G - D| (the dynamics without the feedthrough) of ``ss`` at its poles' frequencies (the
+    resonances' peaks) and on 512 frequencies: a discrete model's up to the Nyquist frequency, a
+    continuous one's from 0 to ten times its largest pole's modulus."""
+    poles = ss.poles()
+    if ss.discrete:
+        points = np.exp(1j * np.concatenate([np.linspace(0.0, np.pi, 512), np.abs(np.angle(poles))]))
+    else:
+        top = 10 * float(np.max(np.abs(poles), initial=1.0))
+        points = 1j * np.concatenate([np.linspace(0.0, top, 512), np.abs(poles.imag)])
+    return float(np.max(np.abs(ss.frequency_response(points) - ss.D)))
 
 
 def modes_of(ss: StateSpace) -> list[Mode] | str:
@@ -173,10 +200,17 @@ def modes_of(ss: StateSpace) -> list[Mode] | str:
     return sorted(out, key=lambda m: m.frequency_hz)
 
 
-def modal_state_space(modes: list[Mode]) -> dict:
-    """The block-diagonal modal ``state_space`` config of ``modes`` in their order (module
-    docstring): a pair's block [[0, 1], [-w^2, -2 zeta w]], input (0, 1), output (beta, alpha); a
-    real pole's [[p]], 1, beta."""
+def acceleration_share(linear: dict) -> float:
+    """The acceleration participation a2 = -beta / w^2 of the first block (a pair's: the moving
+    mode's) of a modal ``state_space`` config of :func:`modal_state_space` (module docstring): its
+    force point's feedthrough where the output is an acceleration."""
+    return linear["C"][0] / linear["A"][1][0]
+
+
+def modal_state_space(modes: list[Mode], D: float = 0.0) -> dict:
+    """The block-diagonal modal ``state_space`` config of ``modes`` in their order with the direct
+    feedthrough ``D`` (module docstring): a pair's block [[0, 1], [-w^2, -2 zeta w]], input
+    (0, 1), output (beta, alpha); a real pole's [[p]], 1, beta."""
     n = sum(2 if m.pair else 1 for m in modes)
     A, B, C = np.zeros((n, n)), np.zeros(n), np.zeros(n)
     j = 0
@@ -191,7 +225,7 @@ def modal_state_space(modes: list[Mode]) -> dict:
             A[j, j], B[j], C[j] = m.pole.real, 1.0, m.beta
             j += 1
     return {"type": "state_space", "domain": "continuous", "A": A.tolist(), "B": B.tolist(), "C": C.tolist(),
-            "D": 0.0}
+            "D": float(D)}
 
 
 def blocks(linear: dict) -> list[tuple[int, int]]:
@@ -323,14 +357,16 @@ def _estimator(effect: Effect):
             return f"not fitted: the mode's {effect.quantity} does not change with the modal amplitude"
         if effect is DAMPER and value < 0:
             return "not fitted: the mode's damping falls with the level (a cubic damper raises it)"
-        lti = modal_state_space([mode] + [m for m in modes if m is not mode])
+        lti = modal_state_space([mode] + [m for m in modes if m is not mode], ss.D)
         r, c = (int(i) for i in effect.entry[2:-1].split("]["))
         lti["A"][r][c] = -intercept
         data = {**ctx.runner.data, "model": {**{k: v for k, v in ctx.runner.data["model"].items() if k in KEPT},
                                              **lti}}
         paths = _paths_of(effect)(data)
-        values = {effect.parameter: value,
-                  **{name: float(_value(data, path)) for name, path in paths.items() if name != effect.parameter}}
+        own = {effect.parameter: value}
+        if ss.D != 0:  # the moving mode's acceleration, at the w^2 the start gives the block
+            own[FEEDTHROUGH_KEY] = acceleration_share(lti)
+        values = {**own, **{name: float(_value(data, path)) for name, path in paths.items() if name not in own}}
         before = ctx.simulation_rss(ctx.runner.data)
         try:
             after = ctx.simulation_rss(_extender(effect)(data, values))
@@ -369,6 +405,8 @@ def _paths_of(effect: Effect):
         linear = model["linear"] if model["type"] == "nonlinear_feedback" else model
         A, C = linear["A"], linear["C"]
         out = {effect.parameter: f"model.nonlinearities[0].{effect.parameter}"}
+        if linear.get("D", 0.0) != 0:  # an acceleration output: D and the moving mode's feedthrough
+            out.update({"D": "model.linear.D", FEEDTHROUGH_KEY: f"model.points.{POINT}.{FEEDTHROUGH_KEY}"})
         for j, size in blocks(linear):
             if size == 1:
                 names = [(f"A[{j}][{j}]", A[j][j]), (f"C[{j}]", C[j])]
@@ -392,7 +430,7 @@ def _extender(effect: Effect):
         out = copy.deepcopy(data)
         model = out["model"]
         linear = {k: copy.deepcopy(model[k]) for k in ("type", "domain", "A", "B", "C")}
-        linear["D"] = 0.0
+        linear["D"] = float(values.get("D", model.get("D", 0.0)))
         for name, value in values.items():
             if name.startswith("A["):
                 r, c = (int(i) for i in name[2:-1].split("]["))
@@ -402,8 +440,10 @@ def _extender(effect: Effect):
         n = len(linear["B"])
         force, position = [0.0] * n, [0.0] * n
         force[1], position[0] = 1.0, 1.0
-        out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0,
-                        "points": {POINT: {"force": force, "position": position}},
+        point = {"force": force, "position": position}
+        if values.get(FEEDTHROUGH_KEY):
+            point[FEEDTHROUGH_KEY] = float(values[FEEDTHROUGH_KEY])
+        out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0, "points": {POINT: point},
                         "nonlinearities": [{"type": effect.force, effect.parameter: float(values[effect.parameter]),
                                             "at": POINT}],
                         **{k: model[k] for k in KEPT if k in model}}
