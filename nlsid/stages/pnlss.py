@@ -40,6 +40,32 @@ class PnlssResult:
         The runs fitted and the runs it was judged on.
     configs, inputs : list of str
         Config files and recordings the fit comes from (its provenance).
+
+    Examples
+    --------
+    A PNLSS model of a mass-spring-damper with a cubic spring (a Duffing oscillator), started
+    from its linear part: two states, and the cubic monomials of (x1, x2, u), C(3 + 2, 3) = 10 of
+    them, in each state equation:
+
+    >>> import os, tempfile
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 200.0, "seed": 1, "multisine": {"period": 200, "band": [1.0, 40.0],
+    ...                     "realizations": 4, "periods": 2, "transient_periods": 3, "rms_levels": [1.0]}})
+    >>> duffing = {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0,
+    ...            "nonlinearities": [{"type": "cubic_stiffness", "k3": 1e9}]}
+    >>> rec = nlsid.Model.from_dict({"model": duffing, "disturbances": {"y_noise": 1e-6, "seed": 3}}).simulate(exc)
+    >>> linear = {"model": {"type": "transfer_function", "num": [0.5], "den": [1.0, 10.0, 1000.0]}}  # 1/(m s^2+c s+k)
+    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), max_iterations=20)
+    >>> result.estimation_ids, result.validation_ids
+    (['ms_l00_m00', 'ms_l00_m01', 'ms_l00_m02'], ['ms_l00_m03'])
+    >>> result.pnlss.A.shape, result.pnlss.E.shape, result.realisation
+    ((2, 2), (2, 10), 'balanced realisation')
+    >>> result.config["model"]["type"], result.model
+    ('pnlss', Model(pnlss, path=None))
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = result.write(os.path.join(folder, "pnlss.yaml"))
+    ...     print(sorted(os.listdir(folder)))
+    ['pnlss.fit.json', 'pnlss.yaml']
     """
 
     fit: PnlssFit
@@ -70,10 +96,12 @@ class PnlssResult:
 
     @property
     def estimation_rms(self) -> float:
+        """The chosen model's rms simulation error on the estimation runs."""
         return float(self.fit.estimation_rms)
 
     @property
     def validation_rms(self) -> float | None:
+        """The chosen model's rms simulation error on the validation runs (None without any)."""
         return None if self.fit.validation_rms is None else float(self.fit.validation_rms)
 
     def summary(self) -> dict:
@@ -237,6 +265,27 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
     nlsid.InputError
         A bad argument (named), a model that is neither linear nor pnlss, runs at another rate.
         A start that diverges does not raise: the result's status and notes say what happened.
+
+    Examples
+    --------
+    A Duffing oscillator (a mass-spring-damper with a cubic spring) measured with output noise
+    sigma = 1e-6: the linear model's validation error is many times the noise, the PNLSS model's
+    is the noise (its rms over the 400 validation samples has a relative std of 1/sqrt(800),
+    3.5 %):
+
+    >>> import nlsid
+    >>> exc = nlsid.design({"fs": 200.0, "seed": 1, "multisine": {"period": 200, "band": [1.0, 40.0],
+    ...                     "realizations": 4, "periods": 2, "transient_periods": 3, "rms_levels": [1.0]}})
+    >>> duffing = {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0,
+    ...            "nonlinearities": [{"type": "cubic_stiffness", "k3": 1e9}]}
+    >>> rec = nlsid.Model.from_dict({"model": duffing, "disturbances": {"y_noise": 1e-6, "seed": 3}}).simulate(exc)
+    >>> linear = {"model": {"type": "transfer_function", "num": [0.5], "den": [1.0, 10.0, 1000.0]}}  # 1/(m s^2+c s+k)
+    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), max_iterations=20)
+    >>> summary = result.summary()
+    >>> summary["linear_validation_rms"] > 10e-6, bool(abs(result.validation_rms / 1e-6 - 1) < 0.2)
+    (True, True)
+    >>> summary["states"], summary["state_degrees"], summary["with_input"]
+    (2, [3], True)
     """
     from nlsid.fit.run_split import split_runs
     from nlsid.fit.pnlss import fit_pnlss as fit
