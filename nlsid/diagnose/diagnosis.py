@@ -28,7 +28,7 @@ from nlsid.diagnose.simulation import ModelRunner
 from nlsid.diagnose.split import BUDGET_ABOVE, BUDGET_SAMPLES, ESTIMATION, VALIDATION, Budget, assign, budgeted
 from nlsid.diagnose.outcome import Outcome
 from nlsid.diagnose.result import Diagnosis
-from nlsid.diagnose.yardstick import Yardstick, fit_yardstick
+from nlsid.diagnose.yardstick import WorkProgress, Yardstick, fit_yardstick
 from nlsid.errors import InputError
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
@@ -317,8 +317,11 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
     apply (:func:`round_work`). A hypothesis fitted does the work of its free parameters + 1 (the
     difference from the work expected of it is added to the work planned); one not fitted (its
     signature, the evidence or a simpler hypothesis at the noise floor rules it out) takes its
-    share back without work, as the yardstick not fitted does. The work done reaches the work
-    planned at the last step, ``"yardstick"``.
+    share back without work, as the yardstick not fitted does. The yardstick's fit advances its
+    share in proportion to its iterates (``name`` ``"yardstick iterates"``,
+    :class:`nlsid.diagnose.yardstick.WorkProgress`); the last step, ``"yardstick"``, does the rest
+    of it, or where the yardstick was not fitted takes back what was not done. The work done
+    reaches the work planned there.
     """
     wanted = YARDSTICK if yardstick is None else yardstick
     step = _planning(step or (lambda name, work, planned: None), YARDSTICK_WORK if wanted else 0)
@@ -346,10 +349,11 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
         following = None
     first.accuracy = _accurate(first, last, data, source, runs, roles, budget)
     _refine_on_all(first, last, data, source, runs, roles)
-    first.yardstick = (_yardstick(first, data, source, runs, roles, budget) if wanted
+    advanced = WorkProgress(step, YARDSTICK_WORK)  # the fit's iterates move the yardstick's share
+    first.yardstick = (_yardstick(first, data, source, runs, roles, budget, advanced) if wanted
                        else Yardstick("not fitted: not asked for (--no-yardstick)"))
-    work = YARDSTICK_WORK if first.yardstick.fitted else 0
-    step("yardstick", work, work - YARDSTICK_WORK if wanted else 0)
+    work = YARDSTICK_WORK - advanced.units if first.yardstick.fitted else 0
+    step("yardstick", work, work + advanced.units - YARDSTICK_WORK if wanted else 0)
     judge_extent(first)
     return first
 
@@ -380,9 +384,10 @@ def check_fit_on(fit_on: str, runner: ModelRunner, name: str = "fit_on") -> None
 
 
 def _yardstick(first: Diagnosis, data: dict, source: str, runs: list[Run], roles: dict[str, str],
-               budget: Budget | None) -> Yardstick:
+               budget: Budget | None, progress=None) -> Yardstick:
     """The black-box model (:mod:`nlsid.diagnose.yardstick`) fitted to the estimation parts the
-    hypotheses saw, with the sensor offset the nuisances found, and scored on the validation runs."""
+    hypotheses saw, with the sensor offset the nuisances found, and scored on the validation runs;
+    ``progress(count, budget)`` told the fit's iterates."""
     ev = first.evidence
     if ev.exact or ev.constant_output:
         return Yardstick("not fitted: " + ("the model matches the noise-free data exactly" if ev.exact
@@ -393,7 +398,7 @@ def _yardstick(first: Diagnosis, data: dict, source: str, runs: list[Run], roles
     fit_runs = budget.of(est_runs) if budget is not None else est_runs
     offset = first.nuisances.values.get("output_offset", float(data["model"].get("output_offset", 0.0)))
     return fit_yardstick(ModelRunner.from_data(data, source), fit_runs, [by_id[res.run_id] for res in val], val,
-                         offset)
+                         offset, progress)
 
 
 def judge_extent(first: Diagnosis) -> None:

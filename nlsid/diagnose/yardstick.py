@@ -29,6 +29,12 @@ degrees 2 and 3 for 7 states and u), the nonlinear LFR form takes its place (Sch
 the rest, the states kept (stated in the fit's notes). A model too large even then is not fitted
 (stated).
 
+Progress: a diagnosis plans the yardstick as a fixed amount of work (its ``step`` units,
+:data:`nlsid.diagnose.diagnosis.YARDSTICK_WORK`); :class:`WorkProgress` advances them during the
+fit in proportion to its accepted iterates against their budget (the iterations the fit may still
+take, :func:`nlsid.fit.pnlss.fit_pnlss` ``progress``), so that a progress bar moves while the
+yardstick is fitted rather than jumping at its end.
+
 Not fitted (the reason stated) in closed loop (the yardstick models the plant from the recorded
 u, while the diagnosis simulates the loop from r: their errors would not compare), for a model
 without a linear part to start from (an ``equations`` model), and for noise-free data that the
@@ -61,6 +67,25 @@ SHAPES = ((EXTRA_STATES, DEGREES, 0), (EXTRA_STATES, DEGREES, LFR_INPUTS), (EXTR
 LINEAR_ITERATIONS = 20
 PATIENCE = 40          # iterates without a lower early-stopping error before the fit stops
 FILE = "black_box_model.yaml"
+PROGRESS_STEP = "yardstick iterates"  # the step name under which the fit advances a diagnosis' work
+
+
+class WorkProgress:
+    """The ``progress(count, budget)`` of :func:`nlsid.fit.pnlss.fit_pnlss` as ``work`` units of
+    a diagnosis' ``step(name, work, planned)``: after ``count`` of ``budget`` iterations,
+    floor(work x count / budget) units done in all, each increase told as
+    ``step(PROGRESS_STEP, increase, 0)``. Whole units, never more than ``work``: the fit's budget
+    only falls, so the units only rise, and reach ``work`` when the fit ends (count = budget).
+    :attr:`units` is what has been told so far."""
+
+    def __init__(self, step, work: int):
+        self.step, self.work, self.units = step, int(work), 0
+
+    def __call__(self, count: int, budget: int) -> None:
+        units = min(self.work, self.work * count // budget) if budget > 0 else 0
+        if units > self.units:
+            self.step(PROGRESS_STEP, units - self.units, 0)
+            self.units = units
 
 
 @dataclass
@@ -244,10 +269,11 @@ def iterations(model, runs: list[Run]) -> int:
 
 
 def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run], val: list,
-                  output_offset: float = 0.0) -> Yardstick:
+                  output_offset: float = 0.0, progress=None) -> Yardstick:
     """Fit and score the yardstick (module docstring). ``fit_runs``: the estimation parts the
     hypotheses were fitted on; ``val_runs`` and ``val``: the validation runs and the user's
-    model's residuals on them (:func:`nlsid.diagnose.gain.score`)."""
+    model's residuals on them (:func:`nlsid.diagnose.gain.score`); ``progress(count, budget)``:
+    told the fit's accepted iterates (:func:`nlsid.fit.pnlss.fit_pnlss`, e.g. a :class:`WorkProgress`)."""
     from nlsid.fit.pnlss import fit_pnlss
     from nlsid.models.pnlss import from_linear, to_config
 
@@ -273,7 +299,7 @@ def fit_yardstick(runner: ModelRunner, fit_runs: list[Run], val_runs: list[Run],
         own, early, rule = _holdout(fit_runs, val_runs)
         own, early = as_recorded(own), as_recorded(early)
         fit = fit_pnlss(model, own, early, max_iterations=iterations(model, own + early),
-                        linear_iterations=LINEAR_ITERATIONS, patience=PATIENCE)
+                        linear_iterations=LINEAR_ITERATIONS, patience=PATIENCE, progress=progress)
         if inputs:
             full = parameters(model.order, degrees)
             fit.notes.insert(0, f"LFR form: a polynomial in all {model.order} states and u would have {full} parameters, "

@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -330,12 +330,56 @@ class _Decomposed:
         return -(self.vectors @ (self.projected / (self.values + lam))) / self.scale
 
 
+class _IterateCount:
+    """The accepted iterates of a fit against its budget, told to ``progress(count, budget)`` at
+    each accepted iterate and once at the end.
+
+    The budget is the iterations the fit may take: at the start the maxima of the stages it will
+    run; a stage that ends before its maximum (converged, stopped early, at the noise floor) gives
+    back the iterations it did not take, and the end sets it to the count. So ``count <= budget``
+    always, the budget never rises, and ``count / budget`` reaches 1 exactly at the last call."""
+
+    def __init__(self, progress: Callable[[int, int], None] | None, budget: int):
+        self.progress, self.count, self.budget = progress, 0, budget
+
+    def accepted(self) -> None:
+        self.count += 1
+        self._tell()
+
+    def give_back(self, iterations: int) -> None:
+        """A stage's iterations not taken (all of them for a stage that does not run)."""
+        self.budget -= iterations
+
+    def done(self) -> None:
+        self.budget = self.count
+        self._tell()
+
+    def _tell(self) -> None:
+        if self.progress is not None:
+            self.progress(self.count, self.budget)
+
+
 def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterations: int, validate,
-           history: list, kept: list, patience: int, floor: float | None = None) -> tuple[Pnlss, list, str]:
+           history: list, kept: list, patience: int, floor: float | None = None,
+           iterates: _IterateCount | None = None) -> tuple[Pnlss, list, str]:
     """Levenberg-Marquardt iterations of one stage from ``model``; appends each accepted iterate to
     ``history`` and its (model, initial states) to ``kept``. Returns the last model, its initial
     states and how the stage ended. ``floor``: the validation rms of a model without error
-    (:func:`validation_floor`), where known."""
+    (:func:`validation_floor`), where known; ``iterates``: told each accepted iterate and, at the
+    end, the iterations of ``max_iterations`` not taken."""
+    iterates = iterates or _IterateCount(None, max_iterations)
+    taken = len(history)
+    try:
+        return _iterate(problem, model, x0s, stage, max_iterations, validate, history, kept, patience, floor,
+                        iterates)
+    finally:
+        iterates.give_back(max_iterations - (len(history) - taken))
+
+
+def _iterate(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterations: int, validate,
+             history: list, kept: list, patience: int, floor: float | None, iterates: _IterateCount
+             ) -> tuple[Pnlss, list, str]:
+    """The iterations of :func:`_stage`."""
     mu = MU_START
     stage_start = len(history)
     theta0 = global_vector(model)
@@ -357,6 +401,7 @@ def _stage(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iteration
         mu = max(mu / 3.0, 1e-15)
         history.append(Iteration(stage, number, math.sqrt(trial_cost / n_samples), validate(model), mu))
         kept.append((model, x0s))
+        iterates.accepted()
         if decrease < CONVERGED:
             return model, x0s, "converged"
         if at_floor(history[-1], floor):
@@ -475,7 +520,8 @@ def _tamed(start: Pnlss, recs: list[Record], bound: float) -> tuple[Pnlss | None
 
 
 def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run] = (), max_iterations: int = 100,
-              linear_iterations: int | None = None, patience: int = 15, fit_offset: bool = True) -> PnlssFit:
+              linear_iterations: int | None = None, patience: int = 15, fit_offset: bool = True,
+              progress: Callable[[int, int], None] | None = None) -> PnlssFit:
     """Fit a PNLSS model to the estimation runs from ``start`` (module docstring).
 
     Parameters
@@ -490,6 +536,10 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
     fit_offset : the output offset is a parameter of every stage, from the start's value (else it is
         held): a constant in y that the start's offset misses (the mean that even monomials add,
         a sensor offset) is otherwise fitted by a slow pole of the linear stage.
+    progress : called as ``progress(count, budget)`` at each accepted iterate and once at the end
+        (:class:`_IterateCount`): the iterates accepted so far and the iterations the fit may take
+        in all, ``linear_iterations`` and ``max_iterations`` per nonlinear stage it runs, less those
+        of stages that ended or were skipped early; at the end ``count == budget``.
 
     Returns
     -------
@@ -514,6 +564,7 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
         notes.append(shrunk)
     if model is None:
         history = [Iteration("start", 0, math.inf, math.inf if val else None, MU_START)]
+        _IterateCount(progress, 0).done()
         return PnlssFit(start, start, start, history, 0, "nothing was fitted: " + shrunk, "failed", notes,
                         [None] * len(est), time.perf_counter() - clock, 0.0)
     nonlinear_start = bool(np.any(model.E) or np.any(model.F))
@@ -532,10 +583,15 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
     floor = validation_floor(val)
     tamed_start, status = model, AT_FLOOR if at_floor(history[0], floor) else "converged"
     seconds, work = 0.0, 0.0
-    if linear_iterations > 0 and not nonlinear_start and status != AT_FLOOR:
+    linear_stage = linear_iterations > 0 and not nonlinear_start and status != AT_FLOOR
+    states_stage = max_iterations > 0 and model.with_input and not model.lfr and not nonlinear_start
+    full_stage = max_iterations > 0 and model.E.size + model.F.size > 0
+    iterates = _IterateCount(progress, (linear_iterations if linear_stage else 0)
+                            + max_iterations * (int(states_stage) + int(full_stage)))
+    if linear_stage:
         problem = _Problem(est, linear_indices(model), bound, fit_offset)
         model, x0s, status = _stage(problem, model, x0s, "linear", linear_iterations, validate, history, kept, patience,
-                                    floor)
+                                    floor, iterates)
         seconds, work = seconds + problem.jacobian_seconds, work + problem.jacobian_work
     linear_model = kept[_best(history, "linear" if history[-1].stage == "linear" else "start")][0]
     if status == AT_FLOOR:
@@ -546,17 +602,18 @@ def fit_pnlss(start: Pnlss, estimation: Sequence[Run], validation: Sequence[Run]
         notes.append(f"LFR form: the {model.lfr_inputs} combination(s) z = Cz x + Dz u started as the linear model's "
                      "output C x + D u (Wiener-like)" + (", the input, then single states" if model.lfr_inputs > 1 else "")
                      + ", each scaled to unit rms on the estimation runs")
-    if max_iterations > 0 and model.with_input and not model.lfr and not nonlinear_start:
+    if states_stage and max_iterations > 0:
         states = _Problem(est, state_term_indices(model), bound, fit_offset)
         model, x0s, status = _stage(states, model, x0s, "nonlinear_states", max_iterations, validate, history, kept,
-                                    patience, floor)
+                                    patience, floor, iterates)
         seconds, work = seconds + states.jacobian_seconds, work + states.jacobian_work
-    if max_iterations > 0 and model.E.size + model.F.size and status != AT_FLOOR:
+    if full_stage and max_iterations > 0 and status != AT_FLOOR:
         model, x0s, status = _stage(full, model, x0s, "nonlinear", max_iterations, validate, history, kept, patience,
-                                    floor)
+                                    floor, iterates)
         seconds, work = seconds + full.jacobian_seconds, work + full.jacobian_work
     if status == AT_FLOOR and max_iterations > 0:
         notes.append(_floor_note(floor))
+    iterates.done()
     chosen = _best(history)
     item = history[chosen]
     if val:

@@ -278,7 +278,10 @@ def progress_calls(progress: Callable[..., None] | None) -> Callable[[str, int, 
     (both whole numbers; ``advance`` 0 where a round plans its work or a hypothesis not fitted takes
     its share back). The work done never exceeds ``total`` and reaches it at the last call. Any
     other callable is called without arguments after the evidence, the nuisances and each
-    hypothesis fitted, in every round, and after the yardstick (fitted or not)."""
+    hypothesis fitted, in every round, and once after the yardstick (fitted or not; not at the
+    steps its fit advances on the way)."""
+    from nlsid.diagnose.yardstick import PROGRESS_STEP
+
     if progress is None:
         return lambda name, work, planned: None
     try:
@@ -293,8 +296,8 @@ def progress_calls(progress: Callable[..., None] | None) -> Callable[[str, int, 
         total += planned
         if counts:
             progress(advance=work, total=total)
-        elif work > 0 or name == "yardstick":
-            progress()
+        elif (work > 0 and name != PROGRESS_STEP) or name == "yardstick":
+            progress()  # the yardstick once, at its end, whatever its fit advanced before
 
     return step
 
