@@ -59,7 +59,9 @@ def _print_summary(summary: dict) -> None:
                                  f"{len(m['detection_bins'])} detection lines in band")
         levels = np.asarray(m["levels"])
         table.add_row("  levels (rms)", f"{levels.size}: {levels.min():g} .. {levels.max():g}")
-        table.add_row("  runs", f"{levels.size} levels x {m['realizations']} realizations, "
+        experiments = (f" x {m['experiments']} experiments (orthogonal, {m['transform']}: inputs "
+                       f"{', '.join(m['input_names'])})" if "inputs" in m else "")
+        table.add_row("  runs", f"{levels.size} levels x {m['realizations']} realizations{experiments}, "
                                 f"{m['transient_periods']} + {m['periods']} periods")
         table.add_row("  crest factor", f"{crest.min():.2f} .. {crest.max():.2f}")
     if "sines" in summary:

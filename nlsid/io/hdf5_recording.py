@@ -29,7 +29,7 @@ from h5py import h5a, h5d, h5o, h5s, h5t
 from nlsid.errors import InputError
 from nlsid.io.atomic import atomic_path
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import IO_DEFAULTS, SIGNALS, Run, check_channel_name, make_run
+from nlsid.io.run import IO_DEFAULTS, SIGNALS, VERSION_3_ATTRS, Run, check_channel_name, make_run
 
 FORMAT_VERSION = 2
 MIMO_FORMAT_VERSION = 3  # written when some run has several inputs or outputs
@@ -161,7 +161,7 @@ class HDF5Recording(RecordingReader):
             group = self._runs[run_id]
             attrs = dict(group.attrs)
             if self.version < MIMO_FORMAT_VERSION:
-                attrs = {key: value for key, value in attrs.items() if key not in IO_DEFAULTS}
+                attrs = {key: value for key, value in attrs.items() if key not in VERSION_3_ATTRS}
             present = [name for name in SIGNALS if name in group]
             extra = self.version >= 2 and "channels" in group
         units: dict[str, str] = {}
@@ -227,7 +227,7 @@ def write_hdf5_recording(
             for run in runs:
                 _write_run(group, run)
                 complete = complete and run.y is not None
-                mimo = mimo or run.is_mimo
+                mimo = mimo or run.needs_version_3
             handle.attrs["nlsid_format"] = "recording" if complete else "excitation"
             if mimo:
                 handle.attrs["nlsid_format_version"] = MIMO_FORMAT_VERSION

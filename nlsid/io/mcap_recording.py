@@ -47,7 +47,7 @@ from nlsid.io.atomic import atomic_path
 from nlsid.io.mcap_file import channels_by_topic, checked, open_mcap
 from nlsid.io.mcap_foreign import read_foreign_run, unmapped_output
 from nlsid.io.reader import RecordingReader
-from nlsid.io.run import IO_DEFAULTS, SIGNALS, Run, check_channel_name, make_run
+from nlsid.io.run import SIGNALS, VERSION_3_ATTRS, Run, check_channel_name, make_run
 
 FORMAT_VERSION = 2
 MIMO_FORMAT_VERSION = 3  # written when some run has several inputs or outputs
@@ -196,7 +196,7 @@ class MCAPRecording(RecordingReader):
         samples = self._read_signals(run_id, topics, n_samples, start, end)
         attrs = {k: v for k, v in meta.items() if k not in _OWN_KEYS}
         if self.version < MIMO_FORMAT_VERSION:
-            attrs = {k: v for k, v in attrs.items() if k not in IO_DEFAULTS}
+            attrs = {k: v for k, v in attrs.items() if k not in VERSION_3_ATTRS}
         if "params" in attrs and not isinstance(attrs["params"], str):
             attrs["params"] = json.dumps(attrs["params"])
         signals = {name: samples[name] for name in names}
@@ -302,7 +302,7 @@ def write_mcap_recording(
             seen.add(run.run_id)
             _write_run(writer, channels, run, t0)
             complete = complete and run.y is not None
-            mimo = mimo or run.is_mimo
+            mimo = mimo or run.needs_version_3
             t0 = _next_start(t0, run)
         version = MIMO_FORMAT_VERSION if mimo else FORMAT_VERSION
         meta = {"nlsid_format": "recording" if complete else "excitation", "nlsid_format_version": str(version)}

@@ -23,6 +23,8 @@ KINDS = ("multisine", "sine", "arbitrary")
 SIGNALS = ("u", "y", "r")
 #: The run attributes naming inputs and outputs (format version 3) and their defaults, the first name of each.
 IO_DEFAULTS = {"inputs": ("u",), "outputs": ("y",)}
+#: The run attributes of format version 3 (ignored in files of older versions).
+VERSION_3_ATTRS = (*IO_DEFAULTS, "experiment")
 #: A run without its measured output, read where one is required (also :mod:`nlsid.feeds`).
 MISSING_Y = "missing dataset 'y' (this is an excitation without a measured output?)"
 
@@ -39,6 +41,8 @@ class Run:
     ``inputs`` and ``outputs`` name the system's inputs and outputs in order: ``u`` (``y``) first,
     then channels of the run. A run of a single-input single-output system keeps the defaults
     ``("u",)`` and ``("y",)``; :meth:`input_matrix` and :meth:`output_matrix` stack them.
+    ``experiment`` is the index of the run among the experiments of one realization of
+    orthogonal multisines (each experiment excites every input; ``None`` otherwise).
     """
 
     run_id: str
@@ -58,6 +62,7 @@ class Run:
     channels: dict[str, np.ndarray] = field(default_factory=dict)
     inputs: tuple[str, ...] = ("u",)
     outputs: tuple[str, ...] = ("y",)
+    experiment: int | None = None
 
     @property
     def n_samples(self) -> int:
@@ -85,6 +90,11 @@ class Run:
         """Whether the run names more than one input or output (a format version 3 run)."""
         return len(self.inputs) > 1 or len(self.outputs) > 1
 
+    @property
+    def needs_version_3(self) -> bool:
+        """Whether the run has an attribute of format version 3 (several inputs or outputs, an experiment)."""
+        return self.is_mimo or self.experiment is not None
+
     def named_signal(self, name: str) -> np.ndarray:
         """Signal ``u``, ``y`` or ``r``, or channel ``name``: the samples of one named input or output."""
         x = getattr(self, name) if name in SIGNALS else self.channels.get(name)
@@ -108,7 +118,7 @@ class Run:
         if self.period is not None:
             out["period"] = int(self.period)
         out["transient_periods"] = int(self.transient_periods)
-        for key in ("realization",):
+        for key in ("realization", "experiment"):
             if getattr(self, key) is not None:
                 out[key] = int(getattr(self, key))
         for key in ("level", "frequency"):
@@ -181,6 +191,9 @@ def parse_run_attrs(run_id: str, attrs: Mapping, where: str) -> dict[str, Any]:
     transient = _int(attrs, "transient_periods", where, required=False, default=0)
     if transient < 0:
         raise InputError(f"{where}.transient_periods", f"must be >= 0, got {transient}")
+    experiment = _int(attrs, "experiment", where, required=False)
+    if experiment is not None and experiment < 0:
+        raise InputError(f"{where}.experiment", f"must be >= 0, got {experiment}")
     out: dict[str, Any] = {
         "run_id": run_id,
         "fs": fs,
@@ -188,6 +201,7 @@ def parse_run_attrs(run_id: str, attrs: Mapping, where: str) -> dict[str, Any]:
         "period": period,
         "transient_periods": transient,
         "realization": _int(attrs, "realization", where, required=False),
+        "experiment": _int(attrs, "experiment", where, required=False),
         "level": _float(attrs, "level", where, required=False),
         "frequency": _float(attrs, "frequency", where, required=kind == "sine"),
     }

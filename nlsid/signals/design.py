@@ -1,7 +1,10 @@
 """Excitation design: turn a validated design config into runs of the recording format.
 
 Multisine runs are ``ms_l<level>_m<realization>``: one per rms level and realization, each with
-independent random phases (or the Schroeder phases), all on the same excited lines. Sine runs are
+independent random phases (or the Schroeder phases), all on the same excited lines. With
+``inputs: n_u`` >= 2 they are full random orthogonal multisines
+(:mod:`nlsid.signals.orthogonal_multisine`): n_u runs ``ms_l<level>_m<realization>_e<experiment>``
+per level and realization, each holding every input (u, then channels u2 .. u<n_u>). Sine runs are
 ``sine_f<frequency>_a<amplitude>_r<repeat>``, u(n) = a sin(2 pi k n / N) with k the sine's bin
 (seed 000 Eq. 10), so every sine is leakage-free. Each run holds ``transient_periods + periods``
 whole periods. Randomness comes only from the config's seed, through independent streams per run.
@@ -17,6 +20,7 @@ import numpy as np
 from nlsid.signals.design_config import DesignConfig, MultisineConfig, SinesConfig
 from nlsid.io.run import Run
 from nlsid.signals import multisine as ms
+from nlsid.signals.orthogonal_multisine import orthogonal_multisine
 from nlsid.signals.lines import band_bins, log_bins, random_grid
 
 _LINES_STREAM, _MULTISINE_STREAM = 0, 1
@@ -52,6 +56,9 @@ def plan_lines(config: MultisineConfig, fs: float, seed: int) -> LinePlan:
 
 def multisine_runs(config: MultisineConfig, plan: LinePlan, fs: float, seed: int, unit: str) -> Iterator[Run]:
     """The multisine runs of a design, one per level and realization, on the planned lines."""
+    if config.inputs > 1:
+        yield from orthogonal_runs(config, plan, fs, seed, unit)
+        return
     n_lines = plan.excited.size
     for li, level in enumerate(config.levels()):
         amplitudes = ms.flat_amplitudes(n_lines, float(level))
@@ -71,6 +78,34 @@ def multisine_runs(config: MultisineConfig, plan: LinePlan, fs: float, seed: int
                 period=config.period, transient_periods=config.transient_periods,
                 realization=m, level=float(level), excited_bins=plan.excited.copy(), units={"u": unit},
             )
+
+
+def input_names(n_inputs: int) -> tuple[str, ...]:
+    """The names of the designed inputs: u, then the channels u2 .. u<n_u>."""
+    return ("u",) + tuple(f"u{r + 1}" for r in range(1, n_inputs))
+
+
+def orthogonal_runs(config: MultisineConfig, plan: LinePlan, fs: float, seed: int, unit: str) -> Iterator[Run]:
+    """The runs of full random orthogonal multisines (book (6-118)): per level and realization, one
+    run per experiment e, holding input 1 as u and inputs 2 .. n_u as channels u2 .. u<n_u>, every
+    input of every experiment of rms ``level``. Each realization draws its phases from its own
+    stream of the seed, as the single-input multisines do."""
+    names = input_names(config.inputs)
+    for li, level in enumerate(config.levels()):
+        for m in range(config.realizations):
+            rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_MULTISINE_STREAM, li, m)))
+            design = orthogonal_multisine(config.period, plan.excited, config.inputs, rms=float(level),
+                                          transform=config.transform, rng=rng)
+            periods = design.signals()                               # (experiments, inputs, N)
+            for e, inputs in enumerate(periods):
+                u = np.tile(inputs, config.transient_periods + config.periods)
+                yield Run(
+                    run_id=f"ms_l{li:02d}_m{m:02d}_e{e:02d}", fs=fs, kind="multisine", u=u[0],
+                    period=config.period, transient_periods=config.transient_periods,
+                    realization=m, level=float(level), excited_bins=plan.excited.copy(),
+                    units={name: unit for name in names}, channels=dict(zip(names[1:], u[1:])),
+                    inputs=names, experiment=e,
+                )
 
 
 def sine_runs(config: SinesConfig, fs: float, unit: str) -> Iterator[Run]:
@@ -93,7 +128,7 @@ def run_count(config: DesignConfig) -> int:
     """How many runs :func:`design_runs` yields."""
     count = 0
     if config.multisine is not None:
-        count += config.multisine.levels().size * config.multisine.realizations
+        count += config.multisine.levels().size * config.multisine.realizations * config.multisine.inputs
     if config.sines is not None:
         s = config.sines
         count += s.frequency_values().size * s.amplitude_values().size * s.repeats

@@ -62,6 +62,8 @@ class MultisineConfig(DesignModel):
     transient_periods: int = Field(1, ge=0)
     rms_levels: Optional[list[float]] = Field(None, min_length=1)
     rms_range: Optional[ValueRange] = None
+    inputs: int = Field(1, ge=1, description="n_u: >= 2 gives orthogonal random multisines, n_u experiments each")
+    transform: Literal["auto", "hadamard", "dft"] = "auto"
 
     def levels(self) -> np.ndarray:
         return _one_of(("multisine",), "rms_levels", self.rms_levels, "rms_range", self.rms_range)
@@ -83,6 +85,25 @@ class MultisineConfig(DesignModel):
         if self.phases == "schroeder" and self.realizations > 1:
             raise ConfigValueError(key + ("realizations",),
                                    "Schroeder phases are deterministic: use realizations: 1 or phases: random")
+        self.check_inputs()
+
+    def check_inputs(self) -> None:
+        """Orthogonal multisines (``inputs`` >= 2) draw their own random phases, per input and per
+        experiment: Schroeder phases and crest-factor iterations would undo that design."""
+        key = ("multisine",)
+        if self.inputs == 1:
+            if self.transform != "auto":
+                raise ConfigValueError(key + ("transform",), "applies to orthogonal multisines: give inputs: 2 or more")
+            return
+        if self.phases != "random":
+            raise ConfigValueError(key + ("phases",), f"orthogonal multisines (inputs: {self.inputs}) have random phases: "
+                                                      "use phases: random")
+        if self.crest_factor_iterations:
+            raise ConfigValueError(key + ("crest_factor_iterations",),
+                                   f"orthogonal multisines (inputs: {self.inputs}) keep their random phases: use 0")
+        if self.transform == "hadamard" and self.inputs & (self.inputs - 1):
+            raise ConfigValueError(key + ("transform",), f"a Hadamard matrix needs a power of two inputs, got "
+                                                         f"{self.inputs}: use dft or auto")
 
 class SinesConfig(DesignModel):
     period: int = Field(ge=8, description="samples per period N")

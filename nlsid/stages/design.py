@@ -205,12 +205,13 @@ def iter_runs(config: str | os.PathLike | Mapping[str, Any] | DesignSource, summ
     meta = []
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by its key
         for run in design_runs(cfg):
-            if not np.all(np.isfinite(run.u)):  # a level near the float range overflows
+            inputs = run.input_matrix()
+            if not np.all(np.isfinite(inputs)):  # a level near the float range overflows
                 what = "rms" if run.kind == "multisine" else "amplitude"
                 raise source.error(level_key(cfg, run), f"{what} {run.level:g} gives non-finite samples (float "
                                                          f"overflow in run {run.run_id}); nothing was written")
             meta.append({"run": run.run_id, "kind": run.kind, "level": run.level, "frequency": run.frequency,
-                         "crest_factor": crest_factor(run.u[: run.period])})
+                         "crest_factor": max(crest_factor(x[: run.period]) for x in inputs)})
             if on_run is not None:
                 on_run(run)
             yield run
@@ -222,6 +223,17 @@ def _provenance(source: DesignSource) -> dict:
     from nlsid.io.provenance import provenance
 
     return provenance(config_paths=[source.path] if source.path is not None else [])
+
+
+def _orthogonal_summary(m) -> dict:
+    """The keys of orthogonal multisines in the design summary: inputs (and the experiments of each
+    realization, as many), their names, and the unitary matrix T used."""
+    from nlsid.signals.design import input_names
+    from nlsid.signals.orthogonal_multisine import is_power_of_two
+
+    transform = m.transform if m.transform != "auto" else ("hadamard" if is_power_of_two(m.inputs) else "dft")
+    return {"inputs": m.inputs, "experiments": m.inputs, "input_names": list(input_names(m.inputs)),
+            "transform": transform}
 
 
 def summary(cfg: DesignConfig, runs_meta: list[dict]) -> dict:
@@ -243,6 +255,8 @@ def summary(cfg: DesignConfig, runs_meta: list[dict]) -> dict:
             "levels": m.levels(), "realizations": m.realizations, "periods": m.periods,
             "transient_periods": m.transient_periods, "crest_factors": crest,
         }
+        if m.inputs > 1:
+            out["multisine"].update(_orthogonal_summary(m))
         duration += len(crest) * (m.periods + m.transient_periods) * m.period / cfg.fs
     if cfg.sines is not None:
         s = cfg.sines
