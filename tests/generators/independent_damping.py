@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _runs(U, fs, substeps, m, c, k, gain, c2, c3, velocity):
     h = 1.0 / fs / substeps
     out = np.empty_like(U)

@@ -31,14 +31,14 @@ import numpy as np
 BISECTIONS = 60
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _bw_rates(p, v, z, drive, m, c, k, kh, a, beta, gamma, n, k3):
     size = abs(z) ** n
     dz = a * v - beta * abs(v) * math.copysign(size, z) - gamma * v * size
     return (drive - c * v - k * p - k3 * p**3 - kh * z) / m, dz
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n, k3):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
@@ -61,7 +61,7 @@ def _bouc_wen_runs(U, fs_hz, substeps, m, c, k, gain, kh, a, beta, gamma, n, k3)
     return Y
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching):
     """The acceleration with the stop ``touching`` (+1 upper, -1 lower, 0 none) pushing as a
     spring and damper (the mode frozen: no cut at zero within a step)."""
@@ -73,7 +73,7 @@ def _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching):
     return (drive - c * v - k * p - force) / m
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _stop_rk4(p, v, tau, drive, m, c, k, upper, lower, ks, cs, touching):
     a1 = _stop_acceleration(p, v, drive, m, c, k, upper, lower, ks, cs, touching)
     p2, v2 = p + 0.5 * tau * v, v + 0.5 * tau * a1
@@ -85,7 +85,7 @@ def _stop_rk4(p, v, tau, drive, m, c, k, upper, lower, ks, cs, touching):
     return p + tau / 6 * (v + 2 * v2 + 2 * v3 + v4), v + tau / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _touching(p, v, upper, lower, ks, cs):
     """The stop that pushes at (p, v): beyond its edge with ks d + cs v pushing back; else 0."""
     if p > upper and ks * (p - upper) + cs * v > 0.0:
@@ -95,7 +95,7 @@ def _touching(p, v, upper, lower, ks, cs):
     return 0
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _end_stop_runs(U, fs_hz, substeps, m, c, k, gain, upper, lower, ks, cs):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
@@ -126,14 +126,14 @@ def _end_stop_runs(U, fs_hz, substeps, m, c, k, gain, upper, lower, ks, cs):
     return Y
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _joint_rates(x, drive, m1, m2, k, c, c1, c2, k3):
     d = x[0] - x[2]
     coupling = k * d + k3 * d**3 + c * (x[1] - x[3])
     return np.array([x[1], (drive - coupling - c1 * x[1]) / m1, x[3], (coupling - c2 * x[3]) / m2])
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _joint_runs(U, fs_hz, substeps, m1, m2, k, c, c1, c2, gain, k3, at):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)

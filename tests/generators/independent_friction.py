@@ -43,13 +43,13 @@ import numpy as np
 BISECTIONS = 60
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv, k3):
     level = fc + (fs - fc) * math.exp(-abs(v / vs) ** delta)
     return (drive - c * v - k * p - k3 * p**3 - s * level - fv * v) / m
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _stribeck_rk4(p, v, tau, drive, s, m, c, k, fc, fs, vs, delta, fv, k3):
     """One RK4 step of length tau while sliding in direction s."""
     a1 = _stribeck_acceleration(p, v, drive, s, m, c, k, fc, fs, vs, delta, fv, k3)
@@ -62,7 +62,7 @@ def _stribeck_rk4(p, v, tau, drive, s, m, c, k, fc, fs, vs, delta, fv, k3):
     return p + tau / 6 * (v + 2 * v2 + 2 * v3 + v4), v + tau / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _stribeck_runs(U, fs_hz, substeps, m, c, k, gain, fc, fs, vs, delta, fv, k3):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
@@ -101,7 +101,7 @@ def _stribeck_runs(U, fs_hz, substeps, m, c, k, gain, fc, fs, vs, delta, fv, k3)
     return Y
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _lugre_rates(p, v, z, drive, m, c, k, sigma0, sigma1, sigma2, fc, fs, vs):
     level = fc + (fs - fc) * math.exp(-(v / vs) ** 2)
     dz = v - sigma0 * abs(v) * z / level
@@ -109,7 +109,7 @@ def _lugre_rates(p, v, z, drive, m, c, k, sigma0, sigma1, sigma2, fc, fs, vs):
     return (drive - c * v - k * p - force) / m, dz
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _lugre_runs(U, fs_hz, substeps, m, c, k, gain, sigma0, sigma1, sigma2, fc, fs, vs):
     h = 1.0 / (fs_hz * substeps)
     Y = np.empty_like(U)
