@@ -120,8 +120,8 @@ class ModelRunner:
     def initial_state(self, run: Run):
         """The initial state fitted to the start of an arbitrary record as the model simulates it
         (:func:`nlsid.simulate.runs.fitted_initial_state`: a plant's, a closed loop's with its drive,
-        a block structure's filters'), None where none is fitted (a periodic run, a mode too slow
-        for the record, a model written as equations)."""
+        a block structure's filters', a model written as equations' states), None where none is
+        fitted (a periodic run, a mode too slow for the record)."""
         from nlsid.simulate.runs import fitted_initial_state
 
         try:

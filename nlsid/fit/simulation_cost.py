@@ -170,10 +170,13 @@ class Problem:
             # r stays for a model written as equations, whose expressions may read it
             model = self.base.get("model")
             keep_r = not self.closed and isinstance(model, dict) and model.get("type") == "equations"
+            # freed initial values of equations are the start of every run: none fitted per record
+            written = keep_r and any(name.startswith("model.states.") for name in self.names)
             if self.closed:  # the recorded command kept to fit the loop's initial state (nlsid.simulate.loop_state)
                 out.append(loop_excitation(record(run)))
             else:
-                out.append(dataclasses.replace(record(run), r=run.r if keep_r else None))
+                whole = record(run)
+                out.append(dataclasses.replace(whole, r=run.r if keep_r else None, y=None if written else whole.y))
         return out
 
     def errors(self, theta: np.ndarray, runs: Sequence[Run], excitations: Sequence[Run]) -> dict[str, list[np.ndarray]]:

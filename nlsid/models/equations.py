@@ -29,8 +29,10 @@ The name ``u`` is the plant input as a plant gets it, f_in(u[k - d] + input_offs
 channel + process noise): the command delayed by ``delay`` (d whole samples, zero before the
 record) through the ``input_nonlinearity`` f_in (identity without one); ``r`` and the channels are
 read as recorded. The recorded y is f_out(g) + output_offset, f_out the ``output_nonlinearity``.
-The states start at their written initial values on every run (no lead-in, no initial state
-fitted: free them with ``fit --model``, ``model.states.NAME``).
+The states start at their written initial values (no lead-in), but an arbitrary record with a
+measured output, simulated as it was measured, starts from the states fitted to its first samples
+(:mod:`nlsid.simulate.equations_state`; not where ``fit --model`` frees ``model.states.NAME``:
+then the written values are the one start of every run, which the fit estimates).
 
 Compilation: the checked expressions (:mod:`nlsid.models.expressions`) are written into the
 Python source of one kernel per model (the loop above, f and g written out in it), which numba

@@ -17,6 +17,7 @@ from nlsid.models.hybrid import Hybrid, simulate_hybrid
 from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
+from nlsid.simulate import equations_state
 from nlsid.simulate.initial_state import estimate as estimate_plant, with_initial_state
 from nlsid.simulate.loop_state import estimate as estimate_loop, simulate_from_start
 from nlsid.simulate.pnlss_runs import simulate_pnlss
@@ -34,7 +35,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     filters': :mod:`nlsid.simulate.structure_state`; a closed loop's plant, pending commands and
     drive, from y and the recorded command of a
     :class:`~nlsid.simulate.loop_state.LoopExcitation`: :mod:`nlsid.simulate.loop_state`). A model written as equations runs from its
-    written initial states in either case (:mod:`nlsid.models.equations`)."""
+    written initial states (:mod:`nlsid.models.equations`), but an arbitrary record with a measured
+    ``y`` from the states fitted to its first samples (:mod:`nlsid.simulate.equations_state`)."""
     noise = noise or Noise.zero(run.n_samples)
     if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
         return simulate_pnlss(model, run, substeps, noise, steady)
@@ -45,7 +47,9 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
         original, m = run, count * run.period
         run = with_lead(run, count)
         noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
-    if isinstance(model, Equations):  # from its written initial states, whatever the run (no lead, no fitted state)
+    if isinstance(model, Equations):  # no lead; an arbitrary record from the states fitted to its start
+        if steady and run.period is None:
+            return equations_state.with_initial_state(model, run, substeps, noise)
         return simulate_equations(model, run, substeps, noise)
     if steady and run.period is None and loop is not None:  # a record that may start in motion
         return simulate_from_start(model, loop, run, substeps, noise)
@@ -66,9 +70,12 @@ def fitted_initial_state(model: Plant | Structure | Equations, loop: ClosedLoop 
     """The initial state :func:`simulate_run` with ``steady`` fits to the start of ``run`` (an
     :class:`~nlsid.simulate.initial_state.InitialState`, in closed loop a
     :class:`~nlsid.simulate.loop_state.LoopState`), None where it fits none: a periodic run, a run
-    without a measured y, a model written as equations, a PNLSS or a hybrid model (their own initial states)."""
-    if run.period is not None or run.y is None or isinstance(model, (Equations, Pnlss, Hybrid)):
+    without a measured y, a PNLSS or a hybrid model (their own initial states). A model written
+    as equations: its states (:mod:`nlsid.simulate.equations_state`)."""
+    if run.period is not None or run.y is None or isinstance(model, (Pnlss, Hybrid)):
         return None
+    if isinstance(model, Equations):
+        return equations_state.estimate(model, run, substeps)
     if loop is not None:
         return estimate_loop(model, loop, run, substeps)
     if isinstance(model, Structure):
