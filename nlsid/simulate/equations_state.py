@@ -89,8 +89,11 @@ def estimate(model: Equations, run: Run, substeps: int | None) -> InitialState |
     states); None where none are fitted."""
     if run.period is not None or run.y is None or not model.states:
         return None
+    share = int(RECORD_SHARE * run.n_samples)
+    if share < 2:  # too short a record for a transient to decay in a quarter of it
+        return None
     written = np.clip(np.asarray(model.x0, float), model.lower, model.upper)
-    prefix = _first(run, int(RECORD_SHARE * run.n_samples))
+    prefix = _first(run, share)
     start = _output(model, prefix, written, substeps)
     columns = _jacobian(model, prefix, written, start, substeps)
     length = transient_length(columns)
