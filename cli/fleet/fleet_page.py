@@ -53,7 +53,6 @@ table.sortable th[data-order=down]::after { content: " \\25BC"; }
 .counts span { display: inline-block; margin-right: 18px; }
 .bad { color: #a61b1b; font-weight: 600; }
 tr.drifts td { background: #fff1f0; }
-.scroll { overflow-x: auto; }
 table.sortable td { text-align: left; }
 table.sortable td[data-v] { text-align: right; }
 table.sortable td.text { min-width: 220px; max-width: 420px; font-size: 12.5px; }
@@ -175,7 +174,8 @@ def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: l
             f'<span>{summary["ran"]} ran, {summary["up_to_date"]} up to date</span></div>')
 
     cause_rows = "".join(f"<tr><td>{_e(titles.get(k, k))}</td><td>{n}</td></tr>" for k, n in count_causes(rows).items())
-    causes = f'<h2>Count per cause</h2><table><thead><tr><th>cause</th><th>recordings</th></tr></thead><tbody>{cause_rows}</tbody></table>'
+    causes = ('<h2>Count per cause</h2><div class="scroll"><table><thead><tr><th>cause</th><th>recordings</th></tr>'
+              f"</thead><tbody>{cause_rows}</tbody></table></div>")
 
     drifting = {d["machine"] for d in drift if d["drifts"]}
     if parameter is None:
@@ -196,10 +196,11 @@ def render_page(rows: list[dict], summary: dict, parameter: str | None, drift: l
             lines.append(f'<tr class="{"drifts" if d["drifts"] else ""}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
         unit = parameter_unit(rows, parameter)
         scale = unit if unit == NOT_RECORDED or unit.startswith(DIFFER) else f"values in {unit}, slopes in {unit} per day"
-        table = ("<table><caption>Drift per machine (least-squares line against time; "
+        table = ('<div class="scroll"><table><caption>Drift per machine (least-squares line against time; '
                  f"{_e(scale)})</caption><thead><tr>"
                  "<th>machine</th><th>recordings</th><th>first</th><th>last</th><th>slope per day</th><th>std</th>"
-                 "<th>change over span</th><th>p</th><th></th></tr></thead><tbody>" + "".join(lines) + "</tbody></table>")
+                 "<th>change over span</th><th>p</th><th></th></tr></thead><tbody>" + "".join(lines)
+                 + "</tbody></table></div>")
         if not drift:
             table = f'<p class="note">No recording has the parameter {_e(parameter)}.</p>'
         trend = f"<h2>{_e(parameter)} over time</h2>{figure}{table}"

@@ -8,7 +8,9 @@ it zooms and can be searched) with its data as a CSV ``data:`` link, there is no
 external resource (no fonts, no stylesheets, no images by address), so it can be mailed to a
 colleague and opened offline. Every piece of text that comes from a file (run ids, parameter
 names, warnings, provenance) is HTML-escaped. Tables wrap their text, so that nothing runs off
-the page at any window width; the sources cited on the page are listed in full at its end.
+the page at any window width, and a table whose columns cannot shrink to the text column (many
+numbers side by side in a narrow window) scrolls sideways in a box of its own (class ``scroll``)
+rather than widening the page; the sources cited on the page are listed in full at its end.
 
 A renderer builds a :class:`Page` from a result file; :func:`render_html` turns it into the text.
 """
@@ -50,6 +52,8 @@ figcaption { color: var(--muted); font-size: 13.5px; margin-top: 6px; }
 figcaption b { color: var(--ink); }
 figcaption a.data { white-space: nowrap; }
 table { border-collapse: collapse; margin: 8px 0 22px; font-size: 13.5px; width: 100%; }
+.scroll { overflow-x: auto; margin: 8px 0 22px; }
+.scroll > table { margin: 0; }
 caption { text-align: left; font-weight: 600; padding: 4px 0 6px; }
 th, td { border-bottom: 1px solid var(--line); padding: 4px 8px; text-align: right; vertical-align: top; }
 th { background: var(--panel); font-weight: 600; }
@@ -172,8 +176,8 @@ def _table(item: Table) -> str:
     head = _cells("th", item.header, item.text)
     body = "".join(f"<tr>{_cells('td', row, item.text)}</tr>" for row in item.rows)
     note = f'<p class="note">{_e(item.note)}</p>' if item.note else ""
-    return (f"<table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead>"
-            f"<tbody>{body}</tbody></table>{note}")
+    return (f'<div class="scroll"><table><caption>{_e(item.caption)}</caption><thead><tr>{head}</tr></thead>'
+            f"<tbody>{body}</tbody></table></div>{note}")
 
 
 def _provenance(provenance: dict) -> str:
@@ -186,7 +190,8 @@ def _provenance(provenance: dict) -> str:
 
     rows = "".join(f"<tr>{_cells('td', [key, text(value)], (1,))}</tr>" for key, value in sorted(provenance.items()))
     head = _cells("th", ["item", "value"], (1,))
-    return f'<h2>Provenance</h2><table class="provenance"><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>'
+    return (f'<h2>Provenance</h2><div class="scroll"><table class="provenance"><thead><tr>{head}</tr></thead>'
+            f"<tbody>{rows}</tbody></table></div>")
 
 
 def _references(body: str) -> str:

@@ -3,7 +3,7 @@
 A diagnosis of a mass-spring-damper whose hidden Coulomb friction (100 N) the model lacks is run
 through the CLI once per module and rendered by ``nlsid report``, as it is and with a ``chain`` of
 causes added to its summary (the shape of ``docs/formats.md``); each page is loaded with the probe
-of :mod:`test_report_browser` at 1280 and 2400 px.
+of :mod:`test_report_browser` at 1280 and 2400 px, and in an 800 px frame inside the 1280 px window.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import pytest
 
 from diagnose.test_diagnose_cli import _setup  # noqa: E402
 from report.test_report_browser import (  # noqa: E402  (skips without chromium, fails in CI)
-    WIDTHS, _report, assert_axes_labelled_with_units, assert_fits_the_window, assert_verdict_first_and_figures_shown,
-    browse, verdict_headline)
+    ALL_WIDTHS, _report, assert_axes_labelled_with_units, assert_fits_the_window, assert_verdict_first_and_figures_shown,
+    seen_at_every_width, verdict_headline)
 
 CHAIN = [{"cause": "coulomb", "title": "Coulomb friction", "values": {"fc": 99.2}, "std": {"fc": 0.4},
           "error_rms": 2.5e-6, "gain_db": 31.5, "above_floor_db": 4.26},
@@ -42,20 +42,19 @@ def diagnosis(tmp_path_factory):
     summary = json.loads((out / "summary.json").read_text())
     (chained / "summary.json").write_text(json.dumps({**summary, "chain": CHAIN}))
     _report(["report", chained, "-o", folder / "chained.html"], folder)
-    seen = {(name, width): browse(folder / f"{name}.html", folder, width)
-            for name in ("diagnosis", "chained") for width in WIDTHS}
+    seen = seen_at_every_width({name: folder / f"{name}.html" for name in ("diagnosis", "chained")}, folder)
     return summary, seen
 
 
 def test_diagnosis_page_renders_with_verdict_and_figures_visible(diagnosis):
     _, seen = diagnosis
     # model vs BLA, line spectrum, BLA vs level, residual vs state, before/after: five figures
-    for width in WIDTHS:
+    for width in ALL_WIDTHS:
         assert_verdict_first_and_figures_shown(seen["diagnosis", width], "Cause: Coulomb friction (fc = ", 5)
 
 
 @pytest.mark.parametrize("name", ["diagnosis", "chained"])
-@pytest.mark.parametrize("width", WIDTHS)
+@pytest.mark.parametrize("width", ALL_WIDTHS)
 def test_nothing_overflows_the_window(diagnosis, name, width):
     assert_fits_the_window(diagnosis[1][name, width])
 

@@ -5,8 +5,11 @@ records error events (script errors and failed resource loads, captured on windo
 load event, writes into the DOM what a reader would see: the page's scroll width against the
 window's, every element that reaches past the right edge of the text column, the rendered size
 and the axis labels (SVG text) of every figure, the verdict's layout box and text, and the text of
-every table; chromium's --dump-dom prints the DOM after the load. Each page is rendered once per
-module and opened once per window width (1280 px, a laptop, and 2400 px, a wide screen). Without
+every table and whether it fits the text column or scrolls in a box of its own; chromium's
+--dump-dom prints the DOM after the load. Each page is rendered once per module and opened once per
+window width (1280 px, a laptop, and 2400 px, a wide screen); in the 1280 px window the probe also
+lays the page out in a frame 800 px wide (a small laptop, a tablet: its own viewport, so the page's
+CSS sees 800 px) and measures it the same way, which costs no further start of chromium. Without
 chromium the test skips, except in CI (CI=true), where it fails.
 """
 
@@ -38,50 +41,82 @@ if CHROMIUM is None:
     pytest.skip("no chromium on PATH: report pages are checked in a headless browser (apt-get install chromium, "
                 "as .ci/run does)", allow_module_level=True)
 
-WIDTHS = (1280, 2400)
+WIDTHS = (1280, 2400)  # a window of chromium each
+NARROW = 800  # a frame in the 1280 px window (browse(narrow=)): a small laptop or a tablet
+ALL_WIDTHS = (NARROW, *WIDTHS)
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 PROBE = """<script>
 var errors = [];
 window.addEventListener('error', function (e) {
   errors.push(String(e.message || (e.target && (e.target.src || e.target.href)) || 'error').slice(0, 80)); }, true);
-window.addEventListener('load', function () {
-  var main = document.querySelector('main'), style = getComputedStyle(main);
+function measure(win) {
+  var doc = win.document, main = doc.querySelector('main'), style = win.getComputedStyle(main);
   var right = main.getBoundingClientRect().right - parseFloat(style.paddingRight) + 1;
+  function scroller(el) {  // the nearest box between el and main that scrolls sideways, or null
+    for (var p = el.parentElement; p && p !== main; p = p.parentElement) {
+      if (/auto|scroll/.test(win.getComputedStyle(p).overflowX)) return p; }
+    return null;
+  }
   var overflowing = [];
   Array.prototype.forEach.call(main.querySelectorAll('*'), function (el) {
     if (el.closest('svg') && el.tagName.toLowerCase() !== 'svg') return;
+    if (scroller(el)) return;  // clipped by its own box, which is checked itself
     var r = el.getBoundingClientRect();
     if (r.width > 0 && r.right > right) overflowing.push(el.tagName + ': ' + (el.textContent || '').slice(0, 60));
   });
-  var figures = Array.prototype.map.call(document.querySelectorAll('figure svg'), function (svg) {
+  var figures = Array.prototype.map.call(doc.querySelectorAll('figure svg'), function (svg) {
     var r = svg.getBoundingClientRect();
     var labels = Array.prototype.map.call(svg.querySelectorAll('[id$="-x-label"], [id$="-y-label"]'),
       function (g) { return {id: g.id, text: g.textContent.replace(/\\s+/g, ' ').trim()}; });
-    return {width: r.width, height: r.height, axes: svg.querySelectorAll('g[id*="-axes_"]').length,
-            labels: labels, texts: svg.querySelectorAll('text').length, images: svg.querySelectorAll('image').length};
+    return {width: r.width, height: r.height, right: r.right, axes: svg.querySelectorAll('g[id*="-axes_"]').length,
+            labels: labels, texts: svg.querySelectorAll('text').length, images: svg.querySelectorAll('image').length,
+            visibility: win.getComputedStyle(svg).visibility};
   });
-  var tables = Array.prototype.map.call(document.querySelectorAll('table'), function (t) {
+  var tables = Array.prototype.map.call(doc.querySelectorAll('table'), function (t) {
+    var box = scroller(t), r = t.getBoundingClientRect();
     return {caption: t.caption ? t.caption.innerText : '', rows: Array.prototype.map.call(t.rows, function (row) {
-      return Array.prototype.map.call(row.cells, function (c) { return c.innerText; }); })};
+      return Array.prototype.map.call(row.cells, function (c) { return c.innerText; }); }),
+      fits: r.right <= right, box_fits: box ? box.getBoundingClientRect().right <= right : null,
+      box_scrolls: box ? box.scrollWidth > box.clientWidth : null};
   });
-  var v = document.getElementById('verdict'), r = v.getBoundingClientRect(), s = getComputedStyle(v);
-  var out = document.createElement('pre'); out.id = 'probe';
-  out.textContent = JSON.stringify({errors: errors, scripts: document.scripts.length,
-    scroll_width: document.documentElement.scrollWidth, inner_width: window.innerWidth,
-    overflowing: overflowing.slice(0, 10), figures: figures, tables: tables,
-    verdict: {text: v.innerText, top: r.top, height: r.height, visibility: s.visibility, display: s.display}});
-  document.body.appendChild(out); });
+  var v = doc.getElementById('verdict'), r = v.getBoundingClientRect(), s = win.getComputedStyle(v);
+  return {scroll_width: doc.documentElement.scrollWidth, scrolling_width: doc.scrollingElement.scrollWidth,
+    inner_width: win.innerWidth, text_right: right, overflowing: overflowing.slice(0, 10), figures: figures,
+    tables: tables, verdict: {text: v.innerText, top: r.top, height: r.height, visibility: s.visibility,
+                              display: s.display}};
+}
+window.addEventListener('load', function () {
+  if (window.top !== window) return;  // the page again, in the narrow frame below
+  var source = '<!DOCTYPE html>' + document.documentElement.outerHTML;
+  var seen = measure(window);
+  seen.errors = errors; seen.scripts = document.scripts.length;
+  function report() {
+    var out = document.createElement('pre'); out.id = 'probe';
+    out.textContent = JSON.stringify(seen);
+    document.body.appendChild(out);
+  }
+  if (!NARROW) { report(); return; }
+  // the same page in a frame NARROW px wide: its own viewport (window.innerWidth, media queries),
+  // laid out in this browser, so that a second width costs no second start of chromium
+  var frame = document.createElement('iframe');
+  frame.style.cssText = 'position: absolute; left: -20000px; top: 0; border: 0; width: ' + NARROW + 'px; height: 900px';
+  frame.addEventListener('load', function () { seen.narrow = measure(frame.contentWindow); report(); });
+  frame.srcdoc = source;
+  document.body.appendChild(frame);
+});
 </script>"""
 
 #: an axis label ends with its unit in parentheses; a level in dB names its reference
 UNIT = re.compile(r"\([^()]+\)$")
 
 
-def browse(page: Path, tmp_path: Path, width: int = 1280) -> dict:
-    """Load ``page`` with the probe in headless chromium, ``width`` px wide; return what the probe saw."""
+def browse(page: Path, tmp_path: Path, width: int = 1280, narrow: int | None = None) -> dict:
+    """Load ``page`` with the probe in headless chromium, ``width`` px wide; return what the probe saw.
+    With ``narrow``, also what it saw of the page in a frame of that width (key ``narrow``)."""
     probed = tmp_path / f"probe_{width}_{page.name}"
-    probed.write_text(page.read_text(encoding="utf-8").replace("<head>", "<head>" + PROBE, 1), encoding="utf-8")
+    probe = PROBE.replace("NARROW", str(narrow or 0))
+    probed.write_text(page.read_text(encoding="utf-8").replace("<head>", "<head>" + probe, 1), encoding="utf-8")
     command = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run", "--hide-scrollbars",
                f"--user-data-dir={tmp_path / 'chromium-profile'}", f"--window-size={width},900",
@@ -94,9 +129,10 @@ def browse(page: Path, tmp_path: Path, width: int = 1280) -> dict:
 
 def assert_verdict_first_and_figures_shown(seen: dict, verdict_start: str, figures: int) -> None:
     """What ``browse`` saw: no error, no script but the probe, the verdict laid out, visible and inside
-    the first screen (900 px), starting with ``verdict_start``, and ``figures`` figures drawn with a size."""
-    assert seen["errors"] == []
-    assert seen["scripts"] == 1  # the probe only: the page itself has no script
+    the first screen (900 px), starting with ``verdict_start``, and ``figures`` figures drawn with a size,
+    visible and inside the text column. (A narrow frame's view has no errors or scripts of its own.)"""
+    assert seen.get("errors", []) == []
+    assert seen.get("scripts", 1) == 1  # the probe only: the page itself has no script
     verdict = seen["verdict"]
     assert verdict["visibility"] == "visible" and verdict["display"] != "none"
     assert verdict["height"] > 20 and 0 <= verdict["top"] < 900
@@ -104,12 +140,17 @@ def assert_verdict_first_and_figures_shown(seen: dict, verdict_start: str, figur
     assert len(seen["figures"]) == figures
     for figure in seen["figures"]:
         assert figure["width"] > 100 and figure["height"] > 100
+        assert figure["visibility"] == "visible" and figure["right"] <= seen["text_right"], figure["labels"]
 
 
 def assert_fits_the_window(seen: dict) -> None:
-    """Nothing wider than the window, no element past the text column's right edge."""
+    """Nothing wider than the window, no element past the text column's right edge; a table wider
+    than the column scrolls sideways in a box of its own that fits it."""
     assert seen["scroll_width"] <= seen["inner_width"], seen["overflowing"]
+    assert seen["scrolling_width"] <= seen["inner_width"] + 1, seen["overflowing"]
     assert seen["overflowing"] == []
+    for table in seen["tables"]:
+        assert table["fits"] or table["box_fits"], (table["caption"], table["rows"][:1])
 
 
 def assert_axes_labelled_with_units(seen: dict) -> None:
@@ -191,7 +232,18 @@ def seen(bla_page, hosidf_page, model_page, tmp_path_factory):
     """What the probe saw of each page kind at each window width."""
     folder = tmp_path_factory.mktemp("probe")
     pages = {"bla": bla_page, "hosidf": hosidf_page[0], "model": model_page[0]}
-    return {(kind, width): browse(page, folder, width) for kind, page in pages.items() for width in WIDTHS}
+    return seen_at_every_width(pages, folder)
+
+
+def seen_at_every_width(pages: dict, folder: Path) -> dict:
+    """What the probe saw of each page at each of ALL_WIDTHS, keyed (name, width): a window per
+    width of WIDTHS, the narrow width a frame inside the first window."""
+    seen = {}
+    for name, page in pages.items():
+        for width in WIDTHS:
+            seen[name, width] = browse(page, folder, width, NARROW if width == WIDTHS[0] else None)
+        seen[name, NARROW] = seen[name, WIDTHS[0]].pop("narrow")
+    return seen
 
 
 @pytest.mark.parametrize("kind, figures, verdict", [("bla", 5, "Odd nonlinear distortion"),
@@ -200,12 +252,12 @@ def seen(bla_page, hosidf_page, model_page, tmp_path_factory):
 def test_page_renders_with_verdict_and_figures_visible(seen, kind, figures, verdict):
     # bla: bla_vs_level, then spectrum and BLA of each of the two levels; hosidf: the H_1 map and one
     # figure per frequency; model: one Bode plot.
-    for width in WIDTHS:
+    for width in ALL_WIDTHS:
         assert_verdict_first_and_figures_shown(seen[kind, width], verdict, figures)
 
 
 @pytest.mark.parametrize("kind", ["bla", "hosidf", "model"])
-@pytest.mark.parametrize("width", WIDTHS)
+@pytest.mark.parametrize("width", ALL_WIDTHS)
 def test_nothing_overflows_the_window(seen, kind, width):
     assert_fits_the_window(seen[kind, width])
 
