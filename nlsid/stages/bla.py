@@ -236,22 +236,25 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     --------
     A linear plant's BLA is its frequency response: here that of the mass-spring-damper
     1/(m s^2 + c s + k) seen through the zero-order hold, as it is simulated (and sampled on a
-    machine). Three transient periods let its slowest mode (decay rate c/2m = 5/s) die out to
-    e^-15. The output noise sigma = 1e-6 then is the only error: a multisine of rms a on F lines
-    has |U(k)| = N a / sqrt(2 F) in an N-sample DFT, so each of the M P period ratios Y/U has
-    noise variance 2 F sigma^2 / (N a^2), and their mean 1/(M P) of it. A complex Gaussian error
+    machine), computed from the matrix exponential of its state equation. Three transient
+    periods let its slowest mode (decay rate c/2m = 5/s) die out to e^-15. The output noise
+    sigma = 1e-6 then is the only error: a multisine of rms a on F lines has
+    |U(k)| = N a / sqrt(2 F) in an N-sample DFT, so each of the M P period ratios Y/U has noise
+    variance 2 F sigma^2 / (N a^2), and their mean 1/(M P) of it. A complex Gaussian error
     exceeds five of its standard deviations with probability exp(-25):
 
     >>> import numpy as np
-    >>> from scipy import signal
     >>> import nlsid
     >>> exc = nlsid.design({"fs": 200.0, "seed": 1, "multisine": {"period": 200, "band": [1.0, 40.0],
     ...                     "realizations": 4, "periods": 2, "transient_periods": 3, "rms_levels": [1.0]}})
     >>> plant = nlsid.Model.from_dict({"model": {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0,
     ...                                          "stiffness": 2000.0}, "disturbances": {"y_noise": 1e-6, "seed": 3}})
     >>> b = nlsid.bla(plant.simulate(exc))
-    >>> num, den, _ = signal.cont2discrete(([1.0], [2.0, 20.0, 2000.0]), 1 / 200.0)  # 1/(m s^2 + c s + k)
-    >>> G = signal.freqz(num.ravel(), den, worN=b.frequency, fs=200.0)[1]
+    >>> from scipy.linalg import expm
+    >>> A = np.array([[0.0, 1.0, 0.0], [-1000.0, -10.0, 0.5], [0.0, 0.0, 0.0]])  # (x, v, u): v' = (u - c v - k x)/m
+    >>> Phi = expm(A / 200.0)  # one sample with u held: (x, v)[n+1] = Ad (x, v)[n] + Bd u[n]
+    >>> Ad, Bd = Phi[:2, :2], Phi[:2, 2]
+    >>> G = np.array([np.linalg.solve(z * np.eye(2) - Ad, Bd)[0] for z in np.exp(2j * np.pi * b.frequency / 200.0)])
     >>> F, N, M, P = len(b.frequency), 200, 4, 2
     >>> std = np.sqrt(2 * F * 1e-6**2 / (N * 1.0**2) / (M * P))
     >>> bool(np.all(np.abs(b.G - G) < 5 * std))

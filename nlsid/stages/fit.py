@@ -167,8 +167,6 @@ class TransferFunctionFit:
     >>> s = 2j * np.pi * 5.0
     >>> bool(abs(G[0] * (2.0 * s**2 + 20.0 * s + 2000.0) - 1) < 1e-3)  # coefficients' std: about 1e-4 relative
     True
-    >>> type(tf.to_scipy()).__name__
-    'TransferFunctionContinuous'
     """
 
     fitted: BLAFit

@@ -44,8 +44,9 @@ class PnlssResult:
     Examples
     --------
     A PNLSS model of a mass-spring-damper with a cubic spring (a Duffing oscillator), started
-    from its linear part: two states, and the cubic monomials of (x1, x2, u), C(3 + 2, 3) = 10 of
-    them, in each state equation:
+    from its linear part and given three nonlinear iterations (:func:`nlsid.fit_pnlss` fits it to
+    the noise): two states, and the cubic monomials of (x1, x2, u), C(3 + 2, 3) = 10 of them, in
+    each state equation:
 
     >>> import os, tempfile
     >>> import nlsid
@@ -55,7 +56,7 @@ class PnlssResult:
     ...            "nonlinearities": [{"type": "cubic_stiffness", "k3": 1e9}]}
     >>> rec = nlsid.Model.from_dict({"model": duffing, "disturbances": {"y_noise": 1e-6, "seed": 3}}).simulate(exc)
     >>> linear = {"model": {"type": "transfer_function", "num": [0.5], "den": [1.0, 10.0, 1000.0]}}  # 1/(m s^2+c s+k)
-    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), max_iterations=20)
+    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), max_iterations=3)
     >>> result.estimation_ids, result.validation_ids
     (['ms_l00_m00', 'ms_l00_m01', 'ms_l00_m02'], ['ms_l00_m03'])
     >>> result.pnlss.A.shape, result.pnlss.E.shape, result.realisation
