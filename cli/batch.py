@@ -308,13 +308,14 @@ def _finish(pipeline, recordings, fleet: Path, stored: dict, records: dict, exec
     if parameter is not None and parameter not in names:
         notes.append(f"--param {parameter}: no recording has it; parameters found: {', '.join(names) or 'none'}")
     drift = res.drift(rows, chosen) if chosen in names else []
+    unit = res.parameter_unit(rows, chosen) if chosen in names else None
     tally = res.counts(rows)
     checks = []
     if fail_if_drift:
         if chosen not in names:
             checks.append(f"--fail-if-drift: no recording has the parameter {chosen or '(none found)'}")
-        checks += [f"--fail-if-drift: {d['machine'] or '(no machine)'}: {chosen} changes by {d['slope_per_day']:+.4g} "
-                   f"per day (p = {d['p_value']:.2g})" for d in drift if d["drifts"]]
+        checks += [f"--fail-if-drift: {d['machine'] or '(no machine)'}: {chosen} changes by {d['slope_per_day']:+.4g}"
+                   f"{res.unit_suffix(unit)} per day (p = {d['p_value']:.2g})" for d in drift if d["drifts"]]
     if tally["bad_input"] or tally["errors"]:
         code = 2
     elif tally["check_failed"] or checks:
@@ -328,7 +329,7 @@ def _finish(pipeline, recordings, fleet: Path, stored: dict, records: dict, exec
         "recordings": len(rows), "ran": len(records), "up_to_date": len(stored), **tally,
         "failed_checks": checks, "exit_code": code, "seconds": round(seconds, 3),
         "work_folders_removed": removed, "workers_lost": getattr(executor, "lost", None),
-        "parameter": chosen if chosen in names else None, "parameters": names,
+        "parameter": chosen if chosen in names else None, "unit": unit, "parameters": names,
         "causes": res.count_causes(rows), "drift": drift,
         "failed": [{"name": r["name"], "status": r["status"], "error": r["error"]} for r in rows if r["status"] != "ok"],
         "notes": notes,
@@ -341,6 +342,8 @@ def _finish(pipeline, recordings, fleet: Path, stored: dict, records: dict, exec
 
 def _print(summary: dict) -> None:
     """The summary on stderr, one line per fact (not wrapped: CI logs are read by grep)."""
+    from nlsid.cli.fleet.results import unit_suffix
+
     if settings().quiet:
         return
     lines = [f"{summary['recordings']} recordings on {summary['executor']}: {summary['ran']} ran, "
@@ -352,8 +355,9 @@ def _print(summary: dict) -> None:
     if summary["work_folders_removed"]:
         lines.append(f"removed {summary['work_folders_removed']} work folder(s) of tasks whose worker was lost")
     lines.append("causes: " + ", ".join(f"{name} {count}" for name, count in summary["causes"].items()))
-    lines += [f"drift: {d['machine'] or '(no machine)'}: {summary['parameter']} {d['slope_per_day']:+.4g} per day "
-              f"(p = {d['p_value']:.2g}, {d['first_value']:.4g} -> {d['last_value']:.4g})"
+    unit = unit_suffix(summary["unit"])
+    lines += [f"drift: {d['machine'] or '(no machine)'}: {summary['parameter']} {d['slope_per_day']:+.4g}{unit} per day "
+              f"(p = {d['p_value']:.2g}, {d['first_value']:.4g} -> {d['last_value']:.4g}{unit})"
               for d in summary["drift"] if d["drifts"]]
     files = summary["files"]
     lines.append(f"results: {files['csv']}, {files['jsonl']}; page: {files['page']}")

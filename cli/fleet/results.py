@@ -108,6 +108,14 @@ def parameter_unit(rows: list[dict], parameter: str) -> str:
     return texts[0] if len(texts) == 1 else DIFFER + ", ".join(texts)
 
 
+def unit_suffix(label: str | None) -> str:
+    """`` N`` after a number where :func:`parameter_unit` names one unit; nothing for a pure
+    number, a unit not recorded or units that differ."""
+    if not label or label in (PURE_NUMBER, NOT_RECORDED) or label.startswith(DIFFER):
+        return ""
+    return f" {label}"
+
+
 def _repr(value) -> str:
     return "" if value is None else repr(float(value))
 

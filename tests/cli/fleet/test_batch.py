@@ -91,7 +91,7 @@ def test_a_fleet_with_a_corrupt_recording_and_a_drifting_machine(run_cli, projec
     assert [s["status"] for s in records["B/corrupt"]["steps"]] == ["failed (2)"]  # fit never ran
 
     # the drifting machine is named, the steady one not
-    assert summary["parameter"] == FIT_PARAMETER
+    assert summary["parameter"] == FIT_PARAMETER and summary["unit"] == "N"
     drift = {d["machine"]: d for d in summary["drift"]}
     assert drift["stage-B"]["drifts"] and drift["stage-B"]["slope_per_day"] == pytest.approx(0.1, rel=0.05)
     assert not drift["stage-A"]["drifts"] and abs(drift["stage-A"]["slope_per_day"]) < 0.002

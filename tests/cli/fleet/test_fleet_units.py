@@ -12,7 +12,7 @@ import io
 
 from nlsid.cli.fleet.fleet_page import svg_figure
 from nlsid.cli.fleet.outputs import diagnosis_fields, fit_parameters
-from nlsid.cli.fleet.results import csv_text, parameter_unit
+from nlsid.cli.fleet.results import csv_text, parameter_unit, unit_suffix
 
 MOMENTS = ("2026-01-01T00:00:00+00:00", "2026-01-02T00:00:00+00:00")
 
@@ -69,3 +69,6 @@ def test_the_axis_says_the_unit_none_or_that_recordings_differ():
     mixed = rows("N", "kN")
     assert parameter_unit(mixed, "fc") == "units differ: N, kN"
     assert "fc (units differ: N, kN)" in svg_figure(mixed, "fc", set())
+    # after a number (the terminal's drift lines): a unit only where one is named
+    assert [unit_suffix(label) for label in ("N", "1", "unit not recorded", "units differ: N, kN", None)] == [
+        " N", "", "", "", ""]
