@@ -75,9 +75,13 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     levels, lpm_levels, warnings, across = result.levels, result.lpm_levels, result.warnings, result.across_levels
     summaries = [level.summary() for level in levels]
     lpm_summaries = [level.summary() for level in lpm_levels]
+    frm_summaries = [level.summary() for level in result.frm_levels]
     if as_json:
-        emit_json({"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
-                   "levels": summaries, "lpm_levels": lpm_summaries, "across_levels": across, "warnings": warnings})
+        document = {"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
+                    "levels": summaries, "lpm_levels": lpm_summaries, "across_levels": across, "warnings": warnings}
+        if frm_summaries:
+            document["frm_levels"] = frm_summaries
+        emit_json(document)
         return
     rms = _rms_header(result.units.get("u"))
     if summaries:
@@ -86,6 +90,8 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         _print_modes_table(output, across["modes"])
     if lpm_summaries:
         _print_lpm_table(output, lpm_summaries, rms, first=len(summaries))
+    if frm_summaries:
+        _print_frm_table(output, frm_summaries)
 
 
 FLAGS = {"method": "--method", "confidence": "--confidence", "lpm_lines": "--lpm-lines", "lpm_degree": "--lpm-degree"}
@@ -134,6 +140,21 @@ def _print_modes_table(output: str, modes: list[dict]) -> None:
     settings().console.print(text_table(
         f"{output}: modes from the lowest to the highest level (changes in %, +- 1 standard error)",
         ("f Hz", "zeta", "to f Hz", "to zeta", "df %", "+-", "dzeta %", "+-", "significant"), rows, ruled=True))
+
+
+def _print_frm_table(output: str, summaries: list[dict]) -> None:
+    """The frequency response matrix of runs with several inputs or outputs: one row per level and
+    entry (output <- input), band means in dB (variances relative to |G|^2)."""
+    rows = []
+    for index, row in enumerate(summaries):
+        counts = f"{row['realizations']} x {row['experiments']} x {row['periods']}"
+        level = "-" if row["level"] is None else f"{row['level']:.3g}"
+        for entry in row["entries"]:
+            rows.append([str(index), level, counts, f"{entry['output']} <- {entry['input']}", _cell(entry["bla_db"]),
+                         _cell(entry["noise_var_db"]), _cell(entry["total_var_db"])])
+    settings().console.print(text_table(f"{output}: frequency response matrix per level (dB; variances relative to "
+                                        "|G|^2)", ("FRM level", "level", "M x E x P", "entry", "|G| dB", "noise var",
+                                                   "total var"), rows))
 
 
 def _print_lpm_table(output: str, summaries: list[dict], rms: str, first: int) -> None:

@@ -31,7 +31,19 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
         G (F, 2), var_G, var_y, var_G_smoothed, [G_yr (F, 2), G_ur (F, 2), var_u], radius, mag_lo, mag_hi,
         phase_lo, phase_hi
 
-Version 1 files (no ``lpm_levels``) are still read.
+    /frm_levels/level_NN/   (version 3) one group per level of runs with several inputs or outputs:
+                            the frequency response matrix (nlsid.analysis.frm_levels, docs/mimo.md)
+        attrs   level (NaN when none), fs, period, n_realizations, n_experiments, n_periods,
+                confidence, inputs, outputs, run_ids (JSON: [realization][experiment]), units
+                (JSON), warnings (JSON), summary (JSON, see FrmLevel.summary)
+        excited_bins (F,) int64, frequency (F,)
+        G (F, n_y, n_u, 2), std_noise, std_total (F, n_y, n_u),
+        cov_noise, cov_total, cov_nonlinear (F, n_y n_u, n_y n_u, 2)   vec(G) column-stacked
+        bounds/, noise_bounds/   radius, mag_lo, mag_hi, phase_lo, phase_hi (F, n_y, n_u)
+        detection/   (odd grids only) odd_bins, even_bins, odd_power, even_power, odd_noise, even_noise
+
+Version 1 files (no ``lpm_levels``) and version 2 files (no ``frm_levels``) are still read; a file
+without ``frm_levels`` is written as version 2.
 
 Meaning and units of each dataset: ``docs/formats.md`` (drafted in ``docs/drafts/bla.md``).
 """
@@ -51,7 +63,8 @@ from nlsid.io.result_file import create_result, datasets, json_safe, open_result
 
 FORMAT = "bla"
 FORMAT_VERSION = 2
-READ_VERSIONS = (1, 2)
+FRM_FORMAT_VERSION = 3  # written when the file holds frm_levels
+READ_VERSIONS = (1, 2, 3)
 _BOUNDS = ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")
 _ROBUST = ("G", "var_total", "var_noise", "var_nl", "var_noise_period", "var_ys", "var_input_nl")
 _FAST = ("G", "var_noise", "var_total", "var_nl", "var_nl_even")
@@ -65,10 +78,12 @@ def _put_bounds(group: h5py.Group, bounds) -> None:
 
 
 def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: float, warnings: list[str],
-              across: dict, force: bool = False, lpm_levels=(), units: dict | None = None) -> Path:
-    """Write the :class:`~nlsid.analysis.levels.LevelResult` list and the
-    :class:`~nlsid.analysis.arbitrary.LPMLevel` list atomically in the layout above."""
-    with create_result(path, FORMAT, FORMAT_VERSION, provenance, force) as handle:
+              across: dict, force: bool = False, lpm_levels=(), units: dict | None = None, frm_levels=()) -> Path:
+    """Write the :class:`~nlsid.analysis.levels.LevelResult` list, the
+    :class:`~nlsid.analysis.arbitrary.LPMLevel` list and the
+    :class:`~nlsid.analysis.frm_levels.FrmLevel` list atomically in the layout above."""
+    version = FRM_FORMAT_VERSION if frm_levels else FORMAT_VERSION
+    with create_result(path, FORMAT, version, provenance, force) as handle:
         handle.attrs["confidence"] = float(probability)
         handle.attrs["units"] = json.dumps(units or {}, sort_keys=True)
         handle.attrs["warnings"] = json.dumps(warnings)
@@ -80,7 +95,34 @@ def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: fl
             lpm_root = handle.create_group("lpm_levels")
             for index, level in enumerate(lpm_levels):
                 _write_lpm_level(lpm_root.create_group(f"level_{index:02d}"), level)
+        if frm_levels:
+            frm_root = handle.create_group("frm_levels")
+            for index, level in enumerate(frm_levels):
+                _write_frm_level(frm_root.create_group(f"level_{index:02d}"), level)
     return Path(path)
+
+
+def _write_frm_level(group: h5py.Group, level) -> None:
+    result = level.frm
+    group.attrs.update({
+        "level": float("nan") if level.level is None else float(level.level),
+        "fs": float(level.fs), "period": int(level.period), "n_realizations": int(result.n_realizations),
+        "n_experiments": int(result.n_experiments), "n_periods": int(result.n_periods),
+        "confidence": float(result.confidence), "inputs": json.dumps(list(level.inputs)),
+        "outputs": json.dumps(list(level.outputs)), "run_ids": json.dumps(level.run_ids),
+        "units": json.dumps(level.units, sort_keys=True), "warnings": json.dumps(level.warnings),
+        "summary": json.dumps(json_safe(level.summary()), sort_keys=True),
+    })
+    put(group, "excited_bins", result.bins.astype(np.int64))
+    put(group, "frequency", result.frequency)
+    for name in ("G", "std_noise", "std_total", "cov_noise", "cov_total", "cov_nonlinear"):
+        put(group, name, getattr(result, name))
+    _put_bounds(group.create_group("bounds"), result.bounds)
+    _put_bounds(group.create_group("noise_bounds"), result.noise_bounds)
+    if result.detection is not None:
+        detection = group.create_group("detection")
+        for item in fields(result.detection):
+            put(detection, item.name, getattr(result.detection, item.name))
 
 
 def _write_lpm_level(group: h5py.Group, level) -> None:
@@ -147,7 +189,9 @@ def read_bla(path: str | os.PathLike) -> dict:
 
     Returns ``{"attrs": {...}, "levels": [{"attrs": {...}, "excited_bins", "frequency",
     "robust": {...}, "fast": {...} or None, "lines": {...}}, ...], "lpm_levels": [{"attrs": {...},
-    "bins", "frequency", "G", "var_G", ...}, ...]}``; JSON attributes are parsed.
+    "bins", "frequency", "G", "var_G", ...}, ...], "frm_levels": [{"attrs": {...}, "excited_bins",
+    "frequency", "G", "std_noise", ..., "bounds": {...}, "noise_bounds": {...}, "detection": {...}
+    or None}, ...]}``; JSON attributes are parsed.
     """
     with open_result(path, FORMAT, READ_VERSIONS, "nlsid bla") as handle:
         attrs = {key: _attr(key, value) for key, value in handle.attrs.items()}
@@ -177,7 +221,19 @@ def read_bla(path: str | os.PathLike) -> dict:
             lpm_levels.append({"name": name,
                                "attrs": {key: _attr(key, value) for key, value in group.attrs.items()},
                                **datasets(group, where)})
-    return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels}
+        frm_levels = []
+        for name in sorted(handle["frm_levels"]) if "frm_levels" in handle else []:
+            group, where = handle["frm_levels"][name], f"{path}:/frm_levels/{name}"
+            for required in ("excited_bins", "frequency", "G", "std_noise", "std_total", "bounds", "noise_bounds"):
+                if required not in group:
+                    raise InputError(f"{where}/{required}", "missing")
+            frm_levels.append({"name": name,
+                               "attrs": {key: _attr(key, value) for key, value in group.attrs.items()},
+                               **datasets(group, where),
+                               **{sub: datasets(group[sub], f"{where}/{sub}") for sub in ("bounds", "noise_bounds")},
+                               "detection": datasets(group["detection"], f"{where}/detection")
+                               if "detection" in group else None})
+    return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels, "frm_levels": frm_levels}
 
 
 def read_units(path: str | os.PathLike) -> dict[str, str]:
@@ -186,7 +242,7 @@ def read_units(path: str | os.PathLike) -> dict[str, str]:
         return json.loads(text(handle.attrs.get("units", "{}")))
 
 
-_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary", "units")
+_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary", "units", "inputs", "outputs")
 
 
 def _attr(key: str, value):

@@ -15,6 +15,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from nlsid.analysis.arbitrary import LPMLevel
+from nlsid.analysis.frm_levels import FrmLevel
 from nlsid.analysis.levels import LevelResult
 from nlsid.errors import InputError
 from nlsid.stages.recording import Recording
@@ -58,6 +59,9 @@ class BlaResult:
         The BLA versus the excitation level (``docs/formats.md``).
     units : dict
         Signal -> unit that every run of the recording gives it.
+    frm_levels : list of FrmLevel
+        Levels of runs with several inputs or outputs: the frequency response matrix ``.frm``
+        (:mod:`nlsid.analysis.frm_levels`, ``docs/mimo.md``); empty for a single-input recording.
     confidence : float
         Probability of the confidence bounds.
     source : str
@@ -99,6 +103,7 @@ class BlaResult:
     confidence: float
     source: str
     inputs: list[str] = field(default_factory=list)
+    frm_levels: list[FrmLevel] = field(default_factory=list)
 
     @property
     def frequency(self) -> np.ndarray:
@@ -128,15 +133,19 @@ class BlaResult:
         """Every warning, of the recording and of each level (``level 1 (rms 2 N): ...``)."""
         names = self.level_names()
         lpm = [(names[len(self.levels) + i] + " (arbitrary runs)", level) for i, level in enumerate(self.lpm_levels)]
-        return self.warnings + [f"{name}: {w}" for name, level in [*zip(names, self.levels), *lpm]
+        frm = [(f"frequency response matrix level {i}", level) for i, level in enumerate(self.frm_levels)]
+        return self.warnings + [f"{name}: {w}" for name, level in [*zip(names, self.levels), *lpm, *frm]
                                 for w in level.warnings]
 
     def summary(self) -> dict:
         """Per level the scalars of ``docs/formats.md`` (``levels``, ``lpm_levels``), the
         ``across_levels`` trend and the ``warnings``: the ``nlsid bla --json`` summary without paths."""
-        return {"levels": [level.summary() for level in self.levels],
-                "lpm_levels": [level.summary() for level in self.lpm_levels],
-                "across_levels": self.across_levels, "warnings": self.warnings}
+        out = {"levels": [level.summary() for level in self.levels],
+               "lpm_levels": [level.summary() for level in self.lpm_levels],
+               "across_levels": self.across_levels, "warnings": self.warnings}
+        if self.frm_levels:
+            out["frm_levels"] = [level.summary() for level in self.frm_levels]
+        return out
 
     def figures(self) -> dict[str, bytes]:
         """The stage's figures as PNG bytes by file name (``nlsid bla --plots``)."""
@@ -161,7 +170,7 @@ class BlaResult:
         check_writable(str(path), force)
         record = provenance if provenance is not None else make_provenance(input_paths=self.inputs)
         write_bla(path, self.levels, record, self.confidence, self.warnings, self.across_levels, force=force,
-                  lpm_levels=self.lpm_levels, units=self.units)
+                  lpm_levels=self.lpm_levels, units=self.units, frm_levels=self.frm_levels)
         return Path(path)
 
     def _repr_html_(self) -> str:
@@ -265,6 +274,7 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     ...     print(error)
     ms_l00_m00: run has no signal 'y'
     """
+    from nlsid.analysis.frm_levels import MimoRuns
     from nlsid.analysis.levels import across_levels, analyse_bla, recording_runs
     from nlsid.io.units import common_units
 
@@ -278,14 +288,24 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
 
     options = dict(method=method, probability=confidence, on_run=seen, lpm_half_width=lpm_lines // 2,
                    lpm_degree=lpm_degree)
+    mimo = MimoRuns(on_run=seen)  # runs with several inputs or outputs: the frequency response matrix
+
+    def analyse(runs, source: str):
+        try:
+            return analyse_bla(mimo.take(runs), source=source, **options)
+        except InputError:
+            if mimo.only_mimo:  # its only complaint: no run of one input and one output to analyse
+                return [], [], []
+            raise
+
     if isinstance(recording, Recording):
         source = recording.path or "recording"
         runs = ((run, f"{source}:/runs/{run.run_id}") for run in recording.runs)
-        levels, lpm_levels, warnings = analyse_bla(runs, source=source, **options)
+        levels, lpm_levels, warnings = analyse(runs, source)
         inputs = [recording.path] if recording.path else []
     elif hasattr(recording, "load") and hasattr(recording, "run_ids"):  # a file open for reading, run by run
         source = str(recording.path)
-        levels, lpm_levels, warnings = analyse_bla(recording_runs(recording, source), source=source, **options)
+        levels, lpm_levels, warnings = analyse(recording_runs(recording, source), source)
         inputs = [source]
     else:
         from nlsid.io.recording import open_recording
@@ -293,4 +313,4 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
         with open_recording(recording, require_y=True, mapping=dict(mapping) if mapping else None) as rec:
             return bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=on_run)
     return BlaResult(levels, lpm_levels, warnings, across_levels(levels), common_units(units_seen), confidence,
-                     source, inputs)
+                     source, inputs, mimo.levels(confidence, source))

@@ -1,0 +1,218 @@
+"""The frequency response matrix of a recording's runs with several inputs or outputs, per level.
+
+A run that names several inputs or outputs (``Run.is_mimo``, recording format version 3) is one
+experiment: the n_u inputs it applied, the n_y outputs it measured. The runs of one excitation
+level are grouped by realization (``Run.realization``; a run without one is a realization of its
+own) and, within a realization, ordered by experiment (``Run.experiment``, else by run id). With
+M realizations of E >= n_u experiments of P steady-state periods, the FRM, the MIMO BLA, and its
+noise and total covariances follow from :func:`nlsid.analysis.frm.frm` (Schoukens, Pintelon and
+Rolain 2012, Eq. 6-117 and Section 6.1.1; ``docs/mimo.md``).
+
+The runs of a level must share their inputs and outputs (names, in order), sample rate, period,
+excited bins and number of steady-state periods, and every realization must hold as many
+experiments: anything else is one InputError naming the run and what differs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+
+from nlsid.analysis.frm import FrequencyResponseMatrix, frm
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+
+
+@dataclass
+class FrmLevel:
+    """The FRM of one excitation level.
+
+    Attributes
+    ----------
+    level : float or None
+        The runs' level attribute (None when they carry none).
+    fs : float
+        Sample rate (Hz).
+    period : int
+        N, samples per period.
+    inputs, outputs : tuple of str
+        The names of the inputs (columns of G) and outputs (rows of G), as the runs name them.
+    run_ids : list of list of str
+        ``run_ids[m][e]``: the run of experiment e of realization m.
+    units : dict
+        The unit of each input and output the runs record alike.
+    frm : FrequencyResponseMatrix
+        G (F, n_y, n_u), its standard deviations, covariances and bounds.
+    """
+
+    level: float | None
+    fs: float
+    period: int
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    run_ids: list[list[str]]
+    units: dict[str, str]
+    frm: FrequencyResponseMatrix
+
+    @property
+    def warnings(self) -> list[str]:
+        return self.frm.warnings
+
+    def summary(self) -> dict:
+        """The level's scalars (``nlsid bla --json``, ``frm_levels``): counts, band, and per entry
+        (output i, input a) the band means ``bla_db`` = mean 20 log10 |G_ia| and
+        ``noise_var_db``, ``total_var_db`` = 10 log10 of the mean of var / |G_ia|^2 (NaN where a
+        variance cannot be estimated)."""
+        result = self.frm
+        with np.errstate(divide="ignore", invalid="ignore"):
+            magnitude2 = np.abs(result.G) ** 2
+            rows = []
+            for i, output in enumerate(self.outputs):
+                for a, name in enumerate(self.inputs):
+                    rows.append({
+                        "output": output, "input": name,
+                        "bla_db": _db(np.mean(10 * np.log10(magnitude2[:, i, a]))),
+                        "noise_var_db": _db10(np.mean(result.std_noise[:, i, a] ** 2 / magnitude2[:, i, a])),
+                        "total_var_db": _db10(np.mean(result.std_total[:, i, a] ** 2 / magnitude2[:, i, a])),
+                    })
+        return {
+            "level": self.level, "inputs": list(self.inputs), "outputs": list(self.outputs),
+            "realizations": result.n_realizations, "experiments": result.n_experiments,
+            "periods": result.n_periods, "excited_lines": int(result.bins.size),
+            "band_hz": [float(result.frequency[0]), float(result.frequency[-1])],
+            "entries": rows, "detection": None if result.detection is None else result.detection.summary(),
+            "warnings": list(result.warnings),
+        }
+
+
+def _db(value: float) -> float:
+    """A dB value as a float, NaN where it is not finite."""
+    value = float(value)
+    return value if np.isfinite(value) else float("nan")
+
+
+def _db10(power: float) -> float:
+    return _db(10 * np.log10(power)) if np.isfinite(power) and power > 0 else float("nan")
+
+
+@dataclass
+class MimoRuns:
+    """Sets aside the runs with several inputs or outputs from a stream of ``(run, where)`` pairs
+    (:meth:`take`), then gives their FRM per level (:meth:`levels`).
+
+    ``on_run`` is called with each run set aside, as the single-input analysis calls it with the
+    others; ``others`` counts the runs passed on; ``exhausted`` says the stream was read to its end.
+    """
+
+    on_run: Callable[[Run], None] | None = None
+    runs: list[tuple[Run, str]] = field(default_factory=list)
+    others: int = 0
+    exhausted: bool = False
+
+    def take(self, pairs: Iterable[tuple[Run, str]]) -> Iterator[tuple[Run, str]]:
+        """The pairs of runs with one input and one output; the others are kept for :meth:`levels`."""
+        for run, where in pairs:
+            if not run.is_mimo:
+                self.others += 1
+                yield run, where
+                continue
+            if run.kind != "multisine":
+                raise InputError(where, f"a run with several inputs or outputs ({', '.join(run.inputs)} -> "
+                                        f"{', '.join(run.outputs)}) must be a multisine for the frequency response "
+                                        f"matrix, got kind {run.kind!r}")
+            run.output_matrix()  # a run without y is refused here, naming it
+            self.runs.append((run, where))
+            if self.on_run is not None:
+                self.on_run(run)
+        self.exhausted = True
+
+    @property
+    def only_mimo(self) -> bool:
+        """Whether the stream was read to its end and every run had several inputs or outputs (and
+        there was at least one)."""
+        return self.exhausted and bool(self.runs) and self.others == 0
+
+    def levels(self, confidence: float = 0.95, source: str = "recording") -> list[FrmLevel]:
+        """The FRM of each level of the runs set aside, sorted by level (a level of None first)."""
+        by_level: dict[float | None, list[tuple[Run, str]]] = {}
+        for run, where in self.runs:
+            by_level.setdefault(run.level, []).append((run, where))
+        keys = sorted(by_level, key=lambda level: (level is not None, level or 0.0))
+        return [level_frm(by_level[key], confidence, f"{source}: level {key}") for key in keys]
+
+
+def level_frm(pairs: list[tuple[Run, str]], confidence: float, label: str) -> FrmLevel:
+    """The FRM of the runs of one level (``label`` names the level in messages)."""
+    first = pairs[0][0]
+    for run, where in pairs[1:]:
+        _check_alike(first, run, where)
+    realizations = _realizations([run for run, _ in pairs], label, len(first.inputs))
+    u = np.stack([[_steady(run.input_matrix(), run) for run in experiments] for experiments in realizations])
+    y = np.stack([[_steady(run.output_matrix(), run) for run in experiments] for experiments in realizations])
+    try:
+        result = frm(u, y, first.excited_bins, first.fs, confidence)
+    except InputError as error:
+        raise InputError(label, f"{error.where}: {error.what}") from None
+    units = {name: first.units[name] for name in (*first.inputs, *first.outputs)
+             if name in first.units and all(run.units.get(name) == first.units[name] for run, _ in pairs)}
+    return FrmLevel(level=first.level, fs=first.fs, period=int(first.period), inputs=tuple(first.inputs),
+                    outputs=tuple(first.outputs), run_ids=[[run.run_id for run in e] for e in realizations],
+                    units=units, frm=result)
+
+
+def _steady(x: np.ndarray, run: Run) -> np.ndarray:
+    """The (channels, P, N) steady-state periods of an (channels, n) array of a run."""
+    start = run.transient_periods * run.period
+    return x[:, start:].reshape(x.shape[0], run.n_periods, run.period)
+
+
+def _check_alike(first: Run, run: Run, where: str) -> None:
+    """A run of the level must match its first run in what the FRM combines."""
+    for name, mine, theirs in (
+        ("inputs", tuple(run.inputs), tuple(first.inputs)),
+        ("outputs", tuple(run.outputs), tuple(first.outputs)),
+        ("fs", run.fs, first.fs),
+        ("period", run.period, first.period),
+        ("steady-state periods", run.n_periods, first.n_periods),
+    ):
+        if mine != theirs:
+            raise InputError(where, f"{name} {mine} differ from those of run {first.run_id} of the same level "
+                                    f"({theirs}): one frequency response matrix combines runs of one design")
+    if not np.array_equal(run.excited_bins, first.excited_bins):
+        raise InputError(f"{where}.excited_bins", f"differ from those of run {first.run_id} of the same level: "
+                                                  "orthogonal multisines excite the same lines in every experiment")
+
+
+def _realizations(runs: list[Run], label: str, n_inputs: int) -> list[list[Run]]:
+    """The runs by realization (in order of realization), each list ordered by experiment."""
+    groups: dict[tuple, list[Run]] = {}
+    for run in runs:
+        key = (0, run.realization, "") if run.realization is not None else (1, 0, run.run_id)
+        groups.setdefault(key, []).append(run)
+    out = []
+    for key in sorted(groups):
+        experiments = sorted(groups[key], key=lambda run: (run.experiment is None, run.experiment or 0, run.run_id))
+        indices = [run.experiment for run in experiments if run.experiment is not None]
+        if len(set(indices)) != len(indices):
+            raise InputError(label, f"realization {key[1]} holds experiment {_repeated(indices)} twice "
+                                    f"({', '.join(run.run_id for run in experiments)})")
+        out.append(experiments)
+    counts = {len(experiments) for experiments in out}
+    if len(counts) > 1:
+        detail = ", ".join(f"{e[0].run_id} ...: {len(e)}" for e in out)
+        raise InputError(label, f"the realizations hold different numbers of experiments ({detail})")
+    if counts.pop() < n_inputs:
+        raise InputError(label, f"each realization holds {len(out[0])} experiment(s) (runs), fewer than the "
+                                f"{n_inputs} inputs: the frequency response matrix needs n_u independent experiments")
+    return out
+
+
+def _repeated(values: list[int]) -> int:
+    seen = set()
+    for value in values:
+        if value in seen:
+            return value
+        seen.add(value)
+    raise ValueError("no value is repeated")
