@@ -21,6 +21,7 @@ from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence, gather
 from nlsid.diagnose.significance import verdict_dof
 from nlsid.diagnose.gain import Score, model_residuals, score
+from nlsid.diagnose.hybrid import HybridFit, fit_hybrid
 from nlsid.diagnose.hypotheses import LIBRARY, Context, Estimate, Hypothesis
 from nlsid.diagnose.hypotheses.base import with_lti
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
@@ -236,6 +237,7 @@ def _score(outcome: Outcome, runner: ModelRunner, val_runs: list[Run], val_res: 
 
 MAX_CAUSES = 3  # causes accepted one after the other at most (each round fits the whole library)
 YARDSTICK = True  # whether diagnose() fits the black-box yardstick when its caller does not say
+HYBRID = True  # whether diagnose() fits the hybrid model (nlsid.diagnose.hybrid) where the yardstick is ahead
 
 # The work :func:`diagnose` reports to its ``step``, in units of one free parameter of a hypothesis'
 # fit (about five simulations of the estimation runs: a finite-difference Jacobian column for each of
@@ -250,6 +252,7 @@ FIT_FREE_BESIDES = 5  # free parameters of a hypothesis' fit besides its own, ex
 EVIDENCE_WORK = 4  # a round's evidence (its simulation of every run, BLA, distortion; measured 2.5 and 16)
 NUISANCE_WORK = 1  # a round's nuisances (measured 1.1 and 1.4)
 YARDSTICK_WORK = 230  # the black-box yardstick's fit (measured 316 and 165: within 1.4 times of both)
+HYBRID_WORK = YARDSTICK_WORK  # the hybrid's black-box term: a PNLSS fit of the yardstick's size and budget
 
 
 def fit_work(hypothesis: Hypothesis, carried: dict[str, str] | None = None) -> int:
@@ -302,7 +305,11 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
 
     ``yardstick``: fit the black-box model of :mod:`nlsid.diagnose.yardstick` after the chain
     (None: :data:`YARDSTICK`, True); without it the status rests on the noise floor alone (never
-    ``outside_library``) and ``summary.json`` ``yardstick`` says it was not asked for.
+    ``outside_library``) and ``summary.json`` ``yardstick`` says it was not asked for. Where the
+    yardstick is significantly better than the final extended model, the hybrid model of
+    :mod:`nlsid.diagnose.hybrid` is fitted after it (:data:`HYBRID`; its work,
+    :data:`HYBRID_WORK`, planned when it starts, and done at the step ``"hybrid"``, the last one
+    then); otherwise ``Diagnosis.hybrid`` says why not.
 
     ``fit_on``: the judged signal, the output ``y`` or in closed loop the command ``u`` (the plant
     input the simulated controller computes): every hypothesis and the nuisances are fitted on it,
@@ -354,6 +361,8 @@ def diagnose(data: dict, source: str, runs: list[Run], where: str,
                        else Yardstick("not fitted: not asked for (--no-yardstick)"))
     work = YARDSTICK_WORK - advanced.units if first.yardstick.fitted else 0
     step("yardstick", work, work + advanced.units - YARDSTICK_WORK if wanted else 0)
+    first.hybrid = (_hybrid(first, source, runs, roles, budget, step) if wanted and HYBRID
+                    else HybridFit("not fitted: " + ("no yardstick (not asked for)" if not wanted else "not asked for")))
     judge_extent(first)
     return first
 
@@ -399,6 +408,29 @@ def _yardstick(first: Diagnosis, data: dict, source: str, runs: list[Run], roles
     offset = first.nuisances.values.get("output_offset", float(data["model"].get("output_offset", 0.0)))
     return fit_yardstick(ModelRunner.from_data(data, source), fit_runs, [by_id[res.run_id] for res in val], val,
                          offset, progress)
+
+
+def _hybrid(first: Diagnosis, source: str, runs: list[Run], roles: dict[str, str], budget: Budget | None,
+            step: Callable[[str, int, int], None]) -> HybridFit:
+    """The hybrid model (:mod:`nlsid.diagnose.hybrid`) where the yardstick is significantly better
+    than the final extended model, fitted on the estimation parts the yardstick saw and scored on
+    the validation runs; else why it is not fitted."""
+    y, final = first.yardstick, first.final
+    if final is None:
+        return HybridFit("not fitted: no named cause, so no physical extension to add a black-box term to")
+    if not y.fitted:
+        return HybridFit(f"not fitted: no yardstick to start its black-box term from ({y.reason})")
+    if not first.yardstick_ahead(first.final_score()):
+        return HybridFit("not fitted: the black-box yardstick is not significantly better than the extended model "
+                         "(the verdict's F rule), so no remainder is left for a black-box term")
+    step("hybrid", 0, HYBRID_WORK)
+    by_id = {run.run_id: run for run in runs}
+    est_runs = [by_id[res.run_id] for res in first.evidence.residuals if res.role == ESTIMATION]
+    val = [res for res in first.evidence.residuals if res.role == VALIDATION]
+    fit_runs = budget.of(est_runs) if budget is not None else est_runs
+    result = fit_hybrid(final.extended, source, y, fit_runs, [by_id[res.run_id] for res in val], val)
+    step("hybrid", HYBRID_WORK if result.fitted else 0, 0 if result.fitted else -HYBRID_WORK)
+    return result
 
 
 def judge_extent(first: Diagnosis) -> None:

@@ -12,6 +12,8 @@ from nlsid.diagnose import accuracy, nuisances
 from nlsid.diagnose import verdict as rules
 from nlsid.diagnose.evidence import Evidence
 from nlsid.diagnose.gain import Score, score
+from nlsid.diagnose.hybrid import FILE as HYBRID
+from nlsid.diagnose.hybrid import HybridFit
 from nlsid.diagnose.outcome import MOVED, Outcome
 from nlsid.diagnose.split import ESTIMATION, VALIDATION, Budget
 from nlsid.diagnose.yardstick import FILE as BLACK_BOX
@@ -35,6 +37,7 @@ class Diagnosis:
     leading: Outcome | None = None  # without a named cause: the best hypothesis that lowers the error
     validation_samples: int = 0  # the steady-state samples of the validation runs the scores are of
     yardstick: Yardstick | None = None  # the black-box model fitted to the same estimation data
+    hybrid: HybridFit | None = None  # the final extended model with a black-box term for what remains
     notes: list[str] = field(default_factory=list)  # on the runs as simulated (a channel taken as zero)
     signal: str = "y"  # the judged signal: the output y, or in closed loop the command u (diagnose --fit-on)
     units: dict = field(default_factory=dict)  # the recording's (signal -> unit): the parameters' units
@@ -177,16 +180,21 @@ class Diagnosis:
             return ""
         db = 10 * math.log10(rules.ratio(other.error_rms ** 2, y.score.error_rms ** 2))
         if self.yardstick_ahead(other):
+            h = self.hybrid
+            both = (f"; the extended model with a black-box term for it reaches {h.score.error_rms:.3g} rms ({HYBRID})"
+                    if h is not None and h.fitted else "")
             return (f"; a black-box state-space model reaches {y.score.error_rms:.3g} rms, {db:.1f} dB lower: an effect "
-                    f"outside the library remains")
+                    f"outside the library remains{both}")
         return f"; the named cause reaches the black-box level ({y.score.error_rms:.3g} rms, {db:+.1f} dB)"
 
     def models(self) -> list[dict]:
         """The model files the folder holds with their validation errors (``summary.json``
         ``models``): ``file``, ``kind`` (``extended``: the named causes, physical; ``black_box``:
         the yardstick, in ``black_box_model.yaml`` and, with the status ``outside_library``, in
-        ``extended_model.yaml`` too; ``candidate``: the leading candidate, not significant),
-        ``error_rms``, ``gain_db`` (over the user's model)."""
+        ``extended_model.yaml`` too; ``hybrid``: the extended model with a black-box term for what
+        it leaves, in ``hybrid_model.yaml``, where fitted (:mod:`nlsid.diagnose.hybrid`);
+        ``candidate``: the leading candidate, not significant), ``error_rms``, ``gain_db`` (over
+        the user's model)."""
         out = []
         final = self.final_score()
         y = self.yardstick
@@ -198,6 +206,9 @@ class Diagnosis:
             if self.verdict.status == rules.OUTSIDE_LIBRARY:
                 out.append({"file": EXTENDED, "kind": "black_box", "error_rms": y.score.error_rms,
                             "gain_db": y.score.gain_db})
+        if self.hybrid is not None and self.hybrid.fitted:
+            out.append({"file": HYBRID, "kind": "hybrid", "error_rms": self.hybrid.score.error_rms,
+                        "gain_db": self.hybrid.score.gain_db})
         if self.leading is not None:
             out.append({"file": CANDIDATE, "kind": "candidate", "error_rms": self.leading.score.error_rms,
                         "gain_db": self.leading.score.gain_db})
@@ -221,6 +232,14 @@ class Diagnosis:
         return (f"black-box yardstick (PNLSS, {fit.model.order} states, degrees {list(fit.model.state_degrees)}, "
                 f"{fit.model.n_parameters} parameters; {y.early_stopping}): validation gain "
                 f"{gain}, {versus_floor(y.score)}")
+
+    def _hybrid_finding(self) -> str:
+        h = self.hybrid
+        model = h.fit.model
+        gain = f"{h.score.gain_db:+.1f} dB" if math.isfinite(h.score.gain_db) else "an exact match"
+        return (f"hybrid model (the extended model with a black-box PNLSS term of {model.order} states, "
+                f"{model.n_parameters} parameters, for what it leaves; {h.early_stopping}): validation gain {gain}, "
+                f"{versus_floor(h.score)}")
 
     def moved_nuisances(self) -> list[dict]:
         """The nuisances that moved by more than :data:`MOVED` standard errors between the user's
@@ -271,6 +290,8 @@ class Diagnosis:
             out.append(f"{'extended' if self.final else 'the'} model " + self.accuracy.note())
         if self.yardstick is not None:
             out.append(self._yardstick_finding())
+        if self.hybrid is not None and self.hybrid.fitted:
+            out.append(self._hybrid_finding())
         ranked = [o for o in self.outcomes if o.score is not None]
         for o in ranked[:3]:
             gain = f"{o.score.gain_db:+.1f} dB" if math.isfinite(o.score.gain_db) else "error zero within numerical precision"
@@ -339,6 +360,7 @@ class Diagnosis:
             "nuisances": {**self.nuisances.summary(), "moved": self.moved_nuisances()},
             "explanation": self.explanation(), "leading": self.leading_summary(),
             "yardstick": self.yardstick.summary() if self.yardstick is not None else None,
+            "hybrid": self.hybrid.summary() if self.hybrid is not None else None,
             "models": self.models(), "best_model": self.best_model(), "baseline": self.baseline.summary() if self.baseline else None,
             "chain": self._chain_summary(), "gain": gain, **self._samples(),
             "simulation_accuracy": None if self.accuracy is None else {**dataclasses.asdict(self.accuracy),

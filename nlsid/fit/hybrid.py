@@ -40,6 +40,30 @@ def residual_run(run: Run, physical: np.ndarray) -> Run:
     return dataclasses.replace(run, y=np.asarray(run.y, dtype=float) - physical)
 
 
+def minus_linear(model: Pnlss, linear) -> Pnlss:
+    """A PNLSS model whose output is ``model``'s minus that of the discrete linear model ``linear``
+    (a :class:`nlsid.models.lti.StateSpace` at ``model.fs``): the states of both side by side,
+    x = (x_1, x_2), A = diag(A_1, A_2), B = (B_1, B_2), C = (C_1, -C_2), D = D_1 - D_2, in the LFR
+    form with the monomials of ``model``'s own variables: its combinations z = Cz x_1 + Dz u with
+    zero weights on x_2, or, for a full-form ``model``, z = (x_1, u) (z = x_1 without the input),
+    whose monomials are the full form's in the same order, so E (zero rows for x_2) and F carry
+    over unchanged. Its simulation is ``model``'s minus ``linear``'s exactly (the blocks do not
+    interact until a fit gives x_2 weights in z). The polynomial stays one in n_1 + 1 variables
+    where a full form in all n_1 + n_2 states and u would multiply the coefficients (and the
+    overfitting: 500 against 240 for 3 + 2 states of degrees 2 and 3)."""
+    n1, n2 = model.order, linear.order
+    n = n1 + n2
+    A = np.zeros((n, n))
+    A[:n1, :n1], A[n1:, n1:] = model.A, np.asarray(linear.A, dtype=float)
+    B = np.concatenate([model.B, np.asarray(linear.B, dtype=float)])
+    C = np.concatenate([model.C, -np.asarray(linear.C, dtype=float)])
+    D = float(model.D) - float(linear.D)
+    M, N = model.mixing()  # the full form's variables (x_1, u) as combinations: [I; 0] and (0, .., 1)
+    Cz = np.hstack([np.asarray(M, dtype=float), np.zeros((M.shape[0], n2))])
+    E = np.vstack([model.E, np.zeros((n2, model.E.shape[1]))])
+    return model.replace(A=A, B=B, C=C, D=D, E=E, Cz=Cz, Dz=np.asarray(N, dtype=float).copy(), with_input=False)
+
+
 def output_monomials(model: Pnlss, x: np.ndarray, u: np.ndarray) -> np.ndarray:
     """eta(v[t]) for every sample (rows) and monomial of the output equation (columns, in the
     order of ``model.output_exponents``), v = M x + N u the monomials' variables

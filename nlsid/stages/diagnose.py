@@ -50,8 +50,10 @@ class DiagnosisResult:
         A ``validate_on`` recording that is the diagnosed one was accepted.
     other_models : dict
         Further model configs the folder holds, file name -> YAML text: ``candidate_model.yaml``
-        (the leading candidate where no cause is named, marked as not significant) and
-        ``black_box_model.yaml`` (the yardstick: :mod:`nlsid.diagnose.yardstick`).
+        (the leading candidate where no cause is named, marked as not significant),
+        ``black_box_model.yaml`` (the yardstick: :mod:`nlsid.diagnose.yardstick`) and
+        ``hybrid_model.yaml`` (the extended model with a black-box term, where the yardstick is
+        significantly better: :mod:`nlsid.diagnose.hybrid`).
     computation_delay : nlsid.fit.computation_delay.DelayChoice or None
         Where the model asks for ``closed_loop.computation_delay: auto``: the delay chosen before
         the diagnosis (:mod:`nlsid.diagnose.computation_delay`), every candidate's cost, whether
@@ -266,7 +268,7 @@ class DiagnosisInputs:
         """Diagnose; ``progress`` is told the work done and planned (:func:`progress_calls`)."""
         from nlsid.diagnose import verdict as rules
         from nlsid.diagnose.computation_delay import resolve as resolve_delay
-        from nlsid.diagnose.result import BLACK_BOX, CANDIDATE
+        from nlsid.diagnose.result import BLACK_BOX, CANDIDATE, HYBRID
         from nlsid.diagnose.diagnosis import diagnose as run_diagnosis
         from nlsid.io.diagnosis_file import extended_yaml
         from nlsid.io.units import common_units
@@ -287,6 +289,10 @@ class DiagnosisInputs:
             others[BLACK_BOX] = extended_yaml(yardstick.config, yardstick.header(self.model_source))
             if result.verdict.status == rules.OUTSIDE_LIBRARY:
                 extended = others[BLACK_BOX]
+        hybrid = result.hybrid
+        if hybrid is not None and hybrid.fitted:
+            causes = ", then ".join(o.hypothesis.title for o in result.chain)
+            others[HYBRID] = extended_yaml(hybrid.config, hybrid.header(self.model_source, causes))
         if result.leading is not None:
             others[CANDIDATE] = extended_yaml(result.leading.extended, result.candidate_header())
         units = common_units(run.units for run in [*self.runs, *self.extra])
@@ -346,9 +352,11 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
     if not isinstance(data, dict):
         raise InputError(source, "expected a model config (a mapping with a 'model' key)")
     validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
-    if data["model"].get("type") == "pnlss":
-        raise InputError(f"{source}: model.type", "a pnlss model is a black box: diagnose looks for the physical cause "
-                                                  "of a model's error; give the linear or physical model it came from")
+    if data["model"].get("type") in ("pnlss", "hybrid"):
+        kind = data["model"]["type"]
+        raise InputError(f"{source}: model.type", f"a {kind} model {'is' if kind == 'pnlss' else 'holds'} a black box: "
+                                                  "diagnose looks for the physical cause of a model's error; give the "
+                                                  "linear or physical model it came from")
     return data, source, [source] if isinstance(model, (str, os.PathLike)) else []
 
 

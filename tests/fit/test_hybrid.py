@@ -96,3 +96,28 @@ def test_black_box_term_fitted_to_the_residual_of_a_physical_part():
     assert fit.validation_rms < 1e-8 * np.std(runs[0].y)
     _, rms_on_y = output_equation(start, measured)
     assert rms_on_y > 0.1 * np.std(physical[1])
+
+
+@pytest.mark.parametrize("form", ["full", "lfr"])
+def test_minus_linear_simulates_the_difference(form):
+    """The black-box term's start beside a linear model (minus_linear): its output is the PNLSS
+    model's (the numpy loop above) minus the linear model's (scipy.signal.lfilter of its transfer
+    function D + C (z - a)^-1 B = (D + (C B - a D) z^-1) / (1 - a z^-1)), to rounding."""
+    from scipy import signal
+
+    from nlsid.fit.hybrid import minus_linear
+    from nlsid.models.lti import StateSpace
+
+    rng = np.random.default_rng(2)
+    mix = None if form == "full" else (np.array([[0.8, -0.5]]), np.array([0.6]))
+    terms = 16 if form == "full" else 2
+    E, F = 0.03 * rng.standard_normal((2, terms)), 0.5 * rng.standard_normal(terms)
+    extra = {} if mix is None else {"Cz": mix[0], "Dz": mix[1]}
+    model = Pnlss(A, B, C, D, E, F, FS, output_offset=OFFSET, **extra)
+    a, b, c, d = 0.7, 1.0, 0.4, 0.1
+    linear = StateSpace(np.array([[a]]), np.array([b]), np.array([c]), d, discrete=True)
+    u = 0.5 * rng.standard_normal(200)
+    wide = minus_linear(model, linear)
+    expected = _loop(E, F, u, mix) - signal.lfilter([d, c * b - a * d], [1.0, -a], u)
+    np.testing.assert_allclose(wide.simulate(u), expected, rtol=1e-12, atol=1e-12)
+    assert wide.order == 3 and wide.lfr and wide.E.shape[1] == terms  # the same monomials, in the LFR form
