@@ -15,7 +15,11 @@ Which nuisances are fitted (those the data can tell apart, and the model can exp
   (:func:`_translation_invariant`: the loop cancels it);
 - ``output_timing`` on a continuous plant (a discrete model has no values between samples; a
   structure has no timing key), within (-1, 1) samples, and in closed loop at most the plant's dead
-  time (a lead needs as much dead time, :func:`nlsid.simulate.engine.timing`);
+  time (a lead needs as much dead time, :func:`nlsid.simulate.engine.timing`); within [0, 1) where
+  the output has a direct term in the input (a feedthrough D, a force point's feedthrough: an
+  acceleration output), which steps with the held input at each sample instant: a lag reads the
+  previous sample's input, no small shift of a lead (the error jumps at 0, and a fit started
+  there by central differences was carried into the lag and stuck 45 dB above the floor);
 - an input-side offset only where it differs from an output offset: ``input_offset`` in closed
   loop or with an input block, else ``force_offset`` on a mechanical model with forces that can
   see it (:func:`_force_offset_seen`). On a linear open-loop model both give a constant output, so
@@ -98,7 +102,15 @@ def _timing_bounds(runner: ModelRunner, fs: float) -> tuple[float, float] | None
         loop = runner.data.get("closed_loop", {})
         dead = float(model.get("delay", 0.0)) * fs + int(loop.get("computation_delay", 0))
         upper = min(TIMING_LIMIT, dead)
-    return -TIMING_LIMIT, upper
+    return (0.0 if _steps_with_the_input(runner) else -TIMING_LIMIT), upper
+
+
+def _steps_with_the_input(runner: ModelRunner) -> bool:
+    """The output has a direct term in the held input (module docstring)."""
+    from nlsid.models.from_config import Plant
+
+    plant = runner.plant
+    return isinstance(plant, Plant) and (plant.ss.D != 0 or any(force.output for force in plant.forces))
 
 
 POSITION_FORCES = ("cubic_stiffness", "polynomial_stiffness")  # forces that read the position

@@ -22,6 +22,7 @@ from scipy.signal import dlsim
 from generators.exact_zoh import zoh
 from nlsid.diagnose.hypotheses.modal_joint import (
     MODAL_JOINT, acceleration_share, continuous_model, modal_state_space, modes_of)
+from nlsid.diagnose.nuisances import free_nuisances
 from nlsid.diagnose.simulation import ModelRunner
 from nlsid.errors import InputError
 from nlsid.io.run import Run
@@ -201,3 +202,20 @@ def test_a_feedthrough_with_a_force_where_u_enters_is_refused(data, where):
         ModelRunner.from_data(data, "model.yaml")
     assert f"{where}:" in str(error.value), error.value
     ModelRunner.from_data(_feedback("q", True), "model.yaml")
+
+
+def test_the_output_timing_of_an_acceleration_output_is_not_fitted_as_a_lag():
+    """An output with a direct term steps with the held input at each sample instant: a lag would
+    read the previous sample's input, so the nuisance fit keeps the timing in [0, 1) there (D, or
+    a force point's feedthrough alone), in (-1, 1) for a strictly proper model."""
+    linear = _modal_form(False)
+    u = np.random.default_rng(1).standard_normal(N)
+    runs = [Run("r", FS, "noise", u, y=u)]
+    values = {"k3": K3, "feedthrough": acceleration_share(linear)}
+    bounds = {}
+    for name, D, feedthrough in (("both", linear["D"], values["feedthrough"]), ("point", 0.0, values["feedthrough"]),
+                                 ("neither", 0.0, 0.0)):
+        data = MODAL_JOINT.extend({"model": {**linear, "D": D}}, {**values, "feedthrough": feedthrough})
+        free = free_nuisances(ModelRunner.from_data(data, "model.yaml"), runs)["model.output_timing"]
+        bounds[name] = (free.lower, free.upper)
+    assert bounds == {"both": (0.0, 0.99), "point": (0.0, 0.99), "neither": (-0.99, 0.99)}, bounds
