@@ -124,7 +124,9 @@ class BlaRuns:
     """The checks of the BLA over a stream of ``(run, where)``: :meth:`add` each run, then :meth:`finish`.
 
     Multisine runs feed the robust and fast methods, arbitrary runs the Local Polynomial Method
-    (:mod:`nlsid.analysis.arbitrary`); sines are skipped (they are for ``hosidf``). With
+    (:mod:`nlsid.analysis.arbitrary`); sines are skipped (they are for ``hosidf``). Runs with
+    several inputs or outputs feed the frequency response matrix (:func:`check_mimo_run`; listed
+    in ``mimo``; their levels are checked by :mod:`nlsid.analysis.frm_levels`). With
     ``check_input=False`` :meth:`add` makes the structural checks only and the caller runs
     :meth:`LevelShape.check_spectra` on the spectra it computes anyway (the BLA analysis).
     """
@@ -135,10 +137,16 @@ class BlaRuns:
         self.levels: dict[float | None, LevelShape] = {}
         self.arbitrary: list[str] = []
         self.skipped: list[str] = []
+        self.mimo: list[str] = []
 
     def add(self, run: Run, where: str) -> LevelShape | None:
         """Check one run; return its level's shape, or None for a run that is not a multisine
-        (an arbitrary run, checked and listed in ``arbitrary``, or a skipped one)."""
+        of one input and one output (an arbitrary run, checked and listed in ``arbitrary``, a run
+        with several inputs or outputs, checked and listed in ``mimo``, or a skipped one)."""
+        if run.is_mimo:
+            check_mimo_run(run, where)
+            self.mimo.append(run.run_id)
+            return None
         if run.kind == "arbitrary":
             check_arbitrary_run(run, where, self.method)
             self.arbitrary.append(run.run_id)
@@ -155,9 +163,19 @@ class BlaRuns:
         return shape
 
     def finish(self, source: str) -> None:
-        if not self.levels and not self.arbitrary:
+        if not self.levels and not self.arbitrary and not self.mimo:
             raise InputError(source, "holds no multisine or arbitrary runs; the BLA needs random-phase multisines "
                                      "or arbitrarily excited records (sines are for `nlsid hosidf`)")
+
+
+def check_mimo_run(run: Run, where: str) -> None:
+    """A run with several inputs or outputs feeds the frequency response matrix when it is a
+    multisine with its outputs measured."""
+    if run.kind != "multisine":
+        raise InputError(where, f"a run with several inputs or outputs ({', '.join(run.inputs)} -> "
+                                f"{', '.join(run.outputs)}) must be a multisine for the frequency response "
+                                f"matrix, got kind {run.kind!r}")
+    run.output_matrix()  # no y: the run's own error
 
 
 def check_arbitrary_run(run: Run, where: str, method: str) -> None:
@@ -438,6 +456,9 @@ class Survey:
             verdict.notes.append(f"--method auto uses the reference method (r) for {', '.join(reference)}")
         if self.bla.skipped:
             verdict.notes.append(f"skips {len(self.bla.skipped)} runs that are not multisines")
+        if self.bla.mimo:
+            verdict.notes.append(f"{len(self.bla.mimo)} runs with several inputs or outputs: the frequency "
+                                 "response matrix per level")
 
     def _finish_hosidf(self) -> None:
         verdict = self.verdict["hosidf"]

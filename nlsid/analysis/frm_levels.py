@@ -22,6 +22,7 @@ import numpy as np
 
 from nlsid.analysis.frm import FrequencyResponseMatrix, frm
 from nlsid.errors import InputError
+from nlsid.feeds import check_mimo_run
 from nlsid.io.run import Run
 
 
@@ -118,11 +119,7 @@ class MimoRuns:
                 self.others += 1
                 yield run, where
                 continue
-            if run.kind != "multisine":
-                raise InputError(where, f"a run with several inputs or outputs ({', '.join(run.inputs)} -> "
-                                        f"{', '.join(run.outputs)}) must be a multisine for the frequency response "
-                                        f"matrix, got kind {run.kind!r}")
-            run.output_matrix()  # a run without y is refused here, naming it
+            check_mimo_run(run, where)
             self.runs.append((run, where))
             if self.on_run is not None:
                 self.on_run(run)

@@ -203,6 +203,9 @@ def analyse_runs(
     skipped = checks.skipped
     warnings = [f"skipped {len(skipped)} runs that are not multisines ({', '.join(skipped[:5])}"
                 f"{', ...' if len(skipped) > 5 else ''})"] if skipped else []
+    if checks.mimo:  # their frequency response matrix is nlsid.analysis.frm_levels'
+        warnings.append(f"skipped {len(checks.mimo)} runs with several inputs or outputs ({', '.join(checks.mimo[:5])}"
+                        f"{', ...' if len(checks.mimo) > 5 else ''}): the single-input BLA does not use them")
     keys = sorted(groups, key=lambda level: (level is not None, level or 0.0))
     return [groups[key].result() for key in keys], warnings
 

@@ -113,6 +113,15 @@ def test_a_run_that_is_no_multisine_is_refused_in_one_line(run_cli, tmp_path):
     recording.runs[0] = dataclasses.replace(first, kind="arbitrary", period=None, transient_periods=0,
                                             excited_bins=None, realization=None, experiment=None)
     path = recording.write(tmp_path / "rec.h5")
-    run_cli("bla", path, "-o", tmp_path / "bla.h5").assert_one_line_error(
-        "rec.h5:/runs/ms_l00_m00_e00", "must be a multisine for the frequency response matrix")
+    result = run_cli("bla", path, "-o", tmp_path / "bla.h5")
+    result.assert_one_line_error("rec.h5:/runs/ms_l00_m00_e00", "must be a multisine for the frequency response matrix")
     assert not (tmp_path / "bla.h5").exists()
+    verdict = run_cli("info", path, "--json").json()["stages"]["bla"]  # info says what bla says
+    assert not verdict["feeds"] and verdict["reason"] in result.stderr
+
+
+def test_info_says_bla_feeds_on_orthogonal_multisine_experiments(run_cli, tmp_path):
+    path = measured(design(inputs=2), FILTERS_2X2, 2).write(tmp_path / "rec.h5")
+    verdict = run_cli("info", path, "--json").json()["stages"]["bla"]
+    assert verdict == {"feeds": True, "reason": None,
+                       "notes": ["4 runs with several inputs or outputs: the frequency response matrix per level"]}
