@@ -281,7 +281,7 @@ def fit_pnlss(model, rec: Recording | str | os.PathLike, validate_on=(), validat
     ...            "nonlinearities": [{"type": "cubic_stiffness", "k3": 1e9}]}
     >>> rec = nlsid.Model.from_dict({"model": duffing, "disturbances": {"y_noise": 1e-6, "seed": 3}}).simulate(exc)
     >>> linear = {"model": {"type": "transfer_function", "num": [0.5], "den": [1.0, 10.0, 1000.0]}}  # 1/(m s^2+c s+k)
-    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), max_iterations=20)
+    >>> result = nlsid.fit_pnlss(linear, rec, degrees=(3,), patience=3)  # stop 3 iterates past the best
     >>> summary = result.summary()
     >>> summary["linear_validation_rms"] > 10e-6, bool(abs(result.validation_rms / 1e-6 - 1) < 0.2)
     (True, True)
