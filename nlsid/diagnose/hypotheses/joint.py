@@ -18,11 +18,21 @@ acts on the motor's position, the joint on the deflection of the coupling, which
 mode moves and the rigid-body motion does not: the joint's distortion is where the mode is. The
 same family as the cubic spring (stiffness): the verdict names the one that is significantly
 better (one parameter each).
+
+Around a transfer function (``joint_feedback``): a continuous G from force to the motor's position
+or velocity, with the numerator of degree 2 that the motor's output has, is the two-mass stage of
+:func:`two_mass_of` (gain 1: its masses and k3 in units of u); the joint is estimated and refined
+on that stage, its mechanics with it. The joint reads the deflection p1 - p2, which the output is
+not, so it needs the stage's two masses, not a force fed back around G as the friction families
+(:mod:`~nlsid.diagnose.hypotheses.friction_feedback`) and the modal joint, whose modal form a free
+stage lacks (its double pole at s = 0 is defective).
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
+import math
 
 import numpy as np
 
@@ -99,4 +109,125 @@ CUBIC_JOINT = Hypothesis(
     _applies, _estimate, lambda data, values: _joint(data, values["k3"]), ("k3",), _paths,
     qualifier=lambda values: spring(values["k3"]))
 
-HYPOTHESES = (CUBIC_JOINT,)
+
+
+MECHANICS = ("motor_mass", "load_mass", "stiffness", "damping", "motor_damping", "load_damping")
+ROUNDING = 1e-9  # a damper below this share of the largest one is the roots' rounding (two_mass_of)
+
+
+def _template(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The force-to-motor-position transfer function (num, den / s) of a two-mass stage with the
+    parameters (m1, m2, k, c, c1, c2) of :data:`MECHANICS` (gain 1), den / s monic."""
+    m1, m2, k, c, c1, c2 = params
+    cubic = np.array([m1 * m2, m1 * (c2 + c) + m2 * (c1 + c), (m1 + m2) * k + c1 * c2 + c * (c1 + c2), k * (c1 + c2)])
+    return np.array([m2, c2 + c, k]) / cubic[0], cubic / cubic[0]
+
+
+def _mismatch(got: np.ndarray, given: np.ndarray, scale: float) -> float:
+    """The largest difference of two polynomials' coefficients (descending powers of s), each
+    coefficient of s^i times ``scale``^i, relative to the largest of ``given`` so scaled."""
+    weights = scale ** np.arange(given.size - 1, -1, -1, dtype=float)
+    return float(np.max(np.abs(got - given) * weights) / np.max(np.abs(given) * weights))
+
+
+def two_mass_of(num, den) -> tuple[dict, float] | str:
+    """The two_mass_stage (gain 1: forces in units of u) whose force-to-motor transfer function is
+    the continuous ``num`` / ``den`` (descending powers of s), and the largest relative error of its
+    coefficients against them; or why there is none.
+
+    With the motor's position p1 the output (the motor's velocity: one power of s fewer in den),
+
+        p1 / F = (m2 s^2 + (c2 + c) s + k) / (s (m1 m2 s^3 + (m1 (c2 + c) + m2 (c1 + c)) s^2
+                 + ((m1 + m2) k + c1 c2 + c (c1 + c2)) s + k (c1 + c2))),
+
+    c the coupling's damper, c1 and c2 the motor's and the load's to the ground. Divided by
+    m1 m2, the numerator b2 s^2 + b1 s + b0 and the monic cubic s^3 + a2 s^2 + a1 s + a0 give
+    m1 = 1 / b2, c1 + c2 = a0 / b0, c1 + c = m1 (a2 - b1 m1), c2 + c = b1 m1 m2, k = b0 m1 m2, and
+    a1 a quadratic in the load mass m2 (the sums above put into a1's expression). Each positive
+    root gives a stage (a damper below 0, where a fitted G is biased, at 0); the one that
+    reproduces the coefficients best is kept. The six parameters are fixed by the motor's
+    transfer function; the load's (numerator c s + k) does not fix the masses' split."""
+    num = np.trim_zeros(np.asarray(num, float), "f")
+    den = np.trim_zeros(np.asarray(den, float), "f")
+    while num.size > 1 and den.size > 1 and num[-1] == 0 and den[-1] == 0:  # a common s (a velocity written as s G)
+        num, den = num[:-1], den[:-1]
+    if den.size == 5 and den[-1] == 0:
+        output, cubic = "position", den[:-1]
+    elif den.size == 4:
+        output, cubic = "velocity", den
+    else:
+        return ("needs the transfer function of a two-mass stage from force to the motor's position (order 4, a "
+                "pole at s = 0) or velocity (order 3)")
+    if num.size != 3:
+        return ("needs a numerator of degree 2 (the motor's output: the load's, of degree 1, does not fix the "
+                "masses' split)")
+    b2, b1, b0 = num / cubic[0]
+    _, a2, a1, a0 = cubic / cubic[0]
+    if b2 <= 0 or b0 <= 0:
+        return "the numerator is not a two-mass stage's (its s^2 and constant coefficients must be positive)"
+    m1 = 1.0 / b2
+    ground, motor = a0 / b0, m1 * (a2 - b1 * m1)  # c1 + c2, c1 + c
+    g = b1 * m1
+    roots = np.roots([b0 * m1 - g**2 / 4, b0 * m1**2 + g * (motor + ground) / 2 - a1 * m1, -(ground - motor) ** 2 / 4])
+    best = None
+    for m2 in roots[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 0)].real:
+        c = (g * m2 + motor - ground) / 2
+        params = np.maximum([m1, m2, b0 * m1 * m2, c, motor - c, g * m2 - c], 0.0)
+        params[3:][params[3:] <= ROUNDING * params[3:].max()] = 0.0  # a damper of the roots' rounding is none
+        got_num, got_den = _template(params)
+        scale = math.sqrt(abs(a1))  # about the flexible mode's frequency: each coefficient of s^i times scale^i
+        error = max(_mismatch(got_num, num / cubic[0], scale), _mismatch(got_den, cubic / cubic[0], scale))
+        if params[2] > 0 and (best is None or error < best[1]):
+            best = (params, error)
+    if best is None:
+        return "no two-mass stage with positive masses and stiffness has this transfer function"
+    params, error = best
+    return {"type": "two_mass_stage", **{k: float(v) for k, v in zip(MECHANICS, params)}, "gain": 1.0,
+            "output": output, "output_at": "motor"}, error
+
+
+def _applies_feedback(runner: ModelRunner) -> str | None:
+    model = runner.data["model"]
+    if model["type"] != "transfer_function" or model.get("domain", "continuous") != "continuous":
+        return "needs a continuous transfer_function model (a two_mass_stage has the joint itself)"
+    found = two_mass_of(model["num"], model["den"])
+    return found if isinstance(found, str) else None
+
+
+def _stage(data: dict) -> tuple[dict, float]:
+    """``data`` with its transfer function replaced by the two_mass_stage it is (:func:`two_mass_of`),
+    its offsets, dead time, channels and blocks kept; and the coefficients' mismatch."""
+    from nlsid.diagnose.hypotheses.feedback import KEPT
+
+    model = data["model"]
+    stage, error = two_mass_of(model["num"], model["den"])
+    return {**data, "model": {**stage, **{k: copy.deepcopy(model[k]) for k in KEPT if k in model}}}, error
+
+
+def _estimate_feedback(ctx: Context) -> Estimate | str:
+    """Start values around a transfer function: the joint's (:func:`_estimate`) on the two-mass
+    stage the transfer function is, the residual that stage's."""
+    stage, error = _stage(ctx.runner.data)
+    runner = ctx.runner.with_changes(stage)
+    residuals = [steady_mean(run, ctx.measured(run)) - steady_mean(run, x)
+                 for run, x in zip(ctx.runs, runner.simulate_each(ctx.runs, ctx.signal))]
+    est = _estimate(Context(runner, ctx.runs, residuals, [], signal=ctx.signal))
+    if isinstance(est, str):
+        return est
+    model = stage["model"]
+    read = (f"the transfer function read as a two-mass stage from force (u) to the motor's {model['output']}: "
+            f"masses {model['motor_mass']:.4g} and {model['load_mass']:.4g}, coupling {model['stiffness']:.4g} and "
+            f"{model['damping']:.4g}, ground dampers {model['motor_damping']:.4g} and {model['load_damping']:.4g} "
+            f"(coefficients reproduced within {error:.2g})")
+    return dataclasses.replace(est, note=f"{read}; {est.note}")
+
+
+JOINT_FEEDBACK = Hypothesis(
+    "joint_feedback", "Cubic spring in the joint of the two-mass stage the transfer function is", "stiffness", "k3",
+    "input units / deflection^3",
+    "as cubic_joint, for a transfer function from force to the motor's position or velocity read as a two-mass "
+    "stage: residual like the sensitivity to a cubic spring between the masses",
+    _applies_feedback, _estimate_feedback, lambda data, values: _joint(_stage(data)[0], values["k3"]), ("k3",),
+    _paths, qualifier=lambda values: spring(values["k3"]))
+
+HYPOTHESES = (CUBIC_JOINT, JOINT_FEEDBACK)
