@@ -347,7 +347,8 @@ class _IterateCount:
         self._tell()
 
     def give_back(self, iterations: int) -> None:
-        """A stage's iterations not taken (all of them for a stage that does not run)."""
+        """The iterations a stage that ended did not take (a stage skipped later, at the noise
+        floor, is settled by :meth:`done`)."""
         self.budget -= iterations
 
     def done(self) -> None:

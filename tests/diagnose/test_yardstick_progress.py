@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pytest
 from scipy import signal
 
 from generators.diagnose_cases import FS, NOISE, TF, excitation  # noqa: E402
