@@ -168,6 +168,17 @@ class BlaRuns:
                                      "or arbitrarily excited records (sines are for `nlsid hosidf`)")
 
 
+def several_inputs_outputs(run: Run, where: str) -> InputError | None:
+    """The error of the stages of one input and one output (``simulate``, ``fit --model``,
+    ``diagnose``) on a run with several inputs or outputs; None for a run of one of each. Taking u
+    and y alone would drop the other inputs and outputs silently."""
+    if not run.is_mimo:
+        return None
+    return InputError(where, f"has inputs {', '.join(run.inputs)} and outputs {', '.join(run.outputs)}: a model of "
+                             "one input u and one output y cannot use it without dropping the others (several inputs "
+                             "and outputs: `nlsid bla` only so far, docs/mimo.md)")
+
+
 def check_mimo_run(run: Run, where: str) -> None:
     """A run with several inputs or outputs feeds the frequency response matrix when it is a
     multisine with its outputs measured."""
@@ -380,6 +391,11 @@ class Survey:
         self._diagnose(run, where, no_y)
         if self.fit_y is None and no_y is not None:
             self.fit_y = no_y
+        several = several_inputs_outputs(run, where)
+        if several is not None:  # the stages of one input and one output stop at the first such run
+            measured = ("diagnose", "fit --model") if no_y is None else ()  # they refuse a missing y first
+            for stage in (*measured, "simulate --excitation"):
+                self.verdict[stage].fail(several)
 
     def _bla(self, run: Run, where: str, no_y: InputError | None) -> None:
         verdict = self.verdict["bla"]

@@ -63,19 +63,31 @@ def overlap(data, item) -> str | None:
 
 
 def runs_of(item, argument: str, mapping: dict | None) -> list:
-    """The runs of a Recording or a recording file, each with a measured y."""
+    """The runs of a Recording or a recording file, each with a measured y and one input and one
+    output (:func:`nlsid.feeds.several_inputs_outputs`)."""
     if isinstance(item, Recording):
         missing = [run.run_id for run in item.runs if run.y is None]
         if missing:
             raise InputError(argument, f"run {missing[0]!r} has no measured output y: a fit compares the model's "
                                        "simulation with it")
-        return list(item.runs)
+        return _one_input_output(list(item.runs), item.path or argument)
     if isinstance(item, (str, os.PathLike)):
         from nlsid.io.recording import read_runs
 
-        return read_runs(item, require_y=True, mapping=mapping)
+        return _one_input_output(read_runs(item, require_y=True, mapping=mapping), str(item))
     raise InputError(argument, "expected a Recording (nlsid.read) or the path of a recording, got "
                                f"{type(item).__name__}")
+
+
+def _one_input_output(runs: list, source: str) -> list:
+    """``runs``, refused at the first with several inputs or outputs (named ``SOURCE:/runs/ID``)."""
+    from nlsid.feeds import several_inputs_outputs
+
+    for run in runs:
+        error = several_inputs_outputs(run, f"{source}:/runs/{run.run_id}")
+        if error is not None:
+            raise error
+    return runs
 
 
 @dataclass

@@ -183,6 +183,12 @@ class Model:
         from nlsid.io.provenance import provenance, sha256_in_background
         from nlsid.simulate.batch import simulate_all
 
+        from nlsid.feeds import several_inputs_outputs
+
+        for run in rec.runs:
+            error = several_inputs_outputs(run, f"{rec.path or 'recording'}:/runs/{run.run_id}")
+            if error is not None:
+                raise error
         configs, inputs = [self.path] if self.path else [], [rec.path] if rec.path else []
         digests = {path: sha256_in_background(path) for path in configs + inputs}  # beside the simulation
         out = simulate_all(self._points, list(rec.runs), seed=seed, workers=workers,
