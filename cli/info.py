@@ -44,7 +44,7 @@ def info(recording: str, mapping: tuple[str, ...], as_json: bool) -> None:
                 "excited_lines": None if run.excited_bins is None else int(run.excited_bins.size),
                 "signals": [name for name in ("u", "y", "r") if getattr(run, name) is not None],
                 "channels": sorted(run.channels), "params": run.params,
-                "inputs": list(run.inputs), "outputs": list(run.outputs),
+                "inputs": list(run.inputs), "outputs": list(run.outputs), "experiment": run.experiment,
             })
     stages = {stage: verdict.summary() for stage, verdict in survey.verdicts().items()}
     if as_json:

@@ -82,6 +82,8 @@ def test_written_as_version_3_and_read_back(run_cli, tmp_path):
     runs = read_runs(tmp_path / "e.h5", require_y=False)
     assert [(r.realization, r.experiment, r.inputs) for r in runs][-1] == (1, 1, ("u", "u2"))
     assert runs[0].units == {"u": "V", "u2": "V"}
+    listed = run_cli("info", tmp_path / "e.h5", "--json").json()["runs"]
+    assert [(row["inputs"], row["experiment"]) for row in listed[:2]] == [(["u", "u2"], 0), (["u", "u2"], 1)]
 
 
 @pytest.mark.parametrize("keys, fragment", [
