@@ -301,11 +301,21 @@ def test_verdict_numbers_are_the_summary_numbers(seen, bla_page, hosidf_page, mo
 
 
 def test_probe_sees_overflow_and_an_empty_figure(bla_page, tmp_path):
-    """The checks can fail: a figure of zero size and an element wider than the window are seen."""
+    """The checks can fail: a figure of zero size, an element wider than the window and a table
+    wider than the text column outside a box of its own are seen; the same table in a scroll box
+    is not counted as overflowing."""
     text = bla_page.read_text(encoding="utf-8")
     text = re.sub(r'(<svg [^>]*?) width="[^"]*" height="[^"]*"', r'\1 width="0" height="0"', text, count=1)
     broken = tmp_path / "broken.html"
-    broken.write_text(text.replace("</header>", '</header><div style="width: 3000px">wide</div>', 1), encoding="utf-8")
+    wide_table = '<table><caption>{}</caption><tr><td style="min-width: 1200px">cell</td></tr></table>'
+    broken.write_text(text.replace("</header>", '</header><div style="width: 3000px">wide</div>'
+                                   + wide_table.format("loose") + '<div class="scroll">' + wide_table.format("boxed")
+                                   + "</div>", 1), encoding="utf-8")
     seen = browse(broken, tmp_path)
     assert seen["figures"][0]["width"] <= 2  # its border only
     assert seen["scroll_width"] > seen["inner_width"] and any("wide" in item for item in seen["overflowing"])
+    tables = {t["caption"]: t for t in seen["tables"]}
+    assert not tables["loose"]["fits"] and tables["loose"]["box_fits"] is None
+    assert any(item.startswith("TABLE: loose") for item in seen["overflowing"])
+    assert not tables["boxed"]["fits"] and tables["boxed"]["box_fits"] and tables["boxed"]["box_scrolls"]
+    assert not any(item.startswith("TABLE: boxed") for item in seen["overflowing"])
