@@ -4,9 +4,9 @@ mode of a multi-mode LTI model whose frequency (damping) moves with the excitati
 Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4;
 a discrete one as its continuous equivalent, the exact inverse of its ZOH discretisation,
 :func:`nlsid.models.continuous_equivalent.zoh_inverse`, its D unchanged: the ZOH equivalent of
-(A, B, C, D) is (Phi, Gamma, C, D)) is diagonalised, A = V diag(lambda) V^-1, and each mode's residue r = (C v)(w B) (v the right, w the left
-eigenvector) written as a real block with its own modal coordinate q. A complex pair lambda,
-conj(lambda) becomes
+(A, B, C, D) is (Phi, Gamma, C, D)) is diagonalised, A = V diag(lambda) V^-1, and each mode's
+residue r = (C v)(w B) (v the right, w the left eigenvector) written as a real block with its own
+modal coordinate q. A complex pair lambda, conj(lambda) becomes
 
     q'' + 2 zeta w q' + w^2 q = u,   y_i = beta q + alpha q',
 
@@ -44,8 +44,9 @@ Hypothesis. The moving mode's block gets the force k3 q^3 against its motion:
 a ``nonlinear_feedback`` around the modal state space whose force acts at the ``point`` of that
 mode (``points: {mode: {force: [0, 1, 0, ...], position: [1, 0, 0, ...]}}``, docs/configs.md):
 it reads q = (1, 0, ...) x and enters along -(0, 1, ...) (and reaches an acceleration output
-directly, above). k3 > 0 is a joint that stiffens with
-the mode's amplitude, k3 < 0 one that softens (a torsion mode that drops with the level).
+directly, above: the feedthrough starts at -beta / w^2 of the block as started, its w^2 the
+zero-amplitude one below). k3 > 0 is a joint that stiffens with the mode's amplitude, k3 < 0 one
+that softens (a torsion mode that drops with the level).
 
 Start value of k3 from the frequency shift. Equivalent linearisation of k3 q^3 replaces it by the
 stiffness k_eq = E{q k3 q^3} / E{q^2}. For a sine of amplitude A this is the describing function
@@ -184,8 +185,8 @@ def peak_gain(ss: StateSpace) -> float:
 
 
 def modes_of(ss: StateSpace) -> list[Mode] | str:
-    """The modes of a continuous strictly proper ``ss`` by increasing natural frequency (module
-    docstring), or why it has no modal form (a defective or nearly defective A)."""
+    """The modes of a continuous ``ss`` (its dynamics: D is no mode's) by increasing natural
+    frequency (module docstring), or why it has no modal form (a defective or nearly defective A)."""
     lam, V = np.linalg.eig(ss.A)
     if np.linalg.cond(V) > 1e10:
         return "its state matrix is (nearly) defective: no modal form"
