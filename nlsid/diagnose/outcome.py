@@ -132,8 +132,8 @@ class Outcome:
         for name, path in self.fitted_mechanics().items():
             start, value, std = self.free[path].start, self.estimate.values[name], self.estimate.std[name]
             own = value_at(self.model, path) if self.model is not None and not is_coefficient(name) else None
-            if own is None and self.model is not None and path.startswith("model.parameters."):
-                continue  # an equations parameter the user's model lacks: the hypothesis made it (tank_outflow)
+            if own is None and self.model is not None and not is_coefficient(name):
+                continue  # a parameter the user's model lacks: the hypothesis made it (tank_outflow, joint_feedback)
             start = float(own) if isinstance(own, (int, float)) and own != 0 else start
             significant = math.isfinite(std) and abs(value - start) > MOVED * std
             if is_coefficient(name):
