@@ -242,12 +242,19 @@ def render_model(path: Path) -> Page:
 
     data, lines = load_yaml(path)
     config = validate_simulate_config(data, path, lines)
+    hybrid = config.model if config.model.type == "hybrid" else None
+    if hybrid is not None:  # the physical part's page, the black-box term stated (_with_black_box)
+        try:
+            model(config)  # the checks of nlsid simulate on both parts
+        except InputError as exc:
+            raise InputError(f"{path}: {exc.where}", exc.what) from None
+        config = config.model_copy(update={"model": hybrid.physical})
     if config.model.type == "equations":
         try:
             model(config)  # the checks of nlsid simulate: open loop only, its expressions and names
         except InputError as exc:
             raise InputError(f"{path}: {exc.where}", exc.what) from None
-        return _equations_page(path, config)
+        return _with_black_box(_equations_page(path, config), hybrid)
     try:
         model(config)  # the checks of nlsid simulate: stability, structure in open loop only
         linear, nonlinear = _elements(config)
@@ -312,8 +319,33 @@ def render_model(path: Path) -> Page:
         tables.append(Table("Nonlinear elements", ["element", "type", "parameters"],
                             [[name, values["type"], _parameters(values)] for name, values in nonlinear]))
     tables.append(written_numbers(data))
-    return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
-                headline=headline, findings=findings, figures=figures, tables=tables, numbers=numbers)
+    return _with_black_box(Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
+                                headline=headline, findings=findings, figures=figures, tables=tables,
+                                numbers=numbers), hybrid)
+
+
+def _with_black_box(page: Page, hybrid) -> Page:
+    """The page of a hybrid model's physical part (``hybrid``: its
+    :class:`~nlsid.io.model_config.HybridConfig`; None: ``page`` as it is) with the black-box term
+    in parallel stated: in the headline, a finding, and ``numbers["black_box"]`` (states, degrees,
+    form, coefficients)."""
+    if hybrid is None:
+        return page
+    from nlsid.models.pnlss import build
+
+    box = build(hybrid.black_box, "model.black_box")
+    form = f"LFR form, {box.lfr_inputs} combination(s) z" if box.lfr else "full form"
+    page.headline = f"Hybrid model: {page.headline}; plus a black-box PNLSS term in parallel"
+    page.findings.insert(0, f"black-box term (PNLSS, in parallel with the physical part above, y = y_physical + "
+                            f"y_black_box): {box.order} states, monomials of degrees {list(box.state_degrees)} / "
+                            f"{list(box.output_degrees)} ({form}), {box.n_parameters} coefficients, discrete at "
+                            f"{box.fs:g} Hz")
+    page.numbers["black_box"] = {"states": box.order, "state_degrees": list(box.state_degrees),
+                                 "output_degrees": list(box.output_degrees), "form": "lfr" if box.lfr else "full",
+                                 "parameters": box.n_parameters, "fs": box.fs}
+    page.numbers["model"] = "hybrid"
+    page.numbers["physical"] = hybrid.physical.type
+    return page
 
 
 def _equations_page(path: Path, config) -> Page:
