@@ -219,3 +219,13 @@ def test_the_output_timing_of_an_acceleration_output_is_not_fitted_as_a_lag():
         free = free_nuisances(ModelRunner.from_data(data, "model.yaml"), runs)["model.output_timing"]
         bounds[name] = (free.lower, free.upper)
     assert bounds == {"both": (0.0, 0.99), "point": (0.0, 0.99), "neither": (-0.99, 0.99)}, bounds
+
+
+def test_a_feedthrough_beside_an_integrator_is_no_acceleration_output():
+    """A pole at s = 0 (an unbounded response, which no acceleration output has) with a D: no modal
+    form, and a reason instead of a singular matrix."""
+    A = np.zeros((5, 5))
+    A[1:, 1:] = _truth_blocks()[0][:4, :4]
+    ss = StateSpace(A, np.ones(5), np.ones(5), 0.5, False)
+    reason, _ = continuous_model(ss, FS)
+    assert isinstance(reason, str) and "pole on the frequency axis" in reason, reason

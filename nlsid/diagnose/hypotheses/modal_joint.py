@@ -147,8 +147,9 @@ def _applies(runner: ModelRunner) -> str | None:
 def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[str]]:
     """The continuous model the modal form is made of, and notes; or why there is none. Its direct
     feedthrough D is an acceleration output's where it exceeds :data:`FEEDTHROUGH` of the peak
-    response (kept: module docstring), a fit's rounding below (set to 0); a discrete model is
-    replaced by its continuous equivalent (ZOH inverse, D unchanged)."""
+    response (kept: module docstring), a fit's rounding below (set to 0), neither beside a pole on
+    the frequency axis (none); a discrete model is replaced by its continuous equivalent (ZOH
+    inverse, D unchanged)."""
     from nlsid.models.continuous_equivalent import zoh_inverse
 
     notes = []
@@ -158,6 +159,9 @@ def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[
         if share > FEEDTHROUGH:
             notes.append(f"an acceleration output: D = {D:.3g} ({share:.1%} of the peak response) kept, the moving "
                          "mode's force reaching the output through its acceleration too")
+        elif share == 0:  # a pole on the frequency axis: no acceleration (whose response is bounded)
+            return ("the model has a direct feedthrough D and a pole on the frequency axis (an unbounded response: "
+                    "no acceleration output), which the modal form here does not write"), notes
         else:
             D = 0.0
             notes.append(f"D = {ss.D:.3g} ({share:.2%} of the peak response) set to 0 (a fit's rounding: the output "
@@ -174,14 +178,19 @@ def continuous_model(ss: StateSpace, fs: float) -> tuple[StateSpace | str, list[
 def peak_gain(ss: StateSpace) -> float:
     """max |G - D| (the dynamics without the feedthrough) of ``ss`` at its poles' frequencies (the
     resonances' peaks) and on 512 frequencies: a discrete model's up to the Nyquist frequency, a
-    continuous one's from 0 to ten times its largest pole's modulus."""
+    continuous one's from 0 to ten times its largest pole's modulus; infinite where one of these
+    is a pole (an integrator, an undamped mode)."""
     poles = ss.poles()
     if ss.discrete:
         points = np.exp(1j * np.concatenate([np.linspace(0.0, np.pi, 512), np.abs(np.angle(poles))]))
     else:
         top = 10 * float(np.max(np.abs(poles), initial=1.0))
         points = 1j * np.concatenate([np.linspace(0.0, top, 512), np.abs(poles.imag)])
-    return float(np.max(np.abs(ss.frequency_response(points) - ss.D)))
+    try:
+        peak = float(np.max(np.abs(ss.frequency_response(points) - ss.D)))
+    except np.linalg.LinAlgError:  # a point on a pole: singular sI - A
+        return math.inf
+    return peak if math.isfinite(peak) else math.inf
 
 
 def modes_of(ss: StateSpace) -> list[Mode] | str:
