@@ -454,13 +454,16 @@ def lead_samples(model: Plant | Structure | equations.Equations, loop: ClosedLoo
     closed loop :func:`_loop_decay_rate`, the loop's modes) decays to STEADY_TOLERANCE, t =
     ln(1 / STEADY_TOLERANCE) / sigma, at most MAX_LEAD_PERIODS periods. 0 for an arbitrary record,
     a run with transient periods (simulated as measured), and a model (or loop) with an integrator
-    or an unstable mode (no periodic steady state to reach) or without modes, and a model written as
-    equations (its initial states are part of the model: no lead-in)."""
+    or an unstable mode (no periodic steady state to reach) or without modes, a model written as
+    equations (its initial states are part of the model: no lead-in), and a hybrid model (each of
+    its parts runs its own lead-in, :mod:`nlsid.models.hybrid`)."""
     from nlsid.io.ranges import RangeRun
 
     if run.period is None or isinstance(run, RangeRun) or run.transient_periods:
         return 0
     if isinstance(model, equations.Equations):  # starts at its written initial states (nlsid.models.equations)
+        return 0
+    if not isinstance(model, (Plant, Structure)):  # a hybrid model: each part runs its own lead-in (models.hybrid)
         return 0
     if loop is not None:
         sigma = _loop_decay_rate(model, loop, run.fs, run.n_samples)
