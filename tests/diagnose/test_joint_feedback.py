@@ -64,6 +64,25 @@ def test_the_transfer_function_is_read_back_as_its_two_mass_stage(stage):
         assert got[key] == pytest.approx(stage.get(key, 0.0) / stage["gain"], rel=1e-7, abs=1e-12), key
 
 
+@pytest.mark.filterwarnings("ignore::scipy.signal.BadCoefficients")  # cont2discrete on a num with a zero s^n term
+def test_a_discrete_transfer_function_is_read_through_its_continuous_equivalent():
+    """The motor velocity's ZOH discretisation at 1024 Hz (scipy's cont2discrete), written with its
+    fs as ``nlsid fit --domain z`` writes one: the hypothesis applies, and the stage it extends has
+    the parameters in units of u to 1e-6 (the ZOH inverse's rounding); without fs it says why."""
+    from scipy.signal import cont2discrete
+
+    model = _transfer_function(STAGE)
+    b, a, _ = cont2discrete((model["num"], model["den"]), 1 / cases.FS, method="zoh")
+    discrete = {"type": "transfer_function", "domain": "discrete", "fs": cases.FS,
+                "num": [float(v) for v in np.ravel(b)], "den": [float(v) for v in a]}
+    hypothesis = by_name("joint_feedback")
+    assert hypothesis.applies(ModelRunner.from_data({"model": discrete}, "model.yaml")) is None
+    stage = hypothesis.extend({"model": discrete}, {"k3": 1.0})["model"]
+    for key in MECHANICS:
+        assert stage[key] == pytest.approx(STAGE[key] / STAGE["gain"], rel=1e-6), key
+    assert "model.fs" in hypothesis.applies(ModelRunner.from_data({"model": {**discrete, "fs": None}}, "m.yaml"))
+
+
 def test_the_load_transfer_function_is_refused_with_the_reason():
     """The load's numerator (c s + k) does not fix the masses' split: not applied, said why."""
     model = _transfer_function({**STAGE, "output": "position"})

@@ -19,8 +19,9 @@ mode moves and the rigid-body motion does not: the joint's distortion is where t
 same family as the cubic spring (stiffness): the verdict names the one that is significantly
 better (one parameter each).
 
-Around a transfer function (``joint_feedback``): a continuous G from force to the motor's position
-or velocity, with the numerator of degree 2 that the motor's output has, is the two-mass stage of
+Around a transfer function (``joint_feedback``): a continuous G (or a discrete one's exact ZOH
+equivalent at its ``fs``) from force to the motor's position or velocity, with the numerator of
+degree 2 that the motor's output has, is the two-mass stage of
 :func:`two_mass_of` (gain 1: its masses and k3 in units of u); the joint is estimated and refined
 on that stage, its mechanics with it. The joint reads the deflection p1 - p2, which the output is
 not, so it needs the stage's two masses, not a force fed back around G as the friction families
@@ -112,7 +113,7 @@ CUBIC_JOINT = Hypothesis(
 
 
 MECHANICS = ("motor_mass", "load_mass", "stiffness", "damping", "motor_damping", "load_damping")
-ROUNDING = 1e-9  # a damper below this share of the largest one is the roots' rounding (two_mass_of)
+ROUNDING = 1e-9  # a damper (a scaled coefficient) below this share of the largest is rounding (two_mass_of, _rounded)
 
 
 def _template(params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -186,21 +187,46 @@ def two_mass_of(num, den) -> tuple[dict, float] | str:
             "output": output, "output_at": "motor"}, error
 
 
+def _read(model: dict) -> tuple[dict, float] | str:
+    """The two-mass stage a transfer function config is (:func:`two_mass_of`; a discrete one's
+    exact ZOH equivalent at its ``fs``), or why there is none."""
+    from nlsid.models.continuous_equivalent import continuous_transfer_function
+
+    if model["type"] != "transfer_function":
+        return "needs a transfer_function model (a two_mass_stage has the joint itself)"
+    num, den = model["num"], model["den"]
+    if model.get("domain", "continuous") == "discrete":
+        if model.get("fs") is None:
+            return "a discrete transfer function needs its rate (model.fs) to be read as a two-mass stage"
+        equivalent = continuous_transfer_function(num, den, float(model["fs"]))
+        if isinstance(equivalent, str):
+            return f"the discrete model has no continuous equivalent: {equivalent}"
+        num, den = (_rounded(equivalent[key], float(model["fs"])) for key in ("num", "den"))
+    return two_mass_of(num, den)
+
+
+def _rounded(poly: list[float], fs: float) -> np.ndarray:
+    """A continuous equivalent's coefficients with those of the ZOH inverse's rounding set to 0:
+    each coefficient of s^i times (2 pi fs)^i at most ROUNDING of the largest so scaled (a pole or
+    zero at z = 1 comes out at s of order 1e-10 of the sampling rate, not at 0)."""
+    out = np.asarray(poly, float).copy()
+    scaled = np.abs(out) * (2 * math.pi * fs) ** np.arange(out.size - 1, -1, -1, dtype=float)
+    out[scaled <= ROUNDING * scaled.max()] = 0.0
+    return out
+
+
 def _applies_feedback(runner: ModelRunner) -> str | None:
-    model = runner.data["model"]
-    if model["type"] != "transfer_function" or model.get("domain", "continuous") != "continuous":
-        return "needs a continuous transfer_function model (a two_mass_stage has the joint itself)"
-    found = two_mass_of(model["num"], model["den"])
+    found = _read(runner.data["model"])
     return found if isinstance(found, str) else None
 
 
 def _stage(data: dict) -> tuple[dict, float]:
-    """``data`` with its transfer function replaced by the two_mass_stage it is (:func:`two_mass_of`),
+    """``data`` with its transfer function replaced by the two_mass_stage it is (:func:`_read`),
     its offsets, dead time, channels and blocks kept; and the coefficients' mismatch."""
     from nlsid.diagnose.hypotheses.feedback import KEPT
 
     model = data["model"]
-    stage, error = two_mass_of(model["num"], model["den"])
+    stage, error = _read(model)
     return {**data, "model": {**stage, **{k: copy.deepcopy(model[k]) for k in KEPT if k in model}}}, error
 
 
