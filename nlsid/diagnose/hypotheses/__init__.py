@@ -68,9 +68,9 @@ cubic_joint         odd distortion around the flexible mode   ``nonlinearities: 
                     of a two_mass_stage; residual like the    with ``at: joint`` (k3: k3 (p1 -
                     sensitivity to a cubic spring between     p2)^3 in the coupling, with the
                     the masses                                mechanics)
-joint_feedback      as cubic_joint, for a continuous          the two_mass_stage the transfer
-                    transfer function from force to the       function is (joint.two_mass_of,
-                    motor's position or velocity              gain 1) with the cubic joint (k3,
+joint_feedback      as cubic_joint, for a transfer function   the two_mass_stage the transfer
+                    from force to the motor's position or     function is (joint.two_mass_of,
+                    velocity (a discrete one with its fs)     gain 1) with the cubic joint (k3,
                                                               the mechanics)
 modal_joint         odd distortion; one mode of a multi-mode  ``nonlinear_feedback`` around the
                     LTI model (order >= 4) moves with the     model's modal state space (the
