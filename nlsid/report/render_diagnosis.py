@@ -49,7 +49,7 @@ def floor_text(score: dict | None) -> str:
 #: the opening words of the findings that are settings or side estimates rather than the answer
 #: (:meth:`nlsid.diagnose.result.Diagnosis.findings`): they go to the page's collapsed details
 DETAIL_OPENINGS = ("nuisances estimated first", "initial state fitted", "extended model simulated with",
-                   "the model simulated with", "estimation budget", "black-box yardstick")
+                   "the model simulated with", "estimation budget", "black-box yardstick", "hybrid model")
 
 
 def split_findings(findings: list[str]) -> tuple[list[str], list[str]]:
@@ -97,7 +97,8 @@ def cause_lines(summary: dict) -> list[str]:
 
 def standing_lines(summary: dict) -> list[str]:
     """Where the models' validation errors stand against the noise floor: the original, the
-    extended (named causes) and the black-box yardstick, which shows how far a flexible model gets."""
+    extended (named causes), the black-box yardstick, which shows how far a flexible model gets,
+    and the hybrid (the extended model with a black-box term) where it was fitted."""
     original, gain = summary["original"], summary.get("gain")
     text = f"validation error against the noise floor: original model {floor_text(original)}"
     if gain:
@@ -111,6 +112,10 @@ def standing_lines(summary: dict) -> list[str]:
                      "the named causes")
     elif yardstick:
         lines.append("no black-box yardstick to compare with (why: in the details below)")
+    hybrid = summary.get("hybrid")
+    if hybrid and hybrid.get("fitted"):
+        lines.append(f"the extended model with a black-box term for what it leaves (hybrid_model.yaml) reaches "
+                     f"{floor_text(hybrid['validation'])} the floor, its physical part as named")
     return lines
 
 
@@ -234,6 +239,11 @@ def _error_table(summary: dict, units: Units) -> Table:
     if yardstick.get("fitted"):
         val = yardstick["validation"]
         label = "black-box yardstick (PNLSS)" + (", best" if best == "black_box_model.yaml" else "")
+        rows.append([label, number(val["error_rms"], ".4g"), number(val["error_db"], ".1f"), floor_text(val)])
+    hybrid = summary.get("hybrid") or {}
+    if hybrid.get("fitted"):
+        val = hybrid["validation"]
+        label = "hybrid (extended model + black-box term)" + (", best" if best == "hybrid_model.yaml" else "")
         rows.append([label, number(val["error_rms"], ".4g"), number(val["error_db"], ".1f"), floor_text(val)])
     floor = gain["extended"] if gain else original
     rows.append(["noise floor", number(floor["noise_rms"], ".4g"), number(floor["noise_db"], ".1f"), "the floor"])

@@ -1,5 +1,5 @@
-"""The model page of a hybrid config (``type: hybrid``): its physical part's page, the black-box term
-in parallel stated.
+"""The report pages of a hybrid model: its model page (``type: hybrid``) is its physical part's
+page with the black-box term in parallel stated; the diagnosis page stands it beside the yardstick.
 
 From theory: the physical part, a discrete transfer function with denominator
 z^2 - 1.2 z + 0.5 at 100 Hz, has the pole pair r e^(+-j w), r = sqrt(0.5), cos w = 0.6 / r, so
@@ -35,3 +35,21 @@ def test_hybrid_page_is_the_physical_part_with_the_black_box_stated(tmp_path):
     box = page.numbers["black_box"]
     assert box["parameters"] == 31 and box["states"] == 2 and box["form"] == "full"
     assert page.headline.startswith("Hybrid model:") and "black-box term" in page.findings[0]
+
+
+def test_diagnosis_page_stands_the_hybrid_beside_the_yardstick():
+    """The diagnosis page's lines of where each model stands against the floor name the hybrid
+    where summary.json says it was fitted (its above_floor_db rounded as the verdict words it),
+    and its finding goes to the details, as the yardstick's does."""
+    from nlsid.report.render_diagnosis import split_findings, standing_lines
+
+    error = {"above_floor_db": 41.1, "noise_floor_zero": False}
+    summary = {"original": error, "gain": {"extended": {"above_floor_db": 27.3, "noise_floor_zero": False},
+                                           "gain_db": 13.8},
+               "yardstick": {"fitted": True, "validation": {"above_floor_db": 0.57, "noise_floor_zero": False}},
+               "hybrid": {"fitted": True, "validation": {"above_floor_db": 11.23, "noise_floor_zero": False}}}
+    lines = standing_lines(summary)
+    assert "(hybrid_model.yaml) reaches 11.2 dB above the floor" in lines[-1]
+    assert not any("hybrid" in line for line in standing_lines({**summary, "hybrid": {"fitted": False}}))
+    lead, details = split_findings(["hybrid model (the extended model with a black-box PNLSS term ...)", "cause"])
+    assert lead == ["cause"] and details[0].startswith("hybrid model")
