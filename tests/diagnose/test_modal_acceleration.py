@@ -36,6 +36,7 @@ PARTICIPATION = np.array([1.0, 0.8, 1.2])  # b_i
 SHAPE = np.array([1.0, -0.8, 0.6])  # c_i
 MOVING = 1
 K3 = -8.0e9  # softening: the cubic is 25 % of the output's rms at the input below (white, rms 1)
+K3_2 = -2.0e11  # a second cubic, on the mode at 33 Hz
 
 
 def _truth_blocks() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -94,14 +95,14 @@ def test_the_modal_form_with_feedthrough_has_the_structure_s_response(discrete):
     assert acceleration_share(linear) == pytest.approx(SHAPE[MOVING] * PARTICIPATION[MOVING], rel=1e-9)
 
 
-def _runge_kutta_mode(u: np.ndarray, substeps: int) -> np.ndarray:
-    """c q'' of the moving mode with its cubic, q'' = b u - 2 zeta w q' - w^2 q - K3 q^3, by RK4 with
-    u held over each sample, read at the sample instants (u[k] the held value there)."""
-    w, z, b, c = 2 * np.pi * FREQUENCIES_HZ[MOVING], DAMPING[MOVING], PARTICIPATION[MOVING], SHAPE[MOVING]
+def _runge_kutta_mode(u: np.ndarray, substeps: int, i: int, k3: float) -> np.ndarray:
+    """c q'' of mode i with a cubic, q'' = b u - 2 zeta w q' - w^2 q - k3 q^3, by RK4 with u held
+    over each sample, read at the sample instants (u[k] the held value there)."""
+    w, z, b, c = 2 * np.pi * FREQUENCIES_HZ[i], DAMPING[i], PARTICIPATION[i], SHAPE[i]
     h = 1 / (FS * substeps)
 
     def rates(p, v, force):
-        return v, force - 2 * z * w * v - w * w * p - K3 * p**3
+        return v, force - 2 * z * w * v - w * w * p - k3 * p**3
 
     p = v = 0.0
     y = np.zeros(u.size)
@@ -116,12 +117,12 @@ def _runge_kutta_mode(u: np.ndarray, substeps: int) -> np.ndarray:
     return y
 
 
-def _truth(u: np.ndarray, substeps: int) -> np.ndarray:
-    """The structure's acceleration output: the linear modes by their exact ZOH (scipy's dlsim),
-    the moving one by RK4."""
+def _truth(u: np.ndarray, substeps: int, joints: dict[int, float]) -> np.ndarray:
+    """The structure's acceleration output with the cubics ``joints`` (mode -> k3): the linear
+    modes by their exact ZOH (scipy's dlsim), those with a cubic by RK4."""
     w, z = 2 * np.pi * FREQUENCIES_HZ, DAMPING
-    y = _runge_kutta_mode(u, substeps)
-    for i in (i for i in range(w.size) if i != MOVING):
+    y = sum(_runge_kutta_mode(u, substeps, i, k3) for i, k3 in joints.items())
+    for i in (i for i in range(w.size) if i not in joints):
         a = np.array([[0.0, 1.0], [-w[i] ** 2, -2 * z[i] * w[i]]])
         Phi, Gamma = zoh(a, np.array([0.0, PARTICIPATION[i]]), 1 / FS)
         C = SHAPE[i] * a[1:]  # c q'' = c (-w^2 q - 2 zeta w q') + c b u
@@ -130,8 +131,7 @@ def _truth(u: np.ndarray, substeps: int) -> np.ndarray:
     return y
 
 
-def _nlsid(linear: dict, u: np.ndarray, substeps: int, feedthrough: float) -> np.ndarray:
-    values = {"k3": K3 * PARTICIPATION[MOVING] ** 2, "feedthrough": feedthrough}
+def _nlsid(linear: dict, u: np.ndarray, substeps: int, values: dict) -> np.ndarray:
     data = {**MODAL_JOINT.extend({"model": linear}, values), "simulation": {"substeps": substeps}}
     run = Run("r", FS, "noise", u)
     return ModelRunner.from_data(data, "model.yaml").simulate_each([run])[0]
@@ -144,17 +144,36 @@ def test_the_modal_cubic_with_an_acceleration_output_simulates_the_structure():
     from the two first sub-steps' middles), so it falls by 4 +- 1 per halving. Without the
     feedthrough the force's acceleration is missing from y: an error far above that."""
     u = np.random.default_rng(8).standard_normal(N)
-    truth = _truth(u, 16)
+    truth = _truth(u, 16, {MOVING: K3})
     linear = _modal_form(False)
-    share = acceleration_share(linear)
+    values = {"k3": K3 * PARTICIPATION[MOVING] ** 2, "feedthrough": acceleration_share(linear)}
     nonlinear = np.std(truth - _truth_linear(u))
     assert nonlinear > 0.1 * np.std(truth)  # the cubic matters: 10 % of y at least
-    errors = [_rms(_nlsid(linear, u, m, share) - truth) for m in (5, 10, 20)]
+    errors = [_rms(_nlsid(linear, u, m, values) - truth) for m in (5, 10, 20)]
     # RK4's own error, 1/15 of its change on halving the step: below 1 % of the smallest error here
-    assert _rms(_truth(u, 8) - truth) < 0.15 * errors[2], errors
+    assert _rms(_truth(u, 8, {MOVING: K3}) - truth) < 0.15 * errors[2], errors
     assert 3 < errors[0] / errors[1] < 5 and 3 < errors[1] / errors[2] < 5, errors
     assert errors[2] < 1e-3 * nonlinear, (errors, nonlinear)
-    assert _rms(_nlsid(linear, u, 20, 0.0) - truth) > 100 * errors[2]
+    assert _rms(_nlsid(linear, u, 20, {**values, "feedthrough": 0.0}) - truth) > 100 * errors[2]
+
+
+def test_two_joints_at_two_points_simulate_the_structure():
+    """Cubics on the modes at 15 and 33 Hz (``k3`` at ``mode``, ``k3_2`` at ``mode_2``, blocks
+    first and second, each with its feedthrough c b): the same second-order agreement with the
+    independent simulation, and the second joint's part of y is no rounding (10 % of the cubics')."""
+    joints = {MOVING: K3, 2: K3_2}
+    u = np.random.default_rng(9).standard_normal(N)
+    truth = _truth(u, 16, joints)
+    ss, _ = continuous_model(_user_model(False), FS)
+    six, fifteen, thirty_three = modes_of(ss)  # by frequency
+    linear = modal_state_space([fifteen, thirty_three, six], ss.D)
+    values = {"k3": K3 * PARTICIPATION[MOVING] ** 2, "k3_2": K3_2 * PARTICIPATION[2] ** 2,
+              "feedthrough": acceleration_share(linear), "feedthrough_2": acceleration_share(linear, 2)}
+    assert values["feedthrough_2"] == pytest.approx(SHAPE[2] * PARTICIPATION[2], rel=1e-9)
+    second = np.std(truth - _truth(u, 16, {MOVING: K3}))
+    assert second > 0.1 * np.std(truth - _truth_linear(u))
+    errors = [_rms(_nlsid(linear, u, m, values) - truth) for m in (10, 20)]
+    assert 3 < errors[0] / errors[1] < 5 and errors[1] < 1e-3 * second, (errors, second)
 
 
 def _rms(x: np.ndarray) -> float:

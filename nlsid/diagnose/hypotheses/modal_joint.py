@@ -84,7 +84,13 @@ Which mode: the one whose frequency changes most significantly from the lowest l
 highest (the largest |change| / standard error among the significant ones), matched to the model's
 mode with the nearest natural frequency; the note names both. Not fitted where no mode moves
 significantly, where fewer than two levels give the mode's frequency, or where the model has no
-mode within :data:`MATCH` of it.
+mode within :data:`MATCH` of it. The next mode that moves significantly gets a joint of its own
+(:func:`second_joint`) where its line over the levels is significant too (the slope beyond
+:data:`SECOND_SIGNIFICANCE` standard errors: a BLA of ten modes compared at the 5 % level shows a
+spurious change now and then, which the line then rarely confirms): its block second, its point
+``mode_2``, its parameters ``k3_2`` (``c3_2``) and, on an acceleration output, ``feedthrough_2``.
+Two at most: the joints' modal coordinates are each started as if alone (the variance of one
+mode's coordinate under the other's cubic is a second-order effect the refinement takes up).
 """
 
 from __future__ import annotations
@@ -108,6 +114,7 @@ FEEDTHROUGH = 0.01  # a discrete D above this share of the peak response is the 
 NEGLIGIBLE = 1e-6  # an output coefficient this small relative to the mode's other one is not refined
 POINT = "mode"  # the name of the force point of the moving mode
 FEEDTHROUGH_KEY = "feedthrough"  # the point's direct term to an acceleration output, and its parameter's name
+SECOND_SIGNIFICANCE = 3.0  # a second moving mode's joint: its line's slope this many standard errors from 0
 
 
 @dataclass(frozen=True)
@@ -210,11 +217,12 @@ def modes_of(ss: StateSpace) -> list[Mode] | str:
     return sorted(out, key=lambda m: m.frequency_hz)
 
 
-def acceleration_share(linear: dict) -> float:
-    """The acceleration participation a2 = -beta / w^2 of the first block (a pair's: the moving
-    mode's) of a modal ``state_space`` config of :func:`modal_state_space` (module docstring): its
-    force point's feedthrough where the output is an acceleration."""
-    return linear["C"][0] / linear["A"][1][0]
+def acceleration_share(linear: dict, j: int = 0) -> float:
+    """The acceleration participation a2 = -beta / w^2 of the pair whose block starts at state
+    ``j`` (the first: the moving mode's) of a modal ``state_space`` config of
+    :func:`modal_state_space` (module docstring): its force point's feedthrough where the output is
+    an acceleration."""
+    return linear["C"][j] / linear["A"][j + 1][j]
 
 
 def modal_state_space(modes: list[Mode], D: float = 0.0) -> dict:
@@ -270,9 +278,10 @@ def modal_variance(run, pole: complex, derivative: int = 0) -> float:
     return float(np.var(q))
 
 
-def moving_mode(ctx: Context, quantity: str = "frequency") -> dict | str:
-    """The row of :func:`nlsid.analysis.modes.level_modes` of the measured levels whose
-    ``quantity`` (``frequency`` or ``damping``) changes most significantly, or why there is none."""
+def moving_modes(ctx: Context, quantity: str = "frequency") -> list[dict] | str:
+    """The rows of :func:`nlsid.analysis.modes.level_modes` of the measured levels whose
+    ``quantity`` (``frequency`` or ``damping``) changes significantly, the most significant change
+    (|change| / standard error) first, or why there is none."""
     from nlsid.analysis.levels import common_lines
     from nlsid.analysis.modes import level_modes
 
@@ -282,7 +291,7 @@ def moving_mode(ctx: Context, quantity: str = "frequency") -> dict | str:
     rows = [row for row in level_modes(measured, common_lines(measured)) if row[f"{quantity}_significant"]]
     if not rows:
         return f"no mode of the BLA changes its {quantity} significantly with the level"
-    return max(rows, key=lambda row: abs(row[f"{quantity}_change"]) / row[f"{quantity}_change_se"])
+    return sorted(rows, key=lambda row: -abs(row[f"{quantity}_change"]) / row[f"{quantity}_change_se"])
 
 
 def level_line(ctx: Context, row: dict, pole: complex, effect: "Effect") -> tuple[float, float, float, int] | str:
@@ -338,6 +347,53 @@ SPRING = Effect("cubic_stiffness", "k3", "frequency", 0, "A[1][0]")
 DAMPER = Effect("cubic_damping", "c3", "damping", 1, "A[1][1]")
 
 
+@dataclass(frozen=True)
+class Joint:
+    """A moving mode's joint as started (module docstring): the BLA's ``row``, the model's ``mode``
+    matched to it, the force parameter's ``value`` and standard error ``std``, the block's
+    ``intercept`` (w0^2 or 2 zeta w at zero amplitude) and the ``levels`` its line used."""
+
+    row: dict
+    mode: Mode
+    value: float
+    std: float
+    intercept: float
+    levels: int
+
+
+def joint(ctx: Context, row: dict, pairs: list[Mode], effect: "Effect") -> Joint | str:
+    """The joint of the BLA's moving mode ``row`` on the nearest of the model's ``pairs``, or why
+    there is none (no pair within :data:`MATCH`, no line over the levels, a change the effect
+    cannot make)."""
+    f_moving = row["frequency_hz"]
+    mode = min(pairs, key=lambda m: abs(m.frequency_hz / f_moving - 1))
+    if abs(mode.frequency_hz / f_moving - 1) > MATCH:
+        return (f"the BLA's mode at {f_moving:.4g} Hz changes with the level, and the model has no mode within "
+                f"{MATCH:.0%} of it")
+    line = level_line(ctx, row, mode.pole, effect)
+    if isinstance(line, str):
+        return line
+    slope, slope_std, intercept, used = line
+    value = slope / 3  # the equivalent stiffness (damping) 3 k3 sigma_q^2 (3 c3 sigma_v^2)
+    if not (value != 0 and intercept > 0):
+        return f"the mode's {effect.quantity} does not change with the modal amplitude"
+    if effect is DAMPER and value < 0:
+        return "the mode's damping falls with the level (a cubic damper raises it)"
+    return Joint(row, mode, value, slope_std / 3, intercept, used)
+
+
+def second_joint(ctx: Context, rows: list[dict], pairs: list[Mode], first: Joint, effect: "Effect") -> Joint | None:
+    """The joint of the next moving mode (``rows`` after the first, most significant first) on
+    another of the model's modes whose line over the levels is significant itself (|value| >
+    :data:`SECOND_SIGNIFICANCE` standard errors); None where there is none."""
+    others = [m for m in pairs if m is not first.mode]
+    for row in rows:
+        found = joint(ctx, row, others, effect) if others else None
+        if isinstance(found, Joint) and abs(found.value) > SECOND_SIGNIFICANCE * found.std:
+            return found
+    return None
+
+
 def _estimator(effect: Effect):
     def estimate(ctx: Context) -> Estimate | str:
         """Start values (module docstring)."""
@@ -347,49 +403,65 @@ def _estimator(effect: Effect):
         modes = modes_of(ss)
         if isinstance(modes, str):
             return f"not fitted: {modes}"
-        row = moving_mode(ctx, effect.quantity)
-        if isinstance(row, str):
-            return f"not fitted: {row}"
-        f_moving = row["frequency_hz"]
+        rows = moving_modes(ctx, effect.quantity)
+        if isinstance(rows, str):
+            return f"not fitted: {rows}"
         pairs = [m for m in modes if m.pair]
         if not pairs:
             return "not fitted: the model has no resonance (no complex pole pair)"
-        mode = min(pairs, key=lambda m: abs(m.frequency_hz / f_moving - 1))
-        if abs(mode.frequency_hz / f_moving - 1) > MATCH:
-            return (f"not fitted: the BLA's mode at {f_moving:.4g} Hz changes with the level, and the model has no "
-                    f"mode within {MATCH:.0%} of it")
-        line = level_line(ctx, row, mode.pole, effect)
-        if isinstance(line, str):
-            return f"not fitted: {line}"
-        slope, slope_std, intercept, used = line
-        value = slope / 3  # the equivalent stiffness (damping) 3 k3 sigma_q^2 (3 c3 sigma_v^2)
-        if not (value != 0 and intercept > 0):
-            return f"not fitted: the mode's {effect.quantity} does not change with the modal amplitude"
-        if effect is DAMPER and value < 0:
-            return "not fitted: the mode's damping falls with the level (a cubic damper raises it)"
-        lti = modal_state_space([mode] + [m for m in modes if m is not mode], ss.D)
+        first = joint(ctx, rows[0], pairs, effect)
+        if isinstance(first, str):
+            return f"not fitted: {first}"
+        second = second_joint(ctx, rows[1:], pairs, first, effect)
+        joints = [first] if second is None else [first, second]
+        moving = [j.mode for j in joints]
+        lti = modal_state_space(moving + [m for m in modes if all(m is not k for k in moving)], ss.D)
         r, c = (int(i) for i in effect.entry[2:-1].split("]["))
-        lti["A"][r][c] = -intercept
+        own = {}
+        for n, j in enumerate(joints):
+            lti["A"][r + 2 * n][c + 2 * n] = -j.intercept
+            own[_name(effect.parameter, n)] = j.value
+            if ss.D != 0:  # the moving mode's acceleration, at the w^2 the start gives the block
+                own[_name(FEEDTHROUGH_KEY, n)] = acceleration_share(lti, 2 * n)
         data = {**ctx.runner.data, "model": {**{k: v for k, v in ctx.runner.data["model"].items() if k in KEPT},
                                              **lti}}
-        paths = _paths_of(effect)(data)
-        own = {effect.parameter: value}
-        if ss.D != 0:  # the moving mode's acceleration, at the w^2 the start gives the block
-            own[FEEDTHROUGH_KEY] = acceleration_share(lti)
+        paths = {**_paths_of(effect)(data), **_second_paths(effect, len(joints), ss.D != 0)}
         values = {**own, **{name: float(_value(data, path)) for name, path in paths.items() if name not in own}}
         before = ctx.simulation_rss(ctx.runner.data)
         try:
             after = ctx.simulation_rss(_extender(effect)(data, values))
         except InputError as exc:  # the start diverges: scored as explaining nothing
             after, notes = before, [*notes, f"the start could not be simulated ({exc.what})"]
-        change, change_se = row[f"{effect.quantity}_change"], row[f"{effect.quantity}_change_se"]
-        notes = [f"mode near {f_moving:.4g} Hz (the BLA's, {effect.quantity} {change:+.2%} +- {change_se:.2%} "
-                 f"from level {row['from_level']:g} to {row['to_level']:g}), the model's at {mode.frequency_hz:.4g} Hz",
-                 f"{effect.parameter} = b / 3 from the line {_line_text(effect)} over {used} levels", *notes]
+        notes = [*(_joint_note(j, effect, n) for n, j in enumerate(joints)), *notes]
         std = {name: math.nan for name in values}
-        std[effect.parameter] = slope_std / 3
-        return Estimate(values, std, explained_db(before, after), "; ".join(notes), lti=lti)
+        std.update({_name(effect.parameter, n): j.std for n, j in enumerate(joints)})
+        return Estimate(values, std, explained_db(before, after), "; ".join(notes), paths=paths, lti=lti)
     return estimate
+
+
+def _name(base: str, n: int) -> str:
+    """A parameter's (or point's) name for the n-th moving mode: ``k3``, ``k3_2``."""
+    return base if n == 0 else f"{base}_{n + 1}"
+
+
+def _second_paths(effect: "Effect", count: int, acceleration: bool) -> dict[str, str]:
+    """The key paths of the second moving mode's force parameter (and feedthrough)."""
+    if count < 2:
+        return {}
+    point = _name(POINT, 1)
+    out = {_name(effect.parameter, 1): f"model.nonlinearities[1].{effect.parameter}"}
+    if acceleration:
+        out[_name(FEEDTHROUGH_KEY, 1)] = f"model.points.{point}.{FEEDTHROUGH_KEY}"
+    return out
+
+
+def _joint_note(j: Joint, effect: "Effect", n: int) -> str:
+    row, quantity = j.row, effect.quantity
+    change, change_se = row[f"{quantity}_change"], row[f"{quantity}_change_se"]
+    which = "mode" if n == 0 else "second moving mode"
+    return (f"{which} near {row['frequency_hz']:.4g} Hz (the BLA's, {quantity} {change:+.2%} +- {change_se:.2%} "
+            f"from level {row['from_level']:g} to {row['to_level']:g}), the model's at {j.mode.frequency_hz:.4g} Hz; "
+            f"{_name(effect.parameter, n)} = b / 3 from the line {_line_text(effect)} over {j.levels} levels")
 
 
 def _line_text(effect: Effect) -> str:
@@ -448,30 +520,42 @@ def _extender(effect: Effect):
             elif name.startswith("C["):
                 linear["C"][int(name[2:-1])] = float(value)
         n = len(linear["B"])
-        force, position = [0.0] * n, [0.0] * n
-        force[1], position[0] = 1.0, 1.0
-        point = {"force": force, "position": position}
-        if values.get(FEEDTHROUGH_KEY):
-            point[FEEDTHROUGH_KEY] = float(values[FEEDTHROUGH_KEY])
-        out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0, "points": {POINT: point},
-                        "nonlinearities": [{"type": effect.force, effect.parameter: float(values[effect.parameter]),
-                                            "at": POINT}],
-                        **{k: model[k] for k in KEPT if k in model}}
+        points, forces = {}, []
+        count = 2 if _name(effect.parameter, 1) in values else 1
+        for m in range(count):  # the moving modes' blocks first, each (q, q') from state 2 m
+            force, position = [0.0] * n, [0.0] * n
+            force[2 * m + 1], position[2 * m] = 1.0, 1.0
+            point = {"force": force, "position": position}
+            if values.get(_name(FEEDTHROUGH_KEY, m)):
+                point[FEEDTHROUGH_KEY] = float(values[_name(FEEDTHROUGH_KEY, m)])
+            points[_name(POINT, m)] = point
+            forces.append({"type": effect.force, effect.parameter: float(values[_name(effect.parameter, m)]),
+                           "at": _name(POINT, m)})
+        out["model"] = {"type": "nonlinear_feedback", "linear": linear, "gain": 1.0, "points": points,
+                        "nonlinearities": forces, **{k: model[k] for k in KEPT if k in model}}
         return out
     return extend
 
 
-def _frequency_hz(values: dict) -> float:
-    return math.sqrt(-values["A[1][0]"]) / (2 * math.pi) if values.get("A[1][0]", 0) < 0 else math.nan
+def _frequency_hz(values: dict, n: int = 0) -> float:
+    """The natural frequency of the n-th moving mode's block (its -w^2 at A[2n+1][2n])."""
+    key = f"A[{2 * n + 1}][{2 * n}]"
+    return math.sqrt(-values[key]) / (2 * math.pi) if values.get(key, 0) < 0 else math.nan
 
 
 def _spring_reading(values: dict) -> str:
-    return (f"a {spring(values['k3'])} cubic spring on the modal coordinate of the mode at "
+    text = (f"a {spring(values['k3'])} cubic spring on the modal coordinate of the mode at "
             f"{_frequency_hz(values):.4g} Hz (zero amplitude)")
+    if "k3_2" in values:
+        text += f", and a {spring(values['k3_2'])} one on the mode at {_frequency_hz(values, 1):.4g} Hz"
+    return text
 
 
 def _damper_reading(values: dict) -> str:
-    return f"a cubic damper on the modal velocity of the mode at {_frequency_hz(values):.4g} Hz"
+    text = f"a cubic damper on the modal velocity of the mode at {_frequency_hz(values):.4g} Hz"
+    if "c3_2" in values:
+        text += f", and one on the mode at {_frequency_hz(values, 1):.4g} Hz"
+    return text
 
 
 MODAL_JOINT = Hypothesis(
