@@ -9,10 +9,12 @@ fitted (its parameters, nuisances and simulation settings unchanged: the readabl
 adds a PNLSS term in parallel, fitted to what the extended model leaves of the measured output,
 r = y - y_p, on the same estimation parts (:func:`nlsid.diagnose.split.budgeted`) the yardstick saw:
 
-* its start is the yardstick itself, whose state equation (A, B, E) already holds dynamics that
-  reach the whole output; its output equation is fitted to r by linear least squares along that
-  state trajectory (:func:`nlsid.fit.hybrid.output_equation`), which is exact where the residual
-  is what the yardstick's states can express (the derivation in ``docs/pnlss.md``);
+* its start is made from both models (:func:`black_box_start`): r is the system's output, which
+  the yardstick reaches, less the physical model's, which a PNLSS copy of the physical model
+  (fitted to its own noise-free output) reaches, so the start is the yardstick minus that copy,
+  side by side (:func:`nlsid.fit.hybrid.difference`); its output equation is then fitted to r by
+  linear least squares along its state trajectory (:func:`nlsid.fit.hybrid.output_equation`),
+  exact where r is what the start's states can express (the derivation in ``docs/pnlss.md``);
 * then every coefficient of the term is refined on r by :func:`nlsid.fit.pnlss.fit_pnlss`, with
   the yardstick's early-stopping rule (an estimation run held out where a level has two, else the
   validation runs: :mod:`nlsid.diagnose.yardstick`) and its iteration budget.
@@ -26,6 +28,7 @@ a yardstick not significantly better than the extended model) it is not fitted, 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -35,6 +38,7 @@ from nlsid.errors import InputError
 from nlsid.io.run import Run
 
 FILE = "hybrid_model.yaml"
+COPY_ITERATIONS = 30  # accepted iterations of the PNLSS copy of the physical model at most (black_box_start)
 
 
 @dataclass
@@ -92,33 +96,51 @@ def residual_runs(runner: ModelRunner, runs: list[Run]) -> list[Run]:
     return [residual_run(run, y) for run, y in zip(runs, runner.simulate_each(runs))]
 
 
-def black_box_start(yardstick, runner: ModelRunner, samples: int):
-    """The black-box term's start, and how it was made (a sentence): the yardstick's PNLSS model
-    (:class:`nlsid.models.pnlss.Pnlss`) minus the linear part of the physical model (its linear
-    dynamics from u to y, :func:`nlsid.diagnose.yardstick.linear_start`, ZOH-discretised at the
-    yardstick's rate and balanced), side by side (:func:`nlsid.fit.hybrid.minus_linear`). The
-    residual y - y_p holds the system's output, which the yardstick's states reach, less the
-    physical model's, whose linear part its own states reach: the hybrid starts at the yardstick
-    plus the physical model's nonlinear part, which the fit then removes from the term. Where the
-    physical model has no linear part of one domain, or the wider term's iteration would cost more
-    than the yardstick's limit (:data:`nlsid.diagnose.yardstick.WORK`), the yardstick alone."""
+def black_box_start(yardstick, runner: ModelRunner, own: list[Run], early: list[Run], iterations: int = 0):
+    """The black-box term's start, and how it was made (a sentence), from both models: the
+    yardstick's PNLSS model (:class:`nlsid.models.pnlss.Pnlss`) minus a PNLSS copy of the physical
+    model, side by side (:func:`nlsid.fit.hybrid.difference`). The copy starts from the physical
+    model's linear part (its linear dynamics from u to y, :func:`nlsid.diagnose.yardstick.linear_start`,
+    ZOH-discretised and balanced) in the LFR form with one combination (the Wiener-like start of
+    :func:`nlsid.models.pnlss.lfr_start_rows`) and the yardstick's degrees, and is fitted to the
+    physical model's own noise-free output on the runs ``own`` (early stopping on ``early``: both
+    with y the physical model's output) by :func:`nlsid.fit.pnlss.fit_pnlss`, ``iterations`` at most
+    in its linear and in its nonlinear stage (0: :data:`COPY_ITERATIONS`). The residual y - y_p is then, to the yardstick's and the copy's errors, the start's output.
+    Where the physical model has no linear part of one domain, the yardstick alone; where the
+    term would cost more than the yardstick's limit per iteration (:data:`nlsid.diagnose.yardstick.WORK`),
+    the yardstick minus the linear part alone (:func:`nlsid.fit.hybrid.minus_linear`) or the yardstick."""
     from nlsid.diagnose.yardstick import WORK, linear_start
-    from nlsid.fit.hybrid import minus_linear
-    from nlsid.models.pnlss import balanced, discretised
+    from nlsid.fit.hybrid import difference, minus_linear
+    from nlsid.fit.pnlss import fit_pnlss
+    from nlsid.models.pnlss import balanced, discretised, from_linear
 
     linear = linear_start(runner)
     if isinstance(linear, str):
         return yardstick, f"black-box term started from the yardstick alone: {linear}"
+    samples = sum(run.n_samples for run in own)
+    fits = lambda model: samples * model.n_parameters ** 2 <= WORK  # noqa: E731
+    copy, _ = from_linear(linear, yardstick.fs, yardstick.state_degrees, yardstick.output_degrees, True,
+                          lfr_inputs=1, lfr_where="physical")
+    wide = difference(yardstick, copy)
+    if fits(wide):
+        budget = iterations or COPY_ITERATIONS
+        fit = fit_pnlss(copy, own, early, max_iterations=budget, linear_iterations=budget, patience=budget)
+        if fit.status != "failed":
+            wide = difference(yardstick, fit.model)
+            return wide, (f"black-box term started as the yardstick minus a PNLSS copy of the physical model "
+                          f"({yardstick.order} + {fit.model.order} states side by side, LFR form over both models' "
+                          f"variables, {wide.n_parameters} parameters; the copy's rms error on the physical "
+                          f"model's output {fit.validation_rms if fit.validation_rms is not None else fit.estimation_rms:.4g}, "
+                          f"{fit.status})")
     linear, _ = balanced(discretised(linear, yardstick.fs, "physical"))
     wider = minus_linear(yardstick, linear)
-    count = wider.n_parameters
-    if samples * count ** 2 > WORK:
-        return yardstick, (f"black-box term started from the yardstick alone: with the physical model's {linear.order} "
-                           f"linear states beside its {yardstick.order} it would cost {samples} x {count}^2 samples x "
-                           f"parameters^2 per iteration, above {WORK:.0e}")
-    return wider, (f"black-box term started as the yardstick minus the physical model's linear part "
-                   f"({yardstick.order} + {linear.order} states side by side, its monomials those of the yardstick's "
-                   f"{wider.lfr_inputs} variables: LFR form, {count} parameters)")
+    if fits(wider):
+        return wider, (f"black-box term started as the yardstick minus the physical model's linear part "
+                       f"({yardstick.order} + {linear.order} states side by side, its monomials those of the "
+                       f"yardstick's {wider.lfr_inputs} variables: LFR form, {wider.n_parameters} parameters)")
+    return yardstick, (f"black-box term started from the yardstick alone: with the physical model's {linear.order} "
+                       f"linear states beside its {yardstick.order} it would cost {samples} x {wider.n_parameters}^2 "
+                       f"samples x parameters^2 per iteration, above {WORK:.0e}")
 
 
 def fit_hybrid(extended: dict, source: str, yardstick, fit_runs: list[Run], val_runs: list[Run],
@@ -127,16 +149,22 @@ def fit_hybrid(extended: dict, source: str, yardstick, fit_runs: list[Run], val_
     config; ``yardstick``: the fitted :class:`nlsid.diagnose.yardstick.Yardstick`; ``fit_runs``:
     the estimation parts it was fitted on; ``val_runs`` and ``val``: the validation runs and the
     user's model's residuals on them (:func:`nlsid.diagnose.gain.score`); ``max_iterations``: of
-    the term's fit (None: the yardstick's budget, :func:`nlsid.diagnose.yardstick.iterations`)."""
+    the term's fit (None: the yardstick's budget, :func:`nlsid.diagnose.yardstick.iterations`), and
+    of the physical model's copy's where fewer than :data:`COPY_ITERATIONS`."""
     from nlsid.diagnose.yardstick import PATIENCE, _holdout, as_recorded, iterations
-    from nlsid.fit.hybrid import fit_black_box
+    from nlsid.fit.hybrid import fit_black_box, residual_run
     from nlsid.models.pnlss import to_config
 
     try:
         runner = ModelRunner.from_data(extended, source)
         own, early, rule = _holdout(fit_runs, val_runs)
-        own, early = as_recorded(residual_runs(runner, own)), as_recorded(residual_runs(runner, early))
-        start, how = black_box_start(yardstick.fit.model, runner, sum(run.n_samples for run in own))
+        physical = [runner.simulate_each(runs) for runs in (own, early)]
+        own_p, early_p = ([dataclasses.replace(run, y=y) for run, y in zip(runs, ys)]
+                          for runs, ys in zip((own, early), physical))
+        own, early = ([residual_run(run, y) for run, y in zip(runs, ys)] for runs, ys in zip((own, early), physical))
+        start, how = black_box_start(yardstick.fit.model, runner, as_recorded(own_p), as_recorded(early_p),
+                                     min(COPY_ITERATIONS, max_iterations or COPY_ITERATIONS))
+        own, early = as_recorded(own), as_recorded(early)
         budget = iterations(start, own + early) if max_iterations is None else max_iterations
         fit = fit_black_box(start, own, early, max_iterations=budget, patience=PATIENCE)
         fit.notes.insert(0, how)

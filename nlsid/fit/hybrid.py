@@ -140,3 +140,46 @@ def fit_black_box(start: Pnlss, estimation: Sequence[Run], validation: Sequence[
                         f"its output equation (C, D, F, offset) fitted to the residual by linear least squares "
                         f"(rms {rms:.6g} on the estimation runs)")
     return fit
+
+
+def difference(first: Pnlss, second: Pnlss) -> Pnlss:
+    """A PNLSS model whose output is ``first``'s minus ``second``'s (both at one rate): the states
+    side by side, x = (x_1, x_2), A = diag(A_1, A_2), B = (B_1, B_2), C = (C_1, -C_2),
+    D = D_1 - D_2, offsets subtracted; in the LFR form over the two models' own variables stacked,
+    z = (v_1, v_2), v_k = M_k x_k + N_k u (:meth:`Pnlss.mixing`: a full form's (x_k, u)), so that
+    each model's monomial coefficients go to the same monomial of z (the other block's powers zero)
+    and the mixed monomials start at zero. Both need the same degrees. Its simulation is the
+    difference exactly (the blocks do not interact until a fit couples them)."""
+    from nlsid.models.pnlss import exponents
+
+    if first.state_degrees != second.state_degrees or first.output_degrees != second.output_degrees:
+        raise InputError("black_box", f"the models' degrees differ ({list(first.state_degrees)}/"
+                                      f"{list(first.output_degrees)} and {list(second.state_degrees)}/"
+                                      f"{list(second.output_degrees)})")
+    n1, n2 = first.order, second.order
+    n = n1 + n2
+    A = np.zeros((n, n))
+    A[:n1, :n1], A[n1:, n1:] = first.A, second.A
+    (M1, N1), (M2, N2) = first.mixing(), second.mixing()
+    k1, k2 = M1.shape[0], M2.shape[0]
+    Cz = np.zeros((k1 + k2, n))
+    Cz[:k1, :n1], Cz[k1:, n1:] = M1, M2
+    Dz = np.concatenate([N1, N2]).astype(float)
+
+    def placed(table_1: np.ndarray, table_2: np.ndarray, degrees) -> tuple[np.ndarray, np.ndarray, int]:
+        wide = exponents(k1 + k2, degrees, False)
+        rows = {tuple(r): j for j, r in enumerate(wide)}
+        one = np.array([rows[tuple(list(r) + [0] * k2)] for r in table_1], dtype=int)
+        two = np.array([rows[tuple([0] * k1 + list(r))] for r in table_2], dtype=int)
+        return one, two, wide.shape[0]
+
+    e1, e2, nz = placed(first.state_exponents, second.state_exponents, first.state_degrees)
+    f1, f2, nh = placed(first.output_exponents, second.output_exponents, first.output_degrees)
+    E = np.zeros((n, nz))
+    E[:n1, e1], E[n1:, e2] = first.E, second.E
+    F = np.zeros(nh)
+    F[f1] += first.F
+    F[f2] -= second.F
+    return first.replace(A=A, B=np.concatenate([first.B, second.B]), C=np.concatenate([first.C, -second.C]),
+                         D=float(first.D) - float(second.D), E=E, F=F, Cz=Cz, Dz=Dz, with_input=False,
+                         output_offset=first.output_offset - second.output_offset)

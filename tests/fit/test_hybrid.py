@@ -121,3 +121,28 @@ def test_minus_linear_simulates_the_difference(form):
     expected = _loop(E, F, u, mix) - signal.lfilter([d, c * b - a * d], [1.0, -a], u)
     np.testing.assert_allclose(wide.simulate(u), expected, rtol=1e-12, atol=1e-12)
     assert wide.order == 3 and wide.lfr and wide.E.shape[1] == terms  # the same monomials, in the LFR form
+
+
+def test_difference_of_two_pnlss_models_simulates_the_difference():
+    """The start from both models (difference): a full-form model (the loop above) minus an LFR
+    one of one combination, z = cz x + dz u, whose loop is written here; the difference's output is
+    theirs to rounding, and each model's coefficients are its own monomials' (the mixed ones zero)."""
+    from nlsid.fit.hybrid import difference
+
+    rng = np.random.default_rng(8)
+    E, F = 0.03 * rng.standard_normal((2, 16)), 0.5 * rng.standard_normal(16)
+    a2, b2, c2, d2 = np.array([[0.7, 0.1], [0.0, 0.4]]), np.array([0.5, 1.0]), np.array([1.0, 0.3]), -0.2
+    cz, dz = np.array([0.6, -0.4]), 0.3
+    e2, f2 = np.array([[0.05, -0.02], [0.01, 0.03]]), np.array([0.2, -0.1])  # z^2, z^3
+    first = Pnlss(A, B, C, D, E, F, FS, output_offset=OFFSET)
+    second = Pnlss(a2, b2, c2, d2, e2, f2, FS, output_offset=0.1, Cz=cz[None, :], Dz=np.array([dz]))
+    u = 0.5 * rng.standard_normal(200)
+    x, y2 = np.zeros(2), np.empty(u.size)
+    for t, ut in enumerate(u):
+        z = cz @ x + dz * ut
+        y2[t] = c2 @ x + d2 * ut + f2 @ [z ** 2, z ** 3] + 0.1
+        x = a2 @ x + b2 * ut + e2 @ [z ** 2, z ** 3]
+    both = difference(first, second)
+    np.testing.assert_allclose(both.simulate(u), _loop(E, F, u) - y2, rtol=1e-12, atol=1e-12)
+    assert both.order == 4 and both.lfr_inputs == 3 + 1
+    assert np.count_nonzero(both.E) == E.size + e2.size and np.count_nonzero(both.F) == F.size + f2.size
