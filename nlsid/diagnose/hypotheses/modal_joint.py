@@ -1,5 +1,6 @@
-"""A nonlinear joint in modal form: a cubic spring (or damper) on the modal coordinate of the one
-mode of a multi-mode LTI model whose frequency (damping) moves with the excitation level.
+"""A nonlinear joint in modal form: a cubic spring (or damper) on the modal coordinate of the mode
+(or of each of the two modes) of a multi-mode LTI model whose frequency (damping) moves with the
+excitation level.
 
 Modal form. The user's LTI model (``state_space``, ``transfer_function`` or ``zpk`` of order >= 4;
 a discrete one as its continuous equivalent, the exact inverse of its ZOH discretisation,
@@ -559,14 +560,14 @@ def _damper_reading(values: dict) -> str:
 
 
 MODAL_JOINT = Hypothesis(
-    "modal_joint", "Cubic spring on one mode (a nonlinear joint in modal form)", "stiffness", "k3",
+    "modal_joint", "Cubic spring on the moving mode(s) (a nonlinear joint in modal form)", "stiffness", "k3",
     "input units / modal coordinate^3",
     "odd distortion; the frequency of one mode of a multi-mode model moves with the level; the rest stay",
     _applies, _estimator(SPRING), _extender(SPRING), ("k3",), _paths_of(SPRING), reading=_spring_reading,
     qualifier=lambda values: spring(values["k3"]))
 
 MODAL_DAMPING = Hypothesis(
-    "modal_damping", "Cubic damping on one mode (a dissipative joint in modal form)", "friction", "c3",
+    "modal_damping", "Cubic damping on the moving mode(s) (a dissipative joint in modal form)", "friction", "c3",
     "input units / modal velocity^3",
     "odd distortion; the damping of one mode of a multi-mode model grows with the level",
     _applies, _estimator(DAMPER), _extender(DAMPER), ("c3",), _paths_of(DAMPER), reading=_damper_reading)
