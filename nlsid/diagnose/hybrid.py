@@ -87,13 +87,10 @@ def hybrid_config(extended: dict, black_box: dict) -> dict:
     return out
 
 
-def residual_runs(runner: ModelRunner, runs: list[Run]) -> list[Run]:
-    """Each run with its measured y replaced by what ``runner``'s model leaves of it, y - y_p
-    (:func:`nlsid.fit.hybrid.residual_run`; y_p simulated as the diagnosis simulates: periodic
-    runs in steady state, arbitrary records from their fitted initial state)."""
-    from nlsid.fit.hybrid import residual_run
-
-    return [residual_run(run, y) for run, y in zip(runs, runner.simulate_each(runs))]
+def with_outputs(runs: list[Run], outputs: list) -> list[Run]:
+    """Each run with ``outputs`` (one array per run, as long as its y) as its measured y: the
+    physical model's own output, which its PNLSS copy is fitted to (:func:`black_box_start`)."""
+    return [dataclasses.replace(run, y=y) for run, y in zip(runs, outputs)]
 
 
 def black_box_start(yardstick, runner: ModelRunner, own: list[Run], early: list[Run], iterations: int = 0):
@@ -105,10 +102,11 @@ def black_box_start(yardstick, runner: ModelRunner, own: list[Run], early: list[
     :func:`nlsid.models.pnlss.lfr_start_rows`) and the yardstick's degrees, and is fitted to the
     physical model's own noise-free output on the runs ``own`` (early stopping on ``early``: both
     with y the physical model's output) by :func:`nlsid.fit.pnlss.fit_pnlss`, ``iterations`` at most
-    in its linear and in its nonlinear stage (0: :data:`COPY_ITERATIONS`). The residual y - y_p is then, to the yardstick's and the copy's errors, the start's output.
-    Where the physical model has no linear part of one domain, the yardstick alone; where the
-    term would cost more than the yardstick's limit per iteration (:data:`nlsid.diagnose.yardstick.WORK`),
-    the yardstick minus the linear part alone (:func:`nlsid.fit.hybrid.minus_linear`) or the yardstick."""
+    in its linear and in its nonlinear stage (0: :data:`COPY_ITERATIONS`). The residual y - y_p is
+    then the start's output but for the yardstick's and the copy's errors. Where the physical
+    model has no linear part of one domain, the yardstick alone; where the term would cost more
+    than the yardstick's limit per iteration (:data:`nlsid.diagnose.yardstick.WORK`), the
+    yardstick minus the linear part alone (:func:`nlsid.fit.hybrid.minus_linear`) or the yardstick."""
     from nlsid.diagnose.yardstick import WORK, linear_start
     from nlsid.fit.hybrid import difference, minus_linear
     from nlsid.fit.pnlss import fit_pnlss
@@ -127,11 +125,11 @@ def black_box_start(yardstick, runner: ModelRunner, own: list[Run], early: list[
         fit = fit_pnlss(copy, own, early, max_iterations=budget, linear_iterations=budget, patience=budget)
         if fit.status != "failed":
             wide = difference(yardstick, fit.model)
+            error = fit.validation_rms if fit.validation_rms is not None else fit.estimation_rms
             return wide, (f"black-box term started as the yardstick minus a PNLSS copy of the physical model "
                           f"({yardstick.order} + {fit.model.order} states side by side, LFR form over both models' "
                           f"variables, {wide.n_parameters} parameters; the copy's rms error on the physical "
-                          f"model's output {fit.validation_rms if fit.validation_rms is not None else fit.estimation_rms:.4g}, "
-                          f"{fit.status})")
+                          f"model's output {error:.4g}, {fit.status})")
     linear, _ = balanced(discretised(linear, yardstick.fs, "physical"))
     wider = minus_linear(yardstick, linear)
     if fits(wider):
@@ -158,13 +156,12 @@ def fit_hybrid(extended: dict, source: str, yardstick, fit_runs: list[Run], val_
     try:
         runner = ModelRunner.from_data(extended, source)
         own, early, rule = _holdout(fit_runs, val_runs)
-        physical = [runner.simulate_each(runs) for runs in (own, early)]
-        own_p, early_p = ([dataclasses.replace(run, y=y) for run, y in zip(runs, ys)]
-                          for runs, ys in zip((own, early), physical))
-        own, early = ([residual_run(run, y) for run, y in zip(runs, ys)] for runs, ys in zip((own, early), physical))
-        start, how = black_box_start(yardstick.fit.model, runner, as_recorded(own_p), as_recorded(early_p),
+        y_own, y_early = runner.simulate_each(own), runner.simulate_each(early)  # y_p, as the diagnosis simulates
+        start, how = black_box_start(yardstick.fit.model, runner, as_recorded(with_outputs(own, y_own)),
+                                     as_recorded(with_outputs(early, y_early)),
                                      min(COPY_ITERATIONS, max_iterations or COPY_ITERATIONS))
-        own, early = as_recorded(own), as_recorded(early)
+        own = as_recorded([residual_run(run, y) for run, y in zip(own, y_own)])
+        early = as_recorded([residual_run(run, y) for run, y in zip(early, y_early)])
         budget = iterations(start, own + early) if max_iterations is None else max_iterations
         fit = fit_black_box(start, own, early, max_iterations=budget, patience=PATIENCE)
         fit.notes.insert(0, how)

@@ -61,7 +61,6 @@ def simulate_hybrid(model: Hybrid, run: Run, substeps: int | None, noise, steady
     ``noise`` added to u and y, its process noise to the physical part's input), plus the black
     box's output on the same recorded u (the process noise added to its input too: both parts are
     driven by the same plant input). ``steady``: each part as measured (module docstring)."""
-    from nlsid.simulate.noise import Noise
     from nlsid.simulate.pnlss_runs import simulate_measured
     from nlsid.simulate.runs import simulate_run
 

@@ -33,7 +33,8 @@ CONFIG = {"model": {"type": "hybrid", "physical": PHYSICAL, "black_box": BLACK_B
 
 
 def _monomials(v: np.ndarray, degree: int) -> np.ndarray:
-    return np.array([np.prod([v[i] for i in combo]) for combo in itertools.combinations_with_replacement(range(v.size), degree)])
+    combos = itertools.combinations_with_replacement(range(v.size), degree)
+    return np.array([np.prod([v[i] for i in combo]) for combo in combos])
 
 
 def _black_box(u: np.ndarray) -> np.ndarray:
