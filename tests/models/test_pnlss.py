@@ -142,7 +142,8 @@ def test_exact_jacobian_equals_central_differences_arbitrary_record(with_input):
 
 
 def test_exact_jacobian_equals_central_differences_periodic_record():
-    """A periodic record: the lead-in's sensitivities carry into the steady-state rows."""
+    """A periodic record of three periods: the steady state moves with the parameters, and the rows
+    are the total derivative through it (central differences of the steady-state output)."""
     rng = np.random.default_rng(2)
     model = _random_model(rng, 2)
     period = 64
