@@ -136,8 +136,10 @@ def svg_figure(rows: list[dict], parameter: str, drifting: set[str]) -> str | No
         label = moment.strftime("%Y-%m-%d" if span >= 4 * 86400 else "%m-%d %H:%M" if span >= 3600 else "%H:%M:%S")
         out.append(f'<line x1="{xx:.1f}" x2="{xx:.1f}" y1="{height - bottom}" y2="{height - bottom + 5}" stroke="#999"/>'
                    f'<text x="{xx:.1f}" y="{height - bottom + 18}" text-anchor="middle">{label}</text>')
-    out.append(f'<text x="{(left + width - right) / 2:.0f}" y="{height - 8}" text-anchor="middle">recorded (UTC)</text>'
-               f'<text x="16" y="{(top + height - bottom) / 2:.0f}" text-anchor="middle" '
+    # ids as the report pages' axis labels carry (nlsid.report.vector): the browser tests find the units by them
+    out.append(f'<text id="drift-x-label" x="{(left + width - right) / 2:.0f}" y="{height - 8}" text-anchor="middle">'
+               'recorded (UTC)</text>'
+               f'<text id="drift-y-label" x="16" y="{(top + height - bottom) / 2:.0f}" text-anchor="middle" '
                f'transform="rotate(-90 16 {(top + height - bottom) / 2:.0f})">{_e(parameter)} ({_e(parameter_unit(rows, parameter))})</text>')
     for index, (machine, values) in enumerate(data.items()):
         color = _PALETTE[index % len(_PALETTE)]

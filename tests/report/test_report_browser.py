@@ -319,3 +319,38 @@ def test_probe_sees_overflow_and_an_empty_figure(bla_page, tmp_path):
     assert any(item.startswith("TABLE: loose") for item in seen["overflowing"])
     assert not tables["boxed"]["fits"] and tables["boxed"]["box_fits"] and tables["boxed"]["box_scrolls"]
     assert not any(item.startswith("TABLE: boxed") for item in seen["overflowing"])
+
+
+def test_the_fleet_page_fits_1280_and_800_px(tmp_path):
+    """The batch's fleet page (its results table is wide: a column per field) on two machines, one of
+    them drifting, with long recording names: at 1280 px and in the 800 px frame nothing passes the
+    window or the text column, each table fits or scrolls in its own box, and the drift figure is
+    drawn inside the column with its unit on the axis. (The page has a script of its own, its
+    table sorter, so the scripts are not counted.)"""
+    from nlsid.cli.fleet.fleet_page import render_page
+    from nlsid.cli.fleet.results import drift
+
+    rows = []
+    for machine, slope in (("stage-north-bay-07", 0.0), ("stage-south-bay-12", 0.02)):
+        for day in range(6):
+            name = f"{machine}_2026-03-{day + 1:02d}_shift-a_run-0001_with_a_long_name"
+            fc = {"value": 0.5 + slope * day + 0.001 * (-1) ** day, "std": 0.002, "unit": "N"}
+            rows.append({"name": name, "recording": f"{name}.h5", "machine": machine,
+                         "recorded": f"2026-03-{day + 1:02d}T08:00:00+00:00", "recorded_from": "attribute",
+                         "status": "ok", "run": "ran", "verdict": "explained",
+                         "causes": [{"name": "coulomb", "title": "Coulomb friction"}],
+                         "parameters": {"coulomb.fc": fc}, "gain_db": 31.2, "above_floor_db": 0.4,
+                         "floor_of": "y", "seconds": 12.5, "error": None, "headline": None, "output": name})
+    summary = {"ran": 12, "up_to_date": 0, "output": "fleet", "pipeline": "pipeline.yaml",
+               "executor": "2 local processes", "version": "test"}
+    page = tmp_path / "fleet.html"
+    page.write_text(render_page(rows, summary, "coulomb.fc", drift(rows, "coulomb.fc"),
+                                {"coulomb": "Coulomb friction"}), encoding="utf-8")
+    seen = browse(page, tmp_path, WIDTHS[0], NARROW)
+    for view in (seen, seen.pop("narrow")):
+        assert view.get("errors", []) == []
+        assert_fits_the_window(view)
+        assert len(view["tables"]) == 3 and len(view["figures"]) == 1
+        figure = view["figures"][0]
+        assert figure["width"] > 100 and figure["right"] <= view["text_right"]
+        assert any(label["text"].endswith("(N)") for label in figure["labels"]), figure["labels"]
