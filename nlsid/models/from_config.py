@@ -27,6 +27,7 @@ from nlsid.io import model_config as mc
 from nlsid.models import blocks, equations, forces
 from nlsid.models.blocks import StaticBlock, static_block
 from nlsid.models.controller import pid
+from nlsid.models.hybrid import Hybrid
 from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
 from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage, with_points
 
@@ -252,9 +253,7 @@ def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equati
 
         return build(config.model)
     if config.model.type == "hybrid":  # a physical model with a PNLSS term in parallel
-        from nlsid.models.hybrid import build as build_hybrid
-
-        return build_hybrid(config)
+        return hybrid(config)
     if config.model.type == "equations":
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not an equations model "
@@ -309,3 +308,21 @@ def closed_loop(config: mc.SimulateConfig) -> ClosedLoop | None:
             raise InputError("closed_loop.prefilter.delay", "a prefilter has no dead time")
     return ClosedLoop(error, loop.feedforward.coulomb, loop.feedforward.velocity, measurement, prefilter,
                       loop.computation_delay, *channels(loop.excitation_channels))
+
+
+def hybrid(config: mc.SimulateConfig) -> Hybrid:
+    """The :class:`Hybrid` of a validated :class:`nlsid.io.model_config.SimulateConfig` whose model
+    is a :class:`~nlsid.io.model_config.HybridConfig` (open loop only). An error in either part
+    names its key under ``model.physical`` or ``model.black_box``."""
+    from nlsid.models import pnlss
+
+    if config.closed_loop is not None:
+        raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not a hybrid model")
+    physical_config = config.model_copy(update={"model": config.model.physical})
+    try:
+        physical = model(physical_config)
+    except InputError as exc:
+        where = exc.where
+        where = "model.physical" + where[len("model"):] if where.startswith("model") else where
+        raise InputError(where, exc.what) from None
+    return Hybrid(physical, pnlss.build(config.model.black_box, "model.black_box"))

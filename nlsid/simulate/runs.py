@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from nlsid.io.run import Run
 from nlsid.models.equations import Equations
-from nlsid.models.hybrid import Hybrid, simulate_hybrid
+from nlsid.models.hybrid import Hybrid
 from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
 from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simulate_plant, simulate_structure, with_lead
 from nlsid.simulate import equations_state
 from nlsid.simulate.initial_state import estimate as estimate_plant, with_initial_state
 from nlsid.simulate.loop_state import estimate as estimate_loop, simulate_from_start
-from nlsid.simulate.pnlss_runs import simulate_pnlss
+from nlsid.simulate.pnlss_runs import simulate_measured, simulate_pnlss
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.structure_state import estimate as estimate_structure, with_initial_states
 
@@ -40,7 +42,7 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     noise = noise or Noise.zero(run.n_samples)
     if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
         return simulate_pnlss(model, run, substeps, noise, steady)
-    if isinstance(model, Hybrid):  # each part as measured (nlsid.models.hybrid)
+    if isinstance(model, Hybrid):  # each part as measured (simulate_hybrid)
         return simulate_hybrid(model, run, substeps, noise, steady)
     count = lead_periods(model, loop, run) if steady else 0
     if count:
@@ -81,3 +83,17 @@ def fitted_initial_state(model: Plant | Structure | Equations, loop: ClosedLoop 
     if isinstance(model, Structure):
         return estimate_structure(model, run, substeps)
     return estimate_plant(model, None, run, simulate_plant(model, None, run, substeps, Noise.zero(run.n_samples)))
+
+
+def simulate_hybrid(model: Hybrid, run: Run, substeps: int | None, noise, steady: bool) -> Run:
+    """``run`` through the hybrid model (:mod:`nlsid.models.hybrid`): the physical part as
+    :func:`nlsid.simulate.runs.simulate_run` runs it (``substeps`` its own, the measurement noise
+    ``noise`` added to u and y, its process noise to the physical part's input), plus the black
+    box's output on the same recorded u (the process noise added to its input too: both parts are
+    driven by the same plant input). ``steady``: each part as measured (:mod:`nlsid.models.hybrid`)."""
+    physical = simulate_run(model.physical, None, run, substeps, noise, steady)
+    quiet = physical.y - noise.y  # the physical part's noise-free output
+    left = dataclasses.replace(run, y=None if run.y is None else np.asarray(run.y, dtype=float) - quiet)
+    black_box = simulate_measured(model.black_box, left, steady, noise.process)
+    return dataclasses.replace(physical, y=physical.y + black_box)
+
