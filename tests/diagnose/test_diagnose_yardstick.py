@@ -78,11 +78,12 @@ def recording(seed: int) -> list[Run]:
 
 
 def test_the_yardstick_closes_the_gap_the_named_cubic_leaves():
-    """Measured at this size: the cubic named at +13.8 dB, 27 dB above the floor; the yardstick
-    +39 dB, 2.0 dB above it (a PNLSS of 136 parameters on three runs of 2048 samples, early-stopped
-    on a fourth: the issue's 1 dB needs more data). Asserted: the cubic is named with k3 within 30 %
+    """Measured at this size: the cubic named at +13.8 dB, 27.3 dB above the floor; the yardstick
+    0.57 dB above it (a PNLSS of 136 parameters on three runs of two periods of 1024 samples,
+    early-stopped on a fourth, 123 iterates; 2.0 dB when its fit simulated every period after a
+    lead-in, within a smaller iteration budget). Asserted: the cubic is named with k3 within 30 %
     (the template without the filter moves it), the status is partly explained, the yardstick's
-    error is significantly below the extended model's (the verdict's F rule) and within 3 dB of the
+    error is significantly below the extended model's (the verdict's F rule) and within 1 dB of the
     floor, and best_model names it."""
     from nlsid.diagnose.diagnosis import diagnose
 
@@ -92,7 +93,7 @@ def test_the_yardstick_closes_the_gap_the_named_cubic_leaves():
     assert result.verdict.status == rules.PARTLY_EXPLAINED, result.headline()
     final, yardstick = result.final_score(), result.yardstick
     assert yardstick.fitted and result.yardstick_ahead(final), result.headline()
-    assert final.above_floor_db > 15 and yardstick.score.above_floor_db < 3.0
+    assert final.above_floor_db > 15 and yardstick.score.above_floor_db < 1.0
     assert "an effect outside the library remains" in result.headline()
     assert result.summary()["best_model"] == "black_box_model.yaml"
     assert "held out of the fit" in yardstick.early_stopping
