@@ -245,7 +245,7 @@ def _fit_pnlss(model_config, data, validation, validate_on, allow_overlap, degre
     linear = fit_.best_of("linear") or fit_.iterations[0]
     linear_rms = "none" if linear.validation_rms is None else f"{linear.validation_rms:.4g}"
     model = fit_.model
-    form = f" of {model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if model.lfr else ""
+    form = model.form_text
     console.print(f"{output}: PNLSS (black box), {model.order} states, degrees {list(model.state_degrees)} / "
                   f"{list(model.output_degrees)}{form}, {model.n_parameters} coefficients")
     console.print(f"rms error: estimation {fit_.estimation_rms:.4g}, validation {validation_rms} (linear: "

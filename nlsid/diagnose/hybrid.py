@@ -72,7 +72,7 @@ class HybridFit:
         return [f"Hybrid model of nlsid diagnose: the extended model ({causes} added to {source}) as fitted, "
                 "under physical, with a black-box PNLSS term in parallel for what it leaves, under black_box",
                 f"black box: {model.order} states, monomials of degrees {list(model.state_degrees)}"
-                + (f" of {model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if model.lfr else "")
+                + model.form_text
                 + f", {model.n_parameters} parameters; {self.fit.reason}",
                 f"Validation error {self.score.error_rms:.4g} rms"]
 

@@ -119,8 +119,7 @@ class Yardstick:
         return [f"Black-box yardstick of nlsid diagnose (a PNLSS model, not a physical cause) fitted to the "
                 f"estimation data of {source}",
                 f"{self.fit.model.order} states, monomials of degrees {list(self.fit.model.state_degrees)}"
-                + (f" of {self.fit.model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if self.fit.model.lfr
-                   else "") + f", {self.fit.model.n_parameters} parameters; {self.fit.reason}",
+                + self.fit.model.form_text + f", {self.fit.model.n_parameters} parameters; {self.fit.reason}",
                 f"Validation error {s.error_rms:.4g} rms"]
 
 

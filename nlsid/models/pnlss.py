@@ -171,6 +171,12 @@ class Pnlss:
         return 0 if self.Cz is None else int(self.Cz.shape[0])
 
     @property
+    def form_text(self) -> str:
+        """How the monomials' variables are formed, as the pages and headers append it to the degrees:
+        " of k combination(s) z = Cz x + Dz u (LFR form)", or "" for the full form."""
+        return f" of {self.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if self.lfr else ""
+
+    @property
     def n_parameters(self) -> int:
         """Coefficients of A, B, C, D, E and F (and Cz, Dz of the LFR form)."""
         n = self.order

@@ -118,7 +118,7 @@ class PnlssResult:
         return [f"nlsid fit --pnlss --model {self.model_source} --data {self.data_source}",
                 f"PNLSS, black box: {model.order} states, degrees {list(model.state_degrees)} (state) and "
                 f"{list(model.output_degrees)} (output)"
-                + (f" of {model.lfr_inputs} combination(s) z = Cz x + Dz u (LFR form)" if model.lfr else "")
+                + model.form_text
                 + f", {model.n_parameters} coefficients",
                 f"rms error: estimation {fit.estimation_rms:.4g}, validation {validation}; chosen: {fit.reason}",
                 f"report: {report_name}"]
