@@ -168,15 +168,17 @@ class BlaRuns:
                                      "or arbitrarily excited records (sines are for `nlsid hosidf`)")
 
 
-def several_inputs_outputs(run: Run, where: str) -> InputError | None:
+def several_inputs_outputs(run: Run, where: str, reader: str = "a model of one input u and one output y"
+                           ) -> InputError | None:
     """The error of the stages of one input and one output (``simulate``, ``fit --model``,
-    ``diagnose``) on a run with several inputs or outputs; None for a run of one of each. Taking u
-    and y alone would drop the other inputs and outputs silently."""
+    ``diagnose``; ``hosidf``, whose ``reader`` is the HOSIDFs) on a run with several inputs or
+    outputs; None for a run of one of each. Taking u and y alone would drop the other inputs and
+    outputs silently."""
     if not run.is_mimo:
         return None
-    return InputError(where, f"has inputs {', '.join(run.inputs)} and outputs {', '.join(run.outputs)}: a model of "
-                             "one input u and one output y cannot use it without dropping the others (several inputs "
-                             "and outputs: `nlsid bla` only so far, docs/mimo.md)")
+    return InputError(where, f"has inputs {', '.join(run.inputs)} and outputs {', '.join(run.outputs)}: {reader} "
+                             "cannot use it without dropping the others (several inputs and outputs: `nlsid bla` "
+                             "only so far, docs/mimo.md)")
 
 
 def check_mimo_run(run: Run, where: str) -> None:
@@ -232,8 +234,11 @@ def no_sine_runs(source: str) -> InputError:
 
 
 def check_sine_run(run: Run, where: str, input_signal: str) -> int:
-    """The structural checks of one single-sine run (tone on a bin, harmonic 2 below Nyquist, an
-    amplitude, an input tone); return the tone's bin."""
+    """The structural checks of one single-sine run (one input and one output, tone on a bin,
+    harmonic 2 below Nyquist, an amplitude, an input tone); return the tone's bin."""
+    several = several_inputs_outputs(run, where, "the HOSIDFs of one input u and one output y")
+    if several is not None:
+        raise several
     line = sine_bin(run, where)
     if highest_harmonic(run, line) < MIN_HARMONICS:
         raise InputError(where, f"harmonic {MIN_HARMONICS} of bin {line} ({run.frequency:g} Hz) lies at or above "
