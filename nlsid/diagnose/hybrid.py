@@ -30,10 +30,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-from nlsid.diagnose.gain import Score, model_residuals, score
+from nlsid.diagnose.gain import model_residuals, score
 from nlsid.diagnose.simulation import ModelRunner
+from nlsid.diagnose.yardstick import BlackBoxFit
 from nlsid.errors import InputError
 from nlsid.io.run import Run
 
@@ -42,29 +43,16 @@ COPY_ITERATIONS = 30  # accepted iterations of the PNLSS copy of the physical mo
 
 
 @dataclass
-class HybridFit:
-    """The hybrid model's fit and validation score, or why it was not fitted (``reason``)."""
-
-    reason: str = ""
-    config: dict | None = None          # the model config (``model: {type: hybrid, ...}``)
-    fit: object | None = None           # nlsid.fit.pnlss.PnlssFit of the black-box term
-    score: Score | None = None
-    residuals: list = field(default_factory=list)
-    early_stopping: str = ""
-
-    @property
-    def fitted(self) -> bool:
-        return self.score is not None
+class HybridFit(BlackBoxFit):
+    """The hybrid model's fit (``config``: ``model: {type: hybrid, ...}``; ``fit``: its black-box
+    term's) and validation score, or why it was not fitted (``reason``)."""
 
     def summary(self) -> dict:
         """``summary.json`` ``hybrid`` (docs/formats.md)."""
         if not self.fitted:
             return {"fitted": False, "reason": self.reason, "file": None}
-        fit = self.fit.summary()
-        keep = ("status", "reason", "states", "state_degrees", "output_degrees", "form", "lfr_inputs", "parameters",
-                "notes", "estimation_rms", "validation_rms", "start_estimation_rms")
         return {"fitted": True, "reason": "", "file": FILE, "kind": "hybrid", "early_stopping": self.early_stopping,
-                "black_box": {key: fit[key] for key in keep}, "validation": self.score.summary()}
+                "black_box": self.fit_summary(("start_estimation_rms",)), "validation": self.score.summary()}
 
     def header(self, source: str, causes: str) -> list[str]:
         """Header comment of :data:`FILE`."""

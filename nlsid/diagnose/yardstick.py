@@ -88,13 +88,20 @@ class WorkProgress:
             self.units = units
 
 
+#: The PNLSS fit's summary keys that summary.json keeps of a black-box model (with its own extras).
+FIT_KEYS = ("status", "reason", "states", "state_degrees", "output_degrees", "form", "lfr_inputs", "parameters",
+            "notes", "estimation_rms", "validation_rms")
+
+
 @dataclass
-class Yardstick:
-    """The black-box model's fit and validation score, or why it was not fitted (``reason``)."""
+class BlackBoxFit:
+    """A model with a PNLSS part fitted by the diagnosis and scored on the validation runs, or why
+    it was not fitted (``reason``): the yardstick (:class:`Yardstick`) and the hybrid
+    (:class:`nlsid.diagnose.hybrid.HybridFit`)."""
 
     reason: str = ""
-    config: dict | None = None          # the model config (``model: {type: pnlss, ...}``)
-    fit: object | None = None           # nlsid.fit.pnlss.PnlssFit
+    config: dict | None = None          # the model config
+    fit: object | None = None           # nlsid.fit.pnlss.PnlssFit of the PNLSS part
     score: Score | None = None
     residuals: list = field(default_factory=list)
     early_stopping: str = ""
@@ -103,15 +110,23 @@ class Yardstick:
     def fitted(self) -> bool:
         return self.score is not None
 
+    def fit_summary(self, extra: tuple[str, ...]) -> dict:
+        """The PNLSS fit's summary keys :data:`FIT_KEYS` and ``extra``."""
+        fit = self.fit.summary()
+        return {key: fit[key] for key in (*FIT_KEYS, *extra)}
+
+
+@dataclass
+class Yardstick(BlackBoxFit):
+    """The black-box model's fit and validation score (``config``: ``model: {type: pnlss, ...}``),
+    or why it was not fitted (``reason``)."""
+
     def summary(self) -> dict:
         """``summary.json`` ``yardstick`` (docs/formats.md)."""
         if not self.fitted:
             return {"fitted": False, "reason": self.reason, "file": None}
-        fit = self.fit.summary()
-        keep = ("status", "reason", "states", "state_degrees", "output_degrees", "form", "lfr_inputs", "parameters",
-                "notes", "estimation_rms", "validation_rms", "linear_estimation_rms")
         return {"fitted": True, "reason": "", "file": FILE, "kind": "pnlss", "early_stopping": self.early_stopping,
-                "fit": {key: fit[key] for key in keep}, "validation": self.score.summary()}
+                "fit": self.fit_summary(("linear_estimation_rms",)), "validation": self.score.summary()}
 
     def header(self, source: str) -> list[str]:
         """Header comment of :data:`FILE`."""
