@@ -96,7 +96,7 @@ def test_records_within_the_threshold_and_periodic_runs_are_fitted_whole():
 
 
 # one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
-pytestmark = [pytest.mark.xdist_group("diagnose_budget"), pytest.mark.slow]  # slow: its fixture, about 30 s, starts first
+pytestmark = pytest.mark.xdist_group("diagnose_budget")
 
 
 @pytest.fixture(scope="module")

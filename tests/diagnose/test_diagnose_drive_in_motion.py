@@ -19,7 +19,7 @@ from nlsid.io.run import Run
 ESTIMATION = ([0.2, 0.05, 0.15, 0.1], [0.125, 0.05, 0.1, 0.03])  # targets (m), top speeds (m/s)
 VALIDATION = ([0.15, 0.05, 0.1], [0.08, 0.11, 0.04])
 
-pytestmark = [pytest.mark.xdist_group("emps"), pytest.mark.slow]  # slow: the emps group, about 70 s, starts first
+pytestmark = pytest.mark.xdist_group("emps")
 
 
 def pulsed_in_motion(run_id: str, moves) -> Run:

@@ -34,7 +34,7 @@ ESTIMATION = ([0.2, 0.05, 0.15, 0.1], [0.125, 0.05, 0.1, 0.03])  # targets (m), 
 VALIDATION = ([0.15, 0.05, 0.1], [0.08, 0.11, 0.04])
 FINE = 1e-15  # an encoder step far below the motion: the generator's axis read exactly
 
-pytestmark = [pytest.mark.xdist_group("emps"), pytest.mark.slow]  # slow: the emps group, about 70 s, starts first
+pytestmark = pytest.mark.xdist_group("emps")
 
 
 def _record(run_id: str, moves) -> Run:

@@ -125,7 +125,6 @@ def test_a_leading_candidate_is_named_with_the_data_that_would_decide_it():
     assert diagnosis.candidate_header()[0].startswith("Leading candidate") and "NOT" in diagnosis.candidate_header()[0]
 
 
-@pytest.mark.slow
 def test_a_cause_outside_the_library_leaves_the_verdict_partly_explained(tmp_path):
     """The cubic spring is named (its k3 within 10 % of the truth: the position-dependent force
     factor biases it), and the force factor, which no family holds, leaves the final model far

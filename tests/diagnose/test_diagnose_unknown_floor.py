@@ -41,7 +41,6 @@ def recording(run_cli, folder: Path, model: dict, name: str) -> Path:
     return out
 
 
-@pytest.mark.slow
 def test_hidden_friction_is_named_without_a_noise_level(run_cli, one_period_design):
     truth = yaml.safe_load((ROOT / "configs" / "stage_true.yaml").read_text())
     rec = recording(run_cli, one_period_design, truth, "true")

@@ -77,7 +77,6 @@ def recording(seed: int) -> list[Run]:
     return runs
 
 
-@pytest.mark.slow
 def test_the_yardstick_closes_the_gap_the_named_cubic_leaves():
     """Measured at this size: the cubic named at +13.8 dB, 27.3 dB above the floor; the yardstick
     0.57 dB above it (a PNLSS of 136 parameters on three runs of two periods of 1024 samples,

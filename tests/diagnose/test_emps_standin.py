@@ -42,7 +42,7 @@ AXIS = {
 
 
 # one worker runs the module: its module fixture is built once (xdist --dist loadgroup)
-pytestmark = [pytest.mark.xdist_group("emps"), pytest.mark.slow]  # slow: the emps group, about 70 s, starts first
+pytestmark = pytest.mark.xdist_group("emps")
 
 
 @pytest.fixture(scope="module")

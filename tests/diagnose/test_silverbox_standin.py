@@ -43,7 +43,7 @@ SUBSTEPS, SKEW_STEPS = 10, 3          # output read 0.3 sample after the update
 INPUT_OFFSET, OUTPUT_OFFSET, NOISE = 0.4e-3, 3e-3, 0.1e-3
 RMS = 22e-3
 # one worker runs the module: its fixture (the whole pipeline, about 20 s) is built once
-pytestmark = [pytest.mark.xdist_group("silverbox"), pytest.mark.slow]  # slow: its fixture, about 40 s, starts first
+pytestmark = pytest.mark.xdist_group("silverbox")
 
 
 @numba.njit(cache=False)

@@ -160,7 +160,6 @@ def test_each_kernel_comes_back_from_the_disk_cache_as_its_own():
     assert np.max(np.abs(a - b)) > 0.5 * np.max(np.abs(a))
 
 
-@pytest.mark.slow  # two compilations of the kernels, about 30 s
 def test_kernels_compiled_in_different_processes_load_together(tmp_path):
     """numba names compiled code after the function and a per-process counter. Two kernels compiled
     each first in its own process (here: without forces, and with one) must still load side by side
