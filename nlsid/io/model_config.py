@@ -108,6 +108,137 @@ class StateSpaceConfig(_LTIBase):
 LTIConfig = Annotated[Union[TransferFunctionConfig, ZPKConfig, StateSpaceConfig], Field(discriminator="type")]
 
 
+def _matrix(rows: list[list[float]], n_rows: int | None, n_columns: int | None, what: str) -> list[list[float]]:
+    """Check that ``rows`` is a matrix of ``n_rows`` rows of ``n_columns`` numbers each (None: any
+    count, at least one, the same in every row); ``what`` says what the rows and columns stand for."""
+    if not rows:
+        raise ValueError(f"expected a matrix ({what}), got no rows")
+    if n_rows is not None and len(rows) != n_rows:
+        raise ValueError(f"expected {n_rows} rows ({what}), got {len(rows)}")
+    lengths = sorted({len(row) for row in rows})
+    width = n_columns if n_columns is not None else len(rows[0])
+    if lengths != [width] or width == 0:
+        raise ValueError(f"expected {width or 'at least one'} numbers in every row ({what}), got row lengths "
+                         f"{[len(row) for row in rows]}")
+    return rows
+
+
+class MimoStateSpaceConfig(_LTIBase):
+    """A linear model of several inputs and outputs: x' = A x + B u (or x[k+1] = ...), y = C x + D u
+    with u = (inputs[0], inputs[1], ...) and y = (outputs[0], ...), the signals of a recording's run
+    (``docs/configs.md``, ``docs/mimo.md``). A is n x n, B n x n_u, C n_y x n, D n_y x n_u
+    (default zeros); ``inputs`` default to u, u2, ..., ``outputs`` to y, y2, ...; the first of each
+    is u (y), the others channel names, no name twice."""
+
+    type: Literal["mimo_state_space"]
+    A: list[list[float]]
+    B: list[list[float]]
+    C: list[list[float]]
+    D: Optional[list[list[float]]] = None
+    inputs: Optional[list[str]] = None
+    outputs: Optional[list[str]] = None
+
+    @field_validator("A")
+    @classmethod
+    def _square(cls, rows):
+        return _matrix(rows, len(rows), len(rows), "A is square: n rows of n numbers, n the states")
+
+    @field_validator("B")
+    @classmethod
+    def _input_columns(cls, rows, info):
+        n = len(info.data["A"]) if "A" in info.data else None
+        return _matrix(rows, n, None, f"B is n x n_u: {n if n is not None else 'n'} rows (one per state of A), "
+                                      "one column per input")
+
+    @field_validator("C")
+    @classmethod
+    def _output_rows(cls, rows, info):
+        n = len(info.data["A"]) if "A" in info.data else None
+        return _matrix(rows, None, n, f"C is n_y x n: one row per output, {n if n is not None else 'n'} numbers "
+                                      "(one per state of A) in each")
+
+    @field_validator("D")
+    @classmethod
+    def _feedthrough(cls, rows, info):
+        if rows is None:
+            return rows
+        n_y = len(info.data["C"]) if "C" in info.data else None
+        n_u = len(info.data["B"][0]) if "B" in info.data else None
+        return _matrix(rows, n_y, n_u, f"D is n_y x n_u: {n_y if n_y is not None else 'n_y'} rows (one per row "
+                                       f"of C), {n_u if n_u is not None else 'n_u'} columns (one per column of B)")
+
+    @field_validator("inputs")
+    @classmethod
+    def _input_names(cls, names, info):
+        if names is not None:
+            count = len(info.data["B"][0]) if "B" in info.data else None
+            _signal_names(names, "u", count, "the columns of B")
+        return names
+
+    @field_validator("outputs")
+    @classmethod
+    def _output_names(cls, names, info):
+        if names is not None:
+            count = len(info.data["C"]) if "C" in info.data else None
+            _signal_names(names, "y", count, "the rows of C")
+            both = sorted(set(names) & set(info.data.get("inputs") or ()))
+            if both:
+                raise ValueError(f"{both[0]!r} is an input too; give each signal one name")
+        return names
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.B[0])
+
+    @property
+    def n_outputs(self) -> int:
+        return len(self.C)
+
+    @property
+    def input_names(self) -> list[str]:
+        """``inputs``, or the default u, u2, ..., u<n_u>."""
+        return list(self.inputs) if self.inputs is not None else default_names("u", self.n_inputs)
+
+    @property
+    def output_names(self) -> list[str]:
+        """``outputs``, or the default y, y2, ..., y<n_y>."""
+        return list(self.outputs) if self.outputs is not None else default_names("y", self.n_outputs)
+
+    @model_validator(mode="after")
+    def _default_names_free(self):
+        if self.inputs is None or self.outputs is None:
+            both = sorted(set(self.input_names) & set(self.output_names))
+            if both:
+                key = "inputs" if self.inputs is None else "outputs"
+                raise ValueError(f"{both[0]!r} is both an input and an output (the default names of {key}); "
+                                 f"give {key} other names")
+        return self
+
+
+def default_names(first: str, count: int) -> list[str]:
+    """The default names of ``count`` inputs (``first`` u) or outputs (y): u, u2, u3, ..."""
+    return [first] + [f"{first}{i}" for i in range(2, count + 1)]
+
+
+def _signal_names(names: list[str], first: str, count: int | None, what: str) -> None:
+    """Check a mimo model's input or output names: ``first`` (u or y) first, then names a channel
+    of a recording may have (:func:`nlsid.io.run.check_channel_name`), none twice, ``count`` in all."""
+    from nlsid.io.run import CHANNEL_NAME, RESERVED_CHANNEL_NAMES
+
+    kind = "input" if first == "u" else "output"
+    if not names or names[0] != first:
+        raise ValueError(f"the first {kind} must be {first!r} (the run's signal {first}), got {names}")
+    if len(set(names)) != len(names):
+        twice = next(name for name in names if names.count(name) > 1)
+        raise ValueError(f"{twice!r} is named twice")
+    for name in names[1:]:
+        if not CHANNEL_NAME.fullmatch(name) or name in RESERVED_CHANNEL_NAMES:
+            raise ValueError(f"{name!r} cannot name a channel of a run (expected an identifier other than "
+                             f"{', '.join(sorted(RESERVED_CHANNEL_NAMES))})")
+    if count is not None and len(names) != count:
+        raise ValueError(f"expected {count} names, one for each of {what}, got {len(names)}")
+
+
 class PolynomialConfig(FiniteModel):
     """y = sum_p coefficients[p] x^p, p = 0, 1, 2, ... (any degree, odd and even terms)."""
 
@@ -683,7 +814,7 @@ ModelConfig = Annotated[
     Union[
         TransferFunctionPlant, ZPKPlant, StateSpacePlant, MassSpringDamperConfig, TwoMassStageConfig,
         NonlinearFeedbackConfig, WienerConfig, HammersteinConfig, WienerHammersteinConfig, LPLConfig,
-        EquationsConfig, PnlssConfig, "HybridConfig",
+        EquationsConfig, PnlssConfig, "HybridConfig", MimoStateSpaceConfig,
     ],
     Field(discriminator="type"),
 ]
@@ -702,6 +833,9 @@ class HybridConfig(FiniteModel):
     @field_validator("physical")
     @classmethod
     def _physical_part(cls, physical):
+        if physical.type == "mimo_state_space":
+            raise ValueError("a mimo_state_space model has several inputs or outputs; a hybrid model has one "
+                             "input u and one output y")
         if physical.type in ("pnlss", "hybrid"):
             raise ValueError(f"a {physical.type} model is not a physical part; give the physical model here (a "
                              "transfer function, a mechanical template, a block structure, equations) and the PNLSS "

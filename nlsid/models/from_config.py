@@ -11,6 +11,8 @@ Two kinds of model come out:
   summed. Open loop only.
 * :class:`nlsid.models.equations.Equations`: a model written as equations (``type: equations``).
   Open loop only.
+* :class:`nlsid.models.lti.MimoStateSpace`: a linear model of several inputs and outputs
+  (``type: mimo_state_space``). Open loop only.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from nlsid.models import blocks, equations, forces
 from nlsid.models.blocks import StaticBlock, static_block
 from nlsid.models.controller import pid
 from nlsid.models.hybrid import Hybrid
-from nlsid.models.lti import StateSpace, check_stable, from_matrices, from_transfer_function, from_zpk
+from nlsid.models.lti import (MimoStateSpace, StateSpace, check_stable, from_matrices, from_transfer_function,
+                              from_zpk)
 from nlsid.models.mechanical import MechanicalPlant, force_feedback, mass_spring_damper, two_mass_stage, with_points
 
 
@@ -243,9 +246,10 @@ def structure(config) -> Structure:
 STRUCTURES = ("wiener", "hammerstein", "wiener_hammerstein", "lpl")
 
 
-def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equations]:
+def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equations, MimoStateSpace]:
     """The plant, structure or equations model of a whole config (a PNLSS model,
-    :class:`nlsid.models.pnlss.Pnlss`; a hybrid one, :class:`nlsid.models.hybrid.Hybrid`)."""
+    :class:`nlsid.models.pnlss.Pnlss`; a hybrid one, :class:`nlsid.models.hybrid.Hybrid`; one of
+    several inputs and outputs, :class:`MimoStateSpace`)."""
     if config.model.type == "pnlss":
         if config.closed_loop is not None:
             raise InputError("closed_loop", "a closed loop needs an LTI or mechanical plant, not a pnlss model")
@@ -261,11 +265,31 @@ def model(config: mc.SimulateConfig) -> Union[Plant, Structure, equations.Equati
         if config.model.updates is not None and config.simulation.substeps not in (None, 1):
             raise InputError("simulation.substeps", "a discrete-time model runs one step per sample; remove substeps")
         return equations.build(config.model, _offsets(config.model))
+    if config.model.type == "mimo_state_space":
+        if config.closed_loop is not None:
+            raise InputError("closed_loop", "a closed loop needs a plant of one input u and one output y, not a "
+                                            "mimo_state_space model")
+        if config.simulation.substeps not in (None, 1):
+            raise InputError("simulation.substeps", "a linear model runs exactly for an input held between samples, "
+                                                    "one step per sample; remove substeps")
+        return mimo_state_space(config.model)
     if config.model.type in STRUCTURES:
         if config.closed_loop is not None:
             raise InputError("closed_loop", f"a closed loop needs an LTI or mechanical plant, not a {config.model.type} structure")
         return structure(config.model)
     return plant(config.model, closed=config.closed_loop is not None)
+
+
+def mimo_state_space(config: mc.MimoStateSpaceConfig, where: str = "model") -> MimoStateSpace:
+    """The :class:`MimoStateSpace` of a validated ``mimo_state_space`` block (its shapes checked by
+    the schema; D zeros where not given, the default names where none are given); an unstable
+    model is refused (:func:`nlsid.models.lti.check_stable`: it runs open loop)."""
+    A, B, C = (np.asarray(getattr(config, name), dtype=float) for name in ("A", "B", "C"))
+    D = np.zeros((C.shape[0], B.shape[1])) if config.D is None else np.asarray(config.D, dtype=float)
+    out = MimoStateSpace(A, B, C, D, config.domain, config.fs, tuple(config.input_names),
+                         tuple(config.output_names), config.delay)
+    check_stable(out, where)
+    return out
 
 
 def _controller(c, where: str) -> StateSpace:

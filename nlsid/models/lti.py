@@ -1,5 +1,6 @@
 """Linear time-invariant models: SISO state space, built from transfer functions, zeros/poles/gain
-or matrices, continuous or discrete, with an optional dead time.
+or matrices, continuous or discrete, with an optional dead time; and the state space of several
+inputs and outputs (:class:`MimoStateSpace`).
 
 A continuous model is run on sampled data through its zero-order-hold (ZOH) equivalent: with the
 input held constant over a step h (a DAC), the state at the end of the step is exactly
@@ -59,6 +60,101 @@ class StateSpace:
         rhs = np.broadcast_to(self.B.astype(complex), (points.size, self.order))[..., None]
         x = np.linalg.solve(system, rhs)[..., 0]
         return (x @ self.C + self.D).reshape(points.shape)
+
+
+@dataclass(frozen=True)
+class MimoStateSpace:
+    """A linear model of several inputs and outputs (``type: mimo_state_space``, ``docs/configs.md``):
+
+        x' = A x + B u  (continuous)  or  x[k+1] = A x[k] + B u[k]  (discrete),   y = C x + D u,
+
+    u = (u_1 .. u_{n_u}) the signals ``inputs`` of a run, y = (y_1 .. y_{n_y}) its ``outputs``.
+
+    Attributes
+    ----------
+    A, B, C, D : numpy.ndarray
+        n x n, n x n_u, n_y x n and n_y x n_u.
+    domain : str
+        ``continuous`` (run on sampled data through its zero-order-hold equivalent, as
+        :class:`StateSpace`) or ``discrete`` (one step per sample).
+    fs : float or None
+        The sample rate (Hz) a discrete model's z refers to, where its config states it.
+    inputs, outputs : tuple of str
+        The names of the inputs (``u`` first) and outputs (``y`` first) in a recording's run.
+    delay : float
+        A dead time in seconds on every input (a whole number of samples at the run's rate).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    domain: str = "continuous"
+    fs: float | None = None
+    inputs: tuple[str, ...] = ("u",)
+    outputs: tuple[str, ...] = ("y",)
+    delay: float = 0.0
+
+    @property
+    def discrete(self) -> bool:
+        return self.domain == "discrete"
+
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.B.shape[1])
+
+    @property
+    def n_outputs(self) -> int:
+        return int(self.C.shape[0])
+
+    def poles(self) -> np.ndarray:
+        """The eigenvalues of A: poles in s (continuous) or z (discrete)."""
+        return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
+
+    def frequency_response(self, freqs_hz, fs: float | None = None) -> np.ndarray:
+        """The frequency response matrix at the frequencies ``freqs_hz`` (Hz), shape (F, n_y, n_u):
+
+            G(f) = (C (x I - A)^{-1} B + D) e^{-j w delay},   w = 2 pi f,
+
+        with x = j w (continuous) or x = e^{j w / fs} (discrete; ``fs`` defaults to the model's own,
+        one of the two is needed). Entry [k, i, a] is the response of output i to input a.
+        """
+        w = 2 * np.pi * np.atleast_1d(np.asarray(freqs_hz, dtype=float))
+        if self.discrete:
+            rate = fs if fs is not None else self.fs
+            if rate is None:
+                raise InputError("fs", "a discrete model states no sample rate: give the rate its z refers to")
+            points = np.exp(1j * w / rate)
+        else:
+            points = 1j * w
+        n = self.order
+        G = np.broadcast_to(self.D.astype(complex), (w.size, self.n_outputs, self.n_inputs)).copy()
+        if n:
+            system = points[:, None, None] * np.eye(n) - self.A
+            G += self.C @ np.linalg.solve(system, np.broadcast_to(self.B.astype(complex), (w.size, n, self.n_inputs)))
+        return G * np.exp(-1j * w * self.delay)[:, None, None]
+
+    def stepped(self, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """(Phi, Gamma) of one step of length h: the exact zero-order-hold equivalent of a continuous
+        model (:func:`zoh`), (A, B) of a discrete one."""
+        if self.discrete:
+            return self.A, self.B
+        return zoh(self.A, self.B, h)
+
+    def config(self) -> dict:
+        """The ``model`` block of a config that ``nlsid simulate`` runs."""
+        out = {"type": "mimo_state_space", "domain": self.domain,
+               **{name: [[float(v) for v in row] for row in getattr(self, name)] for name in ("A", "B", "C", "D")},
+               "inputs": list(self.inputs), "outputs": list(self.outputs)}
+        if self.delay:
+            out["delay"] = float(self.delay)
+        if self.fs is not None:
+            out["fs"] = float(self.fs)
+        return out
 
 
 @dataclass(frozen=True)
