@@ -1,0 +1,271 @@
+"""The Local Polynomial Method for several inputs: the frequency response matrix of arbitrary records.
+
+Book: Schoukens, Pintelon and Rolain (2012), Section 7.2 (the LPM for MIMO systems; the SISO form
+is Section 3.7, :mod:`nlsid.analysis.lpm`); Pintelon, Schoukens, Vandersteen and Barbé (2010),
+"Estimation of nonparametric noise and FRF models for multivariable systems - Part I: theory",
+Mechanical Systems and Signal Processing 24(3), 573-595. A separate module from the SISO LPM
+because its unknowns are matrices: the regression has n_u (R+1) columns per line instead of
+R+1, the noise is an n_y x n_y covariance, and the inputs can be collinear over a window.
+
+Records m = 1..M of n_u inputs and n_y outputs, spectra ``X(k) = rfft(x)[k] / N``. At every line
+k, on the 2n+1 lines l of a window (centred on k, shifted at the band edges to stay on lines
+1 .. floor((N-1)/2)), with ``r = l - k``::
+
+    Y_m(l) = sum_{s=0..R} G_s r^s U_m(l) + sum_{s=0..R} t_{m,s} r^s + E_m(l)
+
+G_s (n_y x n_u) shared by the records, t_{m,s} (n_y) record m's transient (leakage) term. Row i of
+Y_m over the window is a linear regression on the n_u (R+1) columns ``Phi_m[l, (a, s)] = r^s
+U_{m,a}(l)`` plus the transient columns ``V[l, s] = r^s``. With ``V = Q R_V`` (QR) and the projector
+``P = I - Q Q^T`` the transient drops out, and for every output i (all share the regressor)::
+
+    A = sum_m (P Phi_m)^H (P Phi_m),   b_i = sum_m (P Phi_m)^H P Y_{m,i},   theta_i = A^-1 b_i,
+    G(k)[i, a] = theta_i[(a, 0)],      T_m(k) = [R_V^-1 Q^T (Y_m - Phi_m theta)]_0.
+
+Residual covariance (noise plus, for a nonlinear system, its stochastic distortion) with
+``q = M (2n+1) - (R+1)(n_u + M)`` degrees of freedom::
+
+    C(k)[i, j] = sum_m sum_l E_{m,i}(l) conj(E_{m,j}(l)) / q,
+    Cov(G_ia, G_jb) = [A^-1]_{(a,0),(b,0)} C(k)[i, j]        (vec(G) column-stacked).
+
+For n_u = 1 this is :func:`nlsid.analysis.lpm.lpm` line for line. Per entry,
+``|G_ia_hat - G_ia|^2 / var_hat G_ia`` is F(2, 2q) for circular complex normal noise, which
+gives the circles of :meth:`MimoLPMResult.bounds`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlsid.analysis.confidence import Bounds, circle_bounds
+from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
+from nlsid.errors import InputError
+
+CHUNK_LINES = 4096  # lines solved at once: the regressors of a chunk take some tens of MB
+#: cond of the diagonally scaled A (the square of the regressor's) from which the inputs count as
+#: collinear over a window: rounding (1e-16 relative) then moves G by more than 1e-4 of its size.
+COLLINEAR = 1e12
+
+
+@dataclass
+class MimoLPMResult:
+    """The MIMO LPM's estimates at ``lines`` (DFT bins of records of ``n_samples`` samples at ``fs``).
+
+    Attributes
+    ----------
+    fs : float
+        Sample rate (Hz).
+    n_samples, n_records : int
+        N and M.
+    half_width, degree : int
+        n (a window of 2n+1 lines) and R.
+    lines : numpy.ndarray
+        The lines 1 .. floor((N-1)/2), shape (K,).
+    G : numpy.ndarray
+        The FRM, shape (K, n_y, n_u); ``G[k, i, a]`` from input a to output i. NaN where a window
+        has no input power.
+    cov_G : numpy.ndarray
+        Cov(vec G) per line, shape (K, n_y n_u, n_y n_u), column-stacked
+        (entry (i, a) at ``a n_y + i``, :func:`nlsid.analysis.frm.vec_index`).
+    cov_v : numpy.ndarray
+        C(k): the covariance of the outputs' disturbance spectrum per line (noise plus stochastic
+        nonlinear distortion), shape (K, n_y, n_y).
+    transient : numpy.ndarray
+        T_m(k), each record's transient (leakage) term, shape (M, K, n_y), in the units of Y.
+    dof : int
+        q, the degrees of freedom of C.
+    """
+
+    fs: float
+    n_samples: int
+    n_records: int
+    half_width: int
+    degree: int
+    lines: np.ndarray
+    G: np.ndarray
+    cov_G: np.ndarray
+    cov_v: np.ndarray
+    transient: np.ndarray
+    dof: int
+
+    @property
+    def frequencies(self) -> np.ndarray:
+        return self.lines * self.fs / self.n_samples
+
+    @property
+    def var_G(self) -> np.ndarray:
+        """The variance of each entry of G, shape (K, n_y, n_u)."""
+        n_y, n_u = self.G.shape[1:]
+        diagonal = np.einsum("kjj->kj", self.cov_G).real
+        return diagonal.reshape(-1, n_u, n_y).transpose(0, 2, 1)
+
+    def bounds(self, probability: float) -> Bounds:
+        """Per entry, circles of probability p around G: radius ``sqrt(var_G F_{p; 2, 2q})``."""
+        return circle_bounds(self.G, self.var_G, probability, self.dof + 1)
+
+
+def degrees_of_freedom(n_records: int, n_inputs: int, half_width: int, degree: int) -> int:
+    """q = M (2n+1) - (R+1)(n_u + M): window lines of all records less the G and transient parameters."""
+    return n_records * (2 * half_width + 1) - (degree + 1) * (n_inputs + n_records)
+
+
+def narrowest_half_width(n_records: int, n_inputs: int, degree: int) -> int:
+    """The smallest n for which q >= 1."""
+    lines = -(-((degree + 1) * (n_inputs + n_records) + 1) // n_records)
+    return max(1, lines // 2)
+
+
+def _records(name: str, value) -> np.ndarray:
+    """A (channels, N) or (M, channels, N) array as (M, channels, N) floats."""
+    try:
+        x = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(name, "expected a numeric array (channels, samples) or (records, channels, samples)") from None
+    if x.ndim == 2:
+        x = x[None]
+    if x.ndim != 3 or 0 in x.shape:
+        raise InputError(name, f"expected an array (channels, samples) or (records, channels, samples), "
+                               f"got shape {np.shape(value)}")
+    if not np.all(np.isfinite(x)):
+        raise InputError(name, "holds NaN or infinite samples")
+    return x
+
+
+def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int = DEFAULT_DEGREE) -> MimoLPMResult:
+    """The MIMO LPM (module docstring) of records of inputs ``u`` and outputs ``y``.
+
+    Parameters
+    ----------
+    u : array_like
+        Inputs, shape (n_u, N) for one record or (M, n_u, N) for M records that share the system.
+    y : array_like
+        Outputs, shape (n_y, N) or (M, n_y, N).
+    fs : float
+        Sample rate (Hz).
+    half_width, degree : int
+        n (a window of 2n+1 lines) and R, the degree of the local polynomials of G and T.
+
+    Returns
+    -------
+    MimoLPMResult
+
+    Raises
+    ------
+    nlsid.InputError
+        Arrays of the wrong shape or with non-finite samples, a constant input, a window too short
+        for the records or too narrow to leave a degree of freedom, or inputs collinear over a
+        window (G cannot be separated there).
+
+    Examples
+    --------
+    Two inputs of white noise through two gains and a delay, y1 = 2 u1 - u2, y2 = u2 delayed one
+    sample: G = [[2, -1], [0, exp(-j w)]]. The gains come out to rounding; the delay's phase is
+    not quadratic over the 11 lines of a window, which leaves an interpolation error near 1e-5.
+
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((2, 256))
+    >>> y = np.stack([2 * u[0] - u[1], np.concatenate([[0.0], u[1, :-1]])])
+    >>> result = lpm_mimo(u, y, fs=1.0, half_width=5)
+    >>> result.G.shape, result.dof
+    ((127, 2, 2), 2)
+    >>> w = 2 * np.pi * result.frequencies[40]
+    >>> bool(np.allclose(result.G[40], [[2, -1], [0, np.exp(-1j * w)]], atol=1e-4))
+    True
+    """
+    u, y = _records("u", u), _records("y", y)
+    if y.shape[0] != u.shape[0] or y.shape[2] != u.shape[2]:
+        raise InputError("y", f"expected the records and samples of u {u.shape}, got {y.shape}")
+    if int(half_width) != half_width or half_width < 1:
+        raise InputError("half_width", f"expected an integer >= 1, got {half_width!r}")
+    if int(degree) != degree or degree < 0:
+        raise InputError("degree", f"expected an integer >= 0, got {degree!r}")
+    n_records, n_inputs, n_samples = u.shape
+    width = 2 * half_width + 1
+    top = (n_samples - 1) // 2
+    dof = degrees_of_freedom(n_records, n_inputs, half_width, degree)
+    if dof < 1:
+        raise InputError("half_width", f"a window of {width} lines with degree {degree}, {n_inputs} input(s) and "
+                                       f"{n_records} record(s) leaves q = {dof} degrees of freedom; at least "
+                                       f"half_width {narrowest_half_width(n_records, n_inputs, degree)} is needed")
+    if top < width:
+        raise InputError("u", f"{n_samples} samples give {top} lines, fewer than the window of {width}")
+    flat = np.flatnonzero(~np.any(np.ptp(u, axis=2) > 0, axis=0))
+    if flat.size:
+        raise InputError("u", f"input {flat[0]} is constant in every record: it excites nothing")
+    U = np.fft.rfft(u, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_u, K)
+    Y = np.fft.rfft(y, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_y, K)
+    parts = [_solve_chunk(U, Y, np.arange(start, min(start + CHUNK_LINES, top)), half_width, degree, dof)
+             for start in range(0, top, CHUNK_LINES)]
+    G, cov_G, cov_v, transient, condition = (np.concatenate(part, axis=1 if index == 3 else 0)
+                                             for index, part in enumerate(zip(*parts)))
+    lines = np.arange(1, top + 1)
+    collinear = np.flatnonzero(condition >= COLLINEAR)
+    if collinear.size:
+        raise InputError("u", f"the inputs are collinear over the window at {collinear.size} line(s) (from "
+                              f"{lines[collinear[0]] * fs / n_samples:g} Hz; cond >= {COLLINEAR:.0e}): G cannot be "
+                              "separated; excite the inputs independently (uncorrelated noise, or orthogonal "
+                              "multisines)")
+    return MimoLPMResult(float(fs), n_samples, n_records, int(half_width), int(degree), lines, G, cov_G, cov_v,
+                         transient, dof)
+
+
+def _solve_chunk(U, Y, centres, half_width, degree, dof):
+    """G, Cov(vec G), C, T and the scaled condition number of A at the lines ``centres``.
+
+    A window is the 2n+1 lines from ``first = clip(k - n, 0, K - 2n - 1)``; its offsets, hence V
+    and Q, depend only on ``shift = k - first``, so the lines are solved in groups of equal shift.
+    A is scaled by its diagonal before it is inverted (``D^-1/2 A D^-1/2``, eigenvalues w): the
+    condition number max w / min w then measures how collinear the input columns are, whatever
+    their power. A line where an input has no power at all (a zero diagonal) is unresolved: NaN.
+    """
+    n_records, n_inputs, n_lines = U.shape
+    n_outputs = Y.shape[1]
+    width, p = 2 * half_width + 1, degree + 1
+    first = np.clip(centres - half_width, 0, n_lines - width)
+    shift = centres - first
+    G = np.full((centres.size, n_outputs, n_inputs), np.nan + 0j)
+    cov_G = np.full((centres.size, n_outputs * n_inputs, n_outputs * n_inputs), np.nan + 0j)
+    cov_v = np.full((centres.size, n_outputs, n_outputs), np.nan + 0j)
+    transient = np.full((n_records, centres.size, n_outputs), np.nan + 0j)
+    condition = np.ones(centres.size)
+    for j in np.unique(shift):
+        rows = np.flatnonzero(shift == j)
+        offsets = np.arange(width) - j
+        V = offsets[:, None] ** np.arange(p, dtype=float)                         # (w, R+1)
+        Q, R_V = np.linalg.qr(V)
+        index = first[rows][:, None] + np.arange(width)[None, :]                  # (L, w)
+        Uw = np.moveaxis(U[:, :, index], 1, -1)                                   # (M, L, w, n_u)
+        Yw = np.moveaxis(Y[:, :, index], 1, -1)                                   # (M, L, w, n_y)
+        # regressor columns ordered (input a, power s): column a p + s is r^s U_a(l)
+        Phi = (Uw[..., :, None] * V[None, None, :, None, :]).reshape(Uw.shape[:3] + (n_inputs * p,))
+        QPhi, QY = Q.T @ Phi, Q.T @ Yw                                            # (M, L, R+1, .)
+        PPhi, PY = Phi - Q @ QPhi, Yw - Q @ QY
+        A = np.einsum("mlwi,mlwj->lij", PPhi.conj(), PPhi)
+        b = np.einsum("mlwi,mlwo->lio", PPhi.conj(), PY)
+        scale = np.sqrt(np.einsum("lii->li", A).real)                             # (L, n_u p)
+        powered = np.all(scale > 0, axis=1)
+        scale[~powered] = 1.0
+        w, vectors = np.linalg.eigh(A / scale[:, :, None] / scale[:, None, :])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cond = np.where(powered, w[:, -1] / w[:, 0], 1.0)
+            cond[powered & ~(w[:, 0] > 0)] = np.inf
+        condition[rows] = cond
+        good = powered & (cond < COLLINEAR)
+        if not np.any(good):
+            continue
+        rows, vectors, w, scale, b = rows[good], vectors[good], w[good], scale[good], b[good]
+        PPhi, PY, QPhi, QY = PPhi[:, good], PY[:, good], QPhi[:, good], QY[:, good]
+        A_inv = (vectors / w[:, None, :]) @ vectors.conj().transpose(0, 2, 1) / scale[:, :, None] / scale[:, None, :]
+        theta = A_inv @ b                                                         # (L, n_u p, n_y)
+        residual = PY - PPhi @ theta                                              # (M, L, w, n_y)
+        C = np.einsum("mlwi,mlwj->lij", residual, residual.conj()) / dof
+        g0 = np.arange(n_inputs) * p                                              # the columns (a, s = 0)
+        G[rows] = theta[:, g0, :].transpose(0, 2, 1)
+        block = A_inv[:, g0][:, :, g0]                                            # [A^-1]_{(a,0),(b,0)}
+        # Cov(G_ia, G_jb) = block[a, b] C[i, j], column-stacked: index a n_y + i
+        cov_G[rows] = np.einsum("lab,lij->laibj", block, C).reshape(rows.size, n_inputs * n_outputs, -1)
+        cov_v[rows] = C
+        t = np.linalg.solve(R_V, QY - QPhi @ theta)                              # (M, L, R+1, n_y)
+        transient[:, rows] = t[:, :, 0, :]
+    return G, cov_G, cov_v, transient, condition
