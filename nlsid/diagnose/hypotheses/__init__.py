@@ -54,8 +54,9 @@ hysteresis_feedback as hysteresis, for a transfer function    ``nonlinear_feedba
                     model (its output read as position)       model with ``bouc_wen`` (k, beta,
                                                               gamma, the linear coefficients)
 hysteresis_exponent as hysteresis, the force yielding more    ``bouc_wen`` (k, beta, gamma, n;
-                    sharply (or smoothly) than n = 1 allows;  n >= 1), from the hysteresis or
-                    fitted where n = 1 stays above the floor  hysteresis_feedback fit
+                    sharply (or smoothly) than n = 1 allows;  n >= 1; A = 1 / z0 held, the state
+                    fitted where n = 1 stays above the floor  scaled to tend to 1), from the
+                                                              hysteresis or hysteresis_feedback fit
 end_stops           distortion at the largest levels only;    ``nonlinearities: end_stop`` (ks,
                     residual force where the position is      cs, upper_stop and/or lower_stop:
                     beyond an edge (contact)                  the keys stiffness, damping,
