@@ -6,7 +6,8 @@ the inputs: run i of the excitation with sweep point j is output number i * n_po
 
 In closed loop the reference is the run's ``r`` when it has one (a recording re-simulated), else its
 ``u`` (an excitation from ``nlsid design``). The measured channels of a run (``Run.channels``, with
-their units) are carried unchanged into the simulated run.
+their units) are carried unchanged into the simulated run, but for the inputs (with their
+measurement noise) and outputs a model of several of them writes as channels (:mod:`nlsid.simulate.mimo`).
 """
 
 from __future__ import annotations
@@ -19,8 +20,9 @@ from nlsid.errors import InputError
 from nlsid.io.run import Run
 from nlsid.models import from_config
 from nlsid.models.from_config import ClosedLoop
+from nlsid.models.lti import MimoStateSpace
 from nlsid.simulate.runs import simulate_run
-from nlsid.simulate.noise import NoiseLevels, draw, run_streams
+from nlsid.simulate.noise import NoiseLevels, draw, draw_channels, run_streams
 from nlsid.simulate.sweep import SweepPoint
 from nlsid.simulate.threads import thread_count
 
@@ -71,15 +73,19 @@ def simulate_all(points: list[SweepPoint], runs: list[Run], seed: int | None = N
     def one(job) -> Run:
         run, index, j = job
         model, loop = models[j]
-        noise = draw(levels[j], streams[j][index], run.n_samples)
+        if isinstance(model, MimoStateSpace):  # a noise row per input and output
+            noise = draw_channels(levels[j], streams[j][index], run.n_samples, model.n_inputs, model.n_outputs)
+        else:
+            noise = draw(levels[j], streams[j][index], run.n_samples)
         try:
             out = simulate_run(model, loop, _excitation(run, loop), points[j].config.simulation.substeps, noise,
                                steady)
         except InputError as exc:
             raise points[j].locate(exc) from None
         units = {**out.units, **{name: unit for name, unit in run.units.items() if name in run.channels}}
+        simulated = {name: out.channels[name] for name in (*out.inputs[1:], *out.outputs[1:])}  # inputs, outputs
         out = dataclasses.replace(out, run_id=run_id(run.run_id, j, len(points)), params={**run.params, **points[j].params},
-                                  channels=dict(run.channels), units=units)
+                                  channels={**run.channels, **simulated}, units=units)
         if step is not None:
             step()
         return out

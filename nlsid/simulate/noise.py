@@ -17,7 +17,8 @@ from nlsid.errors import InputError
 
 @dataclass(frozen=True)
 class Noise:
-    """Noise sequences of one run: on the measured u, on the measured y, and on the plant input."""
+    """Noise sequences of one run: on the measured u, on the measured y, and on the plant input
+    (for a model of several inputs and outputs, :func:`draw_channels`, one row per input or output)."""
 
     u: np.ndarray
     y: np.ndarray
@@ -59,3 +60,20 @@ def draw(levels: NoiseLevels, stream: np.random.SeedSequence | None, n: int) -> 
     sequences = [np.random.default_rng(child).standard_normal(n) * level
                  for child, level in zip(children, (levels.u, levels.y, levels.process))]
     return Noise(*sequences)
+
+
+def draw_channels(levels: NoiseLevels, stream: np.random.SeedSequence | None, n: int, n_inputs: int,
+                  n_outputs: int) -> Noise:
+    """The noise of one run of a model of several inputs and outputs: rows (n_inputs, n) on the
+    measured inputs and the plant inputs, (n_outputs, n) on the measured outputs, each row white
+    with the one standard deviation of its kind (``levels``). The first input's and output's rows
+    are the sequences :func:`draw` gives a run of one input and one output; row c > 0 of kind i
+    has its own child stream, spawn key + (i, c)."""
+    if stream is None:
+        return Noise(np.zeros((n_inputs, n)), np.zeros((n_outputs, n)), np.zeros((n_inputs, n)))
+    kinds = []
+    for i, (level, rows) in enumerate(zip((levels.u, levels.y, levels.process), (n_inputs, n_outputs, n_inputs))):
+        keys = [stream.spawn_key + (i,)] + [stream.spawn_key + (i, c) for c in range(1, rows)]
+        kinds.append(np.stack([np.random.default_rng(np.random.SeedSequence(stream.entropy, spawn_key=key))
+                               .standard_normal(n) * level for key in keys]))
+    return Noise(*kinds)

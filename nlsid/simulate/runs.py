@@ -15,6 +15,7 @@ import numpy as np
 
 from nlsid.io.run import Run
 from nlsid.models.equations import Equations
+from nlsid.models.lti import MimoStateSpace
 from nlsid.models.hybrid import Hybrid
 from nlsid.models.pnlss import Pnlss
 from nlsid.models.from_config import ClosedLoop, Plant, Structure
@@ -22,6 +23,7 @@ from nlsid.simulate.engine import _lead, lead_periods, simulate_equations, simul
 from nlsid.simulate import equations_state
 from nlsid.simulate.initial_state import estimate as estimate_plant, with_initial_state
 from nlsid.simulate.loop_state import estimate as estimate_loop, simulate_from_start
+from nlsid.simulate.mimo import simulate_mimo
 from nlsid.simulate.pnlss_runs import simulate_measured, simulate_pnlss
 from nlsid.simulate.noise import Noise
 from nlsid.simulate.structure_state import estimate as estimate_structure, with_initial_states
@@ -39,6 +41,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     :class:`~nlsid.simulate.loop_state.LoopExcitation`: :mod:`nlsid.simulate.loop_state`). A model written as equations runs from its
     written initial states (:mod:`nlsid.models.equations`), but an arbitrary record with a measured
     ``y`` from the states fitted to its first samples (:mod:`nlsid.simulate.equations_state`)."""
+    if isinstance(model, MimoStateSpace):  # several inputs and outputs (nlsid.simulate.mimo); noise rows per signal
+        return simulate_mimo(model, run, noise, steady)
     noise = noise or Noise.zero(run.n_samples)
     if isinstance(model, Pnlss):  # its own lead-in and initial state (nlsid.simulate.pnlss_runs)
         return simulate_pnlss(model, run, substeps, noise, steady)

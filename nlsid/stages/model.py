@@ -184,9 +184,15 @@ class Model:
         from nlsid.simulate.batch import simulate_all
 
         from nlsid.feeds import several_inputs_outputs
+        from nlsid.simulate.mimo import check_run
 
+        mimo = self._mimo_names()
         for run in rec.runs:
-            error = several_inputs_outputs(run, f"{rec.path or 'recording'}:/runs/{run.run_id}")
+            where = f"{rec.path or 'recording'}:/runs/{run.run_id}"
+            if mimo is not None:  # before any work: every run carries the model's inputs, none is dropped
+                check_run(*mimo, run, where)
+                continue
+            error = several_inputs_outputs(run, where)
             if error is not None:
                 raise error
         configs, inputs = [self.path] if self.path else [], [rec.path] if rec.path else []
@@ -194,6 +200,13 @@ class Model:
         out = simulate_all(self._points, list(rec.runs), seed=seed, workers=workers,
                            step=progress, steady=steady)
         return Recording(out, provenance(config_paths=configs, input_paths=inputs, digests=digests))
+
+    def _mimo_names(self) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+        """(inputs, outputs) of a ``mimo_state_space`` model; None for a model of one input and output."""
+        config = self._points[0].config.model
+        if config.type != "mimo_state_space":
+            return None
+        return tuple(config.input_names), tuple(config.output_names)
 
     def _simulate_array(self, u, fs, seed, workers, steady, progress):
         import math
@@ -208,6 +221,9 @@ class Model:
         if len(self._points) > 1:
             raise InputError("u", f"the model sweeps {self._points[0].config.sweep.parameter} over "
                                   f"{len(self._points)} values: simulate a Recording (one run per value)")
+        mimo = self._mimo_names()
+        if mimo is not None:
+            return self._simulate_matrix(u, fs, seed, workers, progress, *mimo)
         signal = validate_signal(u, "u")
         if signal.size == 0:
             raise InputError("u", "no samples")
@@ -215,6 +231,25 @@ class Model:
         out = simulate_all(self._points, [run], seed=seed, workers=workers,
                            step=progress)
         return out[0].y
+
+    def _simulate_matrix(self, u, fs, seed, workers, progress, inputs, outputs):
+        """A model of several inputs and outputs on an (n_u, n) array (a 1-D array: one input): (n_y, n)."""
+        import numpy as np
+
+        from nlsid.io.run import Run, validate_signal
+        from nlsid.simulate.batch import simulate_all
+
+        matrix = np.asarray(u)
+        if matrix.ndim == 1:
+            matrix = matrix[None, :]
+        if matrix.ndim != 2 or matrix.shape[0] != len(inputs) or matrix.shape[1] == 0:
+            raise InputError("u", f"expected an array of {len(inputs)} rows (the model's inputs {', '.join(inputs)}) "
+                                  f"of samples, got shape {np.shape(u)}")
+        rows = [validate_signal(row, f"u[{i}]") for i, row in enumerate(matrix)]
+        run = Run(run_id="u", fs=float(fs), kind="arbitrary", u=rows[0], channels=dict(zip(inputs[1:], rows[1:])),
+                  inputs=inputs)
+        out = simulate_all(self._points, [run], seed=seed, workers=workers, step=progress)
+        return out[0].output_matrix()
 
     def to_dict(self) -> dict:
         """The config as a dict (a copy): the keys as written, with the values set by
