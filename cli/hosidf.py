@@ -36,6 +36,8 @@ def hosidf(recording: str, output: str, harmonics: int, variance: str, input_cho
     amplitude cell, mean and variance over repeats and periods, and the noise bound that marks
     each harmonic significant. With --sweep PARAM: the linearity cost per value of PARAM, its
     optimum, and the time-domain tracking error with its optimum (friction feed-forward tuning).
+    Runs of one input and several outputs give the HOSIDFs of each output (not with --sweep or
+    --model); runs of several inputs are refused.
 
     Examples:
 
@@ -86,7 +88,11 @@ def _print(summary: dict) -> None:
         console.print(f"HOSIDFs of {g['cells']} cells ({len(g['frequencies'])} frequencies x {len(g['levels'])} "
                       f"amplitudes, k = 0..{g['harmonics']}) -> {summary['output']}")
         counts = ", ".join(f"k={k}: {int(n)}" for k, n in enumerate(g["significant_cells_per_harmonic"]))
-        console.print(f"cells where the harmonic clears its noise bound: {counts}")
+        first = f"output {summary['outputs'][0]['output']}: " if "outputs" in summary else ""
+        console.print(f"{first}cells where the harmonic clears its noise bound: {counts}")
+        for row in summary.get("outputs", ())[1:]:
+            counts = ", ".join(f"k={k}: {int(n)}" for k, n in enumerate(row["significant_cells_per_harmonic"]))
+            console.print(f"output {row['output']}: cells where the harmonic clears its noise bound: {counts}")
         console.print(f"noise bound: {g['noise_bound']}")
     if "sweep" in summary:
         s = summary["sweep"]

@@ -171,9 +171,8 @@ class BlaRuns:
 def several_inputs_outputs(run: Run, where: str, reader: str = "a model of one input u and one output y"
                            ) -> InputError | None:
     """The error of the stages of one input and one output (``simulate``, ``fit --model``,
-    ``diagnose``; ``hosidf``, whose ``reader`` is the HOSIDFs) on a run with several inputs or
-    outputs; None for a run of one of each. Taking u and y alone would drop the other inputs and
-    outputs silently."""
+    ``diagnose``) on a run with several inputs or outputs; None for a run of one of each. Taking u
+    and y alone would drop the other inputs and outputs silently."""
     if not run.is_mimo:
         return None
     return InputError(where, f"has inputs {', '.join(run.inputs)} and outputs {', '.join(run.outputs)}: {reader} "
@@ -234,11 +233,12 @@ def no_sine_runs(source: str) -> InputError:
 
 
 def check_sine_run(run: Run, where: str, input_signal: str) -> int:
-    """The structural checks of one single-sine run (one input and one output, tone on a bin,
-    harmonic 2 below Nyquist, an amplitude, an input tone); return the tone's bin."""
-    several = several_inputs_outputs(run, where, "the HOSIDFs of one input u and one output y")
-    if several is not None:
-        raise several
+    """The structural checks of one single-sine run (one input, any number of outputs, tone on a
+    bin, harmonic 2 below Nyquist, an amplitude, an input tone); return the tone's bin."""
+    if len(run.inputs) > 1:
+        raise InputError(where, f"has inputs {', '.join(run.inputs)}: a HOSIDF is a single-input concept "
+                                "(H_k = Y(k w0)/U(w0)^k divides by the tone of one input), so runs with several "
+                                "inputs cannot give one (several inputs: `nlsid bla`, docs/mimo.md)")
     line = sine_bin(run, where)
     if highest_harmonic(run, line) < MIN_HARMONICS:
         raise InputError(where, f"harmonic {MIN_HARMONICS} of bin {line} ({run.frequency:g} Hz) lies at or above "
@@ -250,6 +250,14 @@ def check_sine_run(run: Run, where: str, input_signal: str) -> int:
     if np.any(np.fft.rfft(run.periods(input_signal), axis=-1)[:, line] == 0):
         raise InputError(where, f"input '{input_signal}' has no content at {run.frequency:g} Hz")
     return line
+
+
+def check_sine_outputs(run: Run, outputs: tuple[str, ...], where: str) -> None:
+    """The sine runs of one HOSIDF analysis measure the same outputs (those of the first), in order:
+    a run with others would leave an output without some of its cells."""
+    if tuple(run.outputs) != tuple(outputs):
+        raise InputError(where, f"has outputs {', '.join(run.outputs)}, the first sine run "
+                                f"{', '.join(outputs)}: the HOSIDFs of each output need every run to measure it")
 
 
 def check_harmonics(run: Run, line: int, harmonics: int, where: str) -> None:
@@ -364,6 +372,7 @@ class Survey:
         self.bla = BlaRuns("auto")
         # hosidf (grid mode, --input auto)
         self.sine_signal: str | None = None
+        self.sine_outputs: tuple[str, ...] = ("y",)
         self.cells: dict[tuple[float, float], SineCell] = {}
         self.top_harmonic: int | None = None  # the highest --harmonics every sine run allows
         self.harmonics_error: InputError | None = None  # what the default --harmonics gives first
@@ -424,7 +433,9 @@ class Survey:
                 return
             if self.sine_signal is None:
                 self.sine_signal = hosidf_input(run, "auto")
+                self.sine_outputs = tuple(run.outputs)
             line = check_sine_run(run, where, self.sine_signal)
+            check_sine_outputs(run, self.sine_outputs, where)
         except InputError as exc:
             verdict.fail(exc)
             return

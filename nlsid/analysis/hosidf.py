@@ -42,7 +42,8 @@ from typing import Iterable, Literal, Sequence
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.feeds import SineCell, check_cells, check_harmonics, check_sine_run, check_variance_counts
+from nlsid.feeds import (SineCell, check_cells, check_harmonics, check_sine_outputs, check_sine_run,
+                         check_variance_counts)
 from nlsid.io.run import Run
 
 Variance = Literal["repeats", "periods", "both"]
@@ -73,15 +74,31 @@ class RunSpectra:
         return self.y * np.exp(-1j * k * np.angle(self.u1.mean()))
 
 
-def run_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str = "") -> RunSpectra:
-    """The spectra of one single-sine run; InputError for a bad run (:func:`nlsid.feeds.check_sine_run`)
-    or harmonics above Nyquist."""
+def output_periods(run: Run, output: str = "y") -> np.ndarray:
+    """The steady-state periods (P, N) of the run's output ``output`` (``y`` or a channel named in
+    ``run.outputs``)."""
+    start = run.transient_periods * run.period
+    return run.named_signal(output)[start:].reshape(run.n_periods, run.period)
+
+
+def output_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str = "",
+                   outputs: Sequence[str] = ("y",)) -> dict[str, RunSpectra]:
+    """The spectra of one single-sine run for each of ``outputs``, all normalised by the tone of its
+    one input; InputError for a bad run (:func:`nlsid.feeds.check_sine_run`), for harmonics above
+    Nyquist, or for a run whose outputs are not ``outputs`` (:func:`nlsid.feeds.check_sine_outputs`)."""
     where = f"{source}:/runs/{run.run_id}" if source else run.run_id
     line = check_sine_run(run, where, input_signal)
+    check_sine_outputs(run, tuple(outputs), where)
     check_harmonics(run, line, harmonics, where)
     u1 = harmonic_phasors(run.periods(input_signal), line, 1)[:, 1]
-    y = harmonic_phasors(run.periods("y"), line, harmonics)
-    return RunSpectra(run.run_id, line, float(run.frequency), float(run.level), u1, y)
+    return {name: RunSpectra(run.run_id, line, float(run.frequency), float(run.level), u1,
+                             harmonic_phasors(output_periods(run, name), line, harmonics))
+            for name in outputs}
+
+
+def run_spectra(run: Run, harmonics: int, input_signal: str = "u", source: str = "") -> RunSpectra:
+    """The spectra of one single-sine run of one output y (:func:`output_spectra`)."""
+    return output_spectra(run, harmonics, input_signal, source)["y"]
 
 
 @dataclass
@@ -234,9 +251,28 @@ def measured_hosidf(runs: Iterable[Run], harmonics: int, variance: Variance = "b
     ``variance`` names the variances that must be available ("repeats": >= 2 repeats per cell,
     "periods": >= 2 periods per run, "both"); a cell that lacks them is an InputError.
     """
+    return measured_hosidfs(runs, harmonics, variance, input_signal, source)["y"]
+
+
+def measured_hosidfs(runs: Iterable[Run], harmonics: int, variance: Variance = "both", input_signal: str = "u",
+                     source: str = "", outputs: Sequence[str] = ("y",)) -> dict[str, HOSIDFGrid]:
+    """:func:`measured_hosidf` of each of ``outputs`` of runs of one input and these outputs, in one
+    pass over the runs: output name -> its grid. Each output's HOSIDFs
+    ``H_k = Y_i(k w0)/U(w0)^k`` are those of the single-input single-output path from the input to
+    output i, with their own statistics and noise bounds; the grids share their cells."""
     if harmonics < 2:
         raise InputError("--harmonics", f"need at least 2 harmonics (Table I uses k = 1..K, K >= 2), got {harmonics}")
-    groups = group_cells(run_spectra(run, harmonics, input_signal, source) for run in runs)
+    outputs = tuple(outputs)
+    per_output: dict[str, list[RunSpectra]] = {name: [] for name in outputs}
+    for run in runs:
+        for name, spectra in output_spectra(run, harmonics, input_signal, source, outputs).items():
+            per_output[name].append(spectra)
+    return {name: _grid_of(spectra, harmonics, variance, source) for name, spectra in per_output.items()}
+
+
+def _grid_of(spectra: list[RunSpectra], harmonics: int, variance: Variance, source: str) -> HOSIDFGrid:
+    """The grid of the spectra of one output."""
+    groups = group_cells(spectra)
     if not groups:
         raise InputError(source, "holds no runs")
     frequencies = np.array(sorted({f for f, _ in groups}))

@@ -37,16 +37,23 @@ def _std(grid: HOSIDFGrid, name: str) -> np.ndarray:
     return np.sqrt(np.where(np.isfinite(repeats), repeats, periods))
 
 
-def versus_amplitude_figure(grid: HOSIDFGrid, fi: int, units: Units, signal: str = "u"):
-    """Seed 000 Fig. 6: |H_k| (seed 000 Eqs. 8-9 form) versus amplitude at one frequency, mean and std."""
+def _to(output: str | None) -> str:
+    """`` to <output>`` for a figure title of one of several outputs, else nothing."""
+    return f" to {output}" if output else ""
+
+
+def versus_amplitude_figure(grid: HOSIDFGrid, fi: int, units: Units, signal: str = "u", output: str = "y",
+                            title: str | None = None):
+    """Seed 000 Fig. 6: |H_k| (seed 000 Eqs. 8-9 form) versus amplitude at one frequency, mean and std;
+    ``output`` names the output's unit, ``title`` (one of several outputs) is named in the title."""
     figure, (ax,) = _figure(height=4.5)
     mean, std = np.abs(grid.field("h000")[fi]), _std(grid, "h000")[fi]
     for k in range(1, grid.harmonics + 1):
         line, = ax.loglog(grid.levels, mean[:, k], "o-", label=f"|H_{k}|")
         ax.loglog(grid.levels, std[:, k], "--", color=line.get_color(), label=f"std of H_{k}")
     ax.set_xlabel(units.label("input amplitude", signal))
-    ax.set_ylabel(f"|H_k| (solid), std (dashed) ({units.ratio('y', signal)})")
-    ax.set_title(f"HOSIDFs at {grid.frequencies[fi]:g} Hz")
+    ax.set_ylabel(f"|H_k| (solid), std (dashed) ({units.ratio(output, signal)})")
+    ax.set_title(f"HOSIDFs{_to(title)} at {grid.frequencies[fi]:g} Hz")
     legend_outside(ax)
     ax.grid(True, which="both", alpha=0.3)
     plain_log_ticks(ax.xaxis)
@@ -54,8 +61,10 @@ def versus_amplitude_figure(grid: HOSIDFGrid, fi: int, units: Units, signal: str
     return figure
 
 
-def first_hosidf_figure(grid: HOSIDFGrid, units: Units, analytic: np.ndarray | None = None, signal: str = "u"):
-    """Seed 000 Fig. 7: |H_1| over frequency, one line per amplitude (analytic dashed when given)."""
+def first_hosidf_figure(grid: HOSIDFGrid, units: Units, analytic: np.ndarray | None = None, signal: str = "u",
+                        output: str = "y", title: str | None = None):
+    """Seed 000 Fig. 7: |H_1| over frequency, one line per amplitude (analytic dashed when given);
+    ``output`` and ``title`` as in :func:`versus_amplitude_figure`."""
     figure, (ax_mag, ax_phase) = _figure(2, height=6)
     h1 = grid.field("h")[:, :, 1]
     for ai, level in enumerate(grid.levels):
@@ -65,7 +74,9 @@ def first_hosidf_figure(grid: HOSIDFGrid, units: Units, analytic: np.ndarray | N
         if analytic is not None:
             ax_mag.semilogy(grid.frequencies, np.abs(analytic[:, ai, 1]), "--", color=line.get_color(),
                             label=f"analytic, {name}")
-    ax_mag.set_ylabel(f"|H_1| ({units.ratio('y', signal)})")
+    ax_mag.set_ylabel(f"|H_1| ({units.ratio(output, signal)})")
+    if title:
+        ax_mag.set_title(f"First HOSIDF{_to(title)}")
     phase_axis(ax_phase)
     ax_phase.set_ylabel("angle H_1 (deg)")
     legend_outside(ax_mag)
@@ -78,8 +89,10 @@ def first_hosidf_figure(grid: HOSIDFGrid, units: Units, analytic: np.ndarray | N
     return figure
 
 
-def run_spectrum_figure(y_periods: np.ndarray, spectra: RunSpectra, fs: float, units: Units):
-    """The amplitude spectrum of one run (periods averaged) with its harmonics k f0 marked."""
+def run_spectrum_figure(y_periods: np.ndarray, spectra: RunSpectra, fs: float, units: Units, output: str = "y",
+                        title: str | None = None):
+    """The amplitude spectrum of one run's output (periods averaged) with its harmonics k f0 marked;
+    ``output`` and ``title`` as in :func:`versus_amplitude_figure`."""
     n = y_periods.shape[1]
     amplitude = np.abs(np.fft.rfft(y_periods.mean(axis=0))) / n
     amplitude[1:] *= 2
@@ -92,8 +105,9 @@ def run_spectrum_figure(y_periods: np.ndarray, spectra: RunSpectra, fs: float, u
     ax.semilogy(k[1:] * spectra.frequency, np.abs(spectra.y.mean(axis=0))[1:], "o", label="harmonics k f0")
     ax.set_xlim(0, (k[-1] + 1) * spectra.frequency)
     ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel(units.label("|Y|", "y"))
-    ax.set_title(f"run {spectra.run_id}: {spectra.frequency:g} Hz, amplitude {spectra.level:g}")
+    ax.set_ylabel(units.label("|Y|", output))
+    title = f"output {title} of run" if title else "run"
+    ax.set_title(f"{title} {spectra.run_id}: {spectra.frequency:g} Hz, amplitude {spectra.level:g}")
     legend_outside(ax)
     ax.grid(True, which="both", alpha=0.3)
     return figure

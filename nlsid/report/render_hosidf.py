@@ -31,6 +31,7 @@ from nlsid.analysis.linearity_cost import Sweep, SweepPoint
 from nlsid.errors import InputError
 from nlsid.citations import FRICTION_COMPENSATION, MOTION_STAGES, SPECTRAL_ANALYSIS
 from nlsid.report.html import Figure, Page, Table, number
+from nlsid.io.hosidf_file import output_grids
 from nlsid.report.units import Units, units_of
 
 CHANGE_SIGMAS = 3.0
@@ -148,7 +149,8 @@ def sweep_verdict(sweep: dict, units: Units, signal: str) -> tuple[str, list[str
     return headline, findings
 
 
-def _grid_tables(grid: dict, units: Units, signal: str) -> list[Table]:
+def _grid_tables(grid: dict, units: Units, signal: str, output: str = "y", of: str = "") -> list[Table]:
+    """The cell and H_1 tables of one output's grid (``of``: `` (output NAME)`` in the captions)."""
     measured = grid["n_repeats"] > 0
     K = int(grid["harmonic"][-1])
     rows = []
@@ -161,14 +163,14 @@ def _grid_tables(grid: dict, units: Units, signal: str) -> list[Table]:
                      number(math.degrees(float(np.angle(H[1]))), ".1f"), *marks])
     change_rows = [[f"{r['frequency']:g}", f"{r['from_level']:g}", f"{r['to_level']:g}", f"{r['change_db']:+.3f}",
                     number(r["std_db"], ".2g")] for r in h1_change(grid)]
-    tables = [Table("Cells: H_1 and each harmonic's level above its noise bound (dB)",
-                    ["frequency Hz", units.label("amplitude", signal), "R x P", f"|H_1| ({units.ratio('y', signal)})",
+    tables = [Table(f"Cells: H_1 and each harmonic's level above its noise bound (dB){of}",
+                    ["frequency Hz", units.label("amplitude", signal), "R x P", f"|H_1| ({units.ratio(output, signal)})",
                      "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
                     rows, note=f"k columns: 20 log10 |Y(k w0)| / eps_k, dB re the noise bound "
                                f"({FRICTION_COMPENSATION}, Table I, Eq. 6); ✓ marks a harmonic above its bound. "
                                "R repeats x P periods per cell.")]
     if change_rows:
-        tables.append(Table("H_1 versus amplitude", ["frequency Hz", units.label("from amplitude", signal),
+        tables.append(Table(f"H_1 versus amplitude{of}", ["frequency Hz", units.label("from amplitude", signal),
                                                      units.label("to amplitude", signal), "Δ|H_1| dB", "std dB"],
                             change_rows,
                             note="Δ|H_1| = 20 log10 |H_1(to)/H_1(from)|; std to first order from the variance of "
@@ -208,17 +210,20 @@ def _figures(data: dict, units: Units) -> list[Figure]:
     signal = str(data["input_signal"])
     figures = []
     if "grid" in data:
-        grid = _grid(data["grid"], int(data["harmonics"]))
         analytic = data["grid"].get("analytic", {}).get("H")
-        figures.append(figure(plots.first_hosidf_figure(grid, units, analytic, signal),
-                              "First HOSIDF over frequency. |H_1| and its phase, one line per amplitude"
-                              + (f", analytic ({SPECTRAL_ANALYSIS}, Lemma 2) dashed" if analytic is not None else "")
-                              + f" (as in {MOTION_STAGES}, Fig. 7).", "hosidf_h1_map"))
-        for fi, frequency in enumerate(grid.frequencies):
-            figures.append(figure(plots.versus_amplitude_figure(grid, fi, units, signal),
-                                  f"HOSIDFs versus amplitude at {frequency:g} Hz. |H_k| ({MOTION_STAGES}, Eqs. 8-9) "
-                                  f"solid, standard deviation of the mean dashed (as in {MOTION_STAGES}, Fig. 6).",
-                                  f"hosidf_vs_amplitude_f{fi:03d}"))
+        several = len(data["outputs"]) > 1
+        for output, stored in output_grids(data).items():
+            grid = _grid(stored, int(data["harmonics"]))
+            to, suffix, title = (f" to output {output}", f"_{output}", output) if several else ("", "", None)
+            figures.append(figure(plots.first_hosidf_figure(grid, units, analytic, signal, output, title),
+                                  f"First HOSIDF over frequency{to}. |H_1| and its phase, one line per amplitude"
+                                  + (f", analytic ({SPECTRAL_ANALYSIS}, Lemma 2) dashed" if analytic is not None
+                                     else "") + f" (as in {MOTION_STAGES}, Fig. 7).", f"hosidf_h1_map{suffix}"))
+            for fi, frequency in enumerate(grid.frequencies):
+                figures.append(figure(plots.versus_amplitude_figure(grid, fi, units, signal, output, title),
+                                      f"HOSIDFs versus amplitude at {frequency:g} Hz{to}. |H_k| ({MOTION_STAGES}, "
+                                      f"Eqs. 8-9) solid, standard deviation of the mean dashed (as in "
+                                      f"{MOTION_STAGES}, Fig. 6).", f"hosidf_vs_amplitude_f{fi:03d}{suffix}"))
     if "sweep" in data:
         drawn = plots.sweep_figure_list(_sweep(data["sweep"]), units, signal)
         figures += [figure(mpl, caption, name) for mpl, (name, caption) in zip(drawn, _SWEEP_FIGURES)]
@@ -235,7 +240,9 @@ def render_hosidf(path: Path) -> Page:
     headline, findings, tables, numbers = "", [], [], {"harmonics": int(data["harmonics"]),
                                                        "input_signal": str(data["input_signal"])}
     units, signal = units_of(data.get("units")), str(data["input_signal"])
-    if "grid" in data:
+    if "grid" in data and len(data["outputs"]) > 1:
+        headline, findings, tables, numbers["grid"], numbers["outputs"] = _outputs_parts(data, units, signal)
+    elif "grid" in data:
         grid = data["grid"]
         headline, findings = grid_verdict(grid, units, signal)
         tables += _grid_tables(grid, units, signal)
@@ -252,4 +259,24 @@ def render_hosidf(path: Path) -> Page:
     return Page(kind="Higher order sinusoidal input describing functions", title=f"HOSIDF report: {Path(path).name}",
                 source=str(path), headline=headline, findings=findings, figures=_figures(data, units.for_figures()),
                 tables=tables, provenance=data["provenance"], numbers=numbers,
-                note=units.missing_note("y", signal))
+                note=units.missing_note(*data["outputs"], signal))
+
+
+def _outputs_parts(data: dict, units: Units, signal: str) -> tuple[str, list[str], list[Table], dict, list[dict]]:
+    """Headline, findings, tables and numbers (the first output's ``grid``, and ``outputs``) of a
+    grid of several outputs: each output's verdict as a finding, the headline naming the harmonics
+    above their noise bound per output."""
+    grids = output_grids(data)
+    parts, findings, tables, rows = [], [], [], []
+    for output, grid in grids.items():
+        headline, found = grid_verdict(grid, units, signal)
+        findings += [f"to {output}: {headline}"] + [f"to {output}: {item}" for item in found]
+        tables += _grid_tables(grid, units, signal, output, f" (output {output})")
+        seen = [row["k"] for row in significance(grid) if row["significant_cells"]]
+        parts.append(f"{output}: k = {', '.join(str(k) for k in seen)}" if seen else f"{output}: none")
+        rows.append({"output": output, "significance": significance(grid), "h1_change": h1_change(grid)})
+    first = next(iter(grids.values()))
+    headline = f"HOSIDFs to {len(grids)} outputs; harmonics above their noise bound to " + "; ".join(parts)
+    numbers = {"frequencies": first["frequency"], "levels": first["level"], "significance": rows[0]["significance"],
+               "h1_change": rows[0]["h1_change"]}
+    return headline, findings, tables, numbers, rows

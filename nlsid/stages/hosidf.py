@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import itertools
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Mapping
 
@@ -102,6 +102,12 @@ class HosidfResult:
         The recording's and the model config's paths (the provenance of :meth:`write`).
     first_run : tuple or None
         The first run's output periods, spectra and sample rate (the grid's spectrum figure).
+    outputs : tuple of str
+        The outputs of the runs (``("y",)``, or y and channels: ``Run.outputs``). With several,
+        ``grid``, ``first_run`` and the arrays below are those of the first, y; :meth:`output`
+        gives the result of any one of them.
+    grids, first_runs : dict
+        Output name -> its grid, and its first run's periods, spectra and sample rate (empty for a sweep).
 
     Examples
     --------
@@ -146,6 +152,21 @@ class HosidfResult:
     inputs: list[str] = field(default_factory=list)
     configs: list[str] = field(default_factory=list)
     first_run: tuple[np.ndarray, RunSpectra, float] | None = field(default=None, repr=False)
+    outputs: tuple[str, ...] = ("y",)
+    grids: dict[str, HOSIDFGrid] = field(default_factory=dict, repr=False)
+    first_runs: dict[str, tuple[np.ndarray, RunSpectra, float]] = field(default_factory=dict, repr=False)
+
+    def output(self, name: str) -> "HosidfResult":
+        """The result of output ``name`` alone (one of :attr:`outputs`): its grid, arrays and figures.
+
+        Each output's HOSIDFs are those of the path from the one input to that output
+        (``H_k = Y_i(k w0)/U(w0)^k``)."""
+        if name not in self.outputs:
+            raise InputError("output", f"expected one of {', '.join(self.outputs)}, got {name!r}")
+        if self.grid is None:
+            return self
+        return replace(self, grid=self.grids[name], first_run=self.first_runs[name], outputs=(name,),
+                       grids={name: self.grids[name]}, first_runs={name: self.first_runs[name]})
 
     # --- the grid's numbers -------------------------------------------------------------------
 
@@ -285,6 +306,8 @@ class HosidfResult:
                 "significant_cells_per_harmonic": self.significant.sum(axis=(0, 1)),
                 "noise_bound": NOISE_BOUND,
             }
+            if len(self.outputs) > 1:
+                summary["outputs"] = [self.output(name).output_summary() for name in self.outputs]
         if self.sweep is not None:
             s = self.sweep
             summary["sweep"] = {
@@ -294,6 +317,12 @@ class HosidfResult:
             }
         return json_safe(summary)
 
+    def output_summary(self) -> dict:
+        """One output's numbers in the ``--json`` summary of several outputs: ``output``,
+        ``significant_cells_per_harmonic``, and ``H1`` (per frequency and amplitude, ``[re, im]``)."""
+        return {"output": self.outputs[0], "significant_cells_per_harmonic": self.significant.sum(axis=(0, 1)),
+                "H1": np.stack([self.H[:, :, 1].real, self.H[:, :, 1].imag], axis=-1)}
+
     def _figures(self) -> list[tuple[str, object]]:
         from nlsid.report import hosidf_plots
         from nlsid.report.units import Units
@@ -302,13 +331,26 @@ class HosidfResult:
         if self.grid is None:
             names = ("sweep_harmonics.png", "sweep_spectrum.png", "sweep_hosidf.png", "sweep_performance.png")
             return list(zip(names, hosidf_plots.sweep_figure_list(self.sweep, units, self.input_signal)))
+        if len(self.outputs) > 1:
+            return [(name.replace(".png", f"_{output}.png"), figure) for output in self.outputs
+                    for name, figure in self.output(output)._output_figures(units, named=True)]
+        return self._output_figures(units)
+
+    def _output_figures(self, units, named: bool = False) -> list[tuple[str, object]]:
+        """The grid figures of the first output (``named``: its name in the titles)."""
+        from nlsid.report import hosidf_plots
+
+        output = self.outputs[0]
+        title = output if named else None
         out = [(f"hosidf_vs_amplitude_f{fi:03d}.png",
-                hosidf_plots.versus_amplitude_figure(self.grid, fi, units, self.input_signal))
+                hosidf_plots.versus_amplitude_figure(self.grid, fi, units, self.input_signal, output, title))
                for fi in range(self.grid.frequencies.size)]
         out.append(("hosidf_h1_map.png",
-                    hosidf_plots.first_hosidf_figure(self.grid, units, self.analytic, self.input_signal)))
+                    hosidf_plots.first_hosidf_figure(self.grid, units, self.analytic, self.input_signal, output,
+                                                     title)))
         y_periods, spectra, fs = self.first_run
-        out.append((f"spectrum_{spectra.run_id}.png", hosidf_plots.run_spectrum_figure(y_periods, spectra, fs, units)))
+        out.append((f"spectrum_{spectra.run_id}.png",
+                    hosidf_plots.run_spectrum_figure(y_periods, spectra, fs, units, output, title)))
         return out
 
     def figures(self) -> dict[str, bytes]:
@@ -343,15 +385,17 @@ class HosidfResult:
         record = (provenance if provenance is not None
                   else make_provenance(config_paths=self.configs, input_paths=self.inputs))
         return write_hosidf(path, self.harmonics, self.input_signal, record, grid=self.grid, analytic=self.analytic,
-                            sweep=self.sweep, force=force, units=self.units)
+                            sweep=self.sweep, force=force, units=self.units,
+                            output_grids=self.grids if len(self.outputs) > 1 else None)
 
     def __repr__(self) -> str:
         if self.grid is None:
             return (f"HosidfResult(sweep of {self.sweep.parameter} over {len(self.sweep.points)} values, "
                     f"optimum={self.sweep.optimum:g}, harmonics={self.harmonics}, source={self.source!r})")
+        outputs = f", outputs={list(self.outputs)}" if len(self.outputs) > 1 else ""
         return (f"HosidfResult({len(self.grid.cells)} cells: {self.grid.frequencies.size} frequencies x "
-                f"{self.grid.levels.size} amplitudes, harmonics={self.harmonics}, input_signal={self.input_signal!r}, "
-                f"source={self.source!r})")
+                f"{self.grid.levels.size} amplitudes, harmonics={self.harmonics}, input_signal={self.input_signal!r}"
+                f"{outputs}, source={self.source!r})")
 
     def _repr_html_(self) -> str:
         from html import escape
@@ -366,6 +410,13 @@ class HosidfResult:
                     f"({s.frequency:g} Hz, amplitude {s.level:g}): optimum {s.optimum:g}, time-domain optimum "
                     f"{s.time_optimum:g}</p><table><tr><th>{escape(s.parameter)}</th><th>f_c (Eq. 5)</th>"
                     f"<th>f (Eq. 4)</th><th>error (Eq. 7)</th></tr>{rows}</table>{notes}")
+        if len(self.outputs) > 1:
+            return "".join(self.output(name)._grid_html(f" to output {escape(name)}") for name in self.outputs) + notes
+        return self._grid_html("") + notes
+
+    def _grid_html(self, to: str) -> str:
+        from html import escape
+
         shown = range(1, min(self.harmonics, 3) + 1)
         significant, h, counts = self.significant, self.H, self.n_repeats
         periods = self.n_periods
@@ -376,9 +427,9 @@ class HosidfResult:
             rows.append(f"<tr><td>{self.frequencies[fi]:g}</td><td>{self.levels[ai]:g}</td>"
                         f"<td>{counts[fi, ai]} x {periods[fi, ai]}</td>{cells}<td>{marks}</td></tr>")
         heads = "".join(f"<th>|H_{k}|</th>" for k in shown)
-        return (f"<p><b>HOSIDFs</b> of {escape(self.source)}: {len(self.grid.cells)} cells, k = 0..{self.harmonics}, "
-                f"normalised by {self.input_signal}</p><table><tr><th>Hz</th><th>amplitude</th><th>R x P</th>"
-                f"{heads}<th>significant k</th></tr>{''.join(rows)}</table>{notes}")
+        return (f"<p><b>HOSIDFs</b> of {escape(self.source)}{to}: {len(self.grid.cells)} cells, "
+                f"k = 0..{self.harmonics}, normalised by {self.input_signal}</p><table><tr><th>Hz</th>"
+                f"<th>amplitude</th><th>R x P</th>{heads}<th>significant k</th></tr>{''.join(rows)}</table>")
 
 
 def _sine_runs(runs: Iterable[Run], units: list, skipped: list, on_run: Callable | None) -> Iterator[Run]:
@@ -412,9 +463,19 @@ def _model_branches(model, fs: float) -> list:
     return branches_from_data(data, fs)
 
 
+def _one_output_only(first: Run, source: str, parameter: str | None, model) -> None:
+    """The sweep and the analytic HOSIDFs are of one output: refused on runs of several."""
+    if len(first.outputs) < 2 or (parameter is None and model is None):
+        return
+    what = ("the linearity cost (sweep, --sweep) is that of one output tracking its reference" if parameter is not None
+            else "a model's analytic HOSIDFs (model, --model) are those of one output")
+    raise InputError(f"{source}:/runs/{first.run_id}", f"has outputs {', '.join(first.outputs)}: {what}; without it, "
+                                                       "the HOSIDFs of every output are measured")
+
+
 def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, choice: str, parameter: str | None,
              model, on_run: Callable | None) -> HosidfResult:
-    from nlsid.analysis.hosidf import measured_hosidf, run_spectra
+    from nlsid.analysis.hosidf import measured_hosidfs, output_periods, output_spectra
     from nlsid.analysis.linearity_cost import sweep as linearity_sweep
     from nlsid.feeds import hosidf_input, no_sine_runs
     from nlsid.io.units import common_units
@@ -424,15 +485,19 @@ def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, ch
     first = next(sines, None)
     if first is None:
         raise no_sine_runs(source)
+    _one_output_only(first, source, parameter, model)
     signal = hosidf_input(first, choice)
     sines = itertools.chain([first], sines)
     grid = analytic = result = first_run = None
+    outputs, grids, first_runs = tuple(first.outputs), {}, {}
     if parameter is None:
         branches = None
         if model is not None:
             branches = _model_branches(model, first.fs)
-        grid = measured_hosidf(sines, harmonics, variance, signal, source)
-        first_run = (first.periods("y"), run_spectra(first, harmonics, signal, source), first.fs)
+        grids = measured_hosidfs(sines, harmonics, variance, signal, source, outputs)
+        spectra = output_spectra(first, harmonics, signal, source, outputs)
+        first_runs = {name: (output_periods(first, name), spectra[name], first.fs) for name in outputs}
+        grid, first_run = grids[outputs[0]], first_runs[outputs[0]]
         if branches is not None:
             analytic = _analytic(branches, grid)
     else:
@@ -444,7 +509,7 @@ def _analyse(runs: Iterable[Run], source: str, harmonics: int, variance: str, ch
     return HosidfResult(harmonics, signal, common_units(units_seen), source, grid=grid, sweep=result,
                         analytic=analytic, warnings=warnings,
                         configs=[str(model)] if isinstance(model, (str, os.PathLike)) else [],
-                        first_run=first_run)
+                        first_run=first_run, outputs=outputs, grids=grids, first_runs=first_runs)
 
 
 def hosidf(recording: Recording | str | os.PathLike, harmonics: int = 5, variance: str = "both", input: str = "auto",

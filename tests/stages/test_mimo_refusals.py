@@ -12,7 +12,6 @@ import pytest
 import yaml
 
 import nlsid
-from nlsid.io.run import Run
 
 MODEL = {"model": {"type": "mass_spring_damper", "mass": 2.0, "damping": 20.0, "stiffness": 2000.0}}
 
@@ -47,21 +46,3 @@ def test_each_stage_refuses_in_one_line_as_info_says(run_cli, tmp_path, files):
         assert not verdict["feeds"] and verdict["reason"] in result.stderr, (stage, verdict)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["exc.h5", "model.yaml", "rec.h5"]  # nothing written
 
-
-def test_hosidf_refuses_sines_with_several_outputs_as_info_says(run_cli, tmp_path):
-    """Single-sine runs with a second output: the HOSIDFs of u to y alone would drop y2 unsaid."""
-    fs, period = 100.0, 64
-    t = np.arange(3 * period) / fs
-    runs = []
-    for i, amplitude in enumerate((0.5, 1.0)):
-        u = amplitude * np.cos(2 * np.pi * 5 * fs / period * t)
-        runs.append(Run(f"s{i}", fs, "sine", u, y=u + 0.1 * u**3, period=period, transient_periods=1,
-                        level=amplitude, frequency=5 * fs / period, channels={"y2": 2 * u},
-                        outputs=("y", "y2")))
-    path = nlsid.Recording(runs, {}, None).write(tmp_path / "sines.h5")
-    result = run_cli("hosidf", path, "-o", tmp_path / "h.h5")
-    result.assert_one_line_error(f"{path}:/runs/s0: has inputs u and outputs y, y2: the HOSIDFs of one input u and "
-                                 "one output y cannot use it without dropping the others")
-    verdict = run_cli("info", path, "--json").json()["stages"]["hosidf"]
-    assert not verdict["feeds"] and verdict["reason"] in result.stderr, verdict
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["sines.h5"]  # nothing written
