@@ -76,11 +76,14 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
     summaries = [level.summary() for level in levels]
     lpm_summaries = [level.summary() for level in lpm_levels]
     frm_summaries = [level.summary() for level in result.frm_levels]
+    frm_lpm_summaries = [level.summary() for level in result.frm_lpm_levels]
     if as_json:
         document = {"output": output, "figures": sorted(str(plot_dir / n) for n in figures),
                     "levels": summaries, "lpm_levels": lpm_summaries, "across_levels": across, "warnings": warnings}
         if frm_summaries:
             document["frm_levels"] = frm_summaries
+        if frm_lpm_summaries:
+            document["frm_lpm_levels"] = frm_lpm_summaries
         emit_json(document)
         return
     rms = _rms_header(result.units.get("u"))
@@ -92,6 +95,8 @@ def bla(recording: str, output: str, method: str, confidence: float, lpm_lines: 
         _print_lpm_table(output, lpm_summaries, rms, first=len(summaries))
     if frm_summaries:
         _print_frm_table(output, frm_summaries)
+    if frm_lpm_summaries:
+        _print_frm_lpm_table(output, frm_lpm_summaries, first=len(frm_summaries))
 
 
 FLAGS = {"method": "--method", "confidence": "--confidence", "lpm_lines": "--lpm-lines", "lpm_degree": "--lpm-degree"}
@@ -155,6 +160,24 @@ def _print_frm_table(output: str, summaries: list[dict]) -> None:
     settings().console.print(text_table(f"{output}: frequency response matrix per level (dB; variances relative to "
                                         "|G|^2)", ("FRM level", "level", "M x E x P", "entry", "|G| dB", "noise var",
                                                    "total var"), rows))
+
+
+def _print_frm_lpm_table(output: str, summaries: list[dict], first: int) -> None:
+    """The frequency response matrix of arbitrary runs by the LPM, numbered after the ``first``
+    multisine FRM levels: one row per level and entry, band means in dB; the variance is noise and
+    nonlinear distortion together."""
+    rows = []
+    for index, row in enumerate(summaries, start=first):
+        level = "-" if row["level"] is None else f"{row['level']:.3g}"
+        lo, hi = row["band_hz"]
+        for entry in row["entries"]:
+            rows.append([str(index), level, str(row["records"]), f"{lo:.4g}..{hi:.4g}",
+                         f"{entry['output']} <- {entry['input']}", _cell(entry["bla_db"]),
+                         _cell(entry["total_var_db"]), str(row["lpm"]["dof"])])
+    settings().console.print(text_table(f"{output}: FRM of arbitrary runs by the LPM (dB; variances relative "
+                                        "to |G|^2)",
+                                        ("FRM level", "level", "records", "band Hz", "entry", "|G| dB",
+                                         "noise+NL var (upper bound)", "dof"), rows))
 
 
 def _print_lpm_table(output: str, summaries: list[dict], rms: str, first: int) -> None:

@@ -182,11 +182,12 @@ def several_inputs_outputs(run: Run, where: str, reader: str = "a model of one i
 
 def check_mimo_run(run: Run, where: str) -> None:
     """A run with several inputs or outputs feeds the frequency response matrix when it is a
-    multisine with its outputs measured."""
-    if run.kind != "multisine":
+    multisine (orthogonal multisines) or an arbitrary run (the LPM for several inputs) with its
+    outputs measured."""
+    if run.kind not in ("multisine", "arbitrary"):
         raise InputError(where, f"a run with several inputs or outputs ({', '.join(run.inputs)} -> "
-                                f"{', '.join(run.outputs)}) must be a multisine for the frequency response "
-                                f"matrix, got kind {run.kind!r}")
+                                f"{', '.join(run.outputs)}) must be a multisine or an arbitrary run for the "
+                                f"frequency response matrix, got kind {run.kind!r}")
     run.output_matrix()  # no y: the run's own error
 
 

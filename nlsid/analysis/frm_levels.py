@@ -11,6 +11,13 @@ Rolain 2012, Eq. 6-117 and Section 6.1.1; ``docs/mimo.md``).
 The runs of a level must share their inputs and outputs (names, in order), sample rate, period,
 excited bins and number of steady-state periods, and every realization must hold as many
 experiments: anything else is one InputError naming the run and what differs.
+
+Arbitrary runs (kind ``arbitrary``: noise, sweeps, trajectories) with several inputs or outputs
+give the FRM by the Local Polynomial Method for several inputs instead
+(:func:`nlsid.analysis.lpm_mimo.lpm_mimo`, book Section 7.2; :class:`LpmFrmLevel`): the runs of a
+level are records that share G, each with its own transient, cut to the shortest. Its variances
+hold the noise and the stochastic nonlinear distortion together (the local model cannot tell them
+apart), so they bound the noise from above; every such level says so in its warnings.
 """
 
 from __future__ import annotations
@@ -20,7 +27,11 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from nlsid.analysis.arbitrary import BAND_DB
+from nlsid.analysis.confidence import Bounds
 from nlsid.analysis.frm import FrequencyResponseMatrix, frm
+from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
+from nlsid.analysis.lpm_mimo import MimoLPMResult, degrees_of_freedom, lpm_mimo, narrowest_half_width
 from nlsid.errors import InputError
 from nlsid.feeds import check_mimo_run
 from nlsid.io.run import Run
@@ -132,12 +143,24 @@ class MimoRuns:
         return self.exhausted and bool(self.runs) and self.others == 0
 
     def levels(self, confidence: float = 0.95, source: str = "recording") -> list[FrmLevel]:
-        """The FRM of each level of the runs set aside, sorted by level (a level of None first)."""
+        """The FRM of each level of the multisine runs set aside, sorted by level (a level of None first)."""
+        by_level = self._by_level("multisine")
+        return [level_frm(pairs, confidence, f"{source}: level {key}") for key, pairs in by_level.items()]
+
+    def lpm_levels(self, confidence: float = 0.95, source: str = "recording", half_width: int = DEFAULT_HALF_WIDTH,
+                   degree: int = DEFAULT_DEGREE) -> list["LpmFrmLevel"]:
+        """The FRM by the MIMO LPM of each level of the arbitrary runs set aside, sorted by level."""
+        by_level = self._by_level("arbitrary")
+        return [level_lpm(pairs, confidence, f"{source}: level {key} (arbitrary runs)", half_width, degree)
+                for key, pairs in by_level.items()]
+
+    def _by_level(self, kind: str) -> dict[float | None, list[tuple[Run, str]]]:
+        """The runs of one kind by level, in order of level (None first)."""
         by_level: dict[float | None, list[tuple[Run, str]]] = {}
         for run, where in self.runs:
-            by_level.setdefault(run.level, []).append((run, where))
-        keys = sorted(by_level, key=lambda level: (level is not None, level or 0.0))
-        return [level_frm(by_level[key], confidence, f"{source}: level {key}") for key in keys]
+            if run.kind == kind:
+                by_level.setdefault(run.level, []).append((run, where))
+        return {key: by_level[key] for key in sorted(by_level, key=lambda level: (level is not None, level or 0.0))}
 
 
 def level_frm(pairs: list[tuple[Run, str]], confidence: float, label: str) -> FrmLevel:
@@ -213,3 +236,157 @@ def _repeated(values: list[int]) -> int:
             return value
         seen.add(value)
     raise ValueError("no value is repeated")
+
+
+#: What every level whose FRM is by the LPM says: its variances are not a noise level.
+NOT_SEPARABLE = ("the Local Polynomial Method cannot separate the nonlinear distortion from the noise: the "
+                 "variances and bounds hold both (an upper bound of the noise); periodic orthogonal multisines "
+                 "with P >= 2 periods separate them")
+
+
+@dataclass
+class LpmFrmLevel:
+    """The FRM of the arbitrary runs with several inputs or outputs of one level, by the MIMO LPM.
+
+    Attributes
+    ----------
+    level : float or None
+        The runs' level attribute (None when they carry none).
+    inputs, outputs : tuple of str
+        The names of the inputs (columns of G) and outputs (rows of G).
+    run_ids : list of str
+        The records, in order.
+    units : dict
+        The unit of each input and output the runs record alike.
+    u_rms : list of float
+        The rms of each input about its mean, over the records.
+    result : MimoLPMResult
+        The LPM at every line 1 .. floor((N-1)/2).
+    band : numpy.ndarray
+        Indices into ``result.lines`` of the reported lines: where every input's power, smoothed
+        over the window, is within ``BAND_DB`` of its largest and G is finite.
+    excited : numpy.ndarray
+        Indices into ``result.lines`` of the band's lines where every input carries power itself;
+        the summary's band means are over these.
+    confidence : float
+        Probability of the bounds.
+    warnings : list of str
+        Always :data:`NOT_SEPARABLE`; a widened window, records cut to the shortest, an unused
+        reference.
+    """
+
+    level: float | None
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    run_ids: list[str]
+    units: dict[str, str]
+    u_rms: list[float]
+    result: MimoLPMResult
+    band: np.ndarray
+    excited: np.ndarray
+    confidence: float
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def bins(self) -> np.ndarray:
+        return self.result.lines[self.band]
+
+    @property
+    def frequency(self) -> np.ndarray:
+        return self.result.frequencies[self.band]
+
+    @property
+    def G(self) -> np.ndarray:
+        """G on the band, (F, n_y, n_u)."""
+        return self.result.G[self.band]
+
+    @property
+    def var_G(self) -> np.ndarray:
+        """The variance of each entry (noise plus stochastic nonlinear distortion), (F, n_y, n_u)."""
+        return self.result.var_G[self.band]
+
+    @property
+    def bounds(self) -> Bounds:
+        """Per entry, the circles of probability ``confidence`` with F(2, 2q), on the band."""
+        full = self.result.bounds(self.confidence)
+        return Bounds(*(getattr(full, name)[self.band] for name in ("radius", "mag_lo", "mag_hi", "phase_lo",
+                                                                     "phase_hi")))
+
+    def summary(self) -> dict:
+        """The level's scalars (``nlsid bla --json``, ``frm_lpm_levels``): counts, window, band, and
+        per entry (output i, input a) over the excited lines ``bla_db`` = mean 20 log10 |G_ia| and
+        ``total_var_db`` = 10 log10 of the mean of var / |G_ia|^2 (noise and nonlinear distortion
+        together: ``noise_floor`` is ``upper_bound``)."""
+        result, excited = self.result, self.excited
+        with np.errstate(divide="ignore", invalid="ignore"):
+            magnitude2 = np.abs(result.G[excited]) ** 2
+            variance = result.var_G[excited]
+            rows = [{"output": output, "input": name,
+                     "bla_db": _db(np.mean(10 * np.log10(magnitude2[:, i, a]))),
+                     "total_var_db": _db10(np.mean(variance[:, i, a] / magnitude2[:, i, a]))}
+                    for i, output in enumerate(self.outputs) for a, name in enumerate(self.inputs)]
+        return {
+            "level": self.level, "inputs": list(self.inputs), "outputs": list(self.outputs),
+            "records": result.n_records, "samples": result.n_samples, "method": "lpm",
+            "u_rms": [float(value) for value in self.u_rms],
+            "lpm": {"lines": 2 * result.half_width + 1, "degree": result.degree, "dof": result.dof},
+            "excited_lines": int(excited.size),
+            "band_hz": [float(self.frequency[0]), float(self.frequency[-1])],
+            "entries": rows, "noise_floor": "upper_bound",
+            "floor_source": "LPM residual: noise plus nonlinear distortion",
+            "warnings": list(self.warnings),
+        }
+
+
+def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_width: int = DEFAULT_HALF_WIDTH,
+              degree: int = DEFAULT_DEGREE) -> LpmFrmLevel:
+    """The FRM by the MIMO LPM of the arbitrary runs of one level (``label`` names it in messages).
+
+    The window is ``2 half_width + 1`` lines, widened (with a warning) to the narrowest that leaves
+    a degree of freedom where the level's inputs and records need more (:func:`narrowest_half_width`).
+    """
+    first = pairs[0][0]
+    for run, where in pairs[1:]:
+        for name, mine, theirs in (("inputs", tuple(run.inputs), tuple(first.inputs)),
+                                   ("outputs", tuple(run.outputs), tuple(first.outputs)), ("fs", run.fs, first.fs)):
+            if mine != theirs:
+                raise InputError(where, f"{name} {mine} differ from those of run {first.run_id} of the same level "
+                                        f"({theirs}): the records of one level share one system")
+    runs = [run for run, _ in pairs]
+    warnings = [NOT_SEPARABLE]
+    length = min(run.n_samples for run in runs)
+    if any(run.n_samples != length for run in runs):
+        warnings.append(f"records of different lengths: all cut to the shortest, {length} samples")
+    if any(run.r is not None for run in runs):
+        warnings.append("the runs' reference r is not used: the FRM is taken from the inputs as if they were "
+                        "noise-free")
+    n_inputs = len(first.inputs)
+    needed = narrowest_half_width(len(runs), n_inputs, degree)
+    if half_width < needed:
+        warnings.append(f"a window of {2 * half_width + 1} lines leaves "
+                        f"{degrees_of_freedom(len(runs), n_inputs, half_width, degree)} degrees of freedom with "
+                        f"{n_inputs} inputs and {len(runs)} record(s): widened to {2 * needed + 1} lines")
+        half_width = needed
+    u = np.stack([run.input_matrix()[:, :length] for run in runs])
+    y = np.stack([run.output_matrix()[:, :length] for run in runs])
+    try:
+        result = lpm_mimo(u, y, first.fs, half_width, degree)
+    except InputError as error:
+        raise InputError(label, f"{error.where}: {error.what}") from None
+    power = np.mean(np.abs(np.fft.rfft(u, axis=-1)[..., 1:result.lines.size + 1]) ** 2, axis=0)   # (n_u, K)
+    width = 2 * half_width + 1
+    smooth = np.array([np.convolve(p, np.ones(width) / width, mode="same") for p in power])
+    floor = smooth.max(axis=1, keepdims=True) * 10 ** (-BAND_DB / 10)
+    finite = np.all(np.isfinite(result.G), axis=(1, 2)) & np.all(np.isfinite(result.var_G), axis=(1, 2))
+    band = np.flatnonzero(np.all(smooth >= floor, axis=0) & finite)
+    if band.size == 0:
+        raise InputError(label, "no line carries power of every input: the records excite nothing the LPM can use")
+    excited = band[np.all(power[:, band] >= floor, axis=0)]
+    units = {name: first.units[name] for name in (*first.inputs, *first.outputs)
+             if name in first.units and all(run.units.get(name) == first.units[name] for run in runs)}
+    centred = u - u.mean(axis=-1, keepdims=True)
+    u_rms = np.sqrt(np.mean(centred ** 2, axis=(0, 2)))
+    return LpmFrmLevel(level=first.level, inputs=tuple(first.inputs), outputs=tuple(first.outputs),
+                       run_ids=[run.run_id for run in runs], units=units, u_rms=list(u_rms), result=result,
+                       band=band, excited=excited if excited.size else band, confidence=confidence,
+                       warnings=warnings)

@@ -42,8 +42,21 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
         bounds/, noise_bounds/   radius, mag_lo, mag_hi, phase_lo, phase_hi (F, n_y, n_u)
         detection/   (odd grids only) odd_bins, even_bins, odd_power, even_power, odd_noise, even_noise
 
-Version 1 files (no ``lpm_levels``) and version 2 files (no ``frm_levels``) are still read; a file
-without ``frm_levels`` is written as version 2.
+    /frm_lpm_levels/level_NN/   (version 4) one group per level of arbitrary runs with several inputs
+                            or outputs: the frequency response matrix by the Local Polynomial Method
+                            for several inputs (nlsid.analysis.frm_levels.LpmFrmLevel, docs/mimo.md)
+        attrs   level (NaN when none), fs, n_samples, n_records, method ("lpm"), half_width, degree,
+                dof, confidence, inputs, outputs, run_ids (JSON: the records), units (JSON),
+                u_rms (per input), warnings (JSON), summary (JSON, see LpmFrmLevel.summary)
+        bins (F,) int64      DFT bins k of the records' length (frequency k fs / n_samples)
+        frequency (F,)       Hz
+        G (F, n_y, n_u, 2), var_G (F, n_y, n_u), cov_G (F, n_y n_u, n_y n_u, 2) vec(G) column-stacked,
+        cov_v (F, n_y, n_y, 2) the outputs' disturbance covariance, transient (M, F, n_y, 2)
+        bounds/      radius, mag_lo, mag_hi, phase_lo, phase_hi (F, n_y, n_u)
+
+Version 1 files (no ``lpm_levels``), version 2 files (no ``frm_levels``) and version 3 files (no
+``frm_lpm_levels``) are still read; a file is written with the lowest version that holds its
+content: 2 without either FRM group, 3 with ``frm_levels`` alone, 4 with ``frm_lpm_levels``.
 
 Meaning and units of each dataset: ``docs/formats.md`` (drafted in ``docs/drafts/bla.md``).
 """
@@ -64,7 +77,8 @@ from nlsid.io.result_file import create_result, datasets, json_safe, open_result
 FORMAT = "bla"
 FORMAT_VERSION = 2
 FRM_FORMAT_VERSION = 3  # written when the file holds frm_levels
-READ_VERSIONS = (1, 2, 3)
+FRM_LPM_FORMAT_VERSION = 4  # written when the file holds frm_lpm_levels
+READ_VERSIONS = (1, 2, 3, 4)
 _BOUNDS = ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")
 _ROBUST = ("G", "var_total", "var_noise", "var_nl", "var_noise_period", "var_ys", "var_input_nl")
 _FAST = ("G", "var_noise", "var_total", "var_nl", "var_nl_even")
@@ -78,11 +92,13 @@ def _put_bounds(group: h5py.Group, bounds) -> None:
 
 
 def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: float, warnings: list[str],
-              across: dict, force: bool = False, lpm_levels=(), units: dict | None = None, frm_levels=()) -> Path:
+              across: dict, force: bool = False, lpm_levels=(), units: dict | None = None, frm_levels=(),
+              frm_lpm_levels=()) -> Path:
     """Write the :class:`~nlsid.analysis.levels.LevelResult` list, the
-    :class:`~nlsid.analysis.arbitrary.LPMLevel` list and the
-    :class:`~nlsid.analysis.frm_levels.FrmLevel` list atomically in the layout above."""
-    version = FRM_FORMAT_VERSION if frm_levels else FORMAT_VERSION
+    :class:`~nlsid.analysis.arbitrary.LPMLevel` list, the
+    :class:`~nlsid.analysis.frm_levels.FrmLevel` list and the
+    :class:`~nlsid.analysis.frm_levels.LpmFrmLevel` list atomically in the layout above."""
+    version = FRM_LPM_FORMAT_VERSION if frm_lpm_levels else FRM_FORMAT_VERSION if frm_levels else FORMAT_VERSION
     with create_result(path, FORMAT, version, provenance, force) as handle:
         handle.attrs["confidence"] = float(probability)
         handle.attrs["units"] = json.dumps(units or {}, sort_keys=True)
@@ -99,7 +115,32 @@ def write_bla(path: str | os.PathLike, levels, provenance: dict, probability: fl
             frm_root = handle.create_group("frm_levels")
             for index, level in enumerate(frm_levels):
                 _write_frm_level(frm_root.create_group(f"level_{index:02d}"), level)
+        if frm_lpm_levels:
+            frm_lpm_root = handle.create_group("frm_lpm_levels")
+            for index, level in enumerate(frm_lpm_levels):
+                _write_frm_lpm_level(frm_lpm_root.create_group(f"level_{index:02d}"), level)
     return Path(path)
+
+
+def _write_frm_lpm_level(group: h5py.Group, level) -> None:
+    result = level.result
+    group.attrs.update({
+        "level": float("nan") if level.level is None else float(level.level),
+        "fs": float(result.fs), "n_samples": int(result.n_samples), "n_records": int(result.n_records),
+        "method": "lpm", "half_width": int(result.half_width), "degree": int(result.degree), "dof": int(result.dof),
+        "confidence": float(level.confidence), "inputs": json.dumps(list(level.inputs)),
+        "outputs": json.dumps(list(level.outputs)), "run_ids": json.dumps(level.run_ids),
+        "units": json.dumps(level.units, sort_keys=True), "u_rms": np.asarray(level.u_rms, dtype=float),
+        "warnings": json.dumps(level.warnings), "summary": json.dumps(json_safe(level.summary()), sort_keys=True),
+    })
+    put(group, "bins", level.bins.astype(np.int64))
+    put(group, "frequency", level.frequency)
+    put(group, "G", level.G)
+    put(group, "var_G", level.var_G)
+    put(group, "cov_G", result.cov_G[level.band])
+    put(group, "cov_v", result.cov_v[level.band])
+    put(group, "transient", result.transient[:, level.band])
+    _put_bounds(group.create_group("bounds"), level.bounds)
 
 
 def _write_frm_level(group: h5py.Group, level) -> None:
@@ -191,7 +232,8 @@ def read_bla(path: str | os.PathLike) -> dict:
     "robust": {...}, "fast": {...} or None, "lines": {...}}, ...], "lpm_levels": [{"attrs": {...},
     "bins", "frequency", "G", "var_G", ...}, ...], "frm_levels": [{"attrs": {...}, "excited_bins",
     "frequency", "G", "std_noise", ..., "bounds": {...}, "noise_bounds": {...}, "detection": {...}
-    or None}, ...]}``; JSON attributes are parsed.
+    or None}, ...], "frm_lpm_levels": [{"attrs": {...}, "bins", "frequency", "G", "var_G", "cov_G",
+    "cov_v", "transient", "bounds": {...}}, ...]}``; JSON attributes are parsed.
     """
     with open_result(path, FORMAT, READ_VERSIONS, "nlsid bla") as handle:
         attrs = {key: _attr(key, value) for key, value in handle.attrs.items()}
@@ -233,7 +275,17 @@ def read_bla(path: str | os.PathLike) -> dict:
                                **{sub: datasets(group[sub], f"{where}/{sub}") for sub in ("bounds", "noise_bounds")},
                                "detection": datasets(group["detection"], f"{where}/detection")
                                if "detection" in group else None})
-    return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels, "frm_levels": frm_levels}
+        frm_lpm_levels = []
+        for name in sorted(handle["frm_lpm_levels"]) if "frm_lpm_levels" in handle else []:
+            group, where = handle["frm_lpm_levels"][name], f"{path}:/frm_lpm_levels/{name}"
+            for required in ("bins", "frequency", "G", "var_G", "bounds"):
+                if required not in group:
+                    raise InputError(f"{where}/{required}", "missing")
+            frm_lpm_levels.append({"name": name,
+                                   "attrs": {key: _attr(key, value) for key, value in group.attrs.items()},
+                                   **datasets(group, where), "bounds": datasets(group["bounds"], f"{where}/bounds")})
+    return {"attrs": attrs, "levels": levels, "lpm_levels": lpm_levels, "frm_levels": frm_levels,
+            "frm_lpm_levels": frm_lpm_levels}
 
 
 def read_units(path: str | os.PathLike) -> dict[str, str]:

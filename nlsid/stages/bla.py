@@ -15,7 +15,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from nlsid.analysis.arbitrary import LPMLevel
-from nlsid.analysis.frm_levels import FrmLevel
+from nlsid.analysis.frm_levels import FrmLevel, LpmFrmLevel
 from nlsid.analysis.levels import LevelResult
 from nlsid.errors import InputError
 from nlsid.stages.recording import Recording
@@ -62,6 +62,10 @@ class BlaResult:
     frm_levels : list of FrmLevel
         Levels of runs with several inputs or outputs: the frequency response matrix ``.frm``
         (:mod:`nlsid.analysis.frm_levels`, ``docs/mimo.md``); empty for a single-input recording.
+    frm_lpm_levels : list of LpmFrmLevel
+        Levels of arbitrary runs with several inputs or outputs: the frequency response matrix by
+        the Local Polynomial Method for several inputs (``.G``, ``.var_G``, ``.bounds``, ``.result``;
+        ``docs/mimo.md``); empty for a single-input recording.
     confidence : float
         Probability of the confidence bounds.
     source : str
@@ -104,6 +108,7 @@ class BlaResult:
     source: str
     inputs: list[str] = field(default_factory=list)
     frm_levels: list[FrmLevel] = field(default_factory=list)
+    frm_lpm_levels: list[LpmFrmLevel] = field(default_factory=list)
 
     @property
     def frequency(self) -> np.ndarray:
@@ -134,6 +139,8 @@ class BlaResult:
         names = self.level_names()
         lpm = [(names[len(self.levels) + i] + " (arbitrary runs)", level) for i, level in enumerate(self.lpm_levels)]
         frm = [(f"frequency response matrix level {i}", level) for i, level in enumerate(self.frm_levels)]
+        frm += [(f"frequency response matrix level {i} (arbitrary runs)", level)
+                for i, level in enumerate(self.frm_lpm_levels, start=len(self.frm_levels))]
         return self.warnings + [f"{name}: {w}" for name, level in [*zip(names, self.levels), *lpm, *frm]
                                 for w in level.warnings]
 
@@ -145,6 +152,8 @@ class BlaResult:
                "across_levels": self.across_levels, "warnings": self.warnings}
         if self.frm_levels:
             out["frm_levels"] = [level.summary() for level in self.frm_levels]
+        if self.frm_lpm_levels:
+            out["frm_lpm_levels"] = [level.summary() for level in self.frm_lpm_levels]
         return out
 
     def figures(self) -> dict[str, bytes]:
@@ -170,7 +179,8 @@ class BlaResult:
         check_writable(str(path), force)
         record = provenance if provenance is not None else make_provenance(input_paths=self.inputs)
         write_bla(path, self.levels, record, self.confidence, self.warnings, self.across_levels, force=force,
-                  lpm_levels=self.lpm_levels, units=self.units, frm_levels=self.frm_levels)
+                  lpm_levels=self.lpm_levels, units=self.units, frm_levels=self.frm_levels,
+                  frm_lpm_levels=self.frm_lpm_levels)
         return Path(path)
 
     def _repr_html_(self) -> str:
@@ -215,7 +225,9 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     period-to-period scatter and the nonlinear variance from the realization-to-realization
     scatter, var_NL = M var_total - var_noise (Pintelon and Schoukens 2012, Sec. 3.4; book
     Sec. 6.1.1); the fast method uses the detection lines of one random grid (book Sec. 6.1.2).
-    Arbitrary runs get the Local Polynomial Method (book Sec. 3.7).
+    Arbitrary runs get the Local Polynomial Method (book Sec. 3.7). Runs with several inputs or
+    outputs give the frequency response matrix per level: orthogonal multisines by (6-117), arbitrary
+    runs by the LPM for several inputs (book Sec. 7.2; ``docs/mimo.md``).
 
     Parameters
     ----------
@@ -226,7 +238,8 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     confidence : float
         Probability of the confidence bounds on |G_BLA| and its phase, in (0, 1).
     lpm_lines, lpm_degree : int
-        Local Polynomial Method window (odd number of lines) and polynomial degree.
+        Local Polynomial Method window (odd number of lines) and polynomial degree. With several
+        inputs the window is widened, with a warning, where it leaves no degree of freedom.
     mapping : dict, optional
         Signals of a foreign MCAP log (``read``).
     on_run : callable, optional
@@ -313,4 +326,5 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
         with open_recording(recording, require_y=True, mapping=dict(mapping) if mapping else None) as rec:
             return bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=on_run)
     return BlaResult(levels, lpm_levels, warnings, across_levels(levels), common_units(units_seen), confidence,
-                     source, inputs, mimo.levels(confidence, source))
+                     source, inputs, mimo.levels(confidence, source),
+                     mimo.lpm_levels(confidence, source, lpm_lines // 2, lpm_degree))

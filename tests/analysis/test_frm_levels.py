@@ -108,13 +108,15 @@ def test_fewer_experiments_than_inputs_is_refused():
 
 
 def test_a_run_that_is_no_multisine_is_refused_in_one_line(run_cli, tmp_path):
+    """A sine with several inputs: neither orthogonal multisines nor an arbitrary record."""
     recording = measured(design(inputs=2), FILTERS_2X2, 2)
     first = recording.runs[0]
-    recording.runs[0] = dataclasses.replace(first, kind="arbitrary", period=None, transient_periods=0,
-                                            excited_bins=None, realization=None, experiment=None)
+    recording.runs[0] = dataclasses.replace(first, kind="sine", frequency=FS / N, excited_bins=None,
+                                            realization=None, experiment=None)
     path = recording.write(tmp_path / "rec.h5")
     result = run_cli("bla", path, "-o", tmp_path / "bla.h5")
-    result.assert_one_line_error("rec.h5:/runs/ms_l00_m00_e00", "must be a multisine for the frequency response matrix")
+    result.assert_one_line_error("rec.h5:/runs/ms_l00_m00_e00",
+                                 "must be a multisine or an arbitrary run for the frequency response matrix")
     assert not (tmp_path / "bla.h5").exists()
     verdict = run_cli("info", path, "--json").json()["stages"]["bla"]  # info says what bla says
     assert not verdict["feeds"] and verdict["reason"] in result.stderr
