@@ -36,6 +36,10 @@ distortion is largest:
 - Without detection lines and with a noise level, a nonlinear variance is "not measurable" only
   for M = 1 or P = 1 (:func:`~nlsid.analysis.bla.nonlinear_variance_missing`); with M >= 2 and
   P >= 2 a band mean below zero means no distortion above the noise.
+
+The frequency response matrix levels of runs with several inputs or outputs (``frm_levels``) are
+drawn by :mod:`nlsid.report.render_frm`: on a page of their own when the file holds nothing else,
+else after the levels of this page.
 """
 
 from __future__ import annotations
@@ -364,9 +368,13 @@ def render_bla(path: Path) -> Page:
 
     data = read_bla(path)
     if not data["levels"] and not data["lpm_levels"]:
+        if data["frm_levels"]:
+            from nlsid.report.render_frm import render_frm
+
+            return render_frm(path, data)
         raise InputError(f"{path}:/levels", "holds no level")
     if not data["levels"]:
-        return _lpm_page(path, data)
+        return _with_frm(_lpm_page(path, data), data)
     levels = [_level(stored, f"{path}:/levels/{stored['name']}") for stored in data["levels"]]
     summaries = [stored["attrs"]["summary"] for stored in data["levels"]]
     across = data["attrs"]["across_levels"]
@@ -388,14 +396,31 @@ def render_bla(path: Path) -> Page:
     warnings = list(data["attrs"]["warnings"]) + [f"{_name(s, i, units)}: {w}" for i, s in enumerate(summaries)
                                                   for w in s["warnings"]]
     lpm_figures, lpm_tables, lpm_warnings = _lpm_parts(data, probability, units)
-    return Page(
+    return _with_frm(Page(
         kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
         headline=headline, findings=findings, figures=_figures(levels, summaries, probability, units) + lpm_figures,
         tables=_tables(summaries, across, probability, units) + lpm_tables, warnings=warnings + lpm_warnings,
         provenance=data["attrs"]["provenance"], note=units.missing_note("u", "y"),
         numbers={"levels": summaries, "across_levels": across, "confidence": probability,
                  "detected_threshold_db": DETECTED_DB, "units": units.known,
-                 "lpm_levels": [stored["attrs"]["summary"] for stored in data["lpm_levels"]]})
+                 "lpm_levels": [stored["attrs"]["summary"] for stored in data["lpm_levels"]]}), data)
+
+
+def _with_frm(page: Page, data: dict) -> Page:
+    """``page`` with the frequency response matrix levels of ``data`` added after its own
+    (:mod:`nlsid.report.render_frm`): their figures, tables, findings and warnings, and their
+    summaries as ``numbers["frm_levels"]``."""
+    if not data["frm_levels"]:
+        return page
+    from nlsid.report.render_frm import frm_parts
+
+    figures, tables, findings, warnings, summaries = frm_parts(data)
+    page.figures += figures
+    page.tables += tables
+    page.findings += findings
+    page.warnings += warnings
+    page.numbers["frm_levels"] = summaries
+    return page
 
 
 def lpm_headline(summary: dict, units: Units) -> str:
