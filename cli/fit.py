@@ -12,9 +12,10 @@ from .options import map_option, parse_map, split_options
 
 @click.command(cls=StageCommand)
 @click.argument("bla_file", required=False, type=click.Path(dir_okay=False))
-@click.option("--order", default=None, metavar="NB/NA|auto",
+@click.option("--order", default=None, metavar="NB/NA|N|auto",
               help="Numerator/denominator orders, or auto (scan and select). Required with BLA_FILE: there is no "
-                   "default order. N/N from 5 poles on is fitted by vector fitting, kept stable.")
+                   "default order. N/N from 5 poles on is fitted by vector fitting, kept stable. A level of several "
+                   "inputs or outputs (frm_levels) takes N, the states of a MIMO state space (docs/mimo.md).")
 @click.option("--domain", type=click.Choice(["s", "z"]), default="z", show_default=True,
               help="s: continuous model seen through the zero-order hold; z: discrete model at the BLA's fs.")
 @click.option("--delay", default="0", show_default=True, metavar="SAMPLES|auto", help="Dead time in samples, or auto (0..10).")
@@ -139,6 +140,9 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     from nlsid.io.provenance import provenance
     from nlsid.stages.fit import check_tf_options, cost_check, fit_tf
 
+    if _names_frm_level(bla_file, level):
+        _fit_frm(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
+        return
     check_tf_options(order, domain, delay, max_order, level, names=FLAGS)
     for path in (output, report_path(output)) + ((plot,) if plot else ()):
         check_writable(path, force)
@@ -159,6 +163,51 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     console.print(f"order: {result.report()['order_reason']}")
     for name, value, std in zip(fit_.names, fit_.values, fit_.std):
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")
+
+
+def _names_frm_level(bla_file, level) -> bool:
+    """Whether --level names a level of several inputs or outputs (frm_levels) of the file; a file
+    that cannot be read is left to the transfer-function fit, which reports it as before. In a file
+    with frm_levels, a --level out of range or missing is refused here, counting every level."""
+    from nlsid.io.bla_file import read_bla
+    from nlsid.stages.frm_fit import frm_level
+
+    try:
+        content = read_bla(bla_file)
+    except (InputError, OSError):
+        return False
+    return frm_level(content, level, str(bla_file)) is not None
+
+
+def _fit_frm(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
+    """A MIMO state-space model fitted to an FRM level (docs/mimo.md, "The fit")."""
+    from nlsid.io.atomic import check_writable
+    from nlsid.io.fit_file import report_path
+    from nlsid.io.provenance import provenance
+    from nlsid.stages.frm_fit import cost_words, fit_frm_level, parse_order
+
+    parse_order(order, "--order")
+    if str(delay) != "0":
+        raise InputError("--delay", "a state-space model of several inputs or outputs has no dead time here: leave "
+                                    "--delay at 0")
+    if plot:
+        raise InputError("--plot", "no figure of a fit of several inputs or outputs yet: leave --plot out")
+    for path in (output, report_path(output)):
+        check_writable(path, force)
+    result = fit_frm_level(bla_file, order, domain, level, max_order, names=FLAGS)
+    result.write(output, force=force, provenance=provenance(input_paths=[bla_file]))
+    console = settings().console
+    for warning in result.warnings:
+        console.print(f"warning: {warning}", markup=False)
+    if as_json:
+        emit_json({"output": output, "report": str(report_path(output)), **result.summary()})
+        return
+    fit_ = result.fitted.fit
+    console.print(f"{output}: {fit_.order}-state {domain}-domain state space, {len(result.outputs)} outputs x "
+                  f"{len(result.inputs)} inputs, fitted to level {result.level['index']}, cost {fit_.cost:.5g}, "
+                  f"{cost_words(result.fitted)} over {result.lines} lines", markup=False)
+    console.print(f"order: {result.fitted.reason}", markup=False)
+    console.print("poles: " + ", ".join(f"{p:.5g}" for p in fit_.poles), markup=False)
 
 
 def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on, jacobian,

@@ -98,6 +98,8 @@ class FrmData:
         M realizations); None when the covariance is known (exact), or for unit weights.
     weights : str
         What the covariance is, in words (for the report).
+    diagonal : bool
+        The covariance is diagonal, each entry's variance estimated on its own (:attr:`dimension`).
     """
 
     frequency: np.ndarray
@@ -106,6 +108,14 @@ class FrmData:
     fs: float
     dof: float | None = None
     weights: str = "covariance"
+    diagonal: bool = False
+
+    @property
+    def dimension(self) -> int:
+        """d, the size of the blocks the covariance is estimated in: m for a full covariance of
+        vec(G_k), 1 for a diagonal one (each entry's variance estimated on its own)."""
+        n_y, n_u = self.shape
+        return 1 if self.diagonal else n_y * n_u
 
     @property
     def lines(self) -> int:
@@ -507,8 +517,11 @@ class OrderFit:
                 "accepted": bool(self.accepted), "stable": self.stable, "start_cost": self.start_cost}
 
 
-def cost_statistics(lines: int, m: int, n_theta: int, dof: float | None) -> tuple[float, float, float]:
-    """E{V}, its std and the bound of a correct model's cost (module docstring)."""
+def cost_statistics(lines: int, m: int, n_theta: int, dof: float | None,
+                    dimension: int | None = None) -> tuple[float, float, float]:
+    """E{V}, its std and the bound of a correct model's cost (module docstring); ``dimension`` d:
+    the covariance is estimated in blocks of d entries (m, the default: full; 1: diagonal), each
+    block's term a Hotelling T^2 of dimension d."""
     from scipy.stats import chi2
     from scipy.stats import f as fisher
 
@@ -517,23 +530,24 @@ def cost_statistics(lines: int, m: int, n_theta: int, dof: float | None) -> tupl
         return math.nan, math.nan, math.nan
     if dof is None:
         return base, math.sqrt(base), float(chi2.ppf(ACCEPT_PROBABILITY, 2 * base) / 2)
-    n = float(dof)
-    if n - m <= 0:
+    n, d = float(dof), int(dimension or m)
+    if n - d <= 0:
         return math.inf, math.inf, math.inf
-    factor = m * n / (n - m + 1)
-    d1, d2 = 2 * m, 2 * (n - m + 1)
-    per_line_var = factor ** 2 * float(fisher.var(d1, d2)) if d2 > 4 else math.inf
-    mean = base * n / (n - m)
-    std = math.sqrt(base / m * per_line_var)
+    factor = d * n / (n - d + 1)
+    d1, d2 = 2 * d, 2 * (n - d + 1)
+    block_var = factor ** 2 * float(fisher.var(d1, d2)) if d2 > 4 else math.inf
+    mean = base * n / (n - d)
+    std = math.sqrt(base / d * block_var)
     return mean, std, mean + 3 * std
 
 
-def likelihood_ratio_bound(extra: int, m: int, dof: float | None) -> float:
+def likelihood_ratio_bound(extra: int, dimension: int, dof: float | None) -> float:
     """How much ``extra`` parameters fitting noise lower a correct model's cost, at most (probability
-    ACCEPT_PROBABILITY): (1/2) chi^2(extra), times n/(n - m) for covariances of n degrees of freedom."""
+    ACCEPT_PROBABILITY): (1/2) chi^2(extra), times n/(n - d) for covariances of n degrees of freedom
+    estimated in blocks of d entries."""
     from scipy.stats import chi2
 
-    scale = 1.0 if dof is None else (dof / (dof - m) if dof > m else math.inf)
+    scale = 1.0 if dof is None else (dof / (dof - dimension) if dof > dimension else math.inf)
     return float(chi2.ppf(ACCEPT_PROBABILITY, extra) / 2 * scale)
 
 
@@ -597,7 +611,7 @@ def fit_order(data: FrmData, order: int, domain: str = "z", hold: bool = True,
     r = residual(theta)
     A, B, C, D = shape.unpack(theta)
     poles, pole_std = modal_poles(shape, theta, jacobian(theta))
-    mean, std, bound = cost_statistics(data.lines, m, n_theta, data.dof)
+    mean, std, bound = cost_statistics(data.lines, m, n_theta, data.dof, data.dimension)
     return OrderFit(order, A, B, C, D, float(r @ r), mean, std, bound, n_theta, poles_stable(poles, domain), poles,
                     start_cost, int(solution.nfev), pole_std)
 
@@ -662,8 +676,9 @@ class MimoFit:
         return response(fit.A, fit.B, fit.C, fit.D, x, self.domain, self.hold, self.fs)
 
 
-def choose(scan: list[OrderFit], m: int, dof: float | None) -> tuple[OrderFit, str]:
-    """The order of the scan to take, and why (module docstring)."""
+def choose(scan: list[OrderFit], dimension: int, dof: float | None) -> tuple[OrderFit, str]:
+    """The order of the scan to take, and why (module docstring); ``dimension`` and ``dof`` of the
+    covariance (:func:`likelihood_ratio_bound`)."""
     stable = [r for r in scan if r.stable]
     passing = [r for r in stable if r.accepted]
     if passing:
@@ -676,13 +691,13 @@ def choose(scan: list[OrderFit], m: int, dof: float | None) -> tuple[OrderFit, s
                        f"{min(r.cost / r.cost_bound for r in lower):.3g} times its bound, or unstable")
         while True:
             better = [r for r in stable if r.order > best.order and best.cost - r.cost >
-                      likelihood_ratio_bound(r.parameters - best.parameters, m, dof)]
+                      likelihood_ratio_bound(r.parameters - best.parameters, dimension, dof)]
             if not better:
                 break
             step = better[0]
             reason += (f"; order {step.order} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower, "
                        f"more than its {step.parameters - best.parameters} extra parameters fitting noise would "
-                       f"lower it ({likelihood_ratio_bound(step.parameters - best.parameters, m, dof):.3g}, "
+                       f"lower it ({likelihood_ratio_bound(step.parameters - best.parameters, dimension, dof):.3g}, "
                        f"likelihood ratio at probability {ACCEPT_PROBABILITY})")
             best = step
         return best, reason
@@ -714,7 +729,6 @@ def fit_frm(data: FrmData, order: int | None = None, domain: str = "z", hold: bo
         raise InputError("domain", f"expected s or z, got {domain!r}")
     W = check_data(data)
     n_y, n_u = data.shape
-    m = n_y * n_u
     if order is not None:
         if not (isinstance(order, (int, np.integer)) and order >= 1):
             raise InputError("order", f"expected a whole number of states >= 1 or None (auto), got {order!r}")
@@ -737,7 +751,7 @@ def fit_frm(data: FrmData, order: int | None = None, domain: str = "z", hold: bo
                 stop = min(max_order, n + SCAN_PAST)
         if not scan:
             raise InputError("order", f"{data.lines} lines of a {n_y}x{n_u} FRM are too few for any order")
-        result, reason = choose(scan, m, data.dof)
+        result, reason = choose(scan, data.dimension, data.dof)
         if stop < max_order:
             reason += f"; scanned up to order {scan[-1].order} ({SCAN_PAST} past the first within its bound)"
     warnings = []

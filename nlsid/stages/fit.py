@@ -480,7 +480,13 @@ def fit_tf(b: BlaResult | str | os.PathLike, order=(2, 2), domain: str = "s", le
             from nlsid.fit.bla_source import frf_from_levels
             from nlsid.io.bla_file import read_bla, read_units
 
+            from nlsid.stages.frm_fit import frm_level
+
             content = read_bla(b)
+            if frm_level(content, level, str(b), option) is not None:
+                raise InputError(option, f"level {level or 0} of {b} has several inputs or outputs: fit its frequency "
+                                         "response matrix with nlsid.stages.frm_fit.fit_frm_level (nlsid fit "
+                                         "--order N|auto)")
             chosen = frf_from_levels(content["levels"], content["lpm_levels"], level, str(b), option)
             source, units, inputs = str(b), read_units(b), [str(b)]
             taken = _taken(content["levels"], content["lpm_levels"], level)

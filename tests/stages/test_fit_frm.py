@@ -1,0 +1,121 @@
+"""``nlsid fit`` on a bla.h5 level of several inputs and outputs (frm_levels): a MIMO state-space
+model (nlsid.stages.frm_fit). The bla.h5 is written here from an FRM computed in the test: a
+continuous 2x2 system of order 2 seen through the zero-order hold (scipy.signal.cont2discrete), M
+realizations with complex Gaussian noise of a known covariance, their mean and scatter covariance."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import yaml
+from scipy import signal
+from scipy.stats import chi2
+
+from nlsid.analysis.confidence import Bounds
+from nlsid.analysis.frm import FrequencyResponseMatrix
+from nlsid.analysis.frm_levels import FrmLevel
+from nlsid.io.bla_file import write_bla
+from nlsid.io.model_config import validate_simulate_config
+from nlsid.models.from_config import mimo_state_space
+
+FS, PERIOD, M = 100.0, 200, 12
+BINS = np.arange(1, 31)
+W0 = 2 * np.pi * 6.0
+A_TRUE = np.array([[0.0, 1.0], [-W0**2, -2 * 0.08 * W0]])
+B_TRUE = np.array([[0.0, 0.0], [1000.0, 400.0]])
+C_TRUE = np.array([[1.0, 0.0], [0.3, 0.002]])
+
+
+def zoh_frm(A, B, C, D, f) -> np.ndarray:
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), 1 / FS, "zoh")
+    z = np.exp(2j * np.pi * np.asarray(f) / FS)
+    return np.stack([Cd @ np.linalg.solve(zk * np.eye(A.shape[0]) - Ad, Bd) + Dd for zk in z])
+
+
+def write_frm_file(path, rng) -> tuple[np.ndarray, np.ndarray]:
+    """The bla.h5 of one FRM level; returns the truth and the covariance of the mean's vec(G)."""
+    f = BINS * FS / PERIOD
+    G0 = zoh_frm(A_TRUE, B_TRUE, C_TRUE, np.zeros((2, 2)), f)
+    F = f.size
+    L = 0.03 * np.mean(np.abs(G0)) * (np.eye(4) + 0.3 * np.tri(4, k=-1))   # one realization's noise factor
+    w = (rng.standard_normal((M, F, 4)) + 1j * rng.standard_normal((M, F, 4))) / np.sqrt(2)
+    e = np.einsum("ij,mfj->mfi", L, w)                                       # vec order: column-stacked
+    realizations = G0[None] + np.swapaxes(e.reshape(M, F, 2, 2), 2, 3)
+    G = realizations.mean(axis=0)
+    d = (realizations - G).transpose(0, 1, 3, 2).reshape(M, F, 4)
+    cov_total = np.einsum("mfa,mfb->fab", d, d.conj()) / (M * (M - 1))
+    nan = np.full((F, 2, 2), np.nan)
+    bounds = Bounds(nan, nan, nan, nan, nan)
+    result = FrequencyResponseMatrix(
+        bins=BINS, frequency=f, G=G, std_noise=nan, std_total=np.sqrt(np.abs(np.einsum("fii->fi", cov_total)))
+        .reshape(F, 2, 2).transpose(0, 2, 1), cov_noise=np.full((F, 4, 4), np.nan + 0j), cov_total=cov_total,
+        n_realizations=M, n_experiments=2, n_periods=1, confidence=0.95, bounds=bounds, noise_bounds=bounds)
+    level = FrmLevel(level=None, fs=FS, period=PERIOD, inputs=("u", "u2"), outputs=("y", "acc"),
+                     run_ids=[[f"r{m}e{e}" for e in range(2)] for m in range(M)], units={}, frm=result)
+    write_bla(path, [], {"tool": "test"}, 0.95, [], {}, frm_levels=[level])
+    return G0, (L @ L.conj().T) / M
+
+
+def test_fit_writes_a_mimo_state_space_of_the_frm(tmp_path, run_cli):
+    bla = tmp_path / "bla.h5"
+    G0, cov = write_frm_file(bla, np.random.default_rng(5))
+    out = tmp_path / "model.yaml"
+    result = run_cli("fit", bla, "--order", "auto", "--max-order", "3", "--domain", "s", "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = result.json()
+    assert summary["kind"] == "mimo_state_space" and summary["order"] == 2, summary["order_reason"]
+    assert summary["inputs"] == ["u", "u2"] and summary["outputs"] == ["y", "acc"]
+    assert summary["covariance_dof"] == M - 1 and summary["stable"] and summary["lines"] == BINS.size
+    # the cost against its expected value: (M-1)/(M-1-4) (F m - n_theta/2) for the 4 x 4 covariance of
+    # M = 12 realizations (complex Hotelling T^2), n_theta = 2 (2 + 2) + 4 = 12
+    expected = (M - 1) / (M - 5) * (BINS.size * 4 - 12 / 2)
+    assert abs(summary["expected_cost"] - expected) < 1e-9 * expected
+    assert summary["cost"] < summary["cost_bound"]
+    # the model config: the shared spec's shape, loaded by the schema and the model builder
+    config = yaml.safe_load(out.read_text())
+    model = config["model"]
+    assert set(model) == {"type", "A", "B", "C", "D", "domain", "inputs", "outputs"}
+    assert model["type"] == "mimo_state_space" and model["domain"] == "continuous"
+    A, B, C, D = (np.array(model[k], dtype=float) for k in "ABCD")
+    assert A.shape == (2, 2) and B.shape == (2, 2) and C.shape == (2, 2) and D.shape == (2, 2)
+    assert model["inputs"] == ["u", "u2"] and model["outputs"] == ["y", "acc"]
+    # its sampled response (scipy's ZOH) within the noise of the truth: (1/2) chi^2(n_theta) for an
+    # efficient estimator, with the variances estimated over 12 realizations (4 times the quantile)
+    e = (zoh_frm(A, B, C, D, BINS * FS / PERIOD) - G0).transpose(0, 2, 1).reshape(BINS.size, 4)
+    error = float(np.real(np.einsum("fi,ij,fj->", e.conj(), np.linalg.inv(cov), e)))
+    assert error < 4 * chi2.ppf(0.999, 12) / 2, error
+    loaded = mimo_state_space(validate_simulate_config(config, str(out), {}).model)
+    assert loaded.inputs == ("u", "u2") and loaded.outputs == ("y", "acc") and loaded.domain == "continuous"
+    Phi, Gamma = loaded.stepped(1 / FS)           # as nlsid simulate runs it: scipy's ZOH of the same matrices
+    Ad, Bd, _, _, _ = signal.cont2discrete((A, B, C, D), 1 / FS, "zoh")
+    assert np.allclose(Phi, Ad, atol=1e-12) and np.allclose(Gamma, Bd, rtol=1e-9, atol=1e-12)
+    report = json.loads((tmp_path / "model.fit.json").read_text())
+    assert report["nlsid_format"] == "fit" and report["kind"] == "mimo_state_space"
+    assert np.allclose(np.array(report["A"]), A) and report["order_scan"][1]["order"] == 2
+    assert sorted(np.round(np.hypot(*np.array(report["poles"]).T) / W0, 2)) == [1.0, 1.0]
+
+
+def test_fit_of_an_frm_level_refuses_what_it_cannot_do(tmp_path, run_cli):
+    bla = tmp_path / "bla.h5"
+    write_frm_file(bla, np.random.default_rng(6))
+    out = tmp_path / "model.yaml"
+    run_cli("fit", bla, "--order", "2/2", "-o", out).assert_one_line_error("--order", "number of states")
+    run_cli("fit", bla, "--order", "2", "--delay", "3", "-o", out).assert_one_line_error("--delay")
+    run_cli("fit", bla, "--order", "2", "--plot", tmp_path / "f.png", "-o", out).assert_one_line_error("--plot")
+    run_cli("fit", bla, "--order", "2", "--level", "1", "-o", out).assert_one_line_error("--level", "0..0")
+    assert not out.exists() and not (tmp_path / "model.fit.json").exists()
+
+
+def test_discrete_fit_states_its_rate(tmp_path, run_cli):
+    bla = tmp_path / "bla.h5"
+    write_frm_file(bla, np.random.default_rng(8))
+    out = tmp_path / "model.yaml"
+    result = run_cli("fit", bla, "--order", "2", "--domain", "z", "-o", out)
+    assert result.exit_code == 0, result.stderr
+    config = yaml.safe_load(out.read_text())
+    model = mimo_state_space(validate_simulate_config(config, str(out), {}).model)
+    assert model.domain == "discrete" and model.fs == FS
+    # the discrete poles are the continuous truth's mapped by z = exp(s / fs), within 1 % (noise 3 %)
+    true = np.exp(np.linalg.eigvals(A_TRUE) / FS)
+    assert np.allclose(np.sort_complex(model.poles()), np.sort_complex(true), atol=0.01)
