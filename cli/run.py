@@ -226,7 +226,7 @@ def check_steps(cli: click.Group, pipeline: str, root: Path, steps: list[Step]) 
                         raise InputError(where, f"input {one} does not exist (in {root}) and no earlier step writes it")
                     kind = CONFIG_PARAMETERS.get((step.args[0], param.name))
                     if kind is not None:
-                        _check_config(one, kind)
+                        _check_config(one, kind, step.args[0])
             written.update([step.output, *step.figures])
     finally:
         os.chdir(previous)
@@ -251,7 +251,7 @@ def _step_args(command: click.Command, step: Step) -> list[str]:
     return [*step.args[1:], *(["--force"] if has_force else [])]
 
 
-def _check_config(path: str, kind: str) -> None:
+def _check_config(path: str, kind: str, stage: str) -> None:
     from nlsid.io.config import load_config, load_yaml
 
     if kind == "design":
@@ -259,10 +259,12 @@ def _check_config(path: str, kind: str) -> None:
 
         load_config(path, DesignConfig)
     else:
-        from nlsid.io.model_config import validate_simulate_config
+        from nlsid.io.model_config import refuse_several_inputs_outputs, validate_simulate_config
 
         data, lines = load_yaml(path)
-        validate_simulate_config(data, path, lines)
+        config = validate_simulate_config(data, path, lines)
+        if stage != "simulate":  # the other stages take a model of one input and one output
+            refuse_several_inputs_outputs(config, path, f"nlsid {stage}")
 
 
 def stored_headline(step: Step) -> str | None:

@@ -18,6 +18,7 @@ from typing import Annotated, ClassVar, Literal, Optional, Union
 
 from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
+from nlsid.errors import InputError
 from nlsid.io import config as config_loader
 from nlsid.io.config import StrictModel
 
@@ -1014,6 +1015,18 @@ class SimulateConfig(FiniteModel):
     sweep: Optional[SweepConfig] = None
     simulation: SimulationConfig = SimulationConfig()
     free: dict[str, FreeParameterConfig] = {}  # dotted key path -> start and bounds (nlsid fit --model)
+
+
+def refuse_several_inputs_outputs(config: SimulateConfig, source: str, stage: str) -> None:
+    """Refuse a ``mimo_state_space`` model in ``stage`` (e.g. ``nlsid diagnose``), which takes a
+    model of one input u and one output y: one message at ``SOURCE: model.type``."""
+    model = config.model
+    if model.type != "mimo_state_space":
+        return
+    raise InputError(f"{source}: model.type", f"{stage} takes the models of one input u and one output y (a linear "
+                                              "one as state_space), not a mimo_state_space model (inputs "
+                                              f"{', '.join(model.input_names)}; outputs {', '.join(model.output_names)}); "
+                                              "nlsid simulate runs it (docs/mimo.md)")
 
 
 def validate_simulate_config(data, path, lines: dict) -> SimulateConfig:

@@ -38,6 +38,7 @@ _TITLES = {
     "nonlinear_feedback": "Nonlinear feedback around an LTI system",
     "equations": "Model written as equations",
     "pnlss": "Polynomial nonlinear state-space model (black box)",
+    "mimo_state_space": "State-space model of several inputs and outputs",
 }
 
 
@@ -249,6 +250,8 @@ def render_model(path: Path) -> Page:
         except InputError as exc:
             raise InputError(f"{path}: {exc.where}", exc.what) from None
         config = config.model_copy(update={"model": hybrid.physical})
+    if config.model.type == "mimo_state_space":
+        return _mimo_page(path, config, data)
     if config.model.type == "equations":
         try:
             model(config)  # the checks of nlsid simulate: open loop only, its expressions and names
@@ -322,6 +325,67 @@ def render_model(path: Path) -> Page:
     return _with_black_box(Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
                                 headline=headline, findings=findings, figures=figures, tables=tables,
                                 numbers=numbers), hybrid)
+
+
+def _mimo_page(path: Path, config, data: dict) -> Page:
+    """The page of a ``mimo_state_space`` model: its modes (the eigenvalues of A, shared by every
+    entry) and the matrix of its frequency responses, entry (i, a) from input a to output i
+    (:meth:`nlsid.models.lti.MimoStateSpace.frequency_response`, with its dead time; a discrete
+    model over f/fs where it states no fs)."""
+    from nlsid.models.from_config import model
+
+    try:
+        mimo = model(config)  # the checks of nlsid simulate: stability, open loop only
+    except InputError as exc:
+        raise InputError(f"{path}: {exc.where}", exc.what) from None
+    element = Element("A, B, C, D", mimo)
+    frequency = frequency_axis([element])
+    G = mimo.frequency_response(frequency, fs=1.0 if mimo.discrete and mimo.fs is None else None)
+    shape = f"{mimo.n_outputs} outputs ({', '.join(mimo.outputs)}) x {mimo.n_inputs} inputs ({', '.join(mimo.inputs)})"
+    headline = f"{_TITLES[config.model.type]} in open loop, {shape}: {describe_modes(mimo)}; linear"
+    findings = [f"{mimo.order} states" + (f", dead time {mimo.delay:g} s on every input" if mimo.delay else "")]
+    d = config.disturbances
+    if d.u_noise or d.y_noise or d.process_noise:
+        findings.append(f"noise std on each signal: u {d.u_noise:g}, y {d.y_noise:g}, process {d.process_noise:g}")
+    unit = _unit(mimo)
+    found = modes(mimo)
+    caption = ("Frequency response matrix: row i (magnitude, phase) is output i, a curve per input; "
+               "magnitude in dB re 1 output/input (a model config records no units). "
+               + ("Discrete, up to half its sample rate." if mimo.discrete else "Continuous, with its dead time."))
+    numbers = {"model": config.model.type, "closed_loop": False, "inputs": list(mimo.inputs),
+               "outputs": list(mimo.outputs), "nonlinear": [],
+               "elements": [{"name": element.name, "discrete": mimo.discrete, "delay": mimo.delay, "fs": mimo.fs,
+                             "modes": [{"frequency": m.frequency, "damping": m.damping, "poles": m.count}
+                                       for m in found]}]}
+    rows = [[element.name, f"{m.frequency:.4g} {unit}", number(m.damping, ".3g"),
+             "complex pair" if m.count == 2 else "real"] for m in found]
+    tables = [Table("Modes", ["element", "natural frequency", "damping ratio ζ", "poles"], rows,
+                    note="The eigenvalues of A, common to every input-output pair (as on a model of one input)."),
+              written_numbers(data)]
+    return Page(kind="Simulation model", title=f"Model report: {Path(path).name}", source=str(path),
+                headline=headline, findings=findings, tables=tables, numbers=numbers,
+                figures=[figure(_bode_matrix(mimo, frequency, G), caption, "bode_matrix")])
+
+
+def _bode_matrix(mimo, frequency: np.ndarray, G: np.ndarray):
+    """Magnitude and phase of each entry of ``G`` (F, n_y, n_u): a row of two panels per output,
+    a curve per input."""
+    n_y, n_u = G.shape[1:]
+    drawn, axes = new_figure(n_y, 2, height=2.6)
+    for i in range(n_y):
+        magnitude, phase = axes[2 * i], axes[2 * i + 1]
+        for a in range(n_u):
+            name = f"{mimo.outputs[i]} from {mimo.inputs[a]}"
+            magnitude.semilogx(frequency, 20 * np.log10(np.abs(G[:, i, a])), label=name)
+            phase.semilogx(frequency, unwrapped_phase(G[:, i, a])[0], label=name)
+        magnitude.set_ylabel(f"{mimo.outputs[i]}: magnitude (dB)")
+        phase.set_ylabel(f"{mimo.outputs[i]}: phase (deg)")
+        phase.legend(fontsize="small")
+        for axis in (magnitude, phase):
+            axis.set_xlabel("frequency (Hz)" if in_hertz(mimo) else "f / fs (cycles per sample)")
+            axis.grid(True, which="both", alpha=0.3)
+            plain_log_ticks(axis.xaxis)
+    return drawn
 
 
 def _with_black_box(page: Page, hybrid) -> Page:

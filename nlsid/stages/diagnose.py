@@ -334,7 +334,7 @@ def progress_calls(progress: Callable[..., None] | None) -> Callable[[str, int, 
 
 def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:
     """The model config as a validated dict, its name in messages and its config files."""
-    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.io.model_config import refuse_several_inputs_outputs, validate_simulate_config
     from nlsid.models.key_paths import deep_copy
 
     if isinstance(model, Model):
@@ -351,7 +351,8 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
                                         f"{type(model).__name__}")
     if not isinstance(data, dict):
         raise InputError(source, "expected a model config (a mapping with a 'model' key)")
-    validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
+    config = validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
+    refuse_several_inputs_outputs(config, source, "nlsid diagnose")
     if data["model"].get("type") in ("pnlss", "hybrid"):
         kind = data["model"]["type"]
         raise InputError(f"{source}: model.type", f"a {kind} model {'is' if kind == 'pnlss' else 'holds'} a black box: "
