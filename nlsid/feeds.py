@@ -170,14 +170,14 @@ class BlaRuns:
 
 def several_inputs_outputs(run: Run, where: str, reader: str = "a model of one input u and one output y"
                            ) -> InputError | None:
-    """The error of the stages of one input and one output (``simulate``, ``fit --model``,
+    """The error of the stages of one input and one output (``simulate`` of such a model, ``fit --model``,
     ``diagnose``) on a run with several inputs or outputs; None for a run of one of each. Taking u
     and y alone would drop the other inputs and outputs silently."""
     if not run.is_mimo:
         return None
     return InputError(where, f"has inputs {', '.join(run.inputs)} and outputs {', '.join(run.outputs)}: {reader} "
-                             "cannot use it without dropping the others (several inputs and outputs: `nlsid bla` "
-                             "only so far, docs/mimo.md)")
+                             "cannot use it without dropping the others (several inputs and outputs: `nlsid bla`, and "
+                             "`nlsid simulate` of a mimo_state_space model, docs/mimo.md)")
 
 
 def check_mimo_run(run: Run, where: str) -> None:
