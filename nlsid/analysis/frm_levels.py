@@ -264,7 +264,8 @@ class LpmFrmLevel:
         The LPM at every line 1 .. floor((N-1)/2).
     band : numpy.ndarray
         Indices into ``result.lines`` of the reported lines: where every input's power, smoothed
-        over the window, is within ``BAND_DB`` of its largest and G is finite.
+        over the window, is within ``BAND_DB`` of its largest and G is finite (its variance is
+        NaN where rounding left a negative residual energy, on noise-free data).
     excited : numpy.ndarray
         Indices into ``result.lines`` of the band's lines where every input carries power itself;
         the summary's band means are over these.
@@ -323,7 +324,7 @@ class LpmFrmLevel:
             variance = result.var_G[excited]
             rows = [{"output": output, "input": name,
                      "bla_db": _db(np.mean(10 * np.log10(magnitude2[:, i, a]))),
-                     "total_var_db": _db10(np.mean(variance[:, i, a] / magnitude2[:, i, a]))}
+                     "total_var_db": _db10(np.nanmean(variance[:, i, a] / magnitude2[:, i, a]))}
                     for i, output in enumerate(self.outputs) for a, name in enumerate(self.inputs)]
         return {
             "level": self.level, "inputs": list(self.inputs), "outputs": list(self.outputs),
@@ -377,7 +378,7 @@ def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_
     width = 2 * half_width + 1
     smooth = np.array([np.convolve(p, np.ones(width) / width, mode="same") for p in power])
     floor = smooth.max(axis=1, keepdims=True) * 10 ** (-BAND_DB / 10)
-    finite = np.all(np.isfinite(result.G), axis=(1, 2)) & np.all(np.isfinite(result.var_G), axis=(1, 2))
+    finite = np.all(np.isfinite(result.G), axis=(1, 2))
     band = np.flatnonzero(np.all(smooth >= floor, axis=0) & finite)
     if band.size == 0:
         raise InputError(label, "no line carries power of every input: the records excite nothing the LPM can use")

@@ -39,12 +39,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.analysis.confidence import Bounds, circle_bounds
-from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
+from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH, hpd_inverse
 from nlsid.errors import InputError
 
-CHUNK_LINES = 4096  # lines solved at once: the regressors of a chunk take some tens of MB
-#: cond of the diagonally scaled A (the square of the regressor's) from which the inputs count as
-#: collinear over a window: rounding (1e-16 relative) then moves G by more than 1e-4 of its size.
+CHUNK_LINES = 16384  # lines solved at once: the window arrays of a chunk take some tens of MB
+#: Condition number (1-norm) of the diagonally scaled A (about the square of the regressor's) from
+#: which the inputs count as collinear over a window: rounding (1e-16 relative) then moves G by
+#: more than 1e-4 of its size.
 COLLINEAR = 1e12
 
 
@@ -211,17 +212,29 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
 
 
 def _solve_chunk(U, Y, centres, half_width, degree, dof):
-    """G, Cov(vec G), C, T and the scaled condition number of A at the lines ``centres``.
+    """G, Cov(vec G), C, T and the condition number of the scaled A at the lines ``centres``.
 
     A window is the 2n+1 lines from ``first = clip(k - n, 0, K - 2n - 1)``; its offsets, hence V
-    and Q, depend only on ``shift = k - first``, so the lines are solved in groups of equal shift.
-    A is scaled by its diagonal before it is inverted (``D^-1/2 A D^-1/2``, eigenvalues w): the
-    condition number max w / min w then measures how collinear the input columns are, whatever
-    their power. A line where an input has no power at all (a zero diagonal) is unresolved: NaN.
+    and Q, depend only on ``shift = k - first``, so the lines are solved in groups of equal shift,
+    laid out (..., w, L) so that every window sum is one product of a small fixed matrix with a
+    long one. The normal equations are built from window sums, as in :mod:`nlsid.analysis.lpm`
+    (``H = Q^T Phi``, the part of the regressor the transient columns explain)::
+
+        A = Phi^H Phi - H^H H,   (Phi^H Phi)[(a,s),(b,t)] = sum_l r^(s+t) conj(U_a(l)) U_b(l),
+        b = Phi^H Y - H^H Q^T Y,
+        E^H E = Y^H Y - (Q^T Y)^H Q^T Y - b^H theta,     T = [R_V^-1 (Q^T Y - H theta)]_0,
+
+    summed over the records. A is scaled by its diagonal (``D^-1/2 A D^-1/2``) and inverted by
+    :func:`nlsid.analysis.lpm.hpd_inverse`; the 1-norm condition number of the scaled matrix
+    (within a factor n_u (R+1) of the 2-norm one) measures how collinear the inputs are over the
+    window, whatever their power. A line where an input has no power at all (a zero diagonal)
+    is unresolved: NaN; where the residual energy comes out negative by rounding, the
+    covariances are NaN.
     """
     n_records, n_inputs, n_lines = U.shape
     n_outputs = Y.shape[1]
     width, p = 2 * half_width + 1, degree + 1
+    n_par = n_inputs * p
     first = np.clip(centres - half_width, 0, n_lines - width)
     shift = centres - first
     G = np.full((centres.size, n_outputs, n_inputs), np.nan + 0j)
@@ -229,43 +242,53 @@ def _solve_chunk(U, Y, centres, half_width, degree, dof):
     cov_v = np.full((centres.size, n_outputs, n_outputs), np.nan + 0j)
     transient = np.full((n_records, centres.size, n_outputs), np.nan + 0j)
     condition = np.ones(centres.size)
+    g0 = np.arange(n_inputs) * p                                                  # the columns (a, s = 0)
     for j in np.unique(shift):
         rows = np.flatnonzero(shift == j)
+        L = rows.size
         offsets = np.arange(width) - j
         V = offsets[:, None] ** np.arange(p, dtype=float)                         # (w, R+1)
         Q, R_V = np.linalg.qr(V)
-        index = first[rows][:, None] + np.arange(width)[None, :]                  # (L, w)
-        Uw = np.moveaxis(U[:, :, index], 1, -1)                                   # (M, L, w, n_u)
-        Yw = np.moveaxis(Y[:, :, index], 1, -1)                                   # (M, L, w, n_y)
-        # regressor columns ordered (input a, power s): column a p + s is r^s U_a(l)
-        Phi = (Uw[..., :, None] * V[None, None, :, None, :]).reshape(Uw.shape[:3] + (n_inputs * p,))
-        QPhi, QY = Q.T @ Phi, Q.T @ Yw                                            # (M, L, R+1, .)
-        PPhi, PY = Phi - Q @ QPhi, Yw - Q @ QY
-        A = np.einsum("mlwi,mlwj->lij", PPhi.conj(), PPhi)
-        b = np.einsum("mlwi,mlwo->lio", PPhi.conj(), PY)
-        scale = np.sqrt(np.einsum("lii->li", A).real)                             # (L, n_u p)
-        powered = np.all(scale > 0, axis=1)
-        scale[~powered] = 1.0
-        w, vectors = np.linalg.eigh(A / scale[:, :, None] / scale[:, None, :])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cond = np.where(powered, w[:, -1] / w[:, 0], 1.0)
-            cond[powered & ~(w[:, 0] > 0)] = np.inf
-        condition[rows] = cond
+        index = first[rows][None, :] + np.arange(width)[:, None]                  # (w, L)
+        Uw, Yw = U[:, :, index], Y[:, :, index]                                   # (M, n_u, w, L), (M, n_y, w, L)
+        powers = offsets[None, :] ** np.arange(2 * p - 1, dtype=float)[:, None]  # (2R+1, w)
+        moments = (powers @ (np.conj(Uw)[:, :, None] * Uw[:, None])).sum(axis=0)  # (n_u, n_u, 2R+1, L)
+        hankel = np.add.outer(np.arange(p), np.arange(p))
+        A = moments[:, :, hankel].transpose(0, 2, 1, 3, 4).reshape(n_par, n_par, L)
+        # H[m, t, (a, s)] = sum_l Q[l, t] r^s U_a(l)
+        H = ((Q[:, :, None] * V[:, None, :]).reshape(width, p * p).T @ Uw).reshape(n_records, n_inputs, p, p, L)
+        H = H.transpose(0, 2, 1, 3, 4).reshape(n_records, p, n_par, L)
+        A -= np.einsum("mtil,mtjl->ijl", H.conj(), H)
+        QY = Q.T @ Yw                                                             # (M, n_y, R+1, L)
+        XY = (V.T @ (np.conj(Uw)[:, :, None] * Yw[:, None])).sum(axis=0)          # (n_u, n_y, R+1, L)
+        b = XY.transpose(0, 2, 1, 3).reshape(n_par, n_outputs, L) - np.einsum("mtil,motl->iol", H.conj(), QY)
+        YY = np.einsum("mowl,mqwl->oql", Yw, Yw.conj()) - np.einsum("motl,mqtl->oql", QY, QY.conj())
+        scale = np.sqrt(np.einsum("iil->il", A).real)                             # (n_u (R+1), L)
+        powered = np.all(scale > 0, axis=0)
+        scale[:, ~powered] = 1.0
+        scaled = A / scale[:, None] / scale[None, :]
+        scaled_inv = hpd_inverse(scaled)
+        with np.errstate(invalid="ignore", over="ignore"):
+            cond = np.abs(scaled).sum(axis=0).max(axis=0) * np.abs(scaled_inv).sum(axis=0).max(axis=0)
+        cond[~np.isfinite(cond)] = np.inf
+        condition[rows] = np.where(powered, cond, 1.0)
+        A_inv = scaled_inv / scale[:, None] / scale[None, :]
+        theta = np.einsum("ijl,jol->iol", A_inv, b)                              # (n_u (R+1), n_y, L)
+        energy = YY - np.einsum("iol,iql->oql", b, theta.conj())                  # E^H E, (n_y, n_y, L)
         good = powered & (cond < COLLINEAR)
         if not np.any(good):
             continue
-        rows, vectors, w, scale, b = rows[good], vectors[good], w[good], scale[good], b[good]
-        PPhi, PY, QPhi, QY = PPhi[:, good], PY[:, good], QPhi[:, good], QY[:, good]
-        A_inv = (vectors / w[:, None, :]) @ vectors.conj().transpose(0, 2, 1) / scale[:, :, None] / scale[:, None, :]
-        theta = A_inv @ b                                                         # (L, n_u p, n_y)
-        residual = PY - PPhi @ theta                                              # (M, L, w, n_y)
-        C = np.einsum("mlwi,mlwj->lij", residual, residual.conj()) / dof
-        g0 = np.arange(n_inputs) * p                                              # the columns (a, s = 0)
-        G[rows] = theta[:, g0, :].transpose(0, 2, 1)
-        block = A_inv[:, g0][:, :, g0]                                            # [A^-1]_{(a,0),(b,0)}
+        # rounding of a (near) noise-free window can leave a negative residual energy: its
+        # variances are unknown there, not small (G stands)
+        energy[..., np.any(np.einsum("ool->ol", energy).real < 0, axis=0)] = np.nan
+        C = energy[..., good] / dof
+        block = A_inv[g0][:, g0][..., good]                                       # [A^-1]_{(a,0),(b,0)}
+        G[rows[good]] = np.moveaxis(theta[g0][..., good], -1, 0).transpose(0, 2, 1)
         # Cov(G_ia, G_jb) = block[a, b] C[i, j], column-stacked: index a n_y + i
-        cov_G[rows] = np.einsum("lab,lij->laibj", block, C).reshape(rows.size, n_inputs * n_outputs, -1)
-        cov_v[rows] = C
-        t = np.linalg.solve(R_V, QY - QPhi @ theta)                              # (M, L, R+1, n_y)
-        transient[:, rows] = t[:, :, 0, :]
+        cov_G[rows[good]] = np.einsum("abl,ijl->laibj", block, C).reshape(-1, n_inputs * n_outputs,
+                                                                           n_inputs * n_outputs)
+        cov_v[rows[good]] = np.moveaxis(C, -1, 0)
+        fitted = np.einsum("mtil,iol->motl", H, theta)                            # Q^T Phi theta, (M, n_y, R+1, L)
+        t0 = np.einsum("t,motl->mol", np.linalg.inv(R_V)[0], QY - fitted)         # first row of R_V^-1
+        transient[:, rows[good]] = np.moveaxis(t0[..., good], -1, 1)
     return G, cov_G, cov_v, transient, condition
