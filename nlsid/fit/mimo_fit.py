@@ -26,8 +26,10 @@ multivariable system identification from frequency response data", IEEE Trans. A
 entries). It identifies a discrete model on points of the unit circle: the z_k themselves (``z``,
 and ``s`` with hold, converted by the matrix logarithm A = log(Phi)/h), or for ``s`` without hold
 the bilinear images z_k = (a + j w_k)/(a - j w_k) of the continuous lines, a the geometric mean of
-the band's angular frequencies, converted by the inverse bilinear map (their Section IV). Poles
-outside the stability region are reflected into it; B and D then follow by weighted linear least
+the band's angular frequencies, converted by the inverse bilinear map (their Section IV; also
+the start of ``s`` with hold where log(Phi) is not real, the hold then left out of the start
+only). Each of q = n + 1, 2n and 3n block rows gives a start; the one of the lowest cost is kept.
+Poles outside the stability region are reflected into it; B and D then follow by weighted linear least
 squares for A and C fixed (the cost is quadratic in them).
 
 Parametrisation of the refinement: the real modal (block-diagonal) form of A from the start, a
@@ -339,18 +341,21 @@ def subspace_start(data: FrmData, W: np.ndarray, order: int, domain: str, hold: 
     scale = np.sqrt(np.mean(np.real(np.einsum("fii->fi", data.covariance)), axis=1))
     weight = 1.0 / scale
     candidates = []
+    a = bilinear_scale(data.frequency)
+    w = 2 * np.pi * data.frequency
     for rows in sorted({order + 1, 2 * order, 3 * order}):
-        if domain == "s" and not hold:
-            a = bilinear_scale(data.frequency)
-            w = 2 * np.pi * data.frequency
-            found = subspace_ac((a + 1j * w) / (a - 1j * w), data.G, weight, order, rows)
-            if found is not None:
-                found = from_bilinear(*found, a)
-        else:
+        found = None
+        if domain == "z" or hold:
             found = subspace_ac(x, data.G, weight, order, rows)
             if found is not None and domain == "s":
                 A = from_held(found[0], data.fs)
                 found = None if A is None else (A, found[1])
+        if found is None and domain == "s":
+            # without the hold, or where log(Phi) is not real (a pole of Phi on the negative real
+            # axis): the continuous model of the bilinear map, the hold left out of the start only
+            found = subspace_ac((a + 1j * w) / (a - 1j * w), data.G, weight, order, rows)
+            if found is not None:
+                found = from_bilinear(*found, a)
         if found is None:
             continue
         A, C = found
@@ -739,19 +744,26 @@ def fit_frm(data: FrmData, order: int | None = None, domain: str = "z", hold: bo
     else:
         if not (isinstance(max_order, (int, np.integer)) and max_order >= 1):
             raise InputError("max_order", f"expected a whole number >= 1, got {max_order!r}")
-        scan, stop = [], int(max_order)
+        scan, stop, skipped = [], int(max_order), []
         for n in range(1, int(max_order) + 1):
             if n > stop:
                 break
+            if 2 * data.lines * n_y * n_u <= parameter_count(n, n_y, n_u):
+                break
             result = fit_order(data, n, domain, hold, W)
             if result is None:
-                break
+                skipped.append(n)
+                continue
             scan.append(result)
             if result.stable and result.accepted and stop == max_order:
                 stop = min(max_order, n + SCAN_PAST)
         if not scan:
-            raise InputError("order", f"{data.lines} lines of a {n_y}x{n_u} FRM are too few for any order")
+            raise InputError("order", f"{data.lines} lines of a {n_y}x{n_u} FRM are too few for any order"
+                             if not skipped else f"no start for any order up to {max_order} (the subspace model "
+                                                 "is not diagonalisable, or not finite)")
         result, reason = choose(scan, data.dimension, data.dof)
+        if skipped:
+            reason += f"; no start for order(s) {', '.join(map(str, skipped))} (not diagonalisable), not scanned"
         if stop < max_order:
             reason += f"; scanned up to order {scan[-1].order} ({SCAN_PAST} past the first within its bound)"
     warnings = []

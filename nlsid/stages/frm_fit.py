@@ -11,10 +11,11 @@ report (``docs/formats.md``).
 
 Weights, by what the level holds (``docs/mimo.md``, "The fit"): the total covariance of vec(G)
 (noise and stochastic nonlinear distortions, over M realizations: n = M - 1 complex degrees of
-freedom) where it is positive definite at every line (M - 1 >= n_y n_u); else the noise
-covariance (n = M E (P - 1)); where the full covariance is singular, each entry's own variance
-(the diagonal, correlations left out, said in a warning); unit weights where neither is known
-(M = 1 and P = 1), without a cost check.
+freedom) where it is positive definite at every line and n >= m + 2 (m = n_y n_u: FULL_MARGIN);
+else the noise covariance (n = M E (P - 1)) where the total is unknown (M = 1); with fewer degrees
+of freedom or a singular full covariance, each entry's own variance (the diagonal, correlations
+left out, said in a warning); unit weights where neither is known (M = 1 and P = 1), without a
+cost check.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ JSON_KEYS = ("kind", "domain", "hold", "order", "inputs", "outputs", "poles", "p
              "order_reason", "order_scan", "warnings", "level")
 #: orders ``order="auto"`` scans at most by default
 MAX_ORDER = 10
+#: degrees of freedom a full covariance needs beyond the m entries: n - m >= 2 gives the cost a
+#: finite spread (the Hotelling T^2's F(2m, 2(n - m + 1)) has a variance for n - m + 1 > 2)
+FULL_MARGIN = 2
 
 
 def frm_level(content: dict, level: int | None, source: str, option: str = "--level") -> tuple[int, dict] | None:
@@ -88,12 +92,13 @@ def frm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
         if name == "cov_noise":
             warnings.append("weights: the noise covariance only (M = 1 realization): nonlinear distortions are not "
                             "in the weights and raise the cost above its expected value")
-        if _definite(cov):
+        if dof - m >= FULL_MARGIN and _definite(cov):
             return FrmData(f, G, cov, float(attrs["fs"]), float(dof), f"{words}, full ({m} x {m} per line)"), warnings
         variance = np.real(np.einsum("fii->fi", cov))
         if np.all(variance > 0):
-            warnings.append(f"weights: {name} is singular for the {m} entries (M - 1 = {M - 1} < {m} realizations, "
-                            "or correlated entries): each entry weighted by its own variance, correlations left out")
+            warnings.append(f"weights: {name} has {dof} degrees of freedom for {m} entries (a full covariance needs "
+                            f"{m + FULL_MARGIN} and must be positive definite): each entry weighted by its own "
+                            "variance, correlations left out")
             diagonal = np.einsum("fi,ij->fij", variance, np.eye(m)).astype(complex)
             return (FrmData(f, G, diagonal, float(attrs["fs"]), float(dof), f"{words}, its diagonal", diagonal=True),
                     warnings)

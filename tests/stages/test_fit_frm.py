@@ -119,3 +119,37 @@ def test_discrete_fit_states_its_rate(tmp_path, run_cli):
     # the discrete poles are the continuous truth's mapped by z = exp(s / fs), within 1 % (noise 3 %)
     true = np.exp(np.linalg.eigvals(A_TRUE) / FS)
     assert np.allclose(np.sort_complex(model.poles()), np.sort_complex(true), atol=0.01)
+
+
+def test_weights_follow_what_the_level_holds():
+    """frm_data's choice: the full total covariance with M - 1 >= m + 2, its diagonal with fewer
+    realizations, the noise covariance for M = 1, unit weights without either; and the cost
+    statistics that go with each (cost_statistics: n/(n - d) (F m - n_theta/2))."""
+    from nlsid.fit.mimo_fit import cost_statistics
+    from nlsid.stages.frm_fit import frm_data
+
+    rng = np.random.default_rng(2)
+    F = 5
+    G = rng.standard_normal((F, 2, 2)) + 1j * rng.standard_normal((F, 2, 2))
+    R = rng.standard_normal((F, 4, 4)) + 1j * rng.standard_normal((F, 4, 4))
+    definite = R @ np.conj(np.swapaxes(R, 1, 2)) + 0.1 * np.eye(4)
+    nan = np.full((F, 4, 4), np.nan + 0j)
+
+    def level(M, P, total, noise):
+        return {"attrs": {"n_realizations": M, "n_experiments": 2, "n_periods": P, "fs": FS},
+                "G": G, "frequency": np.arange(1, F + 1.0), "cov_total": total, "cov_noise": noise}
+
+    full, notes = frm_data(level(7, 1, definite, nan), "here")
+    assert full.dof == 6 and full.dimension == 4 and not notes
+    diagonal, notes = frm_data(level(5, 1, definite, nan), "here")
+    assert diagonal.diagonal and diagonal.dimension == 1 and diagonal.dof == 4
+    assert np.allclose(diagonal.covariance[:, 0, 1], 0) and np.allclose(diagonal.covariance[:, 2, 2], definite[:, 2, 2])
+    assert len(notes) == 1 and "each entry weighted by its own variance" in notes[0]
+    noise, notes = frm_data(level(1, 4, nan, definite), "here")
+    assert noise.dof == 1 * 2 * 3 and "noise covariance only" in notes[0]
+    unit, notes = frm_data(level(1, 1, nan, nan), "here")
+    assert np.allclose(unit.covariance, np.eye(4)) and "unit weights" in notes[0]
+    # expected costs: F(2, 2n) terms for the diagonal (the SISO (M-1)/(M-2)), Hotelling for the full one
+    assert np.isclose(cost_statistics(F, 4, 12, 4.0, 1)[0], 4 / 3 * (20 - 6))
+    assert np.isclose(cost_statistics(F, 4, 12, 6.0, 4)[0], 6 / 2 * (20 - 6))
+    assert cost_statistics(F, 4, 12, 0.0, 4)[0] == np.inf
