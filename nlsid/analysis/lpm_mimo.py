@@ -211,14 +211,22 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
                          transient, dof)
 
 
+def _window_sums(weights: np.ndarray, windows: np.ndarray) -> np.ndarray:
+    """``sum_l weights[r, l] windows[l, ...]`` for real weights (rows, w) and complex windows
+    (w, ...): one real matrix product over the window's lines."""
+    flat = np.ascontiguousarray(windows).reshape(windows.shape[0], -1).view(float)
+    return (weights @ flat).view(complex).reshape((weights.shape[0],) + windows.shape[1:])
+
+
 def _solve_chunk(U, Y, centres, half_width, degree, dof):
     """G, Cov(vec G), C, T and the condition number of the scaled A at the lines ``centres``.
 
     A window is the 2n+1 lines from ``first = clip(k - n, 0, K - 2n - 1)``; its offsets, hence V
     and Q, depend only on ``shift = k - first``, so the lines are solved in groups of equal shift,
-    laid out (..., w, L) so that every window sum is one product of a small fixed matrix with a
-    long one. The normal equations are built from window sums, as in :mod:`nlsid.analysis.lpm`
-    (``H = Q^T Phi``, the part of the regressor the transient columns explain)::
+    the windows laid out (w, L, ...) so that every window sum is one real matrix product
+    (:func:`_window_sums`). The normal equations are built from window sums, as in
+    :mod:`nlsid.analysis.lpm` (``H = Q^T Phi``, the part of the regressor the transient columns
+    explain)::
 
         A = Phi^H Phi - H^H H,   (Phi^H Phi)[(a,s),(b,t)] = sum_l r^(s+t) conj(U_a(l)) U_b(l),
         b = Phi^H Y - H^H Q^T Y,
@@ -243,6 +251,7 @@ def _solve_chunk(U, Y, centres, half_width, degree, dof):
     transient = np.full((n_records, centres.size, n_outputs), np.nan + 0j)
     condition = np.ones(centres.size)
     g0 = np.arange(n_inputs) * p                                                  # the columns (a, s = 0)
+    U_lines, Y_lines = np.moveaxis(U, -1, 0), np.moveaxis(Y, -1, 0)               # (K, M, n_u), (K, M, n_y)
     for j in np.unique(shift):
         rows = np.flatnonzero(shift == j)
         L = rows.size
@@ -250,19 +259,20 @@ def _solve_chunk(U, Y, centres, half_width, degree, dof):
         V = offsets[:, None] ** np.arange(p, dtype=float)                         # (w, R+1)
         Q, R_V = np.linalg.qr(V)
         index = first[rows][None, :] + np.arange(width)[:, None]                  # (w, L)
-        Uw, Yw = U[:, :, index], Y[:, :, index]                                   # (M, n_u, w, L), (M, n_y, w, L)
+        Uw, Yw = U_lines[index], Y_lines[index]                                   # (w, L, M, n_u), (w, L, M, n_y)
         powers = offsets[None, :] ** np.arange(2 * p - 1, dtype=float)[:, None]  # (2R+1, w)
-        moments = (powers @ (np.conj(Uw)[:, :, None] * Uw[:, None])).sum(axis=0)  # (n_u, n_u, 2R+1, L)
-        hankel = np.add.outer(np.arange(p), np.arange(p))
-        A = moments[:, :, hankel].transpose(0, 2, 1, 3, 4).reshape(n_par, n_par, L)
+        moments = _window_sums(powers, np.conj(Uw)[..., :, None] * Uw[..., None, :]).sum(axis=2)
+        hankel = np.add.outer(np.arange(p), np.arange(p))                         # moments: (2R+1, L, n_u, n_u)
+        A = moments[hankel].transpose(3, 0, 4, 1, 2).reshape(n_par, n_par, L)    # [(a, s), (b, t)] = m[s+t, a, b]
         # H[m, t, (a, s)] = sum_l Q[l, t] r^s U_a(l)
-        H = ((Q[:, :, None] * V[:, None, :]).reshape(width, p * p).T @ Uw).reshape(n_records, n_inputs, p, p, L)
-        H = H.transpose(0, 2, 1, 3, 4).reshape(n_records, p, n_par, L)
+        H = _window_sums((Q[:, :, None] * V[:, None, :]).reshape(width, p * p).T, Uw)   # (p p, L, M, n_u)
+        H = H.reshape(p, p, L, n_records, n_inputs).transpose(3, 0, 4, 1, 2).reshape(n_records, p, n_par, L)
         A -= np.einsum("mtil,mtjl->ijl", H.conj(), H)
-        QY = Q.T @ Yw                                                             # (M, n_y, R+1, L)
-        XY = (V.T @ (np.conj(Uw)[:, :, None] * Yw[:, None])).sum(axis=0)          # (n_u, n_y, R+1, L)
-        b = XY.transpose(0, 2, 1, 3).reshape(n_par, n_outputs, L) - np.einsum("mtil,motl->iol", H.conj(), QY)
-        YY = np.einsum("mowl,mqwl->oql", Yw, Yw.conj()) - np.einsum("motl,mqtl->oql", QY, QY.conj())
+        QY = _window_sums(Q.T, Yw).transpose(2, 3, 0, 1)                          # (M, n_y, R+1, L)
+        XY = _window_sums(V.T, np.conj(Uw)[..., :, None] * Yw[..., None, :]).sum(axis=2)  # (R+1, L, n_u, n_y)
+        b = XY.transpose(2, 0, 3, 1).reshape(n_par, n_outputs, L) - np.einsum("mtil,motl->iol", H.conj(), QY)
+        YY = (_window_sums(np.ones((1, width)), Yw[..., :, None] * np.conj(Yw)[..., None, :])[0].sum(axis=1)
+              .transpose(1, 2, 0) - np.einsum("motl,mqtl->oql", QY, QY.conj()))   # (n_y, n_y, L)
         scale = np.sqrt(np.einsum("iil->il", A).real)                             # (n_u (R+1), L)
         powered = np.all(scale > 0, axis=0)
         scale[:, ~powered] = 1.0
