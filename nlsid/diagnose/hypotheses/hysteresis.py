@@ -138,10 +138,16 @@ HYSTERESIS = Hypothesis(
 
 def _estimate_feedback(ctx: Context) -> Estimate | str:
     """Start values of the feedback around a transfer function: the same grid, the model's output
-    read as the position (:func:`velocity_feedback.reading`: a continuous G or its equivalent of
-    relative degree >= 2), its static stiffness K = G(0)^-1 in input units per output unit playing
-    the model's stiffness (k a share of it, the denominator lowered by k / 2 times the numerator)."""
-    found = velocity_feedback.reading(ctx)
+    read as the position (:func:`velocity_feedback.reading`: a continuous G, or a discrete G's
+    continuous equivalent, of relative degree 2 where the equivalent has relative degree 1 by its
+    numerator's leading term dropped, :func:`velocity_feedback.degree_two`, as the end stops read
+    it: the Bouc-Wen state reads the velocity, which around G(z) itself would be a backward
+    difference with the force held over whole samples; on
+    tests/diagnose/test_hysteresis_feedback_discrete.py's record that stopped 13.8 dB above the
+    noise floor, read so it reaches it), its static stiffness K = G(0)^-1 in input units per output
+    unit playing the model's stiffness (k a share of it, the denominator lowered by k / 2 times the
+    numerator)."""
+    found = velocity_feedback.reading(ctx, accelerates=True)
     if isinstance(found, str):
         return found
     reading, notes = found
