@@ -112,7 +112,8 @@ def _db10(power: float) -> float:
 @dataclass
 class MimoRuns:
     """Sets aside the runs with several inputs or outputs from a stream of ``(run, where)`` pairs
-    (:meth:`take`), then gives their FRM per level (:meth:`levels`).
+    (:meth:`take`), then gives their FRM per level: of the multisine runs (:meth:`levels`) and,
+    by the LPM for several inputs, of the arbitrary runs (:meth:`lpm_levels`).
 
     ``on_run`` is called with each run set aside, as the single-input analysis calls it with the
     others; ``others`` counts the runs passed on; ``exhausted`` says the stream was read to its end.
