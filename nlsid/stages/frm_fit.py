@@ -3,7 +3,8 @@ the frequency response matrix (FRM) that ``nlsid bla`` writes to ``bla.h5`` as `
 
 ``nlsid fit bla.h5 --order auto|N`` takes this path when the level it fits (``--level``) is an FRM
 level; the levels are numbered as :func:`nlsid.fit.bla_source.frf_from_bla` numbers them, multisine
-levels first, then levels of arbitrary runs, then the FRM levels. The numbers are those of
+levels first, then levels of arbitrary runs, then the FRM levels of multisines (``frm_levels``)
+and of arbitrary runs (``frm_lpm_levels``, the LPM for several inputs: :func:`lpm_data`). The numbers are those of
 :mod:`nlsid.fit.mimo_fit` (subspace start, sample maximum likelihood refinement, order choice);
 this module chooses the weights from the file, names the model's inputs and outputs after the
 FRM's, and writes the model config (``type: mimo_state_space``, ``docs/configs.md``) and its fit
@@ -44,9 +45,10 @@ FULL_MARGIN = 2
 
 def frm_level(content: dict, level: int | None, source: str, option: str = "--level") -> tuple[int, dict] | None:
     """The FRM level of a ``bla.h5`` read by :func:`nlsid.io.bla_file.read_bla` that ``level``
-    names, as ``(index, level dict)``; None where the file holds no FRM level or ``level`` names a
-    level of one input and one output (the transfer-function fit's)."""
-    frm = content.get("frm_levels") or []
+    names, as ``(index, level dict)``: the ``frm_levels`` numbered after the levels of one input
+    and one output, then the ``frm_lpm_levels``. None where the file holds no FRM level or ``level``
+    names a level of one input and one output (the transfer-function fit's)."""
+    frm = [*(content.get("frm_levels") or []), *(content.get("frm_lpm_levels") or [])]
     if not frm:
         return None
     siso = len(content["levels"]) + len(content["lpm_levels"])
@@ -55,7 +57,7 @@ def frm_level(content: dict, level: int | None, source: str, option: str = "--le
         if total > 1:
             raise InputError(source, f"{total} levels in the file; choose one with {option} 0..{total - 1} "
                                      "(multisine levels first, then levels of arbitrary runs, then levels of several "
-                                     "inputs or outputs)")
+                                     "inputs or outputs: multisine, then arbitrary)")
         level = 0
     if not 0 <= level < total:
         raise InputError(option, f"expected 0..{total - 1} for {source}, got {level}")
@@ -73,6 +75,8 @@ def _definite(cov: np.ndarray) -> bool:
 
 def frm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
     """The FRM of a level dict with its weights (module docstring) and the warnings they bring."""
+    if "cov_G" in chosen:
+        return lpm_data(chosen, where)
     attrs = chosen["attrs"]
     G = np.asarray(chosen["G"], dtype=complex)
     f = np.asarray(chosen["frequency"], dtype=float)
@@ -107,6 +111,33 @@ def frm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
                     "give --order")
     identity = np.broadcast_to(np.eye(m, dtype=complex), (F, m, m)).copy()
     return FrmData(f, G, identity, float(attrs["fs"]), 0.0, "unit weights (no covariance in the file)"), warnings
+
+
+def lpm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
+    """The FRM of a level of arbitrary runs (``frm_lpm_levels``, the LPM for several inputs) with
+    its weights: ``cov_G`` (noise and stochastic nonlinear distortion, q = ``dof`` complex degrees
+    of freedom) where n >= m + 2 and it is positive definite, else its diagonal ``var_G``. The
+    LPM's neighbouring lines share their windows, so their errors are correlated and the cost
+    check is approximate (a warning)."""
+    attrs = chosen["attrs"]
+    G = np.asarray(chosen["G"], dtype=complex)
+    f = np.asarray(chosen["frequency"], dtype=float)
+    m = G.shape[1] * G.shape[2]
+    dof = float(attrs["dof"])
+    cov = np.asarray(chosen["cov_G"], dtype=complex)
+    words = f"the Local Polynomial Method's covariance (noise and nonlinear distortions, q = {dof:g})"
+    warnings = ["weights from the Local Polynomial Method: neighbouring lines share their windows, so their errors "
+                "are correlated and the cost check is approximate"]
+    if np.all(np.isfinite(cov)) and dof - m >= FULL_MARGIN and _definite(cov):
+        return FrmData(f, G, cov, float(attrs["fs"]), dof, f"{words}, full ({m} x {m} per line)"), warnings
+    variance = np.swapaxes(np.asarray(chosen["var_G"], dtype=float), 1, 2).reshape(f.size, m)
+    if not (np.all(np.isfinite(variance)) and np.all(variance > 0)):
+        raise InputError(f"{where}/var_G", "not finite and > 0 at every line: no weights to fit with")
+    warnings.append(f"weights: cov_G has {dof:g} degrees of freedom for {m} entries (a full covariance needs "
+                    f"{m + FULL_MARGIN} and must be positive definite): each entry weighted by its own variance, "
+                    "correlations left out")
+    diagonal = np.einsum("fi,ij->fij", variance, np.eye(m)).astype(complex)
+    return FrmData(f, G, diagonal, float(attrs["fs"]), dof, f"{words}, its diagonal", diagonal=True), warnings
 
 
 def parse_order(order, option: str = "order") -> int | None:
@@ -265,7 +296,8 @@ def fit_frm_level(b: str | os.PathLike, order="auto", domain: str = "z", level: 
         raise InputError(option("level"), f"level {0 if level is None else level} of {b} has one input and one "
                                           "output: fit it with a transfer function (--order NB/NA)")
     index, chosen = found
-    where = f"{b}:/frm_levels/{chosen['name']}"
+    group = "frm_lpm_levels" if "cov_G" in chosen else "frm_levels"
+    where = f"{b}:/{group}/{chosen['name']}"
     data, warnings = frm_data(chosen, where)
     try:
         fitted = fit_frm(data, states, domain, hold=True, max_order=int(max_order or MAX_ORDER))

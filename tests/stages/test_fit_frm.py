@@ -153,3 +153,29 @@ def test_weights_follow_what_the_level_holds():
     assert np.isclose(cost_statistics(F, 4, 12, 4.0, 1)[0], 4 / 3 * (20 - 6))
     assert np.isclose(cost_statistics(F, 4, 12, 6.0, 4)[0], 6 / 2 * (20 - 6))
     assert cost_statistics(F, 4, 12, 0.0, 4)[0] == np.inf
+
+
+def test_levels_of_arbitrary_runs_are_numbered_after_and_fitted():
+    """frm_lpm_levels (the LPM for several inputs) come after frm_levels in the numbering, are
+    weighted by cov_G (or var_G where it has too few degrees of freedom) and fitted like the others."""
+    from nlsid.fit.mimo_fit import fit_frm
+    from nlsid.stages.frm_fit import frm_data, frm_level
+
+    f = np.arange(1, 41) * 0.4
+    G0 = zoh_frm(A_TRUE, B_TRUE, C_TRUE, np.zeros((2, 2)), f)
+    rng = np.random.default_rng(4)
+    cov = np.broadcast_to(np.eye(4) * (0.02 * np.mean(np.abs(G0))) ** 2, (f.size, 4, 4)).astype(complex)
+    noise = 0.02 * np.mean(np.abs(G0)) * (rng.standard_normal(G0.shape) + 1j * rng.standard_normal(G0.shape))
+    lpm = {"name": "level_00", "attrs": {"dof": 30, "fs": FS}, "frequency": f, "G": G0 + noise / np.sqrt(2),
+           "cov_G": cov, "var_G": np.full((f.size, 2, 2), cov[0, 0, 0].real)}
+    content = {"levels": [{}], "lpm_levels": [], "frm_levels": [{"name": "level_00"}], "frm_lpm_levels": [lpm]}
+    assert frm_level(content, 1, "b.h5")[1]["name"] == "level_00" and frm_level(content, 0, "b.h5") is None
+    index, chosen = frm_level(content, 2, "b.h5")
+    assert index == 2 and chosen is lpm
+    data, notes = frm_data(chosen, "b.h5")
+    assert data.dof == 30 and data.dimension == 4 and "approximate" in notes[0]
+    result = fit_frm(data, None, "s", hold=True, max_order=3)
+    assert result.fit.order == 2 and result.fit.stable, result.reason
+    lpm["attrs"]["dof"] = 5
+    data, notes = frm_data(lpm, "b.h5")
+    assert data.diagonal and "each entry weighted by its own variance" in notes[1]
