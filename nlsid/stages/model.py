@@ -143,9 +143,11 @@ class Model:
         Parameters
         ----------
         u : 1-D array, Recording, or path of a recording
-            An array: the input samples (in closed loop the reference), simulated from rest.
+            An array: the input samples (in closed loop the reference), simulated from rest; for
+            a ``mimo_state_space`` model an (n_u, n) array, row i its input ``inputs[i]``.
             A Recording (or file): each run's u (closed loop: its r where it has one, else u), as
-            ``nlsid simulate MODEL --excitation FILE``.
+            ``nlsid simulate MODEL --excitation FILE``; a ``mimo_state_space`` model reads its
+            inputs from u and the run's channels (:mod:`nlsid.simulate.mimo`).
         fs : float, optional
             Sample rate (Hz) of an array (default 1000.0); a recording carries its own.
         seed : int, optional
@@ -160,9 +162,11 @@ class Model:
         Returns
         -------
         numpy.ndarray or Recording
-            For an array, the output y (as measured, with the config's y noise); for a recording, a
-            Recording of one run per excitation run and sweep value (``<id>_s<k>``), with u, y (and
-            r in closed loop) and the excitation's attributes and channels.
+            For an array, the output y (as measured, with the config's y noise; a ``mimo_state_space``
+            model: the (n_y, n) outputs); for a recording, a Recording of one run per excitation
+            run and sweep value (``<id>_s<k>``), with u, y (and r in closed loop) and the
+            excitation's attributes and channels (a ``mimo_state_space`` model: its inputs and
+            outputs named, the outputs after y as channels).
 
         Raises
         ------

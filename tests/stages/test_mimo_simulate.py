@@ -54,3 +54,22 @@ def test_a_run_lacking_an_input_is_refused_in_one_line(run_cli, tmp_path, files)
     result.assert_one_line_error(f"{siso}:/runs/ms_l00_m00: has no input 'u2' (the model's inputs: u, u2; the run's "
                                  "channels: none)")
     assert not (tmp_path / "sim.h5").exists()
+
+
+def test_design_simulate_bla_gives_the_zero_order_hold_response():
+    """Orthogonal multisines through the model in its periodic steady state: the FRM of `bla` is
+    the model's response under the hold, computed here by scipy (cont2discrete, then freqz per
+    input), to numerical precision (no noise: each experiment's periods are identical)."""
+    from scipy import signal
+
+    design = {**DESIGN, "multisine": {**DESIGN["multisine"], "inputs": 2, "periods": 2, "transient_periods": 0}}
+    recording = nlsid.Model.from_dict({"model": MODEL}).simulate(nlsid.design(design), steady=True)
+    frm = nlsid.bla(recording).frm_levels[0].frm
+    a, b, c, d = (np.array(MODEL[key]) for key in "ABCD")
+    phi, gamma, *_ = signal.cont2discrete((a, b, c, d), 1 / DESIGN["fs"], method="zoh")
+    truth = np.empty_like(frm.G)
+    for i in range(2):
+        num, den = signal.ss2tf(phi, gamma, c, d, input=i)
+        for o in range(2):
+            truth[:, o, i] = signal.freqz(num[o], den, worN=frm.frequency, fs=DESIGN["fs"])[1]
+    assert np.max(np.abs(frm.G - truth)) < 1e-10 * np.max(np.abs(truth))
