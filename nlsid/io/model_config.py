@@ -1023,9 +1023,9 @@ def refuse_several_inputs_outputs(config: SimulateConfig, source: str, stage: st
     model = config.model
     if model.type != "mimo_state_space":
         return
+    names = f"inputs {', '.join(model.input_names)}; outputs {', '.join(model.output_names)}"
     raise InputError(f"{source}: model.type", f"{stage} takes the models of one input u and one output y (a linear "
-                                              "one as state_space), not a mimo_state_space model (inputs "
-                                              f"{', '.join(model.input_names)}; outputs {', '.join(model.output_names)}); "
+                                              f"one as state_space), not a mimo_state_space model ({names}); "
                                               "nlsid simulate runs it (docs/mimo.md)")
 
 

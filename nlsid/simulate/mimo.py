@@ -91,8 +91,8 @@ def check_run(inputs: tuple[str, ...], outputs: tuple[str, ...], run: Run, where
                                 f"{', '.join(inputs)}): simulating it would drop that input")
     for name in outputs[1:]:
         if name in run.channels and name not in run.outputs:
-            raise InputError(where, f"has a channel {name!r} that is not one of its outputs ({', '.join(run.outputs)}): "
-                                    f"the model's output {name!r} would overwrite it")
+            raise InputError(where, f"has a channel {name!r} that is not one of its outputs "
+                                    f"({', '.join(run.outputs)}): the model's output {name!r} would overwrite it")
 
 
 def _delayed(P: np.ndarray, d: int, periodic: bool) -> np.ndarray:

@@ -70,3 +70,14 @@ def test_unstable_model_refused_and_config_round_trip():
     assert again.inputs == ("u", "force") and again.outputs == ("y", "accel")
     for name in "ABCD":
         np.testing.assert_array_equal(getattr(again, name), getattr(model, name))
+
+
+@pytest.mark.parametrize("extra, where, what", [
+    ({"closed_loop": {"controller": {"type": "pid", "kp": 1.0}}}, "closed_loop", "not a mimo_state_space model"),
+    ({"simulation": {"substeps": 4}}, "simulation.substeps", "one step per sample; remove substeps"),
+])
+def test_a_closed_loop_and_substeps_are_refused(extra, where, what):
+    config = {"type": "mimo_state_space", "A": A, "B": B, "C": C}
+    with pytest.raises(InputError) as info:
+        build(validate_simulate_config({"model": config, **extra}, None, {}))
+    assert info.value.where == where and what in info.value.what

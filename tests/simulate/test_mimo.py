@@ -84,7 +84,8 @@ def test_arbitrary_record_in_motion_starts_from_the_fitted_state():
 
 
 @pytest.mark.parametrize("run, what", [
-    (Run("s", FS, "arbitrary", np.ones(10)), "has no input 'force' (the model's inputs: u, force; the run's channels: none)"),
+    (Run("s", FS, "arbitrary", np.ones(10)),
+     "has no input 'force' (the model's inputs: u, force; the run's channels: none)"),
     (Run("s", FS, "arbitrary", np.ones(10), channels={"force": np.ones(10), "v": np.ones(10)}, inputs=("u", "force", "v")),
      "has input 'v', which the model does not take (its inputs: u, force): simulating it would drop that input"),
     (Run("s", FS, "arbitrary", np.ones(10), channels={"force": np.ones(10), "accel": np.ones(10)}),

@@ -28,7 +28,8 @@ def test_stages_of_one_input_and_output_refuse_it_in_one_line(run_cli, tmp_path)
     run_cli("fit", "--pnlss", "--model", model, "--data", data, "-o", tmp_path / "p.yaml").assert_one_line_error(
         "a PNLSS fit starts from a linear model", "not mimo_state_space")
     pipeline = tmp_path / "pipeline.yaml"
-    pipeline.write_text(yaml.safe_dump({"root": str(tmp_path), "steps": [f"diagnose --model mimo.yaml --data {data} -o d"]}))
+    step = f"diagnose --model mimo.yaml --data {data} -o d"
+    pipeline.write_text(yaml.safe_dump({"root": str(tmp_path), "steps": [step]}))
     run_cli("run", pipeline).assert_one_line_error(f"mimo.yaml: model.type: nlsid diagnose {WHAT}")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mimo.yaml", "pipeline.yaml"]  # nothing written
 
