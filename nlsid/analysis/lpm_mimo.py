@@ -27,6 +27,9 @@ Residual covariance (noise plus, for a nonlinear system, its stochastic distorti
     C(k)[i, j] = sum_m sum_l E_{m,i}(l) conj(E_{m,j}(l)) / q,
     Cov(G_ia, G_jb) = [A^-1]_{(a,0),(b,0)} C(k)[i, j]        (vec(G) column-stacked).
 
+``cov_G_smoothed`` is the same with C averaged over ``smoothing_lines`` lines around each line
+(:func:`nlsid.analysis.lpm.smoothing_lines`, :func:`nlsid.analysis.lpm.band_mean`): the weight of a
+parametric fit, whose 1/var would have an infinite variance for q <= 2 (``docs/lpm.md``).
 For n_u = 1 this is :func:`nlsid.analysis.lpm.lpm` line for line. Per entry,
 ``|G_ia_hat - G_ia|^2 / var_hat G_ia`` is F(2, 2q) for circular complex normal noise, which
 gives the circles of :meth:`MimoLPMResult.bounds`.
@@ -39,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlsid.analysis.confidence import Bounds, circle_bounds
-from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH, hpd_inverse
+from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH, band_mean, hpd_inverse, smoothing_lines
 from nlsid.errors import InputError
 
 CHUNK_LINES = 16384  # lines solved at once: the window arrays of a chunk take some tens of MB
@@ -76,6 +79,12 @@ class MimoLPMResult:
         T_m(k), each record's transient (leakage) term, shape (M, K, n_y), in the units of Y.
     dof : int
         q, the degrees of freedom of C.
+    cov_G_smoothed : numpy.ndarray
+        Cov(vec G) with C averaged over ``smoothing_lines`` lines around each line (the weight of
+        a parametric fit, as the SISO LPM's ``var_G_smoothed``: with q = 2 a weight 1/var has an
+        infinite variance), shape of ``cov_G``.
+    smoothing_lines, smoothed_dof : int, float
+        B, and the degrees of freedom of the averaged C: at least ``q B / (2n+1)``.
     """
 
     fs: float
@@ -89,6 +98,9 @@ class MimoLPMResult:
     cov_v: np.ndarray
     transient: np.ndarray
     dof: int
+    cov_G_smoothed: np.ndarray | None = None
+    smoothing_lines: int = 1
+    smoothed_dof: float = 0.0
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -198,7 +210,7 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
     Y = np.fft.rfft(y, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_y, K)
     parts = [_solve_chunk(U, Y, np.arange(start, min(start + CHUNK_LINES, top)), half_width, degree, dof)
              for start in range(0, top, CHUNK_LINES)]
-    G, cov_G, cov_v, transient, condition = (np.concatenate(part, axis=1 if index == 3 else 0)
+    G, block, cov_v, transient, condition = (np.concatenate(part, axis=1 if index == 3 else 0)
                                              for index, part in enumerate(zip(*parts)))
     lines = np.arange(1, top + 1)
     collinear = np.flatnonzero(condition >= COLLINEAR)
@@ -207,8 +219,18 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
                               f"{lines[collinear[0]] * fs / n_samples:g} Hz; cond >= {COLLINEAR:.0e}): G cannot be "
                               "separated; excite the inputs independently (uncorrelated noise, or orthogonal "
                               "multisines)")
-    return MimoLPMResult(float(fs), n_samples, n_records, int(half_width), int(degree), lines, G, cov_G, cov_v,
-                         transient, dof)
+    count = smoothing_lines(dof, 2 * half_width + 1, top)
+    return MimoLPMResult(float(fs), n_samples, n_records, int(half_width), int(degree), lines, G,
+                         vec_covariance(block, cov_v), cov_v, transient, dof,
+                         cov_G_smoothed=vec_covariance(block, band_mean(cov_v, count)), smoothing_lines=count,
+                         smoothed_dof=float(dof * count / (2 * half_width + 1)) if count > 1 else float(dof))
+
+
+def vec_covariance(block: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Cov(vec G) per line from ``block = [A^-1]_{(a,0),(b,0)}`` (K, n_u, n_u) and C (K, n_y, n_y):
+    ``Cov(G_ia, G_jb) = block[a, b] C[i, j]``, column-stacked (entry (i, a) at ``a n_y + i``)."""
+    n_lines, n_inputs, n_outputs = block.shape[0], block.shape[1], C.shape[1]
+    return np.einsum("kab,kij->kaibj", block, C).reshape(n_lines, n_inputs * n_outputs, n_inputs * n_outputs)
 
 
 def _window_sums(weights: np.ndarray, windows: np.ndarray) -> np.ndarray:
@@ -219,7 +241,7 @@ def _window_sums(weights: np.ndarray, windows: np.ndarray) -> np.ndarray:
 
 
 def _solve_chunk(U, Y, centres, half_width, degree, dof):
-    """G, Cov(vec G), C, T and the condition number of the scaled A at the lines ``centres``.
+    """G, [A^-1]_{(a,0),(b,0)}, C, T and the condition number of the scaled A at the lines ``centres``.
 
     A window is the 2n+1 lines from ``first = clip(k - n, 0, K - 2n - 1)``; its offsets, hence V
     and Q, depend only on ``shift = k - first``, so the lines are solved in groups of equal shift,
@@ -246,7 +268,7 @@ def _solve_chunk(U, Y, centres, half_width, degree, dof):
     first = np.clip(centres - half_width, 0, n_lines - width)
     shift = centres - first
     G = np.full((centres.size, n_outputs, n_inputs), np.nan + 0j)
-    cov_G = np.full((centres.size, n_outputs * n_inputs, n_outputs * n_inputs), np.nan + 0j)
+    block = np.full((centres.size, n_inputs, n_inputs), np.nan + 0j)
     cov_v = np.full((centres.size, n_outputs, n_outputs), np.nan + 0j)
     transient = np.full((n_records, centres.size, n_outputs), np.nan + 0j)
     condition = np.ones(centres.size)
@@ -291,14 +313,10 @@ def _solve_chunk(U, Y, centres, half_width, degree, dof):
         # rounding of a (near) noise-free window can leave a negative residual energy: its
         # variances are unknown there, not small (G stands)
         energy[..., np.any(np.einsum("ool->ol", energy).real < 0, axis=0)] = np.nan
-        C = energy[..., good] / dof
-        block = A_inv[g0][:, g0][..., good]                                       # [A^-1]_{(a,0),(b,0)}
         G[rows[good]] = np.moveaxis(theta[g0][..., good], -1, 0).transpose(0, 2, 1)
-        # Cov(G_ia, G_jb) = block[a, b] C[i, j], column-stacked: index a n_y + i
-        cov_G[rows[good]] = np.einsum("abl,ijl->laibj", block, C).reshape(-1, n_inputs * n_outputs,
-                                                                           n_inputs * n_outputs)
-        cov_v[rows[good]] = np.moveaxis(C, -1, 0)
+        block[rows[good]] = np.moveaxis(A_inv[g0][:, g0][..., good], -1, 0)       # [A^-1]_{(a,0),(b,0)}
+        cov_v[rows[good]] = np.moveaxis(energy[..., good], -1, 0) / dof
         fitted = np.einsum("mtil,iol->motl", H, theta)                            # Q^T Phi theta, (M, n_y, R+1, L)
         t0 = np.einsum("t,motl->mol", np.linalg.inv(R_V)[0], QY - fitted)         # first row of R_V^-1
         transient[:, rows[good]] = np.moveaxis(t0[..., good], -1, 1)
-    return G, cov_G, cov_v, transient, condition
+    return G, block, cov_v, transient, condition

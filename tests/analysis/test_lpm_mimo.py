@@ -11,7 +11,8 @@ spectrum once the truth G U is taken away, ``T(k) = Y(k) - G(k) U(k)`` (exact on
   4 N, asserted as at least 32 (the random input scales each line's error). T is recovered.
 - With output noise correlated between the outputs: the 95 % circles of every entry cover the
   truth 95 % of the time (binomial band over lines one window apart, which share no data), and
-  the residual covariance is unbiased for the noise's cross-spectrum ``Sigma / N``.
+  the residual covariance is unbiased for the noise's cross-spectrum ``Sigma / N``; averaged over
+  B lines (the weights of a fit) it stays unbiased with a variance at most 1 / smoothed_dof.
 - n_u = 1 gives the single-input LPM's numbers (:func:`nlsid.analysis.lpm.lpm`).
 - Bad input is refused with an InputError naming the argument.
 """
@@ -103,7 +104,7 @@ def test_bounds_cover_and_the_covariance_is_unbiased_under_correlated_noise():
     n_samples, trials, half_width = 2048, 24, 5
     mixing = np.array([[0.05, 0.0], [0.03, 0.04]])                 # v = mixing e: Sigma = mixing mixing^T
     sigma = mixing @ mixing.T
-    hits, ratios = [], []
+    hits, ratios, smoothed = [], [], []
     for _ in range(trials):
         u = rng.standard_normal((2, n_samples))
         y = respond(u, SMOOTH) + mixing @ rng.standard_normal((2, n_samples))
@@ -112,7 +113,12 @@ def test_bounds_cover_and_the_covariance_is_unbiased_under_correlated_noise():
         G = truth(SMOOTH, result.frequencies[apart])
         hits.append(np.abs(result.G[apart] - G) <= result.bounds(0.95).radius[apart])
         ratios.append(result.cov_v[apart] * n_samples / sigma)      # each entry: its mean is 1
-    hits, ratios = np.concatenate(hits), np.concatenate(ratios)
+        # the smoothed C_00 (cov_G_smoothed / cov_G = C_bar / C), on bands that share no line
+        B = result.smoothing_lines
+        far = np.arange(B // 2, result.lines.size - B // 2, B)
+        smoothed.append((result.cov_G_smoothed[far, 0, 0] / result.cov_G[far, 0, 0]).real
+                        * result.cov_v[far, 0, 0].real * n_samples / sigma[0, 0])
+    hits, ratios, smoothed = np.concatenate(hits), np.concatenate(ratios), np.concatenate(smoothed)
     q = degrees_of_freedom(1, 2, half_width, 2)
     assert result.dof == q == 2
     # the four entries of a line share its residual: count lines, not entries, for the band
@@ -121,6 +127,10 @@ def test_bounds_cover_and_the_covariance_is_unbiased_under_correlated_noise():
     n_lines = ratios.shape[0]
     for i, j in ((0, 0), (1, 1), (0, 1)):
         assert abs(ratios[:, i, j].real.mean() - 1) < 4 / math.sqrt(q * n_lines) * (1.5 if i != j else 1), (i, j)
+    # averaged over B = 101 lines: unbiased, with at least smoothed_dof = q B / 11 = 18.4 degrees of freedom
+    assert result.smoothing_lines == 101 and result.smoothed_dof == pytest.approx(2 * 101 / 11)
+    assert abs(smoothed.mean() - 1) < 4 / math.sqrt(result.smoothed_dof * smoothed.size), smoothed.mean()
+    assert smoothed.var() < (1 / result.smoothed_dof) * (1 + 3 * math.sqrt(2 / smoothed.size)), smoothed.var()
 
 
 def test_one_input_gives_the_single_input_lpm():
@@ -141,6 +151,8 @@ def test_one_input_gives_the_single_input_lpm():
         np.testing.assert_allclose(both.cov_v[:, i, i].real, single.var_y, rtol=1e-9)
         bounds = single.bounds(0.9)
         np.testing.assert_allclose(both.bounds(0.9).radius[:, i, 0], bounds.radius, rtol=1e-9)
+        assert both.smoothing_lines == single.smoothing_lines and both.smoothed_dof == single.smoothed_dof
+        np.testing.assert_allclose(both.cov_G_smoothed[:, i, i].real, single.var_G_smoothed, rtol=1e-9)
 
 
 @pytest.mark.parametrize("u, y, kwargs, where, fragment", [

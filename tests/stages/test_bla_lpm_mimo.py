@@ -82,6 +82,8 @@ def test_bla_gives_the_lpm_frm_with_bounds_that_cover_the_truth(tmp_path):
     np.testing.assert_array_equal(stored["G"], level.G)
     np.testing.assert_array_equal(stored["bounds"]["radius"], level.bounds.radius)
     assert stored["transient"].shape == (1, level.band.size, 2) and stored["cov_G"].shape == (level.band.size, 4, 4)
+    np.testing.assert_array_equal(stored["cov_G_smoothed"], level.result.cov_G_smoothed[level.band])
+    assert stored["attrs"]["smoothing_lines"] == level.result.smoothing_lines > 1
     assert stored["attrs"]["inputs"] == ["u", "u2"] and stored["attrs"]["dof"] == 2
     assert math.isclose(stored["attrs"]["u_rms"][1], np.std(u[1]), rel_tol=1e-12)
 
