@@ -709,7 +709,7 @@ def choose(scan: list[OrderFit], dimension: int, dof: float | None) -> tuple[Ord
     if stable:
         best = min(stable, key=lambda r: r.cost + r.parameters)
         if not any(math.isfinite(r.cost_bound) for r in stable):
-            why = "the covariance has too few degrees of freedom for a cost check"
+            why = "no cost check (unit weights, or a covariance of too few degrees of freedom)"
         else:
             why = ("no stable order reaches its cost bound (model errors, or distortions the weights do not "
                    "hold)")

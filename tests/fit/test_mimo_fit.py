@@ -157,3 +157,31 @@ def test_bad_input_refused_and_unstable_data_warned():
     result = fit_frm(FrmData(F_LINES, G1, cov, FS), 2, "s", hold=False)
     assert result.warnings and all("\n" not in w for w in result.warnings)
     assert any("unstable" in w or "exceeds its bound" in w for w in result.warnings), result.warnings
+
+
+def test_cost_with_covariances_estimated_over_realizations():
+    """Weights from the scatter of M = 12 realizations (n = 11 complex degrees of freedom, m = 4):
+    the cost of the true order, averaged over 20 draws, is n/(n - m) (F m - n_theta/2) (the complex
+    Hotelling T^2), not F m - n_theta/2; tolerance 4 standard errors of the mean of the draws."""
+    from nlsid.fit.mimo_fit import cost_statistics
+
+    w0 = 2 * np.pi * 6.0
+    A = np.array([[0.0, 1.0], [-w0**2, -2 * 0.08 * w0]])
+    B = np.array([[0.0, 0.0], [1000.0, 400.0]])
+    C = np.array([[1.0, 0.0], [0.3, 0.002]])
+    f = F_LINES[:20]
+    G0 = continuous(A, B, C, f)
+    rng = np.random.default_rng(21)
+    M = 12
+    one = covariances(f, 4, 0.03 * float(np.mean(np.abs(G0))), rng)       # one realization's covariance
+    costs = []
+    for _ in range(20):
+        realizations = np.stack([noisy(G0, one, rng) for _ in range(M)])
+        G = realizations.mean(axis=0)
+        d = vec((realizations - G).reshape(-1, 2, 2)).reshape(M, f.size, 4)
+        cov = np.einsum("mfa,mfb->fab", d, d.conj()) / (M * (M - 1))
+        costs.append(fit_frm(FrmData(f, G, cov, FS, dof=M - 1), 2, "s", hold=False).fit.cost)
+    mean, std, _ = cost_statistics(f.size, 4, parameter_count(2, 2, 2), M - 1)
+    assert np.isclose(mean, 11 / 7 * (20 * 4 - 12 / 2))
+    assert abs(np.mean(costs) - mean) < 4 * std / np.sqrt(20), (np.mean(costs), mean, std)
+    assert np.mean(costs) > 1.3 * (20 * 4 - 12 / 2)        # far above the known-covariance value, 74
