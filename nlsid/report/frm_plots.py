@@ -9,7 +9,10 @@ same circle's phase bounds. Schoukens, Pintelon and Rolain 2012, Section 3.8 and
 ``docs/mimo.md``.
 
 The figure is drawn from a ``/frm_levels/level_NN`` group as :func:`nlsid.io.bla_file.read_bla`
-returns it. matplotlib is imported inside the functions so that importing this module stays cheap.
+returns it, or from a ``/frm_lpm_levels/level_NN`` group (arbitrary runs, the Local Polynomial
+Method for several inputs): there the one standard deviation, from ``var_G``, holds noise and
+nonlinear distortion together (they cannot be told apart without periodic excitation), and the
+bounds are the F(2, 2q) circles of the LPM. matplotlib is imported inside the functions so that importing this module stays cheap.
 """
 
 from __future__ import annotations
@@ -29,8 +32,18 @@ def entry_title(inputs: list[str], outputs: list[str], i: int, a: int) -> str:
     return f"from {inputs[a]} to {outputs[i]}"
 
 
+def std_curves(stored: dict) -> list[tuple[np.ndarray, str, str, str]]:
+    """The standard deviations a level's magnitude panels draw: (F, n_y, n_u) values, line style,
+    colour and label; total and noise for a multisine level, the LPM's one for arbitrary runs."""
+    if "var_G" in stored:
+        return [(np.sqrt(stored["var_G"]), "--", "tab:red", "std (noise + nonlinear, LPM)")]
+    return [(stored["std_total"], "--", "tab:red", "std total (noise + nonlinear)"),
+            (stored["std_noise"], ":", "tab:green", "std noise")]
+
+
 def frm_figure(stored: dict, units: Units, name: str):
-    """The n_y x n_u Bode plots of one FRM level (module docstring); ``name`` titles the figure."""
+    """The n_y x n_u Bode plots of one FRM level, of multisine or of arbitrary runs (module
+    docstring); ``name`` titles the figure."""
     attrs = stored["attrs"]
     inputs, outputs = list(attrs["inputs"]), list(attrs["outputs"])
     n_y, n_u = len(outputs), len(inputs)
@@ -44,15 +57,17 @@ def frm_figure(stored: dict, units: Units, name: str):
             magnitude.plot(f, power_db(np.abs(G[:, i, a]) ** 2), color="k", label="|G|")
             band(magnitude, f, power_db(bounds["mag_lo"][:, i, a] ** 2), power_db(bounds["mag_hi"][:, i, a] ** 2),
                  f"{probability:.0%} bounds", color="k", alpha=0.15)
-            magnitude.plot(f, power_db(stored["std_total"][:, i, a] ** 2), "--", color="tab:red",
-                           label="std total (noise + nonlinear)")
-            magnitude.plot(f, power_db(stored["std_noise"][:, i, a] ** 2), ":", color="tab:green", label="std noise")
-            magnitude.set_ylabel(f"|G|, std ({units.ratio_db(outputs[i], inputs[a])})")
+            for std, style, colour, label in std_curves(stored):
+                magnitude.plot(f, power_db(std[:, i, a] ** 2), style, color=colour, label=label)
+            # the entry in the labels too: they head the figure's CSV columns, one per panel
+            entry = f"{inputs[a]} to {outputs[i]}"
+            magnitude.set_ylabel(f"{entry}: |G|, std ({units.ratio_db(outputs[i], inputs[a])})")
             magnitude.set_title(entry_title(inputs, outputs, i, a), fontsize=9)
             phase.plot(*wrapped_phase(f, G[:, i, a]), color="k", label="phase of G")
             band(phase, *wrapped_band(f, G[:, i, a], bounds["phase_lo"][:, i, a], bounds["phase_hi"][:, i, a]),
                  f"{probability:.0%} bounds", color="k", alpha=0.15)
             phase_axis(phase)
+            phase.set_ylabel(f"{entry}: phase (deg)")
             for axis in (magnitude, phase):
                 frequency_axis(axis, f)
     handles, labels = axes[0].get_legend_handles_labels()

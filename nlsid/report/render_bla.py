@@ -37,8 +37,8 @@ distortion is largest:
   for M = 1 or P = 1 (:func:`~nlsid.analysis.bla.nonlinear_variance_missing`); with M >= 2 and
   P >= 2 a band mean below zero means no distortion above the noise.
 
-The frequency response matrix levels of runs with several inputs or outputs (``frm_levels``) are
-drawn by :mod:`nlsid.report.render_frm`: on a page of their own when the file holds nothing else,
+The frequency response matrix levels of runs with several inputs or outputs (``frm_levels``,
+``frm_lpm_levels``) are drawn by :mod:`nlsid.report.render_frm`: on a page of their own when the file holds nothing else,
 else after the levels of this page.
 """
 
@@ -368,7 +368,7 @@ def render_bla(path: Path) -> Page:
 
     data = read_bla(path)
     if not data["levels"] and not data["lpm_levels"]:
-        if data["frm_levels"]:
+        if data["frm_levels"] or data.get("frm_lpm_levels"):
             from nlsid.report.render_frm import render_frm
 
             return render_frm(path, data)
@@ -409,8 +409,8 @@ def render_bla(path: Path) -> Page:
 def _with_frm(page: Page, data: dict) -> Page:
     """``page`` with the frequency response matrix levels of ``data`` added after its own
     (:mod:`nlsid.report.render_frm`): their figures, tables, findings and warnings, and their
-    summaries as ``numbers["frm_levels"]``."""
-    if not data["frm_levels"]:
+    summaries as ``numbers["frm_levels"]`` and ``numbers["frm_lpm_levels"]``."""
+    if not data["frm_levels"] and not data.get("frm_lpm_levels"):
         return page
     from nlsid.report.render_frm import frm_parts
 
@@ -419,7 +419,8 @@ def _with_frm(page: Page, data: dict) -> Page:
     page.tables += tables
     page.findings += findings
     page.warnings += warnings
-    page.numbers["frm_levels"] = summaries
+    page.numbers["frm_levels"] = summaries[:len(data["frm_levels"])]
+    page.numbers["frm_lpm_levels"] = summaries[len(data["frm_levels"]):]
     return page
 
 

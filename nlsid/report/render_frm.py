@@ -24,6 +24,12 @@ level's ``summary``:
   single-input page (book Eq. 5-9).
 - Without a noise variance (P = 1) or a total variance (M = 1) nothing is compared, and the page
   says so.
+
+The levels of arbitrary runs (``frm_lpm_levels``, the Local Polynomial Method for several inputs,
+numbered after the multisine FRM levels as ``nlsid bla`` numbers them) have one variance per
+entry, noise and nonlinear distortion together: their verdict gives its band mean relative to
+``|G_ia|^2`` over the entries as an upper bound of the noise, never as a noise level. A file
+with multisine FRM levels takes its headline from the highest of those.
 """
 
 from __future__ import annotations
@@ -103,6 +109,22 @@ def frm_verdict(summary: dict) -> tuple[str, list[str]]:
     return head, findings
 
 
+def lpm_frm_verdict(summary: dict) -> tuple[str, list[str]]:
+    """Headline and findings of one FRM level of arbitrary runs (module docstring)."""
+    shape = f"{len(summary['outputs'])} outputs x {len(summary['inputs'])} inputs"
+    lo, hi = summary["band_hz"]
+    levels = [row["total_var_db"] for row in summary["entries"] if _finite(row["total_var_db"])]
+    head = (f"Frequency response matrix of {shape} of arbitrary excitation by the Local Polynomial Method over "
+            f"{lo:.3g} to {hi:.3g} Hz")
+    if levels:
+        head += (f"; noise plus nonlinear distortion {min(levels):.1f} to {max(levels):.1f} dB relative to |G|² over "
+                 "the entries (an upper bound of the noise: the two cannot be separated without periodic excitation)")
+    lpm = summary["lpm"]
+    findings = [f"M = {summary['records']} records of N = {summary['samples']} samples, q = {lpm['dof']} degrees of "
+                f"freedom, window {lpm['lines']} lines, degree {lpm['degree']}, {summary['excited_lines']} lines"]
+    return head, findings
+
+
 def _table(stored: dict, name: str, units: Units) -> Table:
     summary = stored["attrs"]["summary"]
     rows = [[f"from {row['input']} to {row['output']}", number(row["bla_db"], ".1f"),
@@ -116,9 +138,27 @@ def _table(stored: dict, name: str, units: Units) -> Table:
                       "total: realization-to-realization scatter, noise and nonlinear distortion).")
 
 
+def _lpm_table(stored: dict, name: str, units: Units) -> Table:
+    summary = stored["attrs"]["summary"]
+    rows = [[f"from {row['input']} to {row['output']}", number(row["bla_db"], ".1f"),
+             units.ratio_db(row["output"], row["input"]), number(row["total_var_db"], ".1f")]
+            for row in summary["entries"]]
+    return Table(f"Frequency response matrix per entry, {name} (Local Polynomial Method)",
+                 ["entry", "|G| band mean (dB)", "dB reference", "noise+NL var (dB re |G|², upper bound)"], rows,
+                 text=(0, 2), note="|G| band mean: mean over the band's lines of 20 log10 |G|; noise+NL var: 10 log10 "
+                                   "of the band mean of the variance of G relative to |G|²; it bounds the noise from "
+                                   "above.")
+
+
 def _caption(stored: dict, name: str) -> str:
     attrs = stored["attrs"]
     probability = float(attrs["confidence"])
+    if "var_G" in stored:
+        return (f"Frequency response matrix, {name}, by the Local Polynomial Method. One Bode plot per entry, from "
+                f"each input (column) to each output (pair of rows): |G| with its {probability:.0%} confidence "
+                "bounds, F(2, 2q) with q degrees of freedom (grey), the standard deviation of the estimate (red, "
+                f"dashed: noise and nonlinear distortion together), and the phase with the same bounds ({BOOK}, "
+                "Section 3.7).")
     return (f"Frequency response matrix, {name}. One Bode plot per entry, from each input (column) to each output "
             f"(pair of rows): |G| with its {probability:.0%} confidence bounds on the total variance, F(2, 2M - 2) "
             "(grey), the standard deviation of the estimate from noise plus stochastic nonlinear distortion "
@@ -127,22 +167,26 @@ def _caption(stored: dict, name: str) -> str:
 
 
 def frm_parts(data: dict) -> tuple[list[Figure], list[Table], list[str], list[str], list[dict]]:
-    """Figures (the highest level first), tables, findings, warnings and summaries of the
-    ``frm_levels`` of :func:`nlsid.io.bla_file.read_bla`'s ``data``."""
+    """Figures, tables, findings, warnings and summaries of the ``frm_levels`` (the highest
+    level's figure first) and then the ``frm_lpm_levels`` of :func:`nlsid.io.bla_file.read_bla`'s
+    ``data`` (numbered after them)."""
     from nlsid.report.vector import figure
 
-    stored_levels = data["frm_levels"]
+    multisine, arbitrary = data["frm_levels"], data.get("frm_lpm_levels", [])
+    stored_levels = multisine + arbitrary
     summaries = [stored["attrs"]["summary"] for stored in stored_levels]
     figures, tables, findings, warnings = [], [], [], []
-    for index in [len(stored_levels) - 1, *range(len(stored_levels) - 1)]:
+    order = [len(multisine) - 1, *range(len(multisine) - 1)] if multisine else []
+    for index in order + list(range(len(multisine), len(stored_levels))):
         stored, name = stored_levels[index], frm_level_name(index, summaries[index])
         units = _units(stored)
         figures.append(figure(frm_figure(stored, units.for_figures(), name), _caption(stored, name),
                               f"frm_level_{index:02d}"))
     for index, stored in enumerate(stored_levels):
         name = frm_level_name(index, summaries[index])
-        tables.append(_table(stored, name, _units(stored).for_figures()))
-        head, found = frm_verdict(summaries[index])
+        lpm = index >= len(multisine)
+        tables.append((_lpm_table if lpm else _table)(stored, name, _units(stored).for_figures()))
+        head, found = (lpm_frm_verdict if lpm else frm_verdict)(summaries[index])
         findings.append(f"{name}: {head}")
         findings += [f"{name}: {item}" for item in found]
         warnings += [f"{name}: {w}" for w in stored["attrs"]["warnings"]]
@@ -150,19 +194,25 @@ def frm_parts(data: dict) -> tuple[list[Figure], list[Table], list[str], list[st
 
 
 def render_frm(path: Path, data: dict) -> Page:
-    """The page of a ``bla.h5`` that holds only frequency response matrix levels."""
+    """The page of a ``bla.h5`` that holds only frequency response matrix levels (of multisine or
+    of arbitrary runs); the headline is that of the highest multisine FRM level, else of the
+    highest level of arbitrary runs."""
     figures, tables, findings, warnings, summaries = frm_parts(data)
-    top = len(summaries) - 1
-    headline, _ = frm_verdict(summaries[top])
-    findings = [item for item in findings if item != f"{frm_level_name(top, summaries[top])}: {headline}"]
-    units = _units(data["frm_levels"][top])
+    multisine = len(data["frm_levels"])
+    top = multisine - 1 if multisine else len(summaries) - 1
+    headline, _ = (frm_verdict if multisine else lpm_frm_verdict)(summaries[top])
+    name = frm_level_name(top, summaries[top])
+    findings = [item for item in findings if item != f"{name}: {headline}"]
+    stored = (data["frm_levels"] + data.get("frm_lpm_levels", []))[top]
     names = [*summaries[top]["inputs"], *summaries[top]["outputs"]]
+    several = multisine > 1 or (not multisine and len(summaries) > 1)
     return Page(kind="Best Linear Approximation", title=f"BLA report: {Path(path).name}", source=str(path),
-                headline=headline if top == 0 else f"{headline} at the highest, {frm_level_name(top, summaries[top])}",
+                headline=f"{headline} at the highest, {name}" if several else headline,
                 findings=findings, figures=figures,
                 tables=tables, warnings=list(data["attrs"]["warnings"]) + warnings,
-                provenance=data["attrs"]["provenance"], note=units.missing_note(*names),
-                numbers={"levels": [], "lpm_levels": [], "frm_levels": summaries,
+                provenance=data["attrs"]["provenance"], note=_units(stored).missing_note(*names),
+                numbers={"levels": [], "lpm_levels": [], "frm_levels": summaries[:multisine],
+                         "frm_lpm_levels": summaries[multisine:],
                          "confidence": float(data["attrs"]["confidence"]), "detected_threshold_db": DETECTED_DB})
 
 
