@@ -13,6 +13,8 @@ spectrum once the truth G U is taken away, ``T(k) = Y(k) - G(k) U(k)`` (exact on
   truth 95 % of the time (binomial band over lines one window apart, which share no data), and
   the residual covariance is unbiased for the noise's cross-spectrum ``Sigma / N``; averaged over
   B lines (the weights of a fit) it stays unbiased with a variance at most 1 / smoothed_dof.
+- A Wiener system with a cubic: G is the Bussgang BLA within its circles, and the residual
+  covariance holds the nonlinear distortion (it is no noise level).
 - n_u = 1 gives the single-input LPM's numbers (:func:`nlsid.analysis.lpm.lpm`).
 - Bad input is refused with an InputError naming the argument.
 """
@@ -131,6 +133,35 @@ def test_bounds_cover_and_the_covariance_is_unbiased_under_correlated_noise():
     assert result.smoothing_lines == 101 and result.smoothed_dof == pytest.approx(2 * 101 / 11)
     assert abs(smoothed.mean() - 1) < 4 / math.sqrt(result.smoothed_dof * smoothed.size), smoothed.mean()
     assert smoothed.var() < (1 / result.smoothed_dof) * (1 + 3 * math.sqrt(2 / smoothed.size)), smoothed.var()
+
+
+def test_a_wiener_system_gives_the_bla_with_the_distortion_in_the_variance():
+    """Output y2 through a cubic, y2 = x2 + alpha x2^3, x2 Gaussian (a sum of filtered white
+    inputs): by Bussgang's theorem the BLA of row 2 is G_2a (1 + 3 alpha var(x2)), var(x2) the sum
+    of the squared impulse responses. The stochastic distortion acts as noise under random
+    excitation: the 95 % circles cover that BLA at 95 %, and C_22 holds it (here more than 100
+    times the noise's sigma^2 / N), while C_11 of the linear output is the noise's alone."""
+    rng = np.random.default_rng(3)
+    alpha, sigma, n_samples, half_width = 0.1, 0.01, 4096, 5
+    impulse = np.zeros(400)
+    impulse[0] = 1.0
+    var_x2 = sum(np.sum(signal.lfilter(*SMOOTH[(1, a)], impulse) ** 2) for a in range(2))
+    hits, noise_only, with_distortion = [], [], []
+    for _ in range(6):
+        u = rng.standard_normal((2, n_samples))
+        x = respond(u, SMOOTH)
+        y = np.stack([x[0], x[1] + alpha * x[1] ** 3]) + sigma * rng.standard_normal((2, n_samples))
+        result = lpm_mimo(u, y, 1.0, half_width=half_width)
+        apart = np.arange(half_width, result.lines.size - half_width, 2 * half_width + 1)
+        bla = truth(SMOOTH, result.frequencies[apart])
+        bla[:, 1, :] *= 1 + 3 * alpha * var_x2
+        hits.append(np.abs(result.G[apart] - bla) <= result.bounds(0.95).radius[apart])
+        noise_only.append(result.cov_v[apart, 0, 0].real * n_samples / sigma ** 2)
+        with_distortion.append(result.cov_v[apart, 1, 1].real * n_samples / sigma ** 2)
+    hits, noise_only = np.concatenate(hits), np.concatenate(noise_only)
+    assert abs(hits.mean() - 0.95) < binomial_band(0.95, hits.shape[0]), hits.mean(axis=0)
+    assert abs(noise_only.mean() - 1) < 4 / math.sqrt(result.dof * noise_only.size), noise_only.mean()
+    assert np.mean(with_distortion) > 100
 
 
 def test_one_input_gives_the_single_input_lpm():
