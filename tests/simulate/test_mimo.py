@@ -95,3 +95,18 @@ def test_a_run_the_model_cannot_take_whole_is_refused(run, what):
     with pytest.raises(InputError) as info:
         simulate_mimo(_model(), run)
     assert info.value.where == "s" and info.value.what == what
+
+
+def test_noise_rows_first_as_for_one_input_and_output_the_others_independent():
+    from nlsid.simulate.noise import NoiseLevels, draw, draw_channels
+
+    levels = NoiseLevels(u=0.1, y=0.2, process=0.3)
+    stream = np.random.SeedSequence(11).spawn(3)[2]
+    one, rows = draw(levels, stream, 4000), draw_channels(levels, stream, 4000, 2, 3)
+    for kind, count in (("u", 2), ("y", 3), ("process", 2)):
+        matrix = getattr(rows, kind)
+        assert matrix.shape == (count, 4000)
+        np.testing.assert_array_equal(matrix[0], getattr(one, kind))
+        # independent rows of the same std: |correlation| < 5 / sqrt(4000), variance within 5 sigma
+        assert np.all(np.abs(np.corrcoef(matrix)[np.triu_indices(count, 1)]) < 5 / np.sqrt(4000))
+        assert np.all(np.abs(matrix.var(axis=1) / getattr(levels, kind) ** 2 - 1) < 5 * np.sqrt(2 / 4000))
