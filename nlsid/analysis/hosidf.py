@@ -32,6 +32,12 @@ can be pooled; a common rotation changes no magnitude and no variance):
   ``sigma_bar = sqrt(sigma_bar^2)`` (as printed: the sample variance of the K line deviations);
 - noise bound, Eq. (6): ``eps_k = sigma(k) + 2 varsigma``; harmonic k is significant when
   ``|E{Y(k w0)}| > eps_k`` (the set of Eq. (5)).
+
+Several outputs. A run of one input and several outputs (``Run.outputs``: y and channels) gives
+each output i its own HOSIDFs ``H_k = Y_i(k w0) / U(w0)^k`` with the same statistics: every
+output is the output of a single-input system driven by the same tone
+(:func:`measured_hosidfs`). Several inputs have no HOSIDF: the definition divides by the tone of
+one input.
 """
 
 from __future__ import annotations

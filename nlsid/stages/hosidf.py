@@ -5,7 +5,8 @@ function, a ``write``, the figures and a summary. Without ``sweep``: the measure
 H_k = Y(k w0)/U(w0)^k of every frequency x amplitude cell with their variances and the noise
 bound of each harmonic (:mod:`nlsid.analysis.hosidf`), and with ``model`` the analytic HOSIDFs of
 a polynomial block structure (:mod:`nlsid.analysis.hosidf_analytic`). With ``sweep``: the
-linearity cost per value of a run parameter (:mod:`nlsid.analysis.linearity_cost`).
+linearity cost per value of a run parameter (:mod:`nlsid.analysis.linearity_cost`). Runs of one
+input and several outputs give the grid of every output (:meth:`HosidfResult.output`).
 
 Examples
 --------
@@ -523,7 +524,9 @@ def hosidf(recording: Recording | str | os.PathLike, harmonics: int = 5, varianc
     averaged over repeats, with their variances over repeats and periods, and the noise bound
     eps_k = sigma(k) + 2 varsigma of seed 003 Eq. 6 that marks harmonic k significant. With
     ``sweep``, the linearity cost of seed 003 (Definitions 2-3, Eq. 7) per value of a run
-    parameter instead. Runs of other kinds are skipped (said in ``warnings``).
+    parameter instead. Runs of other kinds are skipped (said in ``warnings``). Runs of one input
+    and several outputs give the HOSIDFs of each output (``outputs``, ``grids``, ``output(name)``);
+    runs of several inputs are refused.
 
     Parameters
     ----------
@@ -555,7 +558,8 @@ def hosidf(recording: Recording | str | os.PathLike, harmonics: int = 5, varianc
     Raises
     ------
     nlsid.InputError
-        A bad argument (named), or runs the analysis cannot take (the message names the run).
+        A bad argument (named), or runs the analysis cannot take (the message names the run):
+        several inputs; outputs other than the first run's; ``sweep`` or ``model`` on several outputs.
 
     Examples
     --------
