@@ -129,6 +129,13 @@ def narrowest_half_width(n_records: int, n_inputs: int, degree: int) -> int:
     return max(1, lines // 2)
 
 
+def _integer(name: str, value, least: int) -> int:
+    """``value`` as an int of at least ``least``; InputError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise InputError(name, f"expected an integer >= {least}, got {value!r}")
+    return int(value)
+
+
 def _records(name: str, value) -> np.ndarray:
     """A (channels, N) or (M, channels, N) array as (M, channels, N) floats."""
     try:
@@ -166,7 +173,8 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
     Raises
     ------
     nlsid.InputError
-        Arrays of the wrong shape or with non-finite samples, a constant input, a window too short
+        Arrays of the wrong shape or with non-finite samples, a sample rate that is not positive, a
+        half width below 1 or a negative degree, a constant input, a window too short
         for the records or too narrow to leave a degree of freedom, or inputs collinear over a
         window (G cannot be separated there).
 
@@ -189,10 +197,9 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
     u, y = _records("u", u), _records("y", y)
     if y.shape[0] != u.shape[0] or y.shape[2] != u.shape[2]:
         raise InputError("y", f"expected the records and samples of u {u.shape}, got {y.shape}")
-    if int(half_width) != half_width or half_width < 1:
-        raise InputError("half_width", f"expected an integer >= 1, got {half_width!r}")
-    if int(degree) != degree or degree < 0:
-        raise InputError("degree", f"expected an integer >= 0, got {degree!r}")
+    half_width, degree = _integer("half_width", half_width, 1), _integer("degree", degree, 0)
+    if not (isinstance(fs, (int, float, np.number)) and np.isfinite(fs) and fs > 0):
+        raise InputError("fs", f"expected a positive sample rate, got {fs!r}")
     n_records, n_inputs, n_samples = u.shape
     width = 2 * half_width + 1
     top = (n_samples - 1) // 2

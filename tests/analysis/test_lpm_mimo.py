@@ -194,10 +194,13 @@ def test_one_input_gives_the_single_input_lpm():
     (np.zeros((2, 20)), np.zeros((2, 20)), {}, "u", "20 samples give 9 lines, fewer than the window of 11"),
     (np.stack([np.arange(300.0) % 7, np.zeros(300)]), np.zeros((2, 300)), {}, "u", "input 1 is constant"),
     ("noise", np.zeros((2, 300)), {}, "u", "expected a numeric array"),
+    (np.eye(2, 300), np.zeros((2, 300)), {"half_width": "5"}, "half_width", "expected an integer >= 1"),
+    (np.eye(2, 300), np.zeros((2, 300)), {"degree": -1}, "degree", "expected an integer >= 0"),
+    (np.eye(2, 300), np.zeros((2, 300)), {"fs": 0.0}, "fs", "expected a positive sample rate"),
 ])
 def test_bad_input_is_refused_naming_the_argument(u, y, kwargs, where, fragment):
     with pytest.raises(InputError) as error:
-        lpm_mimo(u, y, 1.0, **{"half_width": 5, **kwargs})
+        lpm_mimo(u, y, **{"fs": 1.0, "half_width": 5, **kwargs})
     assert error.value.where == where and fragment in error.value.what, str(error.value)
 
 
