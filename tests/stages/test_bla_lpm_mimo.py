@@ -11,16 +11,19 @@ circles of lines a window apart at 95 % within the binomial band.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import h5py
 import numpy as np
+import pytest
 from scipy import signal
 
 import nlsid
 from generators.lpm_cases import binomial_band
 from nlsid.analysis.frm_levels import NOT_SEPARABLE
 from nlsid.analysis.lpm_mimo import lpm_mimo
+from nlsid.errors import InputError
 from nlsid.io.bla_file import read_bla
 from nlsid.io.run import Run
 from nlsid.stages.recording import Recording
@@ -104,3 +107,14 @@ def test_cli_json_and_one_line_refusal(run_cli, tmp_path):
     result = run_cli("bla", bad, "-o", tmp_path / "bad_bla.h5")
     result.assert_one_line_error("bad.h5: level 1.0 (arbitrary runs): u: the inputs are collinear over the window")
     assert not (tmp_path / "bad_bla.h5").exists()
+
+
+def test_records_of_one_level_must_share_inputs_outputs_and_fs():
+    u, y = record(5)
+    runs = recording((u, y), (u, y)).runs
+    for change, fragment in (({"fs": 2 * FS}, "fs 100.0 differ from those of run noise0"),
+                             ({"outputs": ("y",)}, "outputs ('y',) differ from those of run noise0")):
+        runs[1] = dataclasses.replace(runs[0], run_id="noise1", **change)
+        with pytest.raises(InputError) as error:
+            nlsid.bla(Recording(list(runs), {}, None))
+        assert error.value.where == "recording:/runs/noise1" and fragment in error.value.what, str(error.value)
