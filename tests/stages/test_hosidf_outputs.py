@@ -128,3 +128,15 @@ def test_several_inputs_sweep_and_model_are_refused_in_one_line(result, tmp_path
     verdict = run_cli("info", path, "--json").json()["stages"]["hosidf"]
     assert not verdict["feeds"] and verdict["reason"] in out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["two.h5"]
+
+
+def test_cli_and_info_take_one_input_and_two_outputs(run_cli, tmp_path):
+    path = nlsid.Recording(_runs(np.random.default_rng(2), LINES[:1]), {}, None).write(tmp_path / "rec.h5")
+    assert run_cli("info", path, "--json").json()["stages"]["hosidf"]["feeds"]
+    out = run_cli("hosidf", path, "-o", tmp_path / "h.h5", "--harmonics", "3", "--json")
+    assert out.exit_code == 0, out.stderr
+    summary = out.json()
+    assert [row["output"] for row in summary["outputs"]] == ["y", "acc2"]
+    assert summary["outputs"][0]["significant_cells_per_harmonic"] == summary["grid"]["significant_cells_per_harmonic"]
+    text = run_cli("hosidf", path, "-o", tmp_path / "h2.h5", "--harmonics", "3")
+    assert text.exit_code == 0 and "output acc2: cells where the harmonic clears its noise bound" in text.stderr
