@@ -140,8 +140,9 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
     from nlsid.io.provenance import provenance
     from nlsid.stages.fit import check_tf_options, cost_check, fit_tf
 
-    if _names_frm_level(bla_file, level):
-        _fit_frm(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json)
+    levels = _frm_levels(bla_file, level)
+    if levels is not None:
+        _fit_frm(bla_file, order, domain, delay, max_order, levels, plot, output, force, as_json)
         return
     check_tf_options(order, domain, delay, max_order, level, names=FLAGS)
     for path in (output, report_path(output)) + ((plot,) if plot else ()):
@@ -165,26 +166,28 @@ def _fit_bla(bla_file, order, domain, delay, max_order, level, plot, output, for
         console.print(f"  {name} = {value:.6g} +- {std:.2g}")
 
 
-def _names_frm_level(bla_file, level) -> bool:
-    """Whether --level names a level of several inputs or outputs (frm_levels) of the file; a file
-    that cannot be read is left to the transfer-function fit, which reports it as before. In a file
-    with frm_levels, a --level out of range or missing is refused here, counting every level."""
+def _frm_levels(bla_file, level) -> list[int] | None:
+    """The FRM levels (frm_levels, frm_lpm_levels) the fit takes (nlsid.stages.frm_fit.levels_to_fit),
+    None for the transfer-function fit; a file that cannot be read is left to the transfer-function
+    fit, which reports it as before. In a file with FRM levels, a --level out of range or missing
+    (where it also holds levels of one input and output) is refused here, counting every level."""
     from nlsid.io.bla_file import read_bla
-    from nlsid.stages.frm_fit import frm_level
+    from nlsid.stages.frm_fit import levels_to_fit
 
     try:
         content = read_bla(bla_file)
     except (InputError, OSError):
-        return False
-    return frm_level(content, level, str(bla_file)) is not None
+        return None
+    return levels_to_fit(content, level, str(bla_file))
 
 
-def _fit_frm(bla_file, order, domain, delay, max_order, level, plot, output, force, as_json) -> None:
-    """A MIMO state-space model fitted to an FRM level (docs/mimo.md, "The fit")."""
+def _fit_frm(bla_file, order, domain, delay, max_order, levels, plot, output, force, as_json) -> None:
+    """A MIMO state-space model fitted to each FRM level of ``levels`` (docs/mimo.md, "The fit"):
+    all fitted before any file is written, so a refusal leaves nothing behind."""
     from nlsid.io.atomic import check_writable
     from nlsid.io.fit_file import report_path
     from nlsid.io.provenance import provenance
-    from nlsid.stages.frm_fit import cost_words, fit_frm_level, parse_order
+    from nlsid.stages.frm_fit import cost_words, fit_frm_level, level_paths, parse_order
 
     parse_order(order, "--order")
     if str(delay) != "0":
@@ -192,22 +195,30 @@ def _fit_frm(bla_file, order, domain, delay, max_order, level, plot, output, for
                                     "--delay at 0")
     if plot:
         raise InputError("--plot", "no figure of a fit of several inputs or outputs yet: leave --plot out")
-    for path in (output, report_path(output)):
+    paths = level_paths(output, levels)
+    for path in paths:
         check_writable(path, force)
-    result = fit_frm_level(bla_file, order, domain, level, max_order, names=FLAGS)
-    result.write(output, force=force, provenance=provenance(input_paths=[bla_file]))
+        check_writable(report_path(path), force)
+    results = [fit_frm_level(bla_file, order, domain, index, max_order, names=FLAGS) for index in levels]
+    for path, result in zip(paths, results):
+        result.write(path, force=force, provenance=provenance(input_paths=[bla_file]))
     console = settings().console
-    for warning in result.warnings:
-        console.print(f"warning: {warning}", markup=False)
+    for result in results:
+        for warning in result.warnings:
+            console.print(f"warning: level {result.level['index']}: {warning}" if len(results) > 1
+                          else f"warning: {warning}", markup=False)
     if as_json:
-        emit_json({"output": output, "report": str(report_path(output)), **result.summary()})
+        entries = [{"output": str(path), "report": str(report_path(path)), **result.summary()}
+                   for path, result in zip(paths, results)]
+        emit_json(entries[0] if len(entries) == 1 else {"levels": entries})
         return
-    fit_ = result.fitted.fit
-    console.print(f"{output}: {fit_.order}-state {domain}-domain state space, {len(result.outputs)} outputs x "
-                  f"{len(result.inputs)} inputs, fitted to level {result.level['index']}, cost {fit_.cost:.5g}, "
-                  f"{cost_words(result.fitted)} over {result.lines} lines", markup=False)
-    console.print(f"order: {result.fitted.reason}", markup=False)
-    console.print("poles: " + ", ".join(f"{p:.5g}" for p in fit_.poles), markup=False)
+    for path, result in zip(paths, results):
+        fit_ = result.fitted.fit
+        console.print(f"{path}: {fit_.order}-state {domain}-domain state space, {len(result.outputs)} outputs x "
+                      f"{len(result.inputs)} inputs, fitted to level {result.level['index']}, cost {fit_.cost:.5g}, "
+                      f"{cost_words(result.fitted)} over {result.lines} lines", markup=False)
+        console.print(f"order: {result.fitted.reason}", markup=False)
+        console.print("poles: " + ", ".join(f"{p:.5g}" for p in fit_.poles), markup=False)
 
 
 def _fit_extension(model_config, data, validation, validate_on, estimation_range, validation_range, fit_on, jacobian,

@@ -64,6 +64,27 @@ def frm_level(content: dict, level: int | None, source: str, option: str = "--le
     return None if level < siso else (level, frm[level - siso])
 
 
+def levels_to_fit(content: dict, level: int | None, source: str, option: str = "--level") -> list[int] | None:
+    """The FRM level indices a fit of ``level`` takes: every FRM level where the file holds FRM
+    levels only, several of them, and no ``level`` is given (one model each); else the one
+    :func:`frm_level` names; None for a level of one input and one output (or a file without FRM
+    levels)."""
+    frm = [*(content.get("frm_levels") or []), *(content.get("frm_lpm_levels") or [])]
+    if level is None and frm and not content["levels"] and not content["lpm_levels"] and len(frm) > 1:
+        return list(range(len(frm)))
+    found = frm_level(content, level, source, option)
+    return None if found is None else [found[0]]
+
+
+def level_paths(output: str | os.PathLike, indices: list[int]) -> list[Path]:
+    """Where the models of ``indices`` go: ``output`` for one level, else ``<stem>.level_NN<suffix>``
+    beside it for each (``model.yaml`` -> ``model.level_00.yaml``, ...)."""
+    path = Path(output)
+    if len(indices) == 1:
+        return [path]
+    return [path.with_name(f"{path.stem}.level_{index:02d}{path.suffix}") for index in indices]
+
+
 def _definite(cov: np.ndarray) -> bool:
     """Positive definite at every line, as the fit's whitening asks."""
     try:

@@ -33,8 +33,16 @@ def zoh_frm(A, B, C, D, f) -> np.ndarray:
     return np.stack([Cd @ np.linalg.solve(zk * np.eye(A.shape[0]) - Ad, Bd) + Dd for zk in z])
 
 
-def write_frm_file(path, rng) -> tuple[np.ndarray, np.ndarray]:
-    """The bla.h5 of one FRM level; returns the truth and the covariance of the mean's vec(G)."""
+def write_frm_file(path, rng, levels=(None,)) -> tuple[np.ndarray, np.ndarray]:
+    """The bla.h5 of FRM levels (the runs' level attribute per level); returns the truth and the
+    covariance of the mean's vec(G)."""
+    made = [frm_level_of(rng, value) for value in levels]
+    write_bla(path, [], {"tool": "test"}, 0.95, [], {}, frm_levels=[level for level, _, _ in made])
+    return made[0][1], made[0][2]
+
+
+def frm_level_of(rng, value) -> tuple[FrmLevel, np.ndarray, np.ndarray]:
+    """One FRM level of M realizations of the truth with noise, the truth and the mean's covariance."""
     f = BINS * FS / PERIOD
     G0 = zoh_frm(A_TRUE, B_TRUE, C_TRUE, np.zeros((2, 2)), f)
     F = f.size
@@ -51,10 +59,9 @@ def write_frm_file(path, rng) -> tuple[np.ndarray, np.ndarray]:
         bins=BINS, frequency=f, G=G, std_noise=nan, std_total=np.sqrt(np.abs(np.einsum("fii->fi", cov_total)))
         .reshape(F, 2, 2).transpose(0, 2, 1), cov_noise=np.full((F, 4, 4), np.nan + 0j), cov_total=cov_total,
         n_realizations=M, n_experiments=2, n_periods=1, confidence=0.95, bounds=bounds, noise_bounds=bounds)
-    level = FrmLevel(level=None, fs=FS, period=PERIOD, inputs=("u", "u2"), outputs=("y", "acc"),
+    level = FrmLevel(level=value, fs=FS, period=PERIOD, inputs=("u", "u2"), outputs=("y", "acc"),
                      run_ids=[[f"r{m}e{e}" for e in range(2)] for m in range(M)], units={}, frm=result)
-    write_bla(path, [], {"tool": "test"}, 0.95, [], {}, frm_levels=[level])
-    return G0, (L @ L.conj().T) / M
+    return level, G0, (L @ L.conj().T) / M
 
 
 def test_fit_writes_a_mimo_state_space_of_the_frm(tmp_path, run_cli):
@@ -179,3 +186,23 @@ def test_levels_of_arbitrary_runs_are_numbered_after_and_fitted():
     lpm["attrs"]["dof"] = 5
     data, notes = frm_data(lpm, "b.h5")
     assert data.diagonal and "each entry weighted by its own variance" in notes[1]
+
+
+def test_every_level_fitted_where_the_file_holds_several(tmp_path, run_cli):
+    """A file of FRM levels only, several of them, without --level: one model per level, named
+    model.level_NN.yaml, all fitted before any is written; --json lists them under levels."""
+    bla = tmp_path / "bla.h5"
+    write_frm_file(bla, np.random.default_rng(9), levels=(1.0, 2.0))
+    result = run_cli("fit", bla, "--order", "2", "-o", tmp_path / "model.yaml", "--json")
+    assert result.exit_code == 0, result.stderr
+    entries = result.json()["levels"]
+    assert [e["level"] for e in entries] == [{"index": 0, "level": 1.0}, {"index": 1, "level": 2.0}]
+    assert [e["output"] for e in entries] == [str(tmp_path / f"model.level_0{i}.yaml") for i in (0, 1)]
+    for i in (0, 1):
+        config = yaml.safe_load((tmp_path / f"model.level_0{i}.yaml").read_text())
+        assert config["model"]["type"] == "mimo_state_space"
+        assert json.loads((tmp_path / f"model.level_0{i}.fit.json").read_text())["level"]["index"] == i
+    assert not (tmp_path / "model.yaml").exists()
+    # --level names one of them: that one alone, at -o
+    result = run_cli("fit", bla, "--order", "2", "--level", "1", "-o", tmp_path / "one.yaml", "--json")
+    assert result.exit_code == 0 and result.json()["level"]["index"] == 1 and (tmp_path / "one.yaml").exists()
