@@ -45,7 +45,7 @@ from nlsid.analysis.confidence import Bounds, circle_bounds
 from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH, band_mean, hpd_inverse, smoothing_lines
 from nlsid.errors import InputError
 
-CHUNK_LINES = 16384  # lines solved at once: the window arrays of a chunk take some tens of MB
+CHUNK_BYTES = 64e6  # bound on the window products of the lines solved at once
 #: Condition number (1-norm) of the diagonally scaled A (about the square of the regressor's) from
 #: which the inputs count as collinear over a window: rounding (1e-16 relative) then moves G by
 #: more than 1e-4 of its size.
@@ -215,8 +215,11 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
         raise InputError("u", f"input {flat[0]} is constant in every record: it excites nothing")
     U = np.fft.rfft(u, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_u, K)
     Y = np.fft.rfft(y, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_y, K)
-    parts = [_solve_chunk(U, Y, np.arange(start, min(start + CHUNK_LINES, top)), half_width, degree, dof)
-             for start in range(0, top, CHUNK_LINES)]
+    # the products conj(U_a) U_b, conj(U_a) Y_o, Y_o conj(Y_p) over a window hold
+    # w M (n_u + n_y)^2 complex numbers per line at most
+    chunk = max(64, int(CHUNK_BYTES // (16 * width * n_records * (n_inputs + y.shape[1]) ** 2)))
+    parts = [_solve_chunk(U, Y, np.arange(start, min(start + chunk, top)), half_width, degree, dof)
+             for start in range(0, top, chunk)]
     G, block, cov_v, transient, condition = (np.concatenate(part, axis=1 if index == 3 else 0)
                                              for index, part in enumerate(zip(*parts)))
     lines = np.arange(1, top + 1)
