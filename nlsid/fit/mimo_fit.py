@@ -11,8 +11,9 @@ what ``nlsid simulate`` runs a continuous model through), R = (z_k I - Phi)^-1 P
 Phi = e^{A h}, Psi = int_0^h e^{A t} dt, h = 1/fs; ``s`` without hold, R = (j w_k I - A)^-1.
 
 Cost. The sample maximum likelihood cost in FRM form (Schoukens, Pintelon and Rolain 2012,
-(4-32) and Section 7.4.2, with the input taken as exact; Pintelon and Schoukens 2012, Section 9.18
-for several inputs):
+(4-32) and Section 7.4.2, with the input taken as exact; the multivariable form of Pintelon and
+Schoukens 2012, System Identification: A Frequency Domain Approach, 2nd ed., weighted by the
+inverse covariance of vec(G_k)):
 
     V(theta) = sum_k e_k^H C_k^-1 e_k,   e_k = vec(G(x_k, theta) - G_k),
 
