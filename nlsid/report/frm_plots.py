@@ -12,7 +12,8 @@ The figure is drawn from a ``/frm_levels/level_NN`` group as :func:`nlsid.io.bla
 returns it, or from a ``/frm_lpm_levels/level_NN`` group (arbitrary runs, the Local Polynomial
 Method for several inputs): there the one standard deviation, from ``var_G``, holds noise and
 nonlinear distortion together (they cannot be told apart without periodic excitation), and the
-bounds are the F(2, 2q) circles of the LPM. matplotlib is imported inside the functions so that importing this module stays cheap.
+bounds are the F(2, 2q) circles of the LPM. matplotlib is imported inside the functions so that
+importing this module stays cheap.
 """
 
 from __future__ import annotations

@@ -164,8 +164,8 @@ def _grid_tables(grid: dict, units: Units, signal: str, output: str = "y", of: s
     change_rows = [[f"{r['frequency']:g}", f"{r['from_level']:g}", f"{r['to_level']:g}", f"{r['change_db']:+.3f}",
                     number(r["std_db"], ".2g")] for r in h1_change(grid)]
     tables = [Table(f"Cells: H_1 and each harmonic's level above its noise bound (dB){of}",
-                    ["frequency Hz", units.label("amplitude", signal), "R x P", f"|H_1| ({units.ratio(output, signal)})",
-                     "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
+                    ["frequency Hz", units.label("amplitude", signal), "R x P",
+                     f"|H_1| ({units.ratio(output, signal)})", "∠H_1 deg", *[f"k = {k}" for k in range(2, K + 1)]],
                     rows, note=f"k columns: 20 log10 |Y(k w0)| / eps_k, dB re the noise bound "
                                f"({FRICTION_COMPENSATION}, Table I, Eq. 6); ✓ marks a harmonic above its bound. "
                                "R repeats x P periods per cell.")]
