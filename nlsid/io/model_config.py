@@ -946,12 +946,29 @@ class ClosedLoopConfig(FiniteModel):
         return self
 
 
-class DisturbancesConfig(FiniteModel):
-    """White Gaussian noise, standard deviations in the units of the signal they are added to."""
+def _std_shape(entry) -> str | None:
+    if isinstance(entry, list):
+        return "list"
+    return "number" if isinstance(entry, (int, float, str)) else None  # str: pydantic's own number message
 
-    u_noise: NonNegative = 0.0
-    y_noise: NonNegative = 0.0
-    process_noise: NonNegative = 0.0
+
+# A noise level: one standard deviation for every signal of its kind, or (a mimo_state_space model)
+# a list of one per input or output, told apart by its shape so that a bad entry gets one error
+NoiseStd = Annotated[Union[Annotated[NonNegative, Tag("number")],
+                           Annotated[list[NonNegative], Field(min_length=1), Tag("list")]],
+                     Discriminator(_std_shape, custom_error_type="noise_std",
+                                   custom_error_message="expected a standard deviation (a number), or a list of one "
+                                                        "per input or output")]
+
+
+class DisturbancesConfig(FiniteModel):
+    """White Gaussian noise, standard deviations in the units of the signal they are added to: one
+    number for every signal of its kind, or for a ``mimo_state_space`` model a list of one per input
+    (``u_noise``, ``process_noise``) or output (``y_noise``), checked by :meth:`SimulateConfig.check`."""
+
+    u_noise: NoiseStd = 0.0
+    y_noise: NoiseStd = 0.0
+    process_noise: NoiseStd = 0.0
     seed: Optional[Annotated[int, Field(ge=0)]] = None
 
 
@@ -1015,6 +1032,22 @@ class SimulateConfig(FiniteModel):
     sweep: Optional[SweepConfig] = None
     simulation: SimulationConfig = SimulationConfig()
     free: dict[str, FreeParameterConfig] = {}  # dotted key path -> start and bounds (nlsid fit --model)
+
+    def check(self) -> None:
+        """Noise levels given per signal (lists) belong to a ``mimo_state_space`` model: one per input
+        (``u_noise``, ``process_noise``) or output (``y_noise``)."""
+        for key, kind in (("u_noise", "inputs"), ("y_noise", "outputs"), ("process_noise", "inputs")):
+            value = getattr(self.disturbances, key)
+            if not isinstance(value, list):
+                continue
+            if self.model.type != "mimo_state_space":
+                raise config_loader.ConfigValueError(("disturbances", key), "a list of standard deviations (one per "
+                                                     "signal) needs a mimo_state_space model; give one number")
+            names = self.model.input_names if kind == "inputs" else self.model.output_names
+            if len(value) != len(names):
+                raise config_loader.ConfigValueError(("disturbances", key), f"expected {len(names)} standard "
+                                                     f"deviations, one for each of the model's {kind} "
+                                                     f"({', '.join(names)}), got {len(value)}")
 
 
 def refuse_several_inputs_outputs(config: SimulateConfig, source: str, stage: str) -> None:

@@ -345,8 +345,11 @@ def _mimo_page(path: Path, config, data: dict) -> Page:
     headline = f"{_TITLES[config.model.type]} in open loop, {shape}: {describe_modes(mimo)}; linear"
     findings = [f"{mimo.order} states" + (f", dead time {mimo.delay:g} s on every input" if mimo.delay else "")]
     d = config.disturbances
-    if d.u_noise or d.y_noise or d.process_noise:
-        findings.append(f"noise std on each signal: u {d.u_noise:g}, y {d.y_noise:g}, process {d.process_noise:g}")
+    levels = {"u": d.u_noise, "y": d.y_noise, "process": d.process_noise}
+    if any(np.any(np.asarray(level) > 0) for level in levels.values()):
+        findings.append("noise std: " + ", ".join(
+            f"{kind} " + (", ".join(f"{v:g}" for v in level) if isinstance(level, list) else f"{level:g} on each")
+            for kind, level in levels.items()))
     unit = _unit(mimo)
     found = modes(mimo)
     caption = ("Frequency response matrix: row i (magnitude, phase) is output i, a curve per input; "

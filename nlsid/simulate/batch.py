@@ -36,7 +36,8 @@ def run_id(base: str, index: int, count: int) -> str:
 
 def _levels(point: SweepPoint) -> NoiseLevels:
     d = point.config.disturbances
-    return NoiseLevels(d.u_noise, d.y_noise, d.process_noise)
+    return NoiseLevels(*(tuple(level) if isinstance(level, list) else level  # a list: one per signal (mimo)
+                         for level in (d.u_noise, d.y_noise, d.process_noise)))
 
 
 def build(point: SweepPoint):

@@ -32,15 +32,16 @@ class Noise:
 
 @dataclass(frozen=True)
 class NoiseLevels:
-    """Standard deviations of the white noise on the measured u, the measured y and the plant input."""
+    """Standard deviations of the white noise on the measured u, the measured y and the plant input:
+    a number each, or (a model of several inputs and outputs) a tuple of one per input or output."""
 
-    u: float = 0.0
-    y: float = 0.0
-    process: float = 0.0
+    u: float | tuple[float, ...] = 0.0
+    y: float | tuple[float, ...] = 0.0
+    process: float | tuple[float, ...] = 0.0
 
     @property
     def any(self) -> bool:
-        return self.u > 0 or self.y > 0 or self.process > 0
+        return any(np.any(np.asarray(level) > 0) for level in (self.u, self.y, self.process))
 
 
 def run_streams(seed: int | None, levels: NoiseLevels, n_runs: int) -> list[np.random.SeedSequence | None]:
@@ -66,7 +67,7 @@ def draw_channels(levels: NoiseLevels, stream: np.random.SeedSequence | None, n:
                   n_outputs: int) -> Noise:
     """The noise of one run of a model of several inputs and outputs: rows (n_inputs, n) on the
     measured inputs and the plant inputs, (n_outputs, n) on the measured outputs, each row white
-    with the one standard deviation of its kind (``levels``). The first input's and output's rows
+    with the standard deviation of its kind (``levels``: one for every row, or one per row). The first input's and output's rows
     are the sequences :func:`draw` gives a run of one input and one output; row c > 0 of kind i
     has its own child stream, spawn key + (i, c)."""
     if stream is None:
@@ -74,6 +75,7 @@ def draw_channels(levels: NoiseLevels, stream: np.random.SeedSequence | None, n:
     kinds = []
     for i, (level, rows) in enumerate(zip((levels.u, levels.y, levels.process), (n_inputs, n_outputs, n_inputs))):
         keys = [stream.spawn_key + (i,)] + [stream.spawn_key + (i, c) for c in range(1, rows)]
+        stds = np.broadcast_to(np.asarray(level, dtype=float), (rows,))
         kinds.append(np.stack([np.random.default_rng(np.random.SeedSequence(stream.entropy, spawn_key=key))
-                               .standard_normal(n) * level for key in keys]))
+                               .standard_normal(n) * std for key, std in zip(keys, stds)]))
     return Noise(*kinds)

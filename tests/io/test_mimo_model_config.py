@@ -51,3 +51,21 @@ def test_a_hybrid_refuses_it_as_its_physical_part():
     black_box = {"type": "pnlss", "fs": 100.0, "A": [[0.5]], "B": [1.0], "C": [1.0]}
     with pytest.raises(InputError, match="model.physical: a mimo_state_space model has several inputs"):
         validate_simulate_config({"model": {"type": "hybrid", "physical": MODEL, "black_box": black_box}}, "m.yaml", {})
+
+
+@pytest.mark.parametrize("model, disturbances, what", [
+    (MODEL, {"y_noise": [0.1, 0.2]}, "disturbances.y_noise: expected 3 standard deviations, one for each of the "
+                                     "model's outputs (y, y2, y3), got 2"),
+    (MODEL, {"process_noise": [0.1, 0.2, 0.3]}, "disturbances.process_noise: expected 2 standard deviations, one "
+                                                "for each of the model's inputs (u, u2), got 3"),
+    (MODEL, {"u_noise": [0.1, -0.2]}, "disturbances.u_noise[1]: must be >= 0"),
+    ({"type": "state_space", "A": [[-1.0]], "B": [1.0], "C": [1.0]}, {"y_noise": [0.1]},
+     "disturbances.y_noise: a list of standard deviations (one per signal) needs a mimo_state_space model"),
+])
+def test_noise_per_signal_needs_one_std_per_input_or_output(model, disturbances, what):
+    with pytest.raises(InputError, match=None) as info:
+        validate_simulate_config({"model": model, "disturbances": disturbances}, "m.yaml", {})
+    assert info.value.what.startswith(what), info.value.what
+    config = validate_simulate_config({"model": MODEL, "disturbances": {"y_noise": [0.1, 0.0, 0.2], "u_noise": 0.1}},
+                                      "m.yaml", {})
+    assert config.disturbances.y_noise == [0.1, 0.0, 0.2] and config.disturbances.u_noise == 0.1

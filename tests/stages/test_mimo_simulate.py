@@ -1,6 +1,6 @@
 """``nlsid simulate`` of a ``mimo_state_space`` model on an excitation of orthogonal multisines for
 two inputs: a recording of format version 3 naming the inputs and outputs, each output with the
-configured noise; a run lacking an input refused in one line."""
+noise of its own std; a run lacking an input refused in one line."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ DESIGN = {"fs": 100.0, "seed": 2, "multisine": {"period": 64, "band": [2.0, 40.0
 @pytest.fixture
 def files(tmp_path):
     path = tmp_path / "model.yaml"
-    path.write_text(yaml.safe_dump({"model": MODEL, "disturbances": {"y_noise": 0.1, "seed": 7}}))
+    path.write_text(yaml.safe_dump({"model": MODEL, "disturbances": {"y_noise": [0.1, 0.3], "seed": 7}}))
     exc = nlsid.design({**DESIGN, "multisine": {**DESIGN["multisine"], "inputs": 2}})
     return path, exc.write(tmp_path / "exc.h5")
 
@@ -41,9 +41,9 @@ def test_simulate_writes_both_outputs_named_with_their_noise(run_cli, tmp_path, 
         np.testing.assert_array_equal(run.input_matrix(), source.input_matrix())  # no input noise configured
         noise.append(run.output_matrix() - simulate_mimo(quiet, source).output_matrix())
     noise = np.concatenate(noise, axis=1)  # 2 outputs x 512 samples
-    # each output's noise white with std 0.1: sample variance within 5 sigma of chi2(512) / 512,
-    # the two outputs' noises independent: |correlation| < 5 / sqrt(512)
-    assert np.all(np.abs(noise.var(axis=1) / 0.01 - 1) < 5 * np.sqrt(2 / 512)), noise.var(axis=1)
+    # each output's noise white with its std (0.1, 0.3): sample variance within 5 sigma of its
+    # chi2(512) / 512, the two outputs' noises independent: |correlation| < 5 / sqrt(512)
+    assert np.all(np.abs(noise.var(axis=1) / [0.01, 0.09] - 1) < 5 * np.sqrt(2 / 512)), noise.var(axis=1)
     assert abs(np.corrcoef(noise)[0, 1]) < 5 / np.sqrt(512)
 
 
