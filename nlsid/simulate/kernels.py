@@ -476,15 +476,23 @@ def _bouc_wen(p: tuple, z: float, previous: float, s_free: float, s_now: float, 
     parts short against its relaxation, the force k times z's trapezoidal mean; twice, from the
     ``previous`` sub-step's force and then from the first pass's."""
     k, a, beta, gamma, n = p[0], p[1], p[2], p[3], p[4]
-    bound = (a / (beta + gamma)) ** (1.0 / n)
+    linear = n == 1.0  # the usual n = 1: no powers (|z|^0 = 1 exactly: the same rate), no bound needed
+    bound = 0.0 if linear else (a / (beta + gamma)) ** (1.0 / n)
     force, end = previous, z
     for _ in range(2):
         v_end = s_free - g * force
-        size = max(abs(z), bound)
-        rate = (beta + abs(gamma)) * n * size ** (n - 1.0) * max(abs(s_now), abs(v_end))
-        parts = min(forces.BOUC_WEN_PARTS, int(rate * h / forces.BOUC_WEN_PART) + 1)
-        dt = h / parts
-        dv = (v_end - s_now) / parts
+        if linear:
+            rate = (beta + abs(gamma)) * max(abs(s_now), abs(v_end))
+        else:
+            size = max(abs(z), bound)
+            rate = (beta + abs(gamma)) * n * size ** (n - 1.0) * max(abs(s_now), abs(v_end))
+        share = rate * h / forces.BOUC_WEN_PART
+        if -1.0 < share < 1.0:  # one part, the usual: no divisions by it (x / 1 = x) on the serial chain
+            parts, dt, dv = 1, h, v_end - s_now
+        else:
+            parts = min(forces.BOUC_WEN_PARTS, int(share) + 1)
+            dt = h / parts
+            dv = (v_end - s_now) / parts
         end = z
         total = 0.5 * z
         for i in range(parts):
@@ -493,7 +501,9 @@ def _bouc_wen(p: tuple, z: float, previous: float, s_free: float, s_now: float, 
             guess = end + dt * slope
             end = end + 0.5 * dt * (slope + _bouc_wen_rate(va + dv, guess, a, beta, gamma, n))
             total += end
-        force = k * (total - 0.5 * end) / parts
+        force = k * (total - 0.5 * end)
+        if parts != 1:
+            force /= parts
     return force, end
 
 
