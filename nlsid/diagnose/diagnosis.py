@@ -107,7 +107,7 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
         bounds = (-abs(start) * 1e3, abs(start) * 1e3) if NUMERATOR.search(path) else sorted((start * 1e-3, start * 1e3))
         free[path] = FreeParameter(start, *bounds)
     fit = fit_free_parameters(extended, free, runs, [], source=source, max_evaluations=budget(free),
-                              stall_db=STALL_DB, stall_share=STALL_SHARE, fit_on=fit_on)
+                              stall_db=STALL_DB, stall_share=STALL_SHARE, fit_on=fit_on, run_errors=False)
     values, std = _derived(hypothesis, *_fitted(estimate, fit, paths), free, paths, fit.config["model"])
     what = "refined by the fit engine (simulation error)" if paths else "nuisances re-fitted with it"
     reading = hypothesis.reading(values) if hypothesis.reading is not None else ""
@@ -182,7 +182,7 @@ def refit_finer(outcome: Outcome, substeps: int, runs: list[Run], source: str, f
     data.setdefault("simulation", {})["substeps"] = substeps
     free = {path: dataclasses.replace(p, start=None) for path, p in outcome.free.items()}
     fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=budget(free),
-                              stall_db=STALL_DB, fit_on=fit_on)
+                              stall_db=STALL_DB, fit_on=fit_on, run_errors=False)
     est = outcome.estimate
     values, std = _derived(outcome.hypothesis, *_fitted(est, fit, outcome.paths), outcome.free, outcome.paths,
                            fit.config["model"])
@@ -477,7 +477,8 @@ def _refine_on_all(first: Diagnosis, last: Diagnosis, data: dict, source: str, r
     est = outcome.estimate
     try:
         fit = fit_free_parameters(outcome.extended, free, estimation, [], source=source,
-                                  max_evaluations=FINAL_EVALUATIONS, stall_db=STALL_DB, fit_on=first.signal)
+                                  max_evaluations=FINAL_EVALUATIONS, stall_db=STALL_DB, fit_on=first.signal,
+                                  run_errors=False)
     except InputError as exc:  # the budget's fit stands, and says why
         outcome.estimate = dataclasses.replace(est, note=f"{est.note}; not refined on all estimation samples: {exc}")
         return

@@ -206,13 +206,14 @@ def estimate(data: dict, source: str, runs: list[Run], fit_on: str = "y") -> tup
     free = free_nuisances(runner, runs)
     if not free:
         return data, Nuisances()
-    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS, fit_on=fit_on)
+    fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS, fit_on=fit_on,
+                              run_errors=False)
     timing = free.get("model.output_timing")
     if timing is not None and not timing.lower + AT_BOUND < fit.value("model.output_timing") < timing.upper - AT_BOUND:
         # a shift of a sample or more is a dead time, a cause: left to the delay hypothesis
         free.pop("model.output_timing")
         fit = fit_free_parameters(data, free, runs, [], source=source, max_evaluations=MAX_EVALUATIONS,
-                                  fit_on=fit_on)
+                                  fit_on=fit_on, run_errors=False)
     return fit.config, fitted(fit)
 
 

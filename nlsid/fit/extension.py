@@ -211,7 +211,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
                         workers: int | None = None, diff_step: float = 1e-3, max_evaluations: int = 100,
                         tolerance: float = 1e-8, fit_on: str = "y", stall_db: float | None = None,
                         stall_share: float | None = None,
-                        jacobian: str = "differences") -> ExtensionFit:
+                        jacobian: str = "differences", run_errors: bool = True) -> ExtensionFit:
     """Estimate the free parameters of a model config by minimising the simulation error.
 
     ``config_data``: the model config as loaded YAML (a dict, e.g. from
@@ -233,6 +233,14 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     model's simulation is smooth in the parameters (:meth:`nlsid.fit.simulation_cost.Cost.sensitivities`), finite
     differences where it is not (a warning says so). Measured: the same estimates, and finite
     differences faster on 2 cores (docs/commands.md, "The refinement's Jacobian").
+    ``run_errors``: False leaves out what only the report needs, the errors of every run as
+    measured (not on its mean period) at the start and at the fitted values and the initial
+    states fitted to arbitrary records: two simulations of every run fitted on its mean period
+    (about 5 % of a diagnosis's simulation time on the battery). The start must still run (its
+    residual is evaluated first), and the estimates are the same; ``start_estimation_rms`` is NaN,
+    ``estimation_rms`` and the ``y``/``u`` errors too where the runs are fitted on their mean
+    periods, and ``runs`` holds no estimation run (for callers that take the parameters alone:
+    ``diagnose``'s refinements).
 
     Returns an :class:`ExtensionFit`: values, std, covariance and correlation, rms errors (with
     the fitted and the start values) on the estimation and validation runs and per run, the
@@ -246,10 +254,11 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     problem = Problem(config_data, free, source, lines or {}, workers, fit_on)
     est_inputs, val_inputs = problem.inputs(estimation), problem.inputs(validation)
     scale = _scales(problem.start, problem.lower, problem.upper)
-    est_start = problem.errors(problem.start, estimation, est_inputs)  # the start must run: its error stops the fit
+    # the start must run: its error stops the fit
+    est_start = problem.errors(problem.start, estimation, est_inputs) if run_errors else None
     cost = Cost.of(problem, estimation, est_inputs)
     # every run fitted whole: the cost's residual is the start's error already simulated (not again)
-    start_residual = (np.concatenate(est_start[fit_on]) if cost.whole(estimation)
+    start_residual = (np.concatenate(est_start[fit_on]) if est_start is not None and cost.whole(estimation)
                       else cost.residuals(problem, [problem.start], fit_on)[0])
     cost_rms = _rms([start_residual])
     penalty = np.full(start_residual.size, 10.0 * cost_rms if cost_rms > 0 else 1.0)
@@ -333,23 +342,28 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
     warnings += ident
     warnings += absent_notes(problem.point(problem.start).config, [*estimation, *validation])
 
+    none = {signal: [] for signal in problem.signals}
     est_errors = (cost.split(result.fun, fit_on) if cost.whole(estimation) and problem.signals == (fit_on,)
-                  else problem.errors(values, estimation, est_inputs))
-    val_errors = problem.errors(values, validation, val_inputs) if validation else {s: [] for s in problem.signals}
-    val_start = problem.errors(problem.start, validation, val_inputs) if validation else {s: [] for s in problem.signals}
+                  else problem.errors(values, estimation, est_inputs) if run_errors else None)
+    val_errors = problem.errors(values, validation, val_inputs) if validation else none
+    val_start = problem.errors(problem.start, validation, val_inputs) if validation else none
     runs = []
-    states = initial_states(problem, values, list(est_inputs) + list(val_inputs))
+    states = initial_states(problem, values, (list(est_inputs) if run_errors else []) + list(val_inputs))
     for role, rs, errs, starts in (("estimation", estimation, est_errors, est_start),
                                    ("validation", validation, val_errors, val_start)):
-        for i, run in enumerate(rs):
+        for i, run in enumerate(rs if errs is not None and starts is not None else []):
             e = errs[fit_on][i]
             y = steady(run, run.y)
             runs.append(RunError(run.run_id, role, _rms([e]), float(np.sqrt(np.mean(y * y))), noise_rms(run, fit_on),
                                  _rms([starts[fit_on][i]]), int(e.size), _rms([errs["y"][i]]),
                                  _rms([errs["u"][i]]) if "u" in errs else math.nan,
                                  states.get(run.run_id)))
+    sizes = [run.n_samples if run.period is None else run.n_periods * run.period for run in estimation]
     noise = {role: _pooled([r.noise_rms for r in runs if r.role == role], [r.samples for r in runs if r.role == role])
              for role in ("estimation", "validation")}
+    if not any(r.role == "estimation" for r in runs):  # the per-run errors left out (run_errors): from the data
+        noise["estimation"] = _pooled([noise_rms(run, fit_on) for run in estimation], sizes)
+    est_errors, est_start = est_errors or none, est_start or none
     completed = {k: deep_copy(v) for k, v in config_data.items() if k != "free"}
     for name, value in zip(problem.names, values):
         set_value(completed, name, float(value))
@@ -360,7 +374,7 @@ def fit_free_parameters(config_data: dict, free: dict[str, FreeParameter], estim
         start_estimation_rms=_rms(est_start[fit_on]), start_validation_rms=_rms(val_start[fit_on]),
         noise_rms_estimation=noise["estimation"], noise_rms_validation=noise["validation"],
         runs=runs, warnings=warnings, config=completed, evaluations=evaluations, message=str(result.message),
-        samples=sum(int(e.size) for e in est_errors[fit_on]), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
+        samples=sum(sizes), bounds=[(float(lo), float(hi)) for lo, hi in zip(problem.lower, problem.upper)],
         fit_on=fit_on, signal_rms={s: {"estimation": _rms(est_errors[s]), "validation": _rms(val_errors[s])}
                                    for s in problem.signals},
         jacobians=formed,
