@@ -157,11 +157,16 @@ class BlaResult:
         return out
 
     def figures(self) -> dict[str, bytes]:
-        """The stage's figures as PNG bytes by file name (``nlsid bla --plots``)."""
+        """The stage's figures as PNG bytes by file name (``nlsid bla --plots``): those of the
+        single-input levels, then ``frm_level_NN.png`` per level of the frequency response matrix
+        (the ``frm_levels``, then the ``frm_lpm_levels``, numbered as the terminal table numbers
+        them), the report page's n_y x n_u Bode matrix of that level."""
         from nlsid.report.bla_plots import render_figures
         from nlsid.report.units import Units
 
-        return render_figures(self.levels, Units(self.units), self.lpm_levels)
+        out = render_figures(self.levels, Units(self.units), self.lpm_levels)
+        out.update(frm_figures(self.frm_levels, self.frm_lpm_levels))
+        return out
 
     def plot(self) -> list:
         """The figures of :meth:`figures` as matplotlib figures (for a notebook)."""
@@ -199,6 +204,44 @@ class BlaResult:
         return (f"<p><b>BLA</b> of {escape(self.source)}</p><table><tr><th>level</th><th>u rms</th><th>M x P</th>"
                 "<th>method</th><th>|G| dB</th><th>NL var dB</th><th>noise var dB</th></tr>" + "".join(rows)
                 + "</table>" + (f"<ul>{warnings}</ul>" if warnings else ""))
+
+
+def frm_figures(frm_levels: list[FrmLevel], frm_lpm_levels: list[LpmFrmLevel]) -> dict[str, bytes]:
+    """``frm_level_NN.png`` per FRM level, multisine levels first, as PNG bytes: the figure of
+    :func:`nlsid.report.frm_plots.frm_figure` (the report page's), drawn from the level in memory
+    with the arrays ``bla.h5`` stores for it (:func:`frm_figure_data`)."""
+    import io
+
+    from nlsid.report.frm_plots import frm_figure
+    from nlsid.report.render_frm import frm_level_name
+    from nlsid.report.units import units_of
+    from nlsid.report.vector import fit_labels
+
+    out = {}
+    for index, level in enumerate([*frm_levels, *frm_lpm_levels]):
+        figure = frm_figure(frm_figure_data(level), units_of(level.units), frm_level_name(index, level.summary()))
+        fit_labels(figure)
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png", dpi=110)  # the resolution of the single-input figures
+        out[f"frm_level_{index:02d}.png"] = buffer.getvalue()
+    return out
+
+
+def frm_figure_data(level: FrmLevel | LpmFrmLevel) -> dict:
+    """What :func:`nlsid.report.frm_plots.frm_figure` draws of one FRM level, in the layout of its
+    ``bla.h5`` group as :func:`nlsid.io.bla_file.read_bla` returns it: ``attrs`` (``inputs``,
+    ``outputs``, ``confidence``), ``frequency``, ``G``, ``bounds``, and the standard deviations
+    (``std_total`` and ``std_noise`` of a multisine level; ``var_G`` of a level by the LPM)."""
+    names = ("radius", "mag_lo", "mag_hi", "phase_lo", "phase_hi")
+    attrs = {"inputs": list(level.inputs), "outputs": list(level.outputs)}
+    if isinstance(level, LpmFrmLevel):
+        bounds = level.bounds
+        return {"attrs": {**attrs, "confidence": level.confidence}, "frequency": level.frequency, "G": level.G,
+                "var_G": level.var_G, "bounds": {name: getattr(bounds, name) for name in names}}
+    result = level.frm
+    attrs["confidence"] = result.confidence
+    return {"attrs": attrs, "frequency": result.frequency, "G": result.G, "std_total": result.std_total,
+            "std_noise": result.std_noise, "bounds": {name: getattr(result.bounds, name) for name in names}}
 
 
 @dataclass(frozen=True)
