@@ -245,6 +245,10 @@ def _fit_extension(model_config, data, validation, validate_on, estimation_range
     console = settings().console
     for line in result.parameter_lines():
         console.print(f"  {line}", markup=False)
+    if hasattr(fitted, "output_lines"):  # several outputs (nlsid.fit.mimo_output_error): each its own
+        for line in fitted.output_lines():
+            console.print(line, markup=False)
+        return
     console.print(f"rms error of {fit_on} (fitted): estimation {fitted.estimation_rms:.4g} (start "
                   f"{fitted.start_estimation_rms:.4g}), validation {fitted.validation_rms:.4g} (start "
                   f"{fitted.start_validation_rms:.4g}); noise level {fitted.noise_rms_validation:.4g}")

@@ -48,7 +48,7 @@ from nlsid.fit.free_parameters import FreeParameter, free_from_config
 from nlsid.fit.run_split import split_runs
 from nlsid.fit.simulation_cost import Cost, Problem, floor_cost, noise_rms, steady
 from nlsid.fit.uncertainty import sandwich_covariance
-from nlsid.io.model_config import refuse_several_inputs_outputs, validate_simulate_config
+from nlsid.io.model_config import validate_simulate_config
 from nlsid.io.ranges import SampleRange
 from nlsid.io.run import Run
 from nlsid.models.key_paths import deep_copy, set_value
@@ -426,11 +426,18 @@ def fit_config(data: dict, runs: Sequence[Run], validation_ids: Sequence[str] | 
     gives it); ``source`` and ``lines`` name its origin in messages."""
     model_path = source
     config = validate_simulate_config(data, model_path, lines or {})
-    refuse_several_inputs_outputs(config, str(model_path), "nlsid fit --model")
     if not config.free:
         raise InputError(str(model_path), "free: no free parameters to fit; mark them under a top-level free: key")
     estimation, validation = split_runs(runs, validation_ids, validate_on, estimation_range, validation_range, where)
     free = free_from_config(config.free)
+    if config.model.type == "mimo_state_space":  # every output at once (nlsid.fit.mimo_output_error)
+        from nlsid.fit.mimo_output_error import fit_mimo_free_parameters
+
+        if fit_on != "y" or estimate_start:
+            raise InputError(str(model_path), "a mimo_state_space model is fitted on its outputs (fit_on y), from "
+                                              "the values written in its config (no start estimate)")
+        return fit_mimo_free_parameters(data, free, estimation, validation, source=str(model_path), lines=lines,
+                                        where=where)
     if estimate_start:
         from nlsid.fit.start import force_regression
 

@@ -28,7 +28,7 @@ from nlsid.fit.bla_fit import BLAFit
 from nlsid.fit.computation_delay import DelayChoice, candidates_of, choose_delay
 from nlsid.fit.extension import ExtensionFit
 from nlsid.stages.bla import BlaResult
-from nlsid.stages.held_out import held_out, whole
+from nlsid.stages.held_out import declares_several, held_out, whole
 from nlsid.stages.model import Model
 from nlsid.stages.recording import Recording
 
@@ -660,9 +660,12 @@ class ModelFit:
         from nlsid.models.parameter_units import with_unit
 
         result, units = self.fitted, self.parameter_units
-        return [f"nlsid fit --model {self.model_source} --data {self.data_source}",
-                "fitted: " + ", ".join(with_unit(f"{n} = {v:.6g} +- {s:.2g}", units[n])
-                                       for n, v, s in zip(result.names, result.values, result.std)),
+        fitted = ("fitted: " + ", ".join(with_unit(f"{n} = {v:.6g} +- {s:.2g}", units[n])
+                                         for n, v, s in zip(result.names, result.values, result.std)))
+        if hasattr(result, "output_lines"):  # several outputs (nlsid.fit.mimo_output_error): each its own
+            return [f"nlsid fit --model {self.model_source} --data {self.data_source}", fitted,
+                    *result.output_lines(), f"report: {report_name}"]
+        return [f"nlsid fit --model {self.model_source} --data {self.data_source}", fitted,
                 f"validation rms error of {result.fit_on} {result.validation_rms:.4g} (noise "
                 f"{result.noise_rms_validation:.4g}); report: {report_name}"] + (
             [] if self.computation_delay is None else
@@ -824,7 +827,8 @@ def fit_model(model, rec: Recording | str | os.PathLike, free: Mapping[str, Mapp
         raise InputError(name("workers"), f"expected a whole number >= 1 or None, got {workers!r}")
     if isinstance(validation, str):
         validation = [validation]
-    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
+    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names,
+                    several=declares_several(model))
     config, lines, source, configs = _model_config(model, free, names)
     held = list(validation) if validation else None
 

@@ -62,19 +62,21 @@ def overlap(data, item) -> str | None:
     return same_recording(str(first), str(second))
 
 
-def runs_of(item, argument: str, mapping: dict | None) -> list:
+def runs_of(item, argument: str, mapping: dict | None, several: bool = False) -> list:
     """The runs of a Recording or a recording file, each with a measured y and one input and one
-    output (:func:`nlsid.feeds.several_inputs_outputs`)."""
+    output (:func:`nlsid.feeds.several_inputs_outputs`), or with ``several`` (a model of several
+    inputs and outputs, which checks its own signals) of any number of them."""
     if isinstance(item, Recording):
         missing = [run.run_id for run in item.runs if run.y is None]
         if missing:
             raise InputError(argument, f"run {missing[0]!r} has no measured output y: a fit compares the model's "
                                        "simulation with it")
-        return _one_input_output(list(item.runs), item.path or argument)
+        return list(item.runs) if several else _one_input_output(list(item.runs), item.path or argument)
     if isinstance(item, (str, os.PathLike)):
         from nlsid.io.recording import read_runs
 
-        return _one_input_output(read_runs(item, require_y=True, mapping=mapping), str(item))
+        runs = read_runs(item, require_y=True, mapping=mapping)
+        return runs if several else _one_input_output(runs, str(item))
     raise InputError(argument, "expected a Recording (nlsid.read) or the path of a recording, got "
                                f"{type(item).__name__}")
 
@@ -104,11 +106,11 @@ class HeldOut:
 
 
 def held_out(rec, validate_on, estimation_range, validation_range, allow_overlap: bool, mapping,
-             name: Callable[[str], str], names: Mapping[str, str]) -> HeldOut:
+             name: Callable[[str], str], names: Mapping[str, str], several: bool = False) -> HeldOut:
     """Check and read the data of a fit or a diagnosis: the ranges (a validation range needs an
     estimation range, which needs something to validate on), the overlap of ``validate_on`` with
     ``rec``, then the recordings. ``name`` gives an argument's name in messages (the command line's
-    flags, from ``names``)."""
+    flags, from ``names``). ``several``: the model has several inputs and outputs (:func:`runs_of`)."""
     from nlsid.io.ranges import qualify
 
     extra = [] if validate_on is None else (
@@ -132,8 +134,32 @@ def held_out(rec, validate_on, estimation_range, validation_range, allow_overlap
                                  f"{names.get('allow_overlap', 'allow_overlap=True')}")
     signals = dict(mapping) if mapping else None
     extra_runs = [run for index, item in enumerate(extra)
-                  for run in qualify(runs_of(item, name("validate_on"), signals),
+                  for run in qualify(runs_of(item, name("validate_on"), signals, several),
                                      source_name(item, f"validate_on[{index}]"))]
-    runs = runs_of(rec, name("rec"), signals)
+    runs = runs_of(rec, name("rec"), signals, several)
     inputs = [p for p in (path_of(rec), *(path_of(item) for item in extra)) if p is not None]
     return HeldOut(runs, where, extra_runs, estimation, validation, inputs)
+
+
+def declares_several(model) -> bool:
+    """Whether ``model`` (a :class:`~nlsid.stages.model.Model`, a config dict or a config's path) is of
+    type ``mimo_state_space``, several inputs and outputs: read before the recordings so that their
+    runs are taken with all their inputs and outputs. False where the config cannot be read (its
+    own check then says why, in one line)."""
+    from nlsid.stages.model import Model
+
+    if isinstance(model, Model):
+        data = model.to_dict()
+    elif isinstance(model, Mapping):
+        data = model
+    elif isinstance(model, (str, os.PathLike)):
+        from nlsid.io.config import load_yaml
+
+        try:
+            data, _ = load_yaml(model)
+        except InputError:
+            return False
+    else:
+        return False
+    inner = data.get("model") if isinstance(data, Mapping) else None
+    return isinstance(inner, Mapping) and inner.get("type") == "mimo_state_space"
