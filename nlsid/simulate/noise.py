@@ -23,11 +23,12 @@ class Noise:
     u: np.ndarray
     y: np.ndarray
     process: np.ndarray
+    silent: bool = False  # made by zero(): all three are zeros (a longer run's is zero() again, not copied)
 
     @staticmethod
     def zero(n: int) -> "Noise":
         z = np.zeros(n)
-        return Noise(z, z, z)
+        return Noise(z, z, z, True)
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,8 @@ def simulate_run(model: Plant | Structure | Equations, loop: ClosedLoop | None, 
     if count:
         original, m = run, count * run.period
         run = with_lead(run, count)
-        noise = Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process)))
+        noise = (Noise.zero(run.n_samples) if noise.silent  # zeros made, not tiled, for each simulation
+                 else Noise(*(_lead(x, run.period, count) for x in (noise.u, noise.y, noise.process))))
     if isinstance(model, Equations):  # no lead; an arbitrary record from the states fitted to its start
         if steady and run.period is None:
             return equations_state.with_initial_state(model, run, substeps, noise)
