@@ -33,6 +33,24 @@ parametric fit, whose 1/var would have an infinite variance for q <= 2 (``docs/l
 For n_u = 1 this is :func:`nlsid.analysis.lpm.lpm` line for line. Per entry,
 ``|G_ia_hat - G_ia|^2 / var_hat G_ia`` is F(2, 2q) for circular complex normal noise, which
 gives the circles of :meth:`MimoLPMResult.bounds`.
+
+*With references* (:func:`lpm_mimo_reference`; the book's Section 7.2 and Pintelon et al. 2010,
+the indirect method): in a closed loop the output noise reaches the inputs through the controller,
+so u is correlated with the disturbance and the LPM from u is biased. The references r (n_r = n_u
+signals the loop does not feed back) are independent of the noise. The LPM above, with r as the
+regressor and ``z = [y; u]`` as the outputs, gives ``G_zr = [G_yr; G_ur]`` (n_y + n_u by n_u) with
+``Cov(vec G_zr) = B (x) C_z`` (B = [A^-1]_{(a,0),(b,0)} of the references, C_z the covariance of the
+disturbances of y and u), and ``Y = G U`` gives the FRM as ``G = G_yr G_ur^-1``. To first order,
+``dG = (dG_yr - G dG_ur) G_ur^-1 = W dG_zr G_ur^-1`` with ``W = [I, -G]``, so
+``vec dG = (G_ur^-T (x) W) vec dG_zr`` and::
+
+    Cov(vec G) = (G_ur^-T B conj(G_ur^-1)) (x) (W C_z W^H),
+
+again a Kronecker product: the single-reference variance of :mod:`nlsid.analysis.lpm`
+(``[A^-1]_00 (C_yy + |G|^2 C_uu - 2 Re(conj(G) C_yu)) / |G_ur|^2``) for n_u = 1. ``W C_z W^H`` is
+the covariance of ``V_y - G V_u``, the disturbance of the relation Y = G U. The circles use
+F(2, 2q) with the q of the references' regression; the ratio makes them first-order (accurate
+where ``G_ur`` is well determined, ``|dG_ur| << |G_ur|``).
 """
 
 from __future__ import annotations
@@ -85,6 +103,16 @@ class MimoLPMResult:
         infinite variance), shape of ``cov_G``.
     smoothing_lines, smoothed_dof : int, float
         B, and the degrees of freedom of the averaged C: at least ``q B / (2n+1)``.
+    method : str
+        ``"lpm"`` (from the inputs u) or ``"lpm_reference"`` (the indirect ratio from the references,
+        :func:`lpm_mimo_reference`). With references, ``cov_v`` is ``W C_z W^H``, the covariance of
+        ``V_y - G V_u``, and ``transient`` is that of the outputs in the regression on r.
+    G_yr, G_ur : numpy.ndarray or None
+        With references: the FRMs from the references to the outputs (K, n_y, n_r) and to the inputs
+        (K, n_u, n_r).
+    cov_z : numpy.ndarray or None
+        With references: C_z, the covariance of the disturbances of ``[y; u]`` per line
+        (K, n_y + n_u, n_y + n_u).
     """
 
     fs: float
@@ -101,6 +129,10 @@ class MimoLPMResult:
     cov_G_smoothed: np.ndarray | None = None
     smoothing_lines: int = 1
     smoothed_dof: float = 0.0
+    method: str = "lpm"
+    G_yr: np.ndarray | None = None
+    G_ur: np.ndarray | None = None
+    cov_z: np.ndarray | None = None
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -195,12 +227,119 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
     True
     """
     u, y = _records("u", u), _records("y", y)
-    if y.shape[0] != u.shape[0] or y.shape[2] != u.shape[2]:
-        raise InputError("y", f"expected the records and samples of u {u.shape}, got {y.shape}")
+    fs, half_width, degree = _settings(u, y, ("u", "y"), fs, half_width, degree)
+    G, block, cov_v, transient, dof, count = _local_models(u, y, "u", fs, half_width, degree)
+    return MimoLPMResult(fs, u.shape[2], u.shape[0], half_width, degree, np.arange(1, G.shape[0] + 1), G,
+                         vec_covariance(block, cov_v), cov_v, transient, dof,
+                         cov_G_smoothed=vec_covariance(block, band_mean(cov_v, count)), smoothing_lines=count,
+                         smoothed_dof=_smoothed_dof(dof, count, half_width))
+
+
+def lpm_mimo_reference(r, u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH,
+                       degree: int = DEFAULT_DEGREE) -> MimoLPMResult:
+    """The MIMO LPM with references (module docstring): the FRM ``G = G_yr G_ur^-1`` of records
+    measured in a closed loop (or with noisy inputs), from the LPM of ``[y; u]`` on the references.
+
+    Parameters
+    ----------
+    r : array_like
+        References, shape (n_u, N) or (M, n_u, N): as many as inputs, independent of the noise.
+    u, y : array_like
+        Inputs (n_u, N) or (M, n_u, N) and outputs (n_y, N) or (M, n_y, N), as measured.
+    fs : float
+        Sample rate (Hz).
+    half_width, degree : int
+        n (a window of 2n+1 lines) and R; q = M (2n+1) - (R+1)(n_u + M) as for :func:`lpm_mimo`.
+
+    Returns
+    -------
+    MimoLPMResult
+        ``method`` ``"lpm_reference"``, with ``G_yr``, ``G_ur`` and ``cov_z``; ``G``, ``cov_G`` and
+        the bounds by the first-order covariance of the ratio. NaN at lines where ``G_ur`` cannot
+        be inverted (condition number >= :data:`COLLINEAR`: the references do not move the inputs
+        independently there).
+
+    Raises
+    ------
+    nlsid.InputError
+        As :func:`lpm_mimo` (naming ``r`` for the references); ``r`` with another number of signals
+        than ``u``, or other records or samples.
+
+    Examples
+    --------
+    One input in a loop u = r - 0.5 y around y = 0.8 u delayed one sample (with output noise v, the
+    loop would feed it back into u). On noise-free data the ratio recovers 0.8 exp(-j w) but for the
+    local polynomials' interpolation error (the delay's phase is not quadratic over the window), near
+    1e-5:
+
+    >>> rng = np.random.default_rng(1)
+    >>> r = rng.standard_normal((1, 512))
+    >>> u, y = np.zeros((1, 512)), np.zeros((1, 512))
+    >>> for k in range(512):
+    ...     y[0, k] = 0.8 * u[0, k - 1] if k else 0.0
+    ...     u[0, k] = r[0, k] - 0.5 * y[0, k]
+    >>> result = lpm_mimo_reference(r, u, y, fs=1.0)
+    >>> result.method, result.G.shape, result.G_ur.shape
+    ('lpm_reference', (255, 1, 1), (255, 1, 1))
+    >>> w = 2 * np.pi * result.frequencies[100]
+    >>> bool(abs(result.G[100, 0, 0] - 0.8 * np.exp(-1j * w)) < 1e-4)
+    True
+    """
+    r, u, y = _records("r", r), _records("u", u), _records("y", y)
+    if r.shape[1] != u.shape[1]:
+        raise InputError("r", f"expected as many references as inputs ({u.shape[1]}), got {r.shape[1]}")
+    if u.shape[0] != r.shape[0] or u.shape[2] != r.shape[2]:
+        raise InputError("u", f"expected the records and samples of r {r.shape}, got {u.shape}")
+    fs, half_width, degree = _settings(r, y, ("r", "y"), fs, half_width, degree)
+    n_outputs = y.shape[1]
+    G_zr, block, cov_z, transient, dof, count = _local_models(r, np.concatenate([y, u], axis=1), "r", fs,
+                                                              half_width, degree)
+    G_yr, G_ur = G_zr[:, :n_outputs], G_zr[:, n_outputs:]
+    inverse = _inverse(G_ur)
+    G = G_yr @ inverse
+    W = np.concatenate([np.broadcast_to(np.eye(n_outputs), G.shape[:1] + (n_outputs, n_outputs)), -G], axis=2)
+    ratio_block = np.swapaxes(inverse, 1, 2) @ block @ inverse.conj()          # G_ur^-T B conj(G_ur^-1)
+    cov_v = W @ cov_z @ np.conj(np.swapaxes(W, 1, 2))                            # W C_z W^H
+    cov_smooth = W @ band_mean(cov_z, count) @ np.conj(np.swapaxes(W, 1, 2))
+    return MimoLPMResult(fs, u.shape[2], u.shape[0], half_width, degree, np.arange(1, G.shape[0] + 1), G,
+                         vec_covariance(ratio_block, cov_v), cov_v, transient[..., :n_outputs], dof,
+                         cov_G_smoothed=vec_covariance(ratio_block, cov_smooth), smoothing_lines=count,
+                         smoothed_dof=_smoothed_dof(dof, count, half_width), method="lpm_reference",
+                         G_yr=G_yr, G_ur=G_ur, cov_z=cov_z)
+
+
+def _inverse(G_ur: np.ndarray) -> np.ndarray:
+    """G_ur^-1 per line (K, n_u, n_u); NaN where it is not finite or its condition number reaches
+    COLLINEAR (the references do not move the inputs independently there)."""
+    inverse = np.full(G_ur.shape, np.nan + 0j)
+    good = np.all(np.isfinite(G_ur), axis=(1, 2))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        good[good] = np.linalg.cond(G_ur[good]) < COLLINEAR
+    inverse[good] = np.linalg.inv(G_ur[good])
+    return inverse
+
+
+def _smoothed_dof(dof: int, count: int, half_width: int) -> float:
+    """The degrees of freedom of C averaged over ``count`` lines: at least q B / (2n+1)."""
+    return float(dof * count / (2 * half_width + 1)) if count > 1 else float(dof)
+
+
+def _settings(x: np.ndarray, z: np.ndarray, names: tuple[str, str], fs, half_width, degree) -> tuple[float, int, int]:
+    """The checked sample rate, half width and degree; the records and samples of ``z`` must be
+    those of ``x`` (``names``: how the caller calls them)."""
+    if z.shape[0] != x.shape[0] or z.shape[2] != x.shape[2]:
+        raise InputError(names[1], f"expected the records and samples of {names[0]} {x.shape}, got {z.shape}")
     half_width, degree = _integer("half_width", half_width, 1), _integer("degree", degree, 0)
     if not (isinstance(fs, (int, float, np.number)) and np.isfinite(fs) and fs > 0):
         raise InputError("fs", f"expected a positive sample rate, got {fs!r}")
-    n_records, n_inputs, n_samples = u.shape
+    return float(fs), half_width, degree
+
+
+def _local_models(x: np.ndarray, z: np.ndarray, x_name: str, fs: float, half_width: int, degree: int):
+    """The LPM of outputs ``z`` (M, n_z, N) on regressors ``x`` (M, n_x, N) at every line:
+    G (K, n_z, n_x), B = [A^-1]_{(a,0),(b,0)} (K, n_x, n_x), C (K, n_z, n_z), T (M, K, n_z), q and
+    the smoothing band; ``x_name`` names the regressors in the refusals."""
+    n_records, n_inputs, n_samples = x.shape
     width = 2 * half_width + 1
     top = (n_samples - 1) // 2
     dof = degrees_of_freedom(n_records, n_inputs, half_width, degree)
@@ -209,31 +348,28 @@ def lpm_mimo(u, y, fs: float, half_width: int = DEFAULT_HALF_WIDTH, degree: int 
                                        f"{n_records} record(s) leaves q = {dof} degrees of freedom; at least "
                                        f"half_width {narrowest_half_width(n_records, n_inputs, degree)} is needed")
     if top < width:
-        raise InputError("u", f"{n_samples} samples give {top} lines, fewer than the window of {width}")
-    flat = np.flatnonzero(~np.any(np.ptp(u, axis=2) > 0, axis=0))
+        raise InputError(x_name, f"{n_samples} samples give {top} lines, fewer than the window of {width}")
+    flat = np.flatnonzero(~np.any(np.ptp(x, axis=2) > 0, axis=0))
     if flat.size:
-        raise InputError("u", f"input {flat[0]} is constant in every record: it excites nothing")
-    U = np.fft.rfft(u, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_u, K)
-    Y = np.fft.rfft(y, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_y, K)
+        signal = "input" if x_name == "u" else "reference"
+        raise InputError(x_name, f"{signal} {flat[0]} is constant in every record: it excites nothing")
+    U = np.fft.rfft(x, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_x, K)
+    Y = np.fft.rfft(z, axis=-1)[..., 1:top + 1] / n_samples          # (M, n_z, K)
     # the products conj(U_a) U_b, conj(U_a) Y_o, Y_o conj(Y_p) over a window hold
-    # w M (n_u + n_y)^2 complex numbers per line at most
-    chunk = max(64, int(CHUNK_BYTES // (16 * width * n_records * (n_inputs + y.shape[1]) ** 2)))
+    # w M (n_x + n_z)^2 complex numbers per line at most
+    chunk = max(64, int(CHUNK_BYTES // (16 * width * n_records * (n_inputs + z.shape[1]) ** 2)))
     parts = [_solve_chunk(U, Y, np.arange(start, min(start + chunk, top)), half_width, degree, dof)
              for start in range(0, top, chunk)]
     G, block, cov_v, transient, condition = (np.concatenate(part, axis=1 if index == 3 else 0)
                                              for index, part in enumerate(zip(*parts)))
-    lines = np.arange(1, top + 1)
     collinear = np.flatnonzero(condition >= COLLINEAR)
     if collinear.size:
-        raise InputError("u", f"the inputs are collinear over the window at {collinear.size} line(s) (from "
-                              f"{lines[collinear[0]] * fs / n_samples:g} Hz; cond >= {COLLINEAR:.0e}): G cannot be "
-                              "separated; excite the inputs independently (uncorrelated noise, or orthogonal "
-                              "multisines)")
-    count = smoothing_lines(dof, 2 * half_width + 1, top)
-    return MimoLPMResult(float(fs), n_samples, n_records, int(half_width), int(degree), lines, G,
-                         vec_covariance(block, cov_v), cov_v, transient, dof,
-                         cov_G_smoothed=vec_covariance(block, band_mean(cov_v, count)), smoothing_lines=count,
-                         smoothed_dof=float(dof * count / (2 * half_width + 1)) if count > 1 else float(dof))
+        signals = "inputs" if x_name == "u" else "references"
+        raise InputError(x_name, f"the {signals} are collinear over the window at {collinear.size} line(s) (from "
+                                 f"{(collinear[0] + 1) * fs / n_samples:g} Hz; cond >= {COLLINEAR:.0e}): G cannot "
+                                 f"be separated; excite the {signals} independently (uncorrelated noise, or "
+                                 "orthogonal multisines)")
+    return G, block, cov_v, transient, dof, smoothing_lines(dof, width, top)
 
 
 def vec_covariance(block: np.ndarray, C: np.ndarray) -> np.ndarray:
