@@ -74,6 +74,12 @@ def diagnose(model_path: str, data_path: str, output: str, fail_if_discrepancy: 
                                                             input_paths=[data_path, *validate_on]))
     if as_json:
         emit_json({"output": output, **summary})
+    elif summary.get("kind") == "mimo":  # several outputs, one at a time (nlsid.diagnose.mimo)
+        console = settings().console
+        console.print(result.headline, style="bold", markup=False)
+        for line in result.findings:
+            console.print(f"  - {line}", markup=False)
+        console.print(f"-> {output}", markup=False)
     else:
         _print(result.diagnosis, output, result.computation_delay, fit_on)
     _check(summary, fail_if_discrepancy, fail_if_error_above, fail_if_distortion_above)

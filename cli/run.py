@@ -263,7 +263,7 @@ def _check_config(path: str, kind: str, stage: str) -> None:
 
         data, lines = load_yaml(path)
         config = validate_simulate_config(data, path, lines)
-        if stage not in ("simulate", "fit"):  # the other stages take a model of one input and one output
+        if stage not in ("simulate", "fit", "diagnose"):  # the other stages take a model of one input and one output
             refuse_several_inputs_outputs(config, path, f"nlsid {stage}")
 
 

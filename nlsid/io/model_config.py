@@ -1051,7 +1051,7 @@ class SimulateConfig(FiniteModel):
 
 
 def refuse_several_inputs_outputs(config: SimulateConfig, source: str, stage: str) -> None:
-    """Refuse a ``mimo_state_space`` model in ``stage`` (e.g. ``nlsid diagnose``), which takes a
+    """Refuse a ``mimo_state_space`` model in ``stage`` (e.g. ``nlsid hosidf --model``), which takes a
     model of one input u and one output y: one message at ``SOURCE: model.type``."""
     model = config.model
     if model.type != "mimo_state_space":

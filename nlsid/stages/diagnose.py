@@ -25,6 +25,7 @@ from nlsid.stages.recording import Recording
 
 if TYPE_CHECKING:
     from nlsid.diagnose.result import Diagnosis
+    from nlsid.stages.mimo_diagnosis import MimoDiagnosisInputs, MimoDiagnosisResult
     from nlsid.fit.computation_delay import DelayChoice
 
 #: The resolution of the PNG figures of :meth:`DiagnosisResult.figures`.
@@ -334,7 +335,7 @@ def progress_calls(progress: Callable[..., None] | None) -> Callable[[str, int, 
 
 def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[str]]:
     """The model config as a validated dict, its name in messages and its config files."""
-    from nlsid.io.model_config import refuse_several_inputs_outputs, validate_simulate_config
+    from nlsid.io.model_config import validate_simulate_config
     from nlsid.models.key_paths import deep_copy
 
     if isinstance(model, Model):
@@ -351,8 +352,7 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
                                         f"{type(model).__name__}")
     if not isinstance(data, dict):
         raise InputError(source, "expected a model config (a mapping with a 'model' key)")
-    config = validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
-    refuse_several_inputs_outputs(config, source, "nlsid diagnose")
+    validate_simulate_config(data, source, lines)  # here, where a refused key's line is known
     if data["model"].get("type") in ("pnlss", "hybrid"):
         kind = data["model"]["type"]
         raise InputError(f"{source}: model.type", f"a {kind} model {'is' if kind == 'pnlss' else 'holds'} a black box: "
@@ -364,10 +364,11 @@ def _model_config(model, name: Callable[[str], str]) -> tuple[dict, str, list[st
 def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None, estimation_range=None,
                      validation_range=None, allow_overlap: bool = False, workers: int | None = None,
                      mapping: Mapping[str, str] | None = None, yardstick: bool | None = None, fit_on: str = "y", *,
-                     names: Mapping[str, str] | None = None) -> DiagnosisInputs:
+                     names: Mapping[str, str] | None = None) -> DiagnosisInputs | MimoDiagnosisInputs:
     """The arguments of :func:`diagnose` checked and read, in the order the command line checks them:
     the model (and the judged signal it allows), the ranges, the overlap of ``validate_on`` with
-    ``rec``, the recordings."""
+    ``rec``, the recordings. A ``mimo_state_space`` model gives a
+    :class:`nlsid.stages.mimo_diagnosis.MimoDiagnosisInputs` (one output at a time)."""
     names = dict(names or {})
     name = lambda argument: names.get(argument, argument)  # noqa: E731
     if workers is not None and not (whole(workers) and workers >= 1):
@@ -380,9 +381,16 @@ def diagnosis_inputs(model, rec: Recording | str | os.PathLike, validate_on=None
     if fit_on == "u" and "closed_loop" not in config:
         raise InputError(name("fit_on"), f"u is judged only in closed loop ({source} has no closed_loop): in open "
                                          "loop the recorded u is the input the simulation is driven by")
-    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names)
+    several = config["model"].get("type") == "mimo_state_space"
+    data = held_out(rec, validate_on, estimation_range, validation_range, allow_overlap, mapping, name, names,
+                    several=several)
     if yardstick is not None and not isinstance(yardstick, bool):
         raise InputError(name("yardstick"), f"expected True, False or None, got {yardstick!r}")
+    if several:  # one output at a time (nlsid.diagnose.mimo): no yardstick, no closed loop
+        from nlsid.stages.mimo_diagnosis import MimoDiagnosisInputs
+
+        return MimoDiagnosisInputs(config, source, data.runs, data.where, data.extra_runs, data.estimation,
+                                   data.validation, configs, data.inputs, bool(allow_overlap), workers)
     return DiagnosisInputs(config, source, data.runs, data.where, data.extra_runs, data.estimation, data.validation,
                            configs, data.inputs, bool(allow_overlap), workers, yardstick, fit_on)
 
@@ -391,7 +399,7 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
              validation_range=None, allow_overlap: bool = False, workers: int | None = None,
              mapping: Mapping[str, str] | None = None, progress: Callable[..., None] | None = None,
              yardstick: bool | None = None, fit_on: str = "y", *,
-             names: Mapping[str, str] | None = None) -> DiagnosisResult:
+             names: Mapping[str, str] | None = None) -> DiagnosisResult | MimoDiagnosisResult:
     """Show what a simulation model gets wrong on measured data, name the cause and fix it.
 
     The model is simulated on the measured excitation (u, or r in closed loop) and compared with
@@ -444,7 +452,11 @@ def diagnose(model, rec: Recording | str | os.PathLike, validate_on=None, estima
 
     Returns
     -------
-    DiagnosisResult
+    DiagnosisResult or MimoDiagnosisResult
+        The latter (:class:`nlsid.stages.mimo_diagnosis.MimoDiagnosisResult`) for a
+        ``mimo_state_space`` model, diagnosed one output at a time (:mod:`nlsid.diagnose.mimo`:
+        each output's error against its noise, the FRM against the model's, the static output
+        hypotheses; the SISO hypotheses listed as not tested).
 
     Raises
     ------

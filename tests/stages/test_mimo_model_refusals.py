@@ -1,5 +1,5 @@
 """A ``mimo_state_space`` model where a stage takes a model of one input and one output
-(``diagnose``, ``hosidf --model``, ``fit --pnlss``, a pipeline's such step): one line,
+(``hosidf --model``, ``fit --pnlss``, a pipeline's such step): one line,
 exit 2, nothing written. ``report`` draws its page: the modes of A and the frequency response matrix."""
 
 from __future__ import annotations
@@ -20,19 +20,20 @@ def test_stages_of_one_input_and_output_refuse_it_in_one_line(run_cli, tmp_path)
     model = tmp_path / "mimo.yaml"
     model.write_text(yaml.safe_dump({"model": MODEL, "free": {"model.A[0][0]": {}}}))
     data = REPO / "sample_data" / "stage.h5"
-    for stage, args in {"nlsid diagnose": ("diagnose", "--model", model, "--data", data, "-o", tmp_path / "d")}.items():
-        run_cli(*args).assert_one_line_error(f"{model}: model.type: {stage} {WHAT}")
-    # fit --model takes it (nlsid.fit.mimo_output_error) on runs of its inputs and outputs: not these
-    run_cli("fit", "--model", model, "--data", data, "-o", tmp_path / "f.yaml").assert_one_line_error(
-        f"{data}:/runs/ms_l00_m00: has no input 'u2' (the model's inputs: u, u2; the run's channels: none)")
+    # fit --model and diagnose take it (nlsid.fit.mimo_output_error, nlsid.diagnose.mimo) on runs of its
+    # inputs and outputs: not these
+    for args in (("fit", "--model", model, "--data", data, "-o", tmp_path / "f.yaml"),
+                 ("diagnose", "--model", model, "--data", data, "-o", tmp_path / "d")):
+        run_cli(*args).assert_one_line_error(
+            f"{data}:/runs/ms_l00_m00: has no input 'u2' (the model's inputs: u, u2; the run's channels: none)")
     run_cli("hosidf", data, "--model", model, "-o", tmp_path / "h.h5").assert_one_line_error(
         "analytic HOSIDFs need a wiener, hammerstein, wiener_hammerstein or lpl model, got 'mimo_state_space'")
     run_cli("fit", "--pnlss", "--model", model, "--data", data, "-o", tmp_path / "p.yaml").assert_one_line_error(
         "a PNLSS fit starts from a linear model", "not mimo_state_space")
     pipeline = tmp_path / "pipeline.yaml"
-    step = f"diagnose --model mimo.yaml --data {data} -o d"
+    step = f"hosidf {data} --model mimo.yaml -o h.h5"
     pipeline.write_text(yaml.safe_dump({"root": str(tmp_path), "steps": [step]}))
-    run_cli("run", pipeline).assert_one_line_error(f"mimo.yaml: model.type: nlsid diagnose {WHAT}")
+    run_cli("run", pipeline).assert_one_line_error(f"mimo.yaml: model.type: nlsid hosidf {WHAT}")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mimo.yaml", "pipeline.yaml"]  # nothing written
 
 

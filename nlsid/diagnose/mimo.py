@@ -1,0 +1,482 @@
+"""The diagnosis of a linear model of several inputs and outputs (``mimo_state_space``), one output at a time.
+
+The model is simulated on the measured inputs of every run (:func:`nlsid.simulate.mimo.simulate_mimo`,
+periodic runs in their steady state) and each output i is judged on its own:
+
+1. **The simulation error against the noise** (the first numbers of a SISO diagnosis, per output).
+   A periodic run of P >= 2 steady periods is compared on its mean period, whose noise variance per
+   sample is sigma_i^2 / P; an arbitrary run on its whole record. On the validation runs
+   S_i = sum_r P_r sum_n e_rn^2 (P_r = 1 for an arbitrary run) and, with the noise variance
+   sigma_i^2 estimated from the period-to-period scatter of every run of P >= 2 periods
+   (nu = sum_r N_r (P_r - 1) degrees of freedom, independent of the period means for Gaussian noise),
+
+       ratio_i = S_i / (n_i sigma_i^2) ~ F(n_i, nu)
+
+   if the model is right (n_i the samples compared). The error is significant where the p-value is
+   below :data:`nlsid.diagnose.significance.ALPHA` (0.001), and ``above_noise_db`` is 10 log10 ratio_i.
+   Without two periods in any run the noise is unknown (NaN) and the error is not judged.
+   The F law assumes white noise; coloured noise makes it optimistic.
+
+2. **The frequency response matrix of the data against the model's**, where the runs are orthogonal
+   multisines (:class:`nlsid.analysis.frm_levels.MimoRuns`): per entry (i, a) and level, the share of
+   excited lines whose measured G_ia lies outside the 95 % circle (of the total variance: noise and
+   stochastic nonlinear distortion) around the model's G_ia. A right model leaves about 5 %.
+
+3. **Static output hypotheses, one output at a time**. Each maps the model's simulated output x_i
+   to the measured z_i; it changes output i only, so the other outputs are held as simulated:
+
+   * ``output_offset``: z = x + c;
+   * ``output_gain``: z = g x;
+   * ``output_saturation`` (a sensor's range, or a saturation at the output): z = min(max(x, lo), hi),
+     each level fitted exactly by a scan of the sorted samples (:func:`fit_saturation`);
+   * ``output_polynomial``: z = c + g x + a2 x^2 + a3 x^3 (a quadratic or cubic sensor curve).
+
+   Each is fitted by weighted least squares (weights P_r) on the estimation runs and scored on the
+   validation runs: with SSE_0 and SSE_1 the weighted squared errors before and after, p parameters
+   and n samples, ``gain_db`` = 10 log10(SSE_0 / SSE_1) and
+
+       F = ((SSE_0 - SSE_1) / p) / (SSE_1 / (n - p)),
+
+   the F test of the reduction against the error left (it needs no noise level; errors the
+   hypothesis does not explain count as noise, which makes it conservative). A hypothesis is
+   significant where its p-value is below ALPHA. Of the significant ones the cause named for output
+   i is the one with the fewest parameters whose SSE_1 is not significantly above the best one's
+   ((SSE_1 - SSE_best) / (SSE_best / n) below the F(1, n) quantile at 1 - ALPHA): the simplest
+   explanation the data cannot tell from the best.
+
+The SISO hypotheses that act inside a mechanical, tank or transfer-function model (friction,
+stiffness, hysteresis, feedback around a transfer function, input blocks, missing resonance,
+wrong mechanics or dynamics, a delay) are not tested: a ``mimo_state_space`` model has no such
+blocks (:data:`NOT_TESTED`). The SISO output blocks (quadratic output, output saturation) are
+tested here, per output. No extended model is written: the type has no output blocks to add.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from nlsid.diagnose.significance import ALPHA
+from nlsid.errors import InputError
+from nlsid.io.run import Run
+
+#: The SISO hypotheses tested here on each output, under the per-output names.
+TESTED_PER_OUTPUT = {"quadratic_output": "output_polynomial", "output_saturation": "output_saturation"}
+#: Why the library's other hypotheses are not tested on a mimo_state_space model.
+NOT_TESTED = ("a single-input single-output hypothesis: it acts inside a mechanical, tank or transfer-function "
+              "model (a force, the input u, the dynamics between one input and one output), blocks a "
+              "mimo_state_space model does not have; its dynamics are refitted by fit --model of its matrices")
+
+#: Why the black-box yardstick is not fitted.
+NO_YARDSTICK = ("the yardstick's black box (a PNLSS model) is fitted to one input and one output; without it the "
+                "status rests on the noise floor alone")
+
+
+@dataclass(frozen=True)
+class OutputHypothesis:
+    """A static map of one simulated output x to the measured one: its name, title, parameter
+    names, ``fit(x, z, w) -> values`` (weighted least squares) and ``apply(x, values) -> z``."""
+
+    name: str
+    title: str
+    parameters: tuple[str, ...]
+    fit: Callable[[np.ndarray, np.ndarray, np.ndarray], dict]
+    apply: Callable[[np.ndarray, dict], np.ndarray]
+
+
+def _weighted_lstsq(X: np.ndarray, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+    root = np.sqrt(w)
+    return np.linalg.lstsq(X * root[:, None], z * root, rcond=None)[0]
+
+
+def _offset(x, z, w) -> dict:
+    return {"offset": float(np.sum(w * (z - x)) / np.sum(w))}
+
+
+def _gain(x, z, w) -> dict:
+    denominator = float(np.sum(w * x * x))
+    return {"gain": float(np.sum(w * x * z)) / denominator if denominator > 0 else 1.0}
+
+
+def _polynomial(x, z, w) -> dict:
+    scale = float(np.sqrt(np.mean(x * x))) or 1.0  # conditioning: the powers of x / rms(x)
+    s = x / scale
+    c = _weighted_lstsq(np.stack([np.ones_like(s), s, s * s, s ** 3], axis=1), z, w)
+    return {"offset": float(c[0]), "gain": float(c[1] / scale), "a2": float(c[2] / scale ** 2),
+            "a3": float(c[3] / scale ** 3)}
+
+
+def _apply_polynomial(x, v) -> np.ndarray:
+    return v["offset"] + x * (v["gain"] + x * (v["a2"] + x * v["a3"]))
+
+
+def fit_saturation(x: np.ndarray, z: np.ndarray, w: np.ndarray) -> dict:
+    """The levels ``lower`` <= ``upper`` of z = min(max(x, lower), upper) that minimise
+    sum w (z_model - z)^2, exactly.
+
+    The two sides separate: samples above ``upper`` change by ``upper`` alone, those below
+    ``lower`` by ``lower`` alone. For the upper side, with x sorted downwards, a level between
+    x_(k+1) and x_(k) clips the k largest samples; the cost change
+    sum_{j <= k} w_j ((upper - z_j)^2 - (x_j - z_j)^2) is a parabola in ``upper`` with its minimum
+    at the weighted mean of their z, clipped into [x_(k+1), x_(k)]. Every k is evaluated with
+    cumulative sums and the best taken; no clipping (the level at max x) is the k = 0 case.
+    The lower side is the same on -x, -z."""
+    return {"lower": -_upper_level(-x, -z, w), "upper": _upper_level(x, z, w)}
+
+
+def _upper_level(x: np.ndarray, z: np.ndarray, w: np.ndarray) -> float:
+    order = np.argsort(-x, kind="stable")
+    xs, zs, ws = x[order], z[order], w[order]
+    W, Wz, Wzz = np.cumsum(ws), np.cumsum(ws * zs), np.cumsum(ws * zs * zs)
+    base = np.cumsum(ws * (xs - zs) ** 2)
+    below = np.append(xs[1:], -np.inf)  # the next sample down: the clipped set's lower edge
+    level = np.clip(Wz / W, below, xs)
+    change = W * level ** 2 - 2 * level * Wz + Wzz - base
+    k = int(np.argmin(change))
+    return float(level[k]) if change[k] < 0 else float(xs[0])
+
+
+def _apply_saturation(x, v) -> np.ndarray:
+    return np.clip(x, v["lower"], v["upper"])
+
+
+HYPOTHESES: tuple[OutputHypothesis, ...] = (
+    OutputHypothesis("output_offset", "Output offset", ("offset",), _offset, lambda x, v: x + v["offset"]),
+    OutputHypothesis("output_gain", "Output gain", ("gain",), _gain, lambda x, v: v["gain"] * x),
+    OutputHypothesis("output_saturation", "Sensor saturation (output range)", ("lower", "upper"), fit_saturation,
+                     _apply_saturation),
+    OutputHypothesis("output_polynomial", "Output polynomial (quadratic and cubic)", ("offset", "gain", "a2", "a3"),
+                     _polynomial, _apply_polynomial),
+)
+
+
+@dataclass
+class Samples:
+    """One output's compared samples over a set of runs: simulated x, measured z, weights w (P of
+    a mean period's sample, 1 of a whole record's)."""
+
+    x: np.ndarray
+    z: np.ndarray
+    w: np.ndarray
+
+    def sse(self, model: np.ndarray | None = None) -> float:
+        e = (self.x if model is None else model) - self.z
+        return float(np.sum(self.w * e * e))
+
+
+@dataclass
+class HypothesisScore:
+    """One hypothesis fitted on one output: its values, and its validation score (module docstring)."""
+
+    output: str
+    hypothesis: OutputHypothesis
+    values: dict
+    sse_before: float
+    sse_after: float
+    samples: int
+    gain_db: float
+    p_value: float
+    significant: bool
+
+    def describe(self, unit: str = "") -> str:
+        """The fitted values in words, e.g. ``sensor saturation at -4.1 and 4.1 V``."""
+        u = f" {unit}" if unit else ""
+        v = self.values
+        if self.hypothesis.name == "output_saturation":
+            return f"sensor saturation at {v['lower']:.4g}{u} and {v['upper']:.4g}{u}"
+        if self.hypothesis.name == "output_offset":
+            return f"output offset {v['offset']:+.4g}{u}"
+        if self.hypothesis.name == "output_gain":
+            return f"output gain {v['gain']:.4g}"
+        return (f"output polynomial {v['offset']:+.3g} + {v['gain']:.4g} x + {v['a2']:.3g} x^2 + {v['a3']:.3g} x^3")
+
+    def summary(self) -> dict:
+        return {"hypothesis": self.hypothesis.name, "title": self.hypothesis.title, "values": dict(self.values),
+                "validation_sse_before": self.sse_before, "validation_sse_after": self.sse_after,
+                "samples": self.samples, "gain_db": self.gain_db, "p_value": self.p_value,
+                "significant": self.significant}
+
+
+@dataclass
+class OutputDiagnosis:
+    """One output's numbers: its noise, its error against it, the hypotheses and the named cause."""
+
+    name: str
+    noise: float
+    noise_dof: int
+    error_rms: float
+    samples: int
+    above_noise_db: float
+    p_value: float
+    significant: bool
+    scores: list[HypothesisScore] = field(default_factory=list)
+    cause: HypothesisScore | None = None
+    remainder_above_noise_db: float = math.nan
+    remainder_significant: bool = False
+    unit: str = ""
+
+    @property
+    def status(self) -> str:
+        if self.cause is not None:
+            return "partly_explained" if self.remainder_significant else "explained"
+        if not math.isfinite(self.noise):
+            return "undetermined"
+        return "unexplained" if self.significant else "no_discrepancy"
+
+    def statement(self) -> str:
+        """One line: ``output y2: sensor saturation at ... , 12.0 dB gained`` or the error against the noise."""
+        if self.cause is not None:
+            rest = (f"; {self.remainder_above_noise_db:.1f} dB above the noise left"
+                    if self.remainder_significant else "")
+            return f"output {self.name}: {self.cause.describe(self.unit)}, {self.cause.gain_db:.1f} dB gained{rest}"
+        if not math.isfinite(self.noise):
+            return f"output {self.name}: noise unknown (no run of two periods), no hypothesis significant"
+        size = f"{self.above_noise_db:+.1f} dB against the noise (p = {self.p_value:.2g})"
+        return (f"output {self.name}: significant error, {size}, no output hypothesis explains it" if self.significant
+                else f"output {self.name}: no significant discrepancy ({size})")
+
+    def summary(self) -> dict:
+        return {"name": self.name, "status": self.status, "statement": self.statement(), "noise": self.noise,
+                "noise_dof": self.noise_dof, "error_rms": self.error_rms, "samples": self.samples,
+                "above_noise_db": self.above_noise_db, "p_value": self.p_value, "significant": self.significant,
+                "cause": (None if self.cause is None
+                          else {**self.cause.summary(), "description": self.cause.describe(self.unit)}),
+                "remainder_above_noise_db": self.remainder_above_noise_db,
+                "remainder_significant": self.remainder_significant,
+                "hypotheses": [s.summary() for s in self.scores]}
+
+
+def _order(statuses: list[str]) -> str:
+    """The diagnosis' status from its outputs' (module docstring of the verdict: the worst first)."""
+    named = any(s in ("explained", "partly_explained") for s in statuses)
+    if "unexplained" in statuses or "partly_explained" in statuses:
+        return "partly_explained" if named else "unexplained"
+    if named:
+        return "explained"
+    return "undetermined" if "undetermined" in statuses else "no_discrepancy"
+
+
+@dataclass
+class MimoDiagnosis:
+    """The diagnosis of a ``mimo_state_space`` model (:func:`diagnose_mimo`)."""
+
+    model_source: str
+    inputs: tuple[str, ...]
+    outputs: list[OutputDiagnosis]
+    frm: list[dict]
+    frm_note: str
+    not_tested: list[dict]
+    estimation: list[str]
+    validation: list[str]
+
+    @property
+    def status(self) -> str:
+        return _order([o.status for o in self.outputs])
+
+    def headline(self) -> str:
+        named = [o for o in self.outputs if o.cause is not None]
+        if named:
+            return "; ".join(o.statement() for o in named)
+        if self.status == "unexplained":
+            return ("Significant discrepancy no output hypothesis explains on "
+                    + ", ".join(o.name for o in self.outputs if o.significant))
+        if self.status == "undetermined":
+            return "No noise level to judge the error by (no run of two periods), and no output hypothesis significant"
+        return "No significant discrepancy on any output"
+
+    def lines(self) -> list[str]:
+        """What the terminal shows under the headline: each output, the FRM, what is not tested."""
+        out = [o.statement() for o in self.outputs]
+        out += [f"FRM entry {e['output']} <- {e['input']} ({e['level']}): {100 * e['outside']:.0f} % of "
+                f"{e['lines']} lines outside the data's 95 % circles" for e in self.frm]
+        if self.frm_note:
+            out.append(f"FRM: {self.frm_note}")
+        tested = ", ".join(f"{siso} as {mine}" for siso, mine in TESTED_PER_OUTPUT.items())
+        out.append(f"tested on each output: {tested}, with output_offset and output_gain")
+        for reason in dict.fromkeys(item["reason"] for item in self.not_tested):
+            names = ", ".join(item["hypothesis"] for item in self.not_tested if item["reason"] == reason)
+            out.append(f"not tested: {names}: {reason}")
+        return out
+
+    def summary(self) -> dict:
+        """``summary.json`` of ``nlsid diagnose`` of such a model (``docs/formats.md``, "several outputs")."""
+        worst = max(self.outputs, key=lambda o: o.above_noise_db if math.isfinite(o.above_noise_db) else -math.inf)
+        return {"kind": "mimo", "headline": self.headline(), "findings": self.lines(),
+                "verdict": {"status": self.status}, "model_source": self.model_source,
+                "inputs": list(self.inputs), "outputs": [o.summary() for o in self.outputs],
+                "frm": list(self.frm), "frm_note": self.frm_note, "not_tested": list(self.not_tested),
+                "split": {"estimation": list(self.estimation), "validation": list(self.validation)},
+                "evidence": {"error_above_noise": {
+                    "output": worst.name, "above_noise_db": worst.above_noise_db, "p_value": worst.p_value,
+                    "significant": any(o.significant for o in self.outputs),
+                    "noise_known": all(math.isfinite(o.noise) for o in self.outputs)}, "lines": []},
+                "extended_model": None}
+
+
+def compared(model, runs: Sequence[Run]) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Per run (simulated outputs, measured outputs, weight): a periodic run of P >= 2 steady
+    periods as its mean period (weight P), any other over its steady part (weight 1)."""
+    from nlsid.fit.mimo_output_error import compact_runs, measured_outputs, steady_columns
+    from nlsid.io.ranges import record
+    from nlsid.simulate.mimo import simulate_mimo
+
+    names = [*model.inputs, *model.outputs]
+    compact, weights = compact_runs(runs, names)
+    measured = measured_outputs(compact, model.outputs)
+    out = []
+    for run, z, w in zip(compact, measured, weights):
+        x = steady_columns(run, simulate_mimo(model, record(run), steady=True).output_matrix())
+        out.append((x, z, float(w) ** 2))
+    return out
+
+
+def samples_of(pairs: list[tuple[np.ndarray, np.ndarray, float]], i: int) -> Samples:
+    """Output i's :class:`Samples` over the runs of :func:`compared`."""
+    return Samples(np.concatenate([x[i] for x, _, _ in pairs]), np.concatenate([z[i] for _, z, _ in pairs]),
+                   np.concatenate([np.full(x.shape[1], w) for x, _, w in pairs]))
+
+
+def output_noise_variance(runs: Sequence[Run], name: str) -> tuple[float, int]:
+    """The pooled period-to-period variance of output ``name`` over the runs of P >= 2 steady
+    periods and its degrees of freedom (NaN, 0 without such a run)."""
+    from nlsid.fit.mimo_output_error import steady_periods
+
+    periodic = [run for run in runs if run.period is not None and run.n_periods >= 2]
+    dof = sum(run.period * (run.n_periods - 1) for run in periodic)
+    if not dof:
+        return math.nan, 0
+    ss = sum(float(np.sum(np.var(steady_periods(run, name), axis=0, ddof=1))) * (run.n_periods - 1) for run in periodic)
+    return ss / dof, dof
+
+
+def score(hypothesis: OutputHypothesis, name: str, estimation: Samples, validation: Samples) -> HypothesisScore:
+    """Fit ``hypothesis`` on the estimation samples of one output, score it on the validation ones."""
+    from scipy import stats
+
+    values = hypothesis.fit(estimation.x, estimation.z, estimation.w)
+    before, after = validation.sse(), validation.sse(hypothesis.apply(validation.x, values))
+    n, p = validation.x.size, len(hypothesis.parameters)
+    gain = 10 * math.log10(before / after) if after > 0 and before > 0 else (math.inf if before > 0 else 0.0)
+    if after > 0 and n > p and before > after:
+        F = ((before - after) / p) / (after / (n - p))
+        p_value = float(stats.f.sf(F, p, n - p))
+    else:
+        p_value = 0.0 if (after == 0 and before > 0) else 1.0
+    return HypothesisScore(name, hypothesis, values, before, after, n, gain, p_value, p_value < ALPHA)
+
+
+def choose(scores: list[HypothesisScore]) -> HypothesisScore | None:
+    """The named cause among the significant scores: the fewest parameters not significantly worse
+    than the best (module docstring); None where none is significant."""
+    from scipy import stats
+
+    significant = [s for s in scores if s.significant]
+    if not significant:
+        return None
+    best = min(significant, key=lambda s: s.sse_after)
+    limit = float(stats.f.ppf(1 - ALPHA, 1, best.samples))
+    close = [s for s in significant
+             if best.sse_after == 0 and s.sse_after == 0
+             or best.sse_after > 0 and (s.sse_after - best.sse_after) / (best.sse_after / best.samples) < limit]
+    return min(close, key=lambda s: (len(s.hypothesis.parameters), s.sse_after))
+
+
+def frm_comparison(model, runs: Sequence[Run], where: str) -> tuple[list[dict], str]:
+    """Per level of orthogonal multisines and entry (output, input): the share of excited lines
+    where the model's G lies outside the data's 95 % circle (module docstring), and a note where
+    no FRM is formed (why)."""
+    from nlsid.analysis.frm_levels import MimoRuns
+
+    if not all(run.kind == "multisine" for run in runs):
+        return [], "not compared: the runs are not all multisines (the LPM's FRM of arbitrary runs is not compared)"
+    mimo = MimoRuns()
+    try:
+        list(mimo.take((run, f"{where}:/runs/{run.run_id}") for run in runs))
+        levels = mimo.levels(0.95, where)
+    except InputError as error:
+        return [], f"not formed: {error.where}: {error.what}"
+    out = []
+    for level in levels:
+        if tuple(level.inputs) != tuple(model.inputs) or tuple(level.outputs) != tuple(model.outputs):
+            return [], "not compared: the runs' inputs and outputs are not the model's, in order"
+        result = level.frm
+        G_model = model.frequency_response(result.frequency, fs=level.fs)
+        radius = result.bounds.radius
+        name = "no level" if level.level is None else f"level {level.level:g}"
+        for i, output in enumerate(level.outputs):
+            for a, source in enumerate(level.inputs):
+                r = radius[:, i, a]
+                known = np.isfinite(r)
+                outside = np.abs(result.G[:, i, a] - G_model[:, i, a])[known] > r[known]
+                out.append({"level": name, "output": output, "input": source, "lines": int(known.sum()),
+                            "outside": float(outside.mean()) if known.any() else math.nan})
+    return out, ""
+
+
+def diagnose_mimo(config_data: dict, source: str, estimation: Sequence[Run], validation: Sequence[Run],
+                  where: str = "recording", units: dict | None = None) -> MimoDiagnosis:
+    """Diagnose a ``mimo_state_space`` model on measured runs, one output at a time (module docstring).
+
+    Parameters
+    ----------
+    config_data : dict
+        The model config (validated) of type ``mimo_state_space``.
+    source : str
+        Its name in messages and the summary.
+    estimation, validation : sequence of Run
+        The runs the hypotheses are fitted on and scored on (:func:`nlsid.fit.run_split.split_runs`).
+    where : str
+        The recording's name, for messages and the FRM's levels.
+    units : dict, optional
+        Signal -> unit, for the named causes' levels.
+
+    Returns
+    -------
+    MimoDiagnosis
+    """
+    from scipy import stats
+
+    from nlsid.fit.mimo_output_error import check_measured
+    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.models.from_config import model as build
+
+    if not validation:
+        raise InputError(where, "no validation run: a diagnosis scores its hypotheses on runs it did not fit")
+    model = build(validate_simulate_config(config_data, source, {}))
+    runs = [*estimation, *validation]
+    for run in runs:
+        check_measured(model, run, f"{where}:/runs/{run.run_id}")
+    est, val = compared(model, estimation), compared(model, validation)
+    outputs = []
+    for i, name in enumerate(model.outputs):
+        variance, dof = output_noise_variance(runs, name)
+        e, v = samples_of(est, i), samples_of(val, i)
+        n = v.x.size
+        sse = v.sse()
+        error_rms = math.sqrt(sse / float(np.sum(v.w))) if n else math.nan
+        if dof and variance > 0:
+            ratio = sse / (n * variance)
+            above, p_value = 10 * math.log10(ratio) if ratio > 0 else -math.inf, float(stats.f.sf(ratio, n, dof))
+        else:
+            above, p_value = math.nan, math.nan
+        scores = [score(h, name, e, v) for h in HYPOTHESES]
+        cause = choose(scores)
+        diagnosis = OutputDiagnosis(name, math.sqrt(variance) if dof else math.nan, dof, error_rms, n, above,
+                                    p_value, bool(p_value < ALPHA), scores, cause,
+                                    unit=(units or {}).get(name, ""))
+        if cause is not None and dof and variance > 0:
+            left = cause.sse_after / (n * variance)
+            diagnosis.remainder_above_noise_db = 10 * math.log10(left) if left > 0 else -math.inf
+            diagnosis.remainder_significant = bool(stats.f.sf(left, n, dof) < ALPHA)
+        outputs.append(diagnosis)
+    frm, note = frm_comparison(model, runs, where)
+    from nlsid.diagnose.hypotheses import LIBRARY
+
+    not_tested = [{"hypothesis": h.name, "title": h.title, "reason": NOT_TESTED}
+                  for h in LIBRARY if h.name not in TESTED_PER_OUTPUT]
+    not_tested.append({"hypothesis": "yardstick", "title": "The black-box yardstick", "reason": NO_YARDSTICK})
+    return MimoDiagnosis(source, tuple(model.inputs), outputs, frm, note, not_tested,
+                         [run.run_id for run in estimation], [run.run_id for run in validation])

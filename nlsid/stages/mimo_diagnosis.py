@@ -1,0 +1,136 @@
+"""The ``diagnose`` stage of a model of several inputs and outputs (``mimo_state_space``).
+
+:func:`nlsid.stages.diagnose.diagnosis_inputs` gives a :class:`MimoDiagnosisInputs` for such a
+model; its :meth:`~MimoDiagnosisInputs.run` diagnoses one output at a time
+(:func:`nlsid.diagnose.mimo.diagnose_mimo`) and gives a :class:`MimoDiagnosisResult`, whose
+:meth:`~MimoDiagnosisResult.write` writes the diagnosis folder: ``summary.json`` alone (no
+``results.h5``, no page arrays, no extended model: ``docs/formats.md``, "The diagnosis of a
+model of several outputs").
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from nlsid.diagnose.mimo import MimoDiagnosis
+
+SUMMARY = "summary.json"
+
+
+@dataclass
+class MimoDiagnosisResult:
+    """A ``mimo_state_space`` model's diagnosis: per output its error against its noise, the
+    output hypotheses and the named cause; the FRM comparison; what is not tested.
+
+    Attributes
+    ----------
+    diagnosis : nlsid.diagnose.mimo.MimoDiagnosis
+    units : dict
+        The recording's units.
+    configs, inputs : list of str
+        Config files and recordings the diagnosis comes from (its provenance).
+    allow_overlap : bool
+        A ``validate_on`` recording that is the diagnosed one was accepted.
+    """
+
+    diagnosis: MimoDiagnosis
+    units: dict = field(default_factory=dict)
+    configs: list[str] = field(default_factory=list)
+    inputs: list[str] = field(default_factory=list)
+    allow_overlap: bool = False
+
+    @property
+    def headline(self) -> str:
+        """Each named cause, ``output y2: sensor saturation at ..., 12.0 dB gained``, or the verdict."""
+        return self.diagnosis.headline()
+
+    @property
+    def status(self) -> str:
+        """``explained``, ``partly_explained``, ``unexplained``, ``no_discrepancy`` or ``undetermined``."""
+        return self.diagnosis.status
+
+    @property
+    def findings(self) -> list[str]:
+        """The lines printed under the headline: each output, the FRM entries, what is not tested."""
+        return self.diagnosis.lines()
+
+    def summary(self) -> dict:
+        """``summary.json`` without its format, provenance and file list (``nlsid diagnose --json``)."""
+        return {**self.diagnosis.summary(), "units": dict(self.units), "allow_overlap": bool(self.allow_overlap)}
+
+    def write(self, folder: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
+        """Write the folder (``summary.json``) atomically; an existing folder only with ``force``."""
+        from nlsid.io.atomic import check_output_folder
+        from nlsid.io.diagnosis_file import FORMAT, FORMAT_VERSION
+        from nlsid.io.provenance import provenance as make_provenance
+        from nlsid.io.result_file import json_safe
+
+        record = (provenance if provenance is not None
+                  else make_provenance(config_paths=self.configs, input_paths=self.inputs))
+        if self.allow_overlap:
+            record = {**record, "allow_overlap": True}
+        target = check_output_folder(folder, force)
+        parent = target.absolute().parent
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
+        try:
+            document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": record,
+                        **self.summary(), "files": [SUMMARY]}
+            (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n",
+                                       encoding="utf-8")
+            os.chmod(tmp, 0o755)
+            if target.exists():
+                old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
+                os.replace(target, old / target.name)
+                os.replace(tmp, target)
+                shutil.rmtree(old)
+            else:
+                os.replace(tmp, target)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp)
+        return target
+
+    def __repr__(self) -> str:
+        return f"MimoDiagnosisResult(status={self.status!r})"
+
+
+@dataclass
+class MimoDiagnosisInputs:
+    """The checked inputs of the diagnosis of a ``mimo_state_space`` model (as
+    :class:`nlsid.stages.diagnose.DiagnosisInputs` for one output)."""
+
+    config: dict
+    model_source: str
+    runs: list
+    where: str
+    extra: list
+    estimation: object
+    validation: object
+    configs: list[str]
+    inputs: list[str]
+    allow_overlap: bool
+    workers: int | None
+
+    @property
+    def steps(self) -> int:
+        """The work :meth:`run` reports: one step (the outputs are diagnosed in well under a second each)."""
+        return 1
+
+    def run(self, progress: Callable[..., None] | None = None) -> MimoDiagnosisResult:
+        """Diagnose; ``progress`` as :func:`nlsid.stages.diagnose.progress_calls` takes it, called once at the end."""
+        from nlsid.diagnose.mimo import diagnose_mimo
+        from nlsid.fit.run_split import split_runs
+        from nlsid.io.units import common_units
+        from nlsid.stages.diagnose import progress_calls
+
+        estimation, validation = split_runs(self.runs, None, self.extra, self.estimation, self.validation, self.where)
+        units = common_units(run.units for run in [*self.runs, *self.extra])
+        result = diagnose_mimo(self.config, self.model_source, estimation, validation, self.where, units)
+        progress_calls(progress)("outputs", 1, 1)
+        return MimoDiagnosisResult(result, units, self.configs, self.inputs, self.allow_overlap)
