@@ -18,6 +18,13 @@ give the FRM by the Local Polynomial Method for several inputs instead
 level are records that share G, each with its own transient, cut to the shortest. Its variances
 hold the noise and the stochastic nonlinear distortion together (the local model cannot tell them
 apart), so they bound the noise from above; every such level says so in its warnings.
+
+Where every run of such a level carries one reference per input (:func:`reference_names`: ``r``,
+then the channels ``r2``, ``r3``, ... up to ``r<n_u>``, as the inputs are ``u``, ``u2``, ...), the
+FRM is the indirect ratio of the LPM with references
+(:func:`nlsid.analysis.lpm_mimo.lpm_mimo_reference`): unbiased in a closed loop or with noisy
+inputs, where the LPM from u is not. ``bla --method auto`` and ``reference`` use it (``reference``
+refuses a run without its references), ``frf`` and ``io`` take u as known.
 """
 
 from __future__ import annotations
@@ -31,7 +38,8 @@ from nlsid.analysis.arbitrary import BAND_DB
 from nlsid.analysis.confidence import Bounds
 from nlsid.analysis.frm import FrequencyResponseMatrix, frm
 from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
-from nlsid.analysis.lpm_mimo import MimoLPMResult, degrees_of_freedom, lpm_mimo, narrowest_half_width
+from nlsid.analysis.lpm_mimo import (MimoLPMResult, degrees_of_freedom, lpm_mimo, lpm_mimo_reference,
+                                     narrowest_half_width)
 from nlsid.errors import InputError
 from nlsid.feeds import check_mimo_run
 from nlsid.io.run import Run
@@ -149,10 +157,11 @@ class MimoRuns:
         return [level_frm(pairs, confidence, f"{source}: level {key}") for key, pairs in by_level.items()]
 
     def lpm_levels(self, confidence: float = 0.95, source: str = "recording", half_width: int = DEFAULT_HALF_WIDTH,
-                   degree: int = DEFAULT_DEGREE) -> list["LpmFrmLevel"]:
-        """The FRM by the MIMO LPM of each level of the arbitrary runs set aside, sorted by level."""
+                   degree: int = DEFAULT_DEGREE, method: str = "auto") -> list["LpmFrmLevel"]:
+        """The FRM by the MIMO LPM of each level of the arbitrary runs set aside, sorted by level
+        (``method`` as ``bla --method``: the references' use, :func:`level_lpm`)."""
         by_level = self._by_level("arbitrary")
-        return [level_lpm(pairs, confidence, f"{source}: level {key} (arbitrary runs)", half_width, degree)
+        return [level_lpm(pairs, confidence, f"{source}: level {key} (arbitrary runs)", half_width, degree, method)
                 for key, pairs in by_level.items()]
 
     def _by_level(self, kind: str) -> dict[float | None, list[tuple[Run, str]]]:
@@ -273,8 +282,11 @@ class LpmFrmLevel:
     confidence : float
         Probability of the bounds.
     warnings : list of str
-        Always :data:`NOT_SEPARABLE`; a widened window, records cut to the shortest, an unused
-        reference.
+        Always :data:`NOT_SEPARABLE`; a widened window, records cut to the shortest, references
+        not used.
+    references : tuple of str
+        The references of the indirect method (``r``, ``r2``, ...; ``result.method`` is
+        ``"lpm_reference"``), empty where G is from the inputs.
     """
 
     level: float | None
@@ -288,6 +300,7 @@ class LpmFrmLevel:
     excited: np.ndarray
     confidence: float
     warnings: list[str] = field(default_factory=list)
+    references: tuple[str, ...] = ()
 
     @property
     def bins(self) -> np.ndarray:
@@ -329,7 +342,8 @@ class LpmFrmLevel:
                     for i, output in enumerate(self.outputs) for a, name in enumerate(self.inputs)]
         return {
             "level": self.level, "inputs": list(self.inputs), "outputs": list(self.outputs),
-            "records": result.n_records, "samples": result.n_samples, "method": "lpm",
+            "records": result.n_records, "samples": result.n_samples, "method": result.method,
+            "references": list(self.references),
             "u_rms": [float(value) for value in self.u_rms],
             "lpm": {"lines": 2 * result.half_width + 1, "degree": result.degree, "dof": result.dof},
             "excited_lines": int(excited.size),
@@ -340,12 +354,52 @@ class LpmFrmLevel:
         }
 
 
+def reference_names(n_inputs: int) -> tuple[str, ...]:
+    """The references of a run with ``n_inputs`` inputs, one per input: ``r``, then the channels
+    ``r2`` .. ``r<n_u>`` (as the inputs are ``u``, ``u2``, ...)."""
+    return ("r",) + tuple(f"r{index}" for index in range(2, n_inputs + 1))
+
+
+def missing_references(run: Run) -> list[str]:
+    """The references of :func:`reference_names` that ``run`` does not carry."""
+    return [name for name in reference_names(len(run.inputs))
+            if (run.r if name == "r" else run.channels.get(name)) is None]
+
+
+def _use_references(pairs: list[tuple[Run, str]], method: str, warnings: list[str]) -> bool:
+    """Whether the level's FRM is the indirect one from the references: ``auto`` where every run
+    carries them all, ``reference`` always (InputError naming a run without them); ``frf`` and
+    ``io`` never. A reference that is then not used is said in ``warnings``."""
+    names = reference_names(len(pairs[0][0].inputs))
+    lacking = [(run, where, missing_references(run)) for run, where in pairs]
+    lacking = [(run, where, missing) for run, where, missing in lacking if missing]
+    if method == "reference" and lacking:
+        run, where, missing = lacking[0]
+        raise InputError(where, f"--method reference needs one reference per input ({', '.join(names)}); this run "
+                                f"lacks {', '.join(missing)}")
+    carried = [run for run, _ in pairs if run.r is not None]
+    if method in ("auto", "reference") and not lacking:
+        return True
+    if carried and method in ("frf", "io"):
+        warnings.append(f"the runs' references are not used (--method {method}): the FRM is taken from the inputs as "
+                        "if they were noise-free (in a closed loop the output noise then biases it)")
+    elif carried:
+        run, _, missing = lacking[0]
+        warnings.append(f"the runs' reference r is not used: {len(names)} inputs need the references "
+                        f"{', '.join(names)}, and run {run.run_id} lacks {', '.join(missing)}; the FRM is taken from "
+                        "the inputs as if they were noise-free")
+    return False
+
+
 def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_width: int = DEFAULT_HALF_WIDTH,
-              degree: int = DEFAULT_DEGREE) -> LpmFrmLevel:
+              degree: int = DEFAULT_DEGREE, method: str = "auto") -> LpmFrmLevel:
     """The FRM by the MIMO LPM of the arbitrary runs of one level (``label`` names it in messages).
 
     The window is ``2 half_width + 1`` lines, widened (with a warning) to the narrowest that leaves
     a degree of freedom where the level's inputs and records need more (:func:`narrowest_half_width`).
+    With ``method`` ``auto`` or ``reference`` and one reference per input in every run
+    (:func:`reference_names`), G is the indirect ratio of
+    :func:`nlsid.analysis.lpm_mimo.lpm_mimo_reference`, its band where every reference carries power.
     """
     first = pairs[0][0]
     for run, where in pairs[1:]:
@@ -359,9 +413,7 @@ def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_
     length = min(run.n_samples for run in runs)
     if any(run.n_samples != length for run in runs):
         warnings.append(f"records of different lengths: all cut to the shortest, {length} samples")
-    if any(run.r is not None for run in runs):
-        warnings.append("the runs' reference r is not used: the FRM is taken from the inputs as if they were "
-                        "noise-free")
+    use_references = _use_references(pairs, method, warnings)
     n_inputs = len(first.inputs)
     needed = narrowest_half_width(len(runs), n_inputs, degree)
     if half_width < needed:
@@ -371,18 +423,24 @@ def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_
         half_width = needed
     u = np.stack([run.input_matrix()[:, :length] for run in runs])
     y = np.stack([run.output_matrix()[:, :length] for run in runs])
+    references = reference_names(n_inputs) if use_references else ()
+    r = np.stack([np.stack([run.named_signal(name)[:length] for name in references]) for run in runs]) \
+        if use_references else None
     try:
-        result = lpm_mimo(u, y, first.fs, half_width, degree)
+        result = lpm_mimo_reference(r, u, y, first.fs, half_width, degree) if use_references else \
+            lpm_mimo(u, y, first.fs, half_width, degree)
     except InputError as error:
         raise InputError(label, f"{error.where}: {error.what}") from None
-    power = np.mean(np.abs(np.fft.rfft(u, axis=-1)[..., 1:result.lines.size + 1]) ** 2, axis=0)   # (n_u, K)
+    regressors = r if use_references else u    # the band: where what the LPM regresses on carries power
+    power = np.mean(np.abs(np.fft.rfft(regressors, axis=-1)[..., 1:result.lines.size + 1]) ** 2, axis=0)
     width = 2 * half_width + 1
     smooth = np.array([np.convolve(p, np.ones(width) / width, mode="same") for p in power])
     floor = smooth.max(axis=1, keepdims=True) * 10 ** (-BAND_DB / 10)
     finite = np.all(np.isfinite(result.G), axis=(1, 2))
     band = np.flatnonzero(np.all(smooth >= floor, axis=0) & finite)
     if band.size == 0:
-        raise InputError(label, "no line carries power of every input: the records excite nothing the LPM can use")
+        signals = "reference" if use_references else "input"
+        raise InputError(label, f"no line carries power of every {signals}: the records excite nothing the LPM can use")
     excited = band[np.all(power[:, band] >= floor, axis=0)]
     units = {name: first.units[name] for name in (*first.inputs, *first.outputs)
              if name in first.units and all(run.units.get(name) == first.units[name] for run in runs)}
@@ -391,4 +449,4 @@ def level_lpm(pairs: list[tuple[Run, str]], confidence: float, label: str, half_
     return LpmFrmLevel(level=first.level, inputs=tuple(first.inputs), outputs=tuple(first.outputs),
                        run_ids=[run.run_id for run in runs], units=units, u_rms=list(u_rms), result=result,
                        band=band, excited=excited if excited.size else band, confidence=confidence,
-                       warnings=warnings)
+                       warnings=warnings, references=references)

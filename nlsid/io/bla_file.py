@@ -45,14 +45,16 @@ and the imaginary part, marked by the dataset attribute ``complex = "re_im_last_
     /frm_lpm_levels/level_NN/   (version 4) one group per level of arbitrary runs with several inputs
                             or outputs: the frequency response matrix by the Local Polynomial Method
                             for several inputs (nlsid.analysis.frm_levels.LpmFrmLevel, docs/mimo.md)
-        attrs   level (NaN when none), fs, n_samples, n_records, method ("lpm"), half_width, degree,
-                dof, smoothing_lines, smoothed_dof, confidence, inputs, outputs, run_ids (JSON: the
-                records), units (JSON), u_rms (per input), warnings (JSON), summary (JSON, see
-                LpmFrmLevel.summary)
+        attrs   level (NaN when none), fs, n_samples, n_records, method ("lpm"; "lpm_reference": the
+                indirect ratio from the references), half_width, degree, dof, smoothing_lines,
+                smoothed_dof, confidence, inputs, outputs, references (JSON: r, r2, ...; [] for "lpm"),
+                run_ids (JSON: the records), units (JSON), u_rms (per input), warnings (JSON), summary
+                (JSON, see LpmFrmLevel.summary)
         bins (F,) int64      DFT bins k of the records' length (frequency k fs / n_samples)
         frequency (F,)       Hz
         G (F, n_y, n_u, 2), var_G (F, n_y, n_u), cov_G and cov_G_smoothed (F, n_y n_u, n_y n_u, 2)
         vec(G) column-stacked, cov_v (F, n_y, n_y, 2) the outputs' disturbance covariance, transient (M, F, n_y, 2)
+        [G_yr (F, n_y, n_u, 2), G_ur (F, n_u, n_u, 2), cov_z (F, n_y + n_u, n_y + n_u, 2)]   "lpm_reference" only
         bounds/      radius, mag_lo, mag_hi, phase_lo, phase_hi (F, n_y, n_u)
 
 Version 1 files (no ``lpm_levels``), version 2 files (no ``frm_levels``) and version 3 files (no
@@ -128,7 +130,8 @@ def _write_frm_lpm_level(group: h5py.Group, level) -> None:
     group.attrs.update({
         "level": float("nan") if level.level is None else float(level.level),
         "fs": float(result.fs), "n_samples": int(result.n_samples), "n_records": int(result.n_records),
-        "method": "lpm", "half_width": int(result.half_width), "degree": int(result.degree), "dof": int(result.dof),
+        "method": result.method, "half_width": int(result.half_width), "degree": int(result.degree),
+        "dof": int(result.dof), "references": json.dumps(list(level.references)),
         "smoothing_lines": int(result.smoothing_lines), "smoothed_dof": float(result.smoothed_dof),
         "confidence": float(level.confidence), "inputs": json.dumps(list(level.inputs)),
         "outputs": json.dumps(list(level.outputs)), "run_ids": json.dumps(level.run_ids),
@@ -143,6 +146,9 @@ def _write_frm_lpm_level(group: h5py.Group, level) -> None:
     put(group, "cov_G_smoothed", result.cov_G_smoothed[level.band])
     put(group, "cov_v", result.cov_v[level.band])
     put(group, "transient", result.transient[:, level.band])
+    if result.method == "lpm_reference":
+        for name in ("G_yr", "G_ur", "cov_z"):
+            put(group, name, getattr(result, name)[level.band])
     _put_bounds(group.create_group("bounds"), level.bounds)
 
 
@@ -297,7 +303,8 @@ def read_units(path: str | os.PathLike) -> dict[str, str]:
         return json.loads(text(handle.attrs.get("units", "{}")))
 
 
-_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary", "units", "inputs", "outputs")
+_JSON_ATTRS = ("provenance", "warnings", "across_levels", "run_ids", "summary", "units", "inputs", "outputs",
+               "references")
 
 
 def _attr(key: str, value):

@@ -370,4 +370,4 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
             return bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=on_run)
     return BlaResult(levels, lpm_levels, warnings, across_levels(levels), common_units(units_seen), confidence,
                      source, inputs, mimo.levels(confidence, source),
-                     mimo.lpm_levels(confidence, source, lpm_lines // 2, lpm_degree))
+                     mimo.lpm_levels(confidence, source, lpm_lines // 2, lpm_degree, method))

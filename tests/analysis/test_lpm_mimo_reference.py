@@ -1,12 +1,9 @@
 """The MIMO LPM with references (the indirect method, G = G_yr G_ur^-1) on closed-loop data.
 
-The loop is simulated here, sample by sample, independently of nlsid's simulator: a discrete 2x2
-plant of order 3 (x[k+1] = A x[k] + B u[k], y[k] = C x[k] + v[k]) under a diagonal proportional
-controller u[k] = r[k] - K y[k], with two independent white-noise references r. The output noise
-v is coloured (first-order lfilter) and enters the loop: the controller feeds it back into u, so u
-is correlated with the disturbance. The records start from a random state (a transient), and the
-measured u and y carry offsets (DC, a line the LPM does not use). The truth is
-G(z) = C (zI - A)^-1 B at z = exp(j 2 pi k / N).
+The loop is ``generators.mimo_loop`` (simulated sample by sample, independently of nlsid's
+simulator): a discrete 2x2 plant of order 3 under a diagonal proportional controller, two white
+references, coloured output noise of the references' level that the controller feeds back into u,
+a random start state and offsets. The truth is G(z) = C (zI - A)^-1 B.
 
 - The direct LPM (from u) is biased: its 95 % circles held the truth at 78-80 % of the entries over
   ten seeds (some 20 standard deviations of the coverage below 95 %), and its normalised squared
@@ -21,36 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import signal
 
 from generators.lpm_cases import binomial_band
+from generators.mimo_loop import A, B, C, K, M, closed_loop, truth
 from nlsid.analysis.lpm import lpm
 from nlsid.analysis.lpm_mimo import lpm_mimo, lpm_mimo_reference
 from nlsid.errors import InputError
-
-A = np.array([[0.7, 0.2, 0.0], [-0.2, 0.7, 0.0], [0.0, 0.0, 0.5]])
-B = np.array([[1.0, 0.0], [0.0, 1.0], [0.5, 1.0]])
-C = np.array([[1.0, 0.0, 0.5], [0.0, 1.0, 1.0]])
-K = np.diag([0.6, 0.5])            # closed-loop poles of modulus <= 0.58: a stable, well damped loop
-SIGMA = 1.0                         # output noise std, the references': the loop feeds much of it back
-M, N = 4, 4096
-
-
-def closed_loop(rng, records: int = M, samples: int = N) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """r, u, y (records, 2, samples) of the loop (module docstring)."""
-    r = rng.standard_normal((records, 2, samples))
-    v = SIGMA * signal.lfilter([1.0], [1.0, -0.5], rng.standard_normal((records, 2, samples)), axis=-1)
-    x = rng.standard_normal((records, 3))
-    u, y = np.empty((records, 2, samples)), np.empty((records, 2, samples))
-    for k in range(samples):
-        y[:, :, k] = x @ C.T + v[:, :, k]
-        u[:, :, k] = r[:, :, k] - y[:, :, k] @ K.T
-        x = x @ A.T + u[:, :, k] @ B.T
-    return r, u + 0.3, y - 0.2
-
-
-def truth(frequencies: np.ndarray) -> np.ndarray:
-    return np.array([C @ np.linalg.solve(z * np.eye(3) - A, B) for z in np.exp(2j * np.pi * frequencies)])
 
 
 def test_the_loop_is_stable():
