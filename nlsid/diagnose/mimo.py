@@ -122,8 +122,8 @@ def fit_saturation(x: np.ndarray, z: np.ndarray, w: np.ndarray) -> dict:
     x_(k+1) and x_(k) clips the k largest samples; the cost change
     sum_{j <= k} w_j ((upper - z_j)^2 - (x_j - z_j)^2) is a parabola in ``upper`` with its minimum
     at the weighted mean of their z, clipped into [x_(k+1), x_(k)]. Every k is evaluated with
-    cumulative sums and the best taken; no clipping (the level at max x) is the k = 0 case.
-    The lower side is the same on -x, -z."""
+    cumulative sums and the best taken; a side where no level lowers the cost does not clip
+    (``upper`` = +inf, ``lower`` = -inf). The lower side is the same on -x, -z."""
     return {"lower": -_upper_level(-x, -z, w), "upper": _upper_level(x, z, w)}
 
 
@@ -136,7 +136,7 @@ def _upper_level(x: np.ndarray, z: np.ndarray, w: np.ndarray) -> float:
     level = np.clip(Wz / W, below, xs)
     change = W * level ** 2 - 2 * level * Wz + Wzz - base
     k = int(np.argmin(change))
-    return float(level[k]) if change[k] < 0 else float(xs[0])
+    return float(level[k]) if change[k] < 0 else math.inf
 
 
 def _apply_saturation(x, v) -> np.ndarray:
@@ -186,7 +186,8 @@ class HypothesisScore:
         u = f" {unit}" if unit else ""
         v = self.values
         if self.hypothesis.name == "output_saturation":
-            return f"sensor saturation at {v['lower']:.4g}{u} and {v['upper']:.4g}{u}"
+            sides = [f"{v[side]:.4g}{u}" for side in ("lower", "upper") if math.isfinite(v[side])]
+            return f"sensor saturation at {' and '.join(sides) or 'no level (nothing clipped)'}"
         if self.hypothesis.name == "output_offset":
             return f"output offset {v['offset']:+.4g}{u}"
         if self.hypothesis.name == "output_gain":

@@ -179,10 +179,14 @@ class MimoExtensionFit(ExtensionFit):
     def output_lines(self) -> list[str]:
         """One line per output: its rms error at the fitted and start values on the estimation and
         validation runs, and its noise level sigma_i (the weight's)."""
-        how = "period-to-period" if self.noise_source == "periods" else "its rms: no two periods per run"
+        def weight(sigma: float) -> str:
+            if self.noise_source == "periods":
+                return f"noise level {sigma:.4g} (period-to-period)"
+            return f"weighted by its rms {sigma:.4g} (no two periods per run: noise unknown)"
+
         return [f"output {o['name']}: rms error estimation {o['estimation_rms']:.4g} (start "
                 f"{o['start_estimation_rms']:.4g}), validation {o['validation_rms']:.4g} (start "
-                f"{o['start_validation_rms']:.4g}); noise level {o['noise']:.4g} ({how})" for o in self.outputs]
+                f"{o['start_validation_rms']:.4g}); {weight(o['noise'])}" for o in self.outputs]
 
     def summary(self) -> dict:
         return {**super().summary(), "outputs": [dict(o) for o in self.outputs], "noise_source": self.noise_source,

@@ -119,3 +119,18 @@ def test_a_siso_recording_is_refused_at_the_missing_input(run_cli, tmp_path):
     run_cli("fit", "--model", tmp_path / "m.yaml", "--data", tmp_path / "rec.h5",
             "-o", tmp_path / "f.yaml").assert_one_line_error("has no input 'u2'")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.yaml", "rec.h5"]
+
+
+def test_arbitrary_runs_are_weighted_by_each_output_rms_and_start_from_their_fitted_state():
+    rng = np.random.default_rng(7)
+    runs = []
+    for r in range(3):
+        U = rng.standard_normal((2, 1500))
+        Y = loop(U) + SIGMA[:, None] * rng.standard_normal((2, 1500))
+        runs.append(Run(f"a{r}", 100.0, "arbitrary", U[0], Y[0], channels={"u2": U[1], "y2": Y[1]},
+                        inputs=("u", "u2"), outputs=("y", "y2")))
+    fit = fit_config({**config(), "free": {"model.A[0][1]": {"start": 0.1}, "model.C[1][0]": {"start": 0.3}}}, runs)
+    assert fit.noise_source == "rms"  # no periods: each output weighted by its rms, said so
+    assert np.all(np.abs(fit.values - np.array([A[0, 1], C[1, 0]])) < 4 * fit.std), (fit.values, fit.std)
+    # the validation run's error (1500 samples, relative std 1.8 %) is the noise of each output
+    assert all(abs(o["validation_rms"] / s - 1) < 0.1 for o, s in zip(fit.outputs, SIGMA))
