@@ -19,7 +19,10 @@ Two kinds of conditions:
 
 Stages (:data:`STAGES`): ``bla`` and ``hosidf`` (grid mode) read multisine and single-sine runs,
 ``diagnose`` the periodic runs, ``fit --model`` every run, each with a measured output y;
-``simulate --excitation`` only u, and only files in the nlsid layout (it has no ``--map``).
+``simulate --excitation`` only the inputs, and only files in the nlsid layout (it has no ``--map``).
+Runs with several inputs are simulated by a ``mimo_state_space`` model that takes their inputs (the
+model is an option: info says which inputs it needs); a recording whose runs no one model can take
+(:func:`simulate_inputs`) cannot feed ``simulate``.
 """
 
 from __future__ import annotations
@@ -339,6 +342,18 @@ def check_run_count(n_runs: int) -> None:
                                  "--validation-range C:D)")
 
 
+# --- simulate: the inputs of one model ---------------------------------------------------------
+
+def simulate_inputs(runs: Iterable[tuple[str, tuple[str, ...], frozenset[str]]]) -> tuple[str, ...]:
+    """The inputs of the one model that can simulate every run: the runs' inputs in order of first
+    appearance (``u`` first), from ``(run id, inputs, channel names)`` of each run. A model of more
+    inputs would need channels the runs lack; of fewer, it would drop an input."""
+    names: list[str] = []
+    for _, inputs, _ in runs:
+        names += [name for name in inputs if name not in names]
+    return tuple(names)
+
+
 # --- nlsid info: every stage's verdict ----------------------------------------------------------
 
 @dataclass
@@ -389,6 +404,9 @@ class Survey:
         self.without_r: list[str] = []
         self.periodic_without_r: list[str] = []
         self.arbitrary: list[str] = []
+        # simulate --excitation: each run's inputs and channel names, the first run of several
+        self.simulate_runs: list[tuple[str, tuple[str, ...], frozenset[str]]] = []
+        self.several: InputError | None = None
 
     def add(self, run: Run) -> None:
         """Check one run for every stage."""
@@ -406,11 +424,13 @@ class Survey:
         self._diagnose(run, where, no_y)
         if self.fit_y is None and no_y is not None:
             self.fit_y = no_y
+        self.simulate_runs.append((where, tuple(run.inputs), frozenset(run.channels)))
         several = several_inputs_outputs(run, where)
         if several is not None:  # the stages of one input and one output stop at the first such run
             measured = ("diagnose", "fit --model") if no_y is None else ()  # they refuse a missing y first
-            for stage in (*measured, "simulate --excitation"):
+            for stage in measured:
                 self.verdict[stage].fail(several)
+            self.several = self.several or several
 
     def _bla(self, run: Run, where: str, no_y: InputError | None) -> None:
         verdict = self.verdict["bla"]
@@ -559,17 +579,37 @@ class Survey:
                                  "is arbitrary")
 
     def _finish_simulate(self) -> None:
-        if not self.mapping:
-            return
-        from nlsid.io.recording import open_recording
+        if self.mapping:
+            from nlsid.io.recording import open_recording
 
-        try:  # simulate --excitation has no --map: what it says of the file without one
-            with open_recording(self.path, require_y=False):
-                pass
-        except InputError as exc:
-            verdict = self.verdict["simulate --excitation"]
-            verdict.fail(exc)
-            verdict.notes.append("simulate has no --map: convert the file with nlsid import first")
+            try:  # simulate --excitation has no --map: what it says of the file without one
+                with open_recording(self.path, require_y=False):
+                    pass
+            except InputError as exc:
+                verdict = self.verdict["simulate --excitation"]
+                verdict.fail(exc)
+                verdict.notes.append("simulate has no --map: convert the file with nlsid import first")
+        if self.several is not None:
+            self._simulate_several()
+
+    def _simulate_several(self) -> None:
+        """Runs with several inputs or outputs: a ``mimo_state_space`` model of the runs' inputs
+        simulates them all, unless a run lacks one of those inputs (that model's own refusal);
+        a model of one input and one output refuses the first such run (a note)."""
+        from types import SimpleNamespace
+
+        from nlsid.simulate.mimo import check_run
+
+        verdict = self.verdict["simulate --excitation"]
+        inputs = simulate_inputs(self.simulate_runs)
+        for where, names, channels in self.simulate_runs:
+            try:
+                check_run(inputs, ("y",), SimpleNamespace(inputs=names, outputs=("y",), channels=channels), where)
+            except InputError as exc:
+                verdict.fail(exc)
+                return
+        verdict.notes.append(f"needs a mimo_state_space model of the inputs {', '.join(inputs)} (docs/mimo.md); a "
+                             f"model of one input and one output stops: {self.several}")
 
 
 def _closed_loop_note(runs: Sequence[str]) -> str:
