@@ -433,9 +433,13 @@ def fit_config(data: dict, runs: Sequence[Run], validation_ids: Sequence[str] | 
     if config.model.type == "mimo_state_space":  # every output at once (nlsid.fit.mimo_output_error)
         from nlsid.fit.mimo_output_error import fit_mimo_free_parameters
 
-        if fit_on != "y" or estimate_start:
-            raise InputError(str(model_path), "a mimo_state_space model is fitted on its outputs (fit_on y), from "
-                                              "the values written in its config (no start estimate)")
+        for flag, refused, why in (("--fit-on", fit_on != "y", "fitted on its outputs y (there is no closed loop)"),
+                                   ("--start-estimate", estimate_start, "started from the values written in its "
+                                                                        "config (the start estimate is of forces)"),
+                                   ("--jacobian", jacobian != "differences", "fitted with a Jacobian by finite "
+                                                                             "differences")):
+            if refused:
+                raise InputError(flag, f"a mimo_state_space model ({model_path}) is {why}")
         return fit_mimo_free_parameters(data, free, estimation, validation, source=str(model_path), lines=lines,
                                         where=where)
     if estimate_start:

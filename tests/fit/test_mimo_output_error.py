@@ -134,3 +134,12 @@ def test_arbitrary_runs_are_weighted_by_each_output_rms_and_start_from_their_fit
     assert np.all(np.abs(fit.values - np.array([A[0, 1], C[1, 0]])) < 4 * fit.std), (fit.values, fit.std)
     # the validation run's error (1500 samples, relative std 1.8 %) is the noise of each output
     assert all(abs(o["validation_rms"] / s - 1) < 0.1 for o, s in zip(fit.outputs, SIGMA))
+
+
+def test_options_of_a_siso_fit_are_refused_in_one_line(run_cli, tmp_path):
+    write_recording(tmp_path / "rec.h5", records(realizations=2))
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(config()))
+    for flag, value in (("--fit-on", "u"), ("--jacobian", "sensitivities"), ("--start-estimate", None)):
+        run_cli("fit", "--model", tmp_path / "m.yaml", "--data", tmp_path / "rec.h5", "-o", tmp_path / "f.yaml",
+                flag, *([value] if value else [])).assert_one_line_error(f"{flag}: a mimo_state_space model")
+    assert not (tmp_path / "f.yaml").exists()
