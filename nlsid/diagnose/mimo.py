@@ -20,7 +20,8 @@ periodic runs in their steady state) and each output i is judged on its own:
 2. **The frequency response matrix of the data against the model's**, where the runs are orthogonal
    multisines (:class:`nlsid.analysis.frm_levels.MimoRuns`): per entry (i, a) and level, the share of
    excited lines whose measured G_ia lies outside the 95 % circle (of the total variance: noise and
-   stochastic nonlinear distortion) around the model's G_ia. A right model leaves about 5 %.
+   stochastic nonlinear distortion) around the model's G_ia (a continuous model's through the
+   zero-order hold: :func:`sampled_model`). A right model leaves about 5 %.
 
 3. **Static output hypotheses, one output at a time**. Each maps the model's simulated output x_i
    to the measured z_i; it changes output i only, so the other outputs are held as simulated:
@@ -385,6 +386,18 @@ def choose(scores: list[HypothesisScore]) -> HypothesisScore | None:
     return min(close, key=lambda s: (len(s.hypothesis.parameters), s.sse_after))
 
 
+def sampled_model(model, fs: float):
+    """The model as it runs on data sampled at ``fs``: a continuous one as its exact zero-order-hold
+    equivalent (the input held between samples, as :func:`nlsid.simulate.mimo.simulate_mimo`
+    runs it), whose response the measured FRM is; a discrete one as it is."""
+    import dataclasses
+
+    if model.discrete:
+        return model
+    Phi, Gamma = model.stepped(1.0 / fs)
+    return dataclasses.replace(model, A=np.asarray(Phi), B=np.asarray(Gamma), domain="discrete", fs=fs)
+
+
 def frm_comparison(model, runs: Sequence[Run], where: str) -> tuple[list[dict], str]:
     """Per level of orthogonal multisines and entry (output, input): the share of excited lines
     where the model's G lies outside the data's 95 % circle (module docstring), and a note where
@@ -404,7 +417,7 @@ def frm_comparison(model, runs: Sequence[Run], where: str) -> tuple[list[dict], 
         if tuple(level.inputs) != tuple(model.inputs) or tuple(level.outputs) != tuple(model.outputs):
             return [], "not compared: the runs' inputs and outputs are not the model's, in order"
         result = level.frm
-        G_model = model.frequency_response(result.frequency, fs=level.fs)
+        G_model = sampled_model(model, level.fs).frequency_response(result.frequency, fs=level.fs)
         radius = result.bounds.radius
         name = "no level" if level.level is None else f"level {level.level:g}"
         for i, output in enumerate(level.outputs):
