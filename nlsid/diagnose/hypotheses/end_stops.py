@@ -175,14 +175,9 @@ def _mass(linear: dict, fs: float) -> float:
 
 
 def _linear_start(lti: dict, c: float, d: float) -> dict | None:
-    """``lti`` with its denominator that of G / (1 + (c + d s) G) (:func:`velocity_feedback.stiffened`,
-    a continuous G; a discrete one's with c alone), or None where that changes the sign of a
-    coefficient (a change of structure, not a start)."""
-    den = np.asarray(lti["den"], float)
-    stiffened = velocity_feedback.stiffened(lti, c)
-    if lti.get("domain") != "discrete":
-        stiffened = stiffened + velocity_feedback.stiffened({**lti, "num": [*lti["num"], 0.0]}, d) - den
-    return {**lti, "den": [float(v) for v in stiffened]} if np.all(np.sign(stiffened) == np.sign(den)) else None
+    """``lti`` with its denominator that of G / (1 + (c + d s) G) (:func:`velocity_feedback.with_spring`),
+    or None where that changes the sign of a coefficient (a change of structure, not a start)."""
+    return velocity_feedback.with_spring(lti, c, d)
 
 
 def _coefficients(lti: dict, names: tuple[str, ...]) -> dict[str, float]:

@@ -21,6 +21,14 @@ model's stiffness (:data:`SPLITS`) with the model's stiffness lowered by k / 2: 
 the data holds a spring between the small-stroke stiffness (its own plus k) and the large-stroke
 one (its own), near the middle at strokes of about zmax, which the grid spans.
 
+Around a transfer function the grid is the same, but G is a model fitted to the data, the loop's
+BLA G_0 / (1 + (k_e + c_e s) G_0), which holds the force's equivalent spring and damper: each grid
+point's linear part starts with them taken out, G / (1 - (k_e + c_e s) G), k_e and c_e the force's
+least-squares linearization along G's motion (:func:`state_along`, :func:`equivalent_spring`,
+docs/feedback_start.md). Where that would change the sign of a coefficient of G (G holds less
+damping than some grid force dissipates: not that loop's BLA, but a plant's mechanics), k / 2 is
+taken out of G's stiffness instead.
+
 The exponent n of the Bouc-Wen state (z' = v - beta |v| |z|^(n-1) z - gamma v |z|^n) sets how
 sharply the force yields: n = 1 a smooth knee, larger n a sharper one, tending to an elastic-plastic
 spring. ``hysteresis`` and ``hysteresis_feedback`` hold n = 1 (their note says so);
@@ -61,6 +69,7 @@ cubic spring (the same family, one parameter against three) only when it is sign
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
@@ -70,10 +79,12 @@ from nlsid.diagnose.hypotheses.mass_forces import add_force, force_paths, needs
 from nlsid.diagnose.hypotheses.mechanics import linear_paths
 from nlsid.diagnose.nuisances import KEYS as NUISANCE_KEYS
 from nlsid.diagnose.simulation import ModelRunner
+from nlsid.simulate.jit import njit  # numba, its cache outside the package
 
 BOUND_SHARES = (0.3, 0.6, 1.2, 2.4)  # zmax over the model's rms position, on the start grid
 GAMMA_SHARES = (-0.5, 0.5)           # gamma / beta (the loop's unloading slope)
 SPLITS = (0.25, 0.5)                 # k over the model's stiffness
+FEEDBACK_SPLITS = (0.3, 0.6)         # k over G's static stiffness, the force's equivalent spring taken out of G
 
 
 def _applies(runner: ModelRunner) -> str | None:
@@ -136,6 +147,75 @@ HYSTERESIS = Hypothesis(
 
 
 
+@njit(cache=True)
+def _state_along(p: np.ndarray, beta: float, gamma: float) -> np.ndarray:
+    z = np.zeros(p.size)
+    now = 0.0
+    for i in range(1, p.size):
+        step = p[i] - p[i - 1]
+        if step == 0.0:
+            z[i] = now
+            continue
+        sign = 1.0 if step > 0.0 else -1.0
+        left = abs(step)
+        if now * sign < 0.0:  # towards zero: the unloading branch, rate beta - gamma, until z = 0
+            rate = beta - gamma
+            target = sign / rate if rate > 0.0 else 0.0
+            reach = -now if rate == 0.0 else -math.log(target / (target - now)) / rate
+            if reach >= left:
+                now = now + left if rate == 0.0 else target + (now - target) * math.exp(-rate * left)
+                z[i] = now
+                continue
+            now, left = 0.0, left - reach
+        rate = beta + gamma  # away from zero: the loading branch towards the bound sign / (beta + gamma)
+        now = sign / rate + (now - sign / rate) * math.exp(-rate * left)
+        z[i] = now
+    return z
+
+
+def state_along(p: np.ndarray, beta: float, gamma: float) -> np.ndarray:
+    """The Bouc-Wen state z (A = n = 1, from z = 0) along the sampled position ``p``, exact for p
+    linear between samples.
+
+    With n = 1 the law is rate independent: z' = v - beta |v| z - gamma v |z| is, per unit of
+    stroke q = sigma (p - p0) in the direction sigma = sign(v), dz/dq = sigma - a z with a = beta
+    + gamma where z has the sign of the motion (loading) and a = beta - gamma where it has the
+    other (unloading, until z = 0). On each branch z(q) = sigma / a + (z0 - sigma / a) e^(-a q)
+    (z0 + sigma q where a = 0); an unloading branch ends at q0 = -ln(t / (t - z0)) / a, t =
+    sigma / a, where z crosses zero and loading begins. The config's -beta < gamma <= beta keeps a
+    >= 0 on both branches.
+
+    Parameters
+    ----------
+    p : ndarray
+        Position samples (one run).
+    beta, gamma : float
+        The shape parameters (beta + gamma > 0, beta - gamma >= 0).
+
+    Returns
+    -------
+    ndarray
+        z at every sample (the force is k z).
+    """
+    return _state_along(np.ascontiguousarray(p, dtype=float), float(beta), float(gamma))
+
+
+def equivalent_spring(p: np.ndarray, v: np.ndarray, force: np.ndarray) -> tuple[float, float]:
+    """The stiffness k_e and damping c_e of the linear force k_e p + c_e v (with a constant) nearest
+    ``force`` in least squares over the samples: the statistical (Bussgang, Caughey) linearization
+    of a force with memory along the motion it is measured on (Gaussian p and v, or any other: the
+    regression is over the samples themselves).
+
+    Why: the BLA of a loop y = G (u - F) is G / (1 + G K_e) with K_e the force's equivalent
+    linear part at the record's amplitude distribution (Bussgang 1952 for a static F of a Gaussian
+    signal; Caughey 1963 for a hysteretic one, whose equivalent part is a spring and a damper:
+    its loop's area dissipates), so a G fitted to the data holds K_e already, and the plant under
+    the force is G / (1 - G K_e) (docs/feedback_start.md)."""
+    columns = np.column_stack([np.ones(p.size), p, v])
+    (_, stiffness, damping), *_ = np.linalg.lstsq(columns, force, rcond=None)
+    return float(stiffness), float(damping)
+
+
 def _estimate_feedback(ctx: Context) -> Estimate | str:
     """Start values of the feedback around a transfer function: the same grid, the model's output
     read as the position (:func:`velocity_feedback.reading`: a continuous G, or a discrete G's
@@ -145,44 +225,71 @@ def _estimate_feedback(ctx: Context) -> Estimate | str:
     difference with the force held over whole samples; on
     tests/diagnose/test_hysteresis_feedback_discrete.py's record that stopped 13.8 dB above the
     noise floor, read so it reaches it), its static stiffness K = G(0)^-1 in input units per output
-    unit playing the model's stiffness (k a share of it, the denominator lowered by k / 2 times the
-    numerator)."""
+    unit playing the model's stiffness (k a share of it).
+
+    The linear part under each grid point's force is G with that force's equivalent spring and
+    damper taken out (:func:`equivalent_spring` along the model's motion, G / (1 - (k_e + c_e s)
+    G), :func:`velocity_feedback.with_spring`): the user's G, fitted to the data, is the loop's
+    BLA and holds them (docs/feedback_start.md); k is FEEDBACK_SPLITS of K. Where some grid point's
+    linear part would change a coefficient's sign, G is not read as the loop's BLA but as the
+    plant's mechanics, and every grid point takes k / 2 times the numerator out of G's denominator
+    (k SPLITS of K). On a G(z) fitted to the lower level's BLA of
+    tests/diagnose/test_hysteresis_feedback_bla.py's record (its damping 45 where the plant's is
+    20) that start stopped 53 times above the noise, this one at it."""
     found = velocity_feedback.reading(ctx, accelerates=True)
     if isinstance(found, str):
         return found
     reading, notes = found
-    if reading.output != "position":
-        return "needs the model's output read as a position (it has a zero at s = 0: a velocity)"
+    positions = velocity_feedback.positions(ctx, reading)
+    if isinstance(positions, str):
+        return positions
     num, den = np.asarray(reading.linear["num"], float), np.asarray(reading.linear["den"], float)
     discrete = reading.linear.get("domain") == "discrete"
     num0, den0 = (num.sum(), den.sum()) if discrete else (num[-1], den[-1])
     if num0 == 0 or den0 / num0 <= 0:
         return "needs a spring in the model (a positive static stiffness den(0) / num(0)), part of which yields"
     stiffness = float(den0 / num0)
-    outputs = np.concatenate(ctx.runner.simulate_each(ctx.runs))
-    spread = float(np.std(outputs))
+    p, v = np.concatenate(positions), np.concatenate(reading.velocity)
+    spread = float(np.std(p))
     if spread == 0:
         return "the model does not move on the estimation runs"
     lti = {"type": "transfer_function", **reading.linear, "output": "position"}
     base = with_lti(ctx.runner.data, lti)
-    aligned = (np.pad(num, (0, max(den.size - num.size, 0)))[:den.size] if discrete
-               else np.pad(num, (den.size - num.size, 0)))
-    candidates = []
+    grid = []  # bound, beta, gamma, the two k shares, the linear part read as the loop's BLA, k_e, c_e
     for share in GAMMA_SHARES:
         for bound in (b * spread for b in BOUND_SHARES):
             beta, gamma = _shape(bound, share)
-            for split in SPLITS:
-                k = split * stiffness
-                lowered = den - 0.5 * k * aligned
-                values = {"k": k, "beta": beta, "gamma": gamma,
-                          **{f"num[{i}]": float(c) for i, c in enumerate(num)},
-                          **{f"den[{i}]": float(c) for i, c in enumerate(lowered)}}
-                cost = ctx.simulation_rss(HYSTERESIS_FEEDBACK.extend(base, values))
-                candidates.append((cost, values, bound, split))
-    cost, values, bound, split = min(candidates, key=lambda c: c[0])
+            z = np.concatenate([state_along(run, beta, gamma) for run in positions])
+            unit = equivalent_spring(p, v, z)  # the spring and damper of the force per unit of k
+            for split, plain in zip(FEEDBACK_SPLITS, SPLITS):
+                k_e, c_e = split * stiffness * unit[0], split * stiffness * unit[1]
+                under = velocity_feedback.with_spring(lti, -k_e, -c_e)
+                grid.append((bound, beta, gamma, split, plain, under, k_e, c_e))
+    held = all(point[5] is not None for point in grid)  # G holds every grid force's equivalent spring and damper
+    candidates = []
+    for bound, beta, gamma, split, plain, under, k_e, c_e in grid:
+        if not held:  # G is not this loop's BLA: the plant's mechanics with a spring in between
+            split, c_e = plain, 0.0
+            k_e = 0.5 * split * stiffness
+            under = velocity_feedback.with_spring(lti, -k_e, 0.0)
+            if under is None:
+                continue
+        values = {"k": split * stiffness, "beta": beta, "gamma": gamma,
+                  **{f"num[{i}]": float(c) for i, c in enumerate(num)},
+                  **{f"den[{i}]": float(c) for i, c in enumerate(under["den"])}}
+        cost = ctx.simulation_rss(HYSTERESIS_FEEDBACK.extend(base, values))
+        candidates.append((cost, values, bound, split, k_e, c_e))
+    if not candidates:
+        return "every start's linear part under the force changes the sign of a coefficient of G's denominator"
+    cost, values, bound, split, k_e, c_e = min(candidates, key=lambda c: c[0])
+    linear = (f"the linear part G / (1 - (k_e + c_e s) G) with the force's equivalent spring k_e = {k_e:.4g} and "
+              f"damper c_e = {c_e:.4g} along the model's motion taken out (G read as the loop's BLA)" if held else
+              f"the linear part G / (1 - k_e G) with k_e = k / 2 = {k_e:.4g} (G read as the plant's mechanics with a "
+              "spring between the small- and large-stroke ones: it holds less than some grid force's equivalent "
+              "damper, so it is not that loop's BLA)")
     note = (f"the least simulation error of a grid of {len(candidates)} starts: zmax = {bound:.3g}, gamma / beta = "
-            f"{values['gamma'] / values['beta']:.2g}, k = {split:g} of the model's static stiffness {stiffness:.4g} and "
-            "the denominator lowered by k / 2 times the numerator (no standard errors)")
+            f"{values['gamma'] / values['beta']:.2g}, k = {split:g} of the model's static stiffness {stiffness:.4g}, "
+            f"{linear} (no standard errors)")
     return Estimate(values, {n: float("nan") for n in values}, explained_db(float(np.sum(ctx.target() ** 2)), cost),
                     "; ".join([note, *notes]), lti=lti)
 

@@ -231,6 +231,18 @@ def stiffened(linear: dict, c: float) -> np.ndarray:
     return den + c * np.pad(num, (max(den.size - num.size, 0), 0))[-den.size:]
 
 
+def with_spring(lti: dict, c: float, d: float) -> dict | None:
+    """``lti`` with the denominator of G / (1 + (c + d s) G): y = G (u - c y - d y' - F) is
+    y = G / (1 + (c + d s) G) (u - F), a linear spring c and damper d moved into the linear part
+    (:func:`stiffened`; a discrete G takes c alone: its s is no polynomial in z^-1). None where that
+    changes the sign of a denominator coefficient (a change of structure, not a start)."""
+    den = np.asarray(lti["den"], float)
+    moved = stiffened(lti, c)
+    if lti.get("domain") != "discrete":
+        moved = moved + stiffened({**lti, "num": [*lti["num"], 0.0]}, d) - den
+    return {**lti, "den": [float(v) for v in moved]} if np.all(np.sign(moved) == np.sign(den)) else None
+
+
 def internal(ctx: Context, extended: dict) -> list[dict[str, np.ndarray]] | str:
     """The position and velocity of the moving part of the ``nonlinear_feedback`` model
     ``extended`` on every estimation run (open loop: copies of it that output them, from rest,
