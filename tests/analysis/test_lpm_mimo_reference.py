@@ -51,7 +51,8 @@ def test_the_direct_lpm_is_biased_and_the_indirect_covers_the_truth():
     assert hits["direct"] < 0.95 - 10 * binomial_band(0.95, trials // 2) / 4, hits
     assert hits["direct z2"] > 10 / 9 + 0.5, hits
     assert indirect.G_yr.shape == indirect.G_ur.shape == (indirect.lines.size, 2, 2)
-    assert indirect.cov_z.shape == (indirect.lines.size, 4, 4) and indirect.transient.shape == (M, indirect.lines.size, 2)
+    assert indirect.cov_z.shape == (indirect.lines.size, 4, 4)
+    assert indirect.transient.shape == (M, indirect.lines.size, 2)
 
 
 def test_one_input_is_the_siso_lpm_with_a_reference():
