@@ -279,12 +279,11 @@ class MimoDiagnosis:
         return _order([o.status for o in self.outputs])
 
     def headline(self) -> str:
-        named = [o for o in self.outputs if o.cause is not None]
-        if named:
+        """Each output with a named cause or a significant error (:meth:`OutputDiagnosis.statement`),
+        else the verdict in words."""
+        named = [o for o in self.outputs if o.cause is not None or o.significant]
+        if named:  # each output with a cause or a significant error, in the model's order
             return "; ".join(o.statement() for o in named)
-        if self.status == "unexplained":
-            return ("Significant discrepancy no output hypothesis explains on "
-                    + ", ".join(o.name for o in self.outputs if o.significant))
         if self.status == "undetermined":
             return "No noise level to judge the error by (no run of two periods), and no output hypothesis significant"
         return "No significant discrepancy on any output"
