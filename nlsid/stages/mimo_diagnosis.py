@@ -10,6 +10,7 @@ model of several outputs").
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import shutil
@@ -123,14 +124,23 @@ class MimoDiagnosisInputs:
         return 1
 
     def run(self, progress: Callable[..., None] | None = None) -> MimoDiagnosisResult:
-        """Diagnose; ``progress`` as :func:`nlsid.stages.diagnose.progress_calls` takes it, called once at the end."""
+        """Diagnose; ``progress`` is told once, at the end, as :func:`nlsid.stages.diagnose.progress_calls`
+        tells it a step: with ``advance=1, total=1`` where it takes those keywords, else without arguments."""
         from nlsid.diagnose.mimo import diagnose_mimo
         from nlsid.fit.run_split import split_runs
         from nlsid.io.units import common_units
-        from nlsid.stages.diagnose import progress_calls
 
         estimation, validation = split_runs(self.runs, None, self.extra, self.estimation, self.validation, self.where)
         units = common_units(run.units for run in [*self.runs, *self.extra])
         result = diagnose_mimo(self.config, self.model_source, estimation, validation, self.where, units)
-        progress_calls(progress)("outputs", 1, 1)
+        if progress is not None:
+            try:
+                inspect.signature(progress).bind(advance=0, total=0)
+                counts = True
+            except (TypeError, ValueError):  # ValueError: a callable without a signature
+                counts = False
+            if counts:
+                progress(advance=1, total=1)
+            else:
+                progress()
         return MimoDiagnosisResult(result, units, self.configs, self.inputs, self.allow_overlap)
