@@ -108,12 +108,17 @@ class MimoProblem:
         if not names:
             raise InputError(source, "free: no free parameters to fit; mark them under a top-level free: key")
         for name, p in free.items():
-            start = p.start if p.start is not None else value_at(base, name)
+            line = (lines or {}).get(("free", name))
+            where = f"{source}:{line}" if line is not None else source
+            try:
+                start = p.start if p.start is not None else value_at(base, name)
+            except InputError as exc:  # named by the free: key the user wrote, at its line
+                raise InputError(where, f"{exc.where}: {exc.what}") from None
             if isinstance(start, bool) or not isinstance(start, (int, float)) or not math.isfinite(start):
-                raise InputError(f"{source}: free.{name}", "no number at this key path of the config; give a start "
-                                                           "value (a matrix entry is model.A[row][column])")
+                raise InputError(where, f"free.{name}: no number at this key path of the config; give a start "
+                                        "value (a matrix entry is model.A[row][column])")
             if not p.lower <= start <= p.upper:
-                raise InputError(f"{source}: free.{name}", f"start {start:g} outside [{p.lower:g}, {p.upper:g}]")
+                raise InputError(where, f"free.{name}: start {start:g} outside [{p.lower:g}, {p.upper:g}]")
             starts.append(float(start))
         problem = cls(base, names, np.array(starts), np.array([free[n].lower for n in names]),
                       np.array([free[n].upper for n in names]), source, lines or {})

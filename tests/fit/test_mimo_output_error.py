@@ -9,8 +9,10 @@ so the transient is 0.6^256 of its start after one period), with white output no
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import yaml
 
+from nlsid.errors import InputError
 from nlsid.fit.extension import fit_config
 from nlsid.io.recording import write_recording
 from nlsid.io.run import Run
@@ -143,3 +145,14 @@ def test_options_of_a_siso_fit_are_refused_in_one_line(run_cli, tmp_path):
         run_cli("fit", "--model", tmp_path / "m.yaml", "--data", tmp_path / "rec.h5", "-o", tmp_path / "f.yaml",
                 flag, *([value] if value else [])).assert_one_line_error(f"{flag}: a mimo_state_space model")
     assert not (tmp_path / "f.yaml").exists()
+
+
+@pytest.mark.parametrize("free, message", [
+    ({"model.A[5][0]": {}}, "model: free.model.A[5][0]: no item [5]: model.A has 2 items"),
+    ({"model.A": {}}, "model: free.model.A: no number at this key path of the config; give a start value (a matrix "
+                      "entry is model.A[row][column])"),
+])
+def test_a_bad_key_path_is_named_at_the_free_key(free, message):
+    with pytest.raises(InputError) as error:
+        fit_config({**config(), "free": free}, records(realizations=2))
+    assert str(error.value) == message
