@@ -398,32 +398,41 @@ def sampled_model(model, fs: float):
 
 
 def frm_comparison(model, runs: Sequence[Run], where: str) -> tuple[list[dict], str]:
-    """Per level of orthogonal multisines and entry (output, input): the share of excited lines
-    where the model's G lies outside the data's 95 % circle (module docstring), and a note where
-    no FRM is formed (why)."""
+    """Per level and entry (output, input): the share of lines where the model's G lies outside the
+    data's 95 % circle (module docstring), and a note where no FRM is formed (why). The FRM is that
+    of orthogonal multisines where every run is a multisine, that of the LPM for several inputs
+    (its band's lines) where every run is arbitrary."""
     from nlsid.analysis.frm_levels import MimoRuns
+    from nlsid.io.ranges import RangeRun
 
-    if not all(run.kind == "multisine" for run in runs):
-        return [], "not compared: the runs are not all multisines (the LPM's FRM of arbitrary runs is not compared)"
+    kinds = {run.kind for run in runs}
+    if kinds not in ({"multisine"}, {"arbitrary"}):
+        return [], f"not compared: the runs are of kinds {', '.join(sorted(kinds))}, not all multisines or all arbitrary"
+    if any(isinstance(run, RangeRun) for run in runs):
+        return [], "not compared: sample ranges cut the records into the estimation and validation parts"
     mimo = MimoRuns()
     try:
         list(mimo.take((run, f"{where}:/runs/{run.run_id}") for run in runs))
-        levels = mimo.levels(0.95, where)
+        if kinds == {"multisine"}:
+            levels = [(level.level, level.inputs, level.outputs, level.fs, level.frm.frequency, level.frm.G,
+                       level.frm.bounds.radius) for level in mimo.levels(0.95, where)]
+        else:  # the LPM for several inputs: its variance holds the nonlinear distortion too
+            levels = [(level.level, level.inputs, level.outputs, level.result.fs,
+                       level.result.frequencies[level.band], level.result.G[level.band],
+                       level.result.bounds(0.95).radius[level.band]) for level in mimo.lpm_levels(0.95, where)]
     except InputError as error:
         return [], f"not formed: {error.where}: {error.what}"
     out = []
-    for level in levels:
-        if tuple(level.inputs) != tuple(model.inputs) or tuple(level.outputs) != tuple(model.outputs):
+    for value, inputs, outputs, fs, frequency, G, radius in levels:
+        if tuple(inputs) != tuple(model.inputs) or tuple(outputs) != tuple(model.outputs):
             return [], "not compared: the runs' inputs and outputs are not the model's, in order"
-        result = level.frm
-        G_model = sampled_model(model, level.fs).frequency_response(result.frequency, fs=level.fs)
-        radius = result.bounds.radius
-        name = "no level" if level.level is None else f"level {level.level:g}"
-        for i, output in enumerate(level.outputs):
-            for a, source in enumerate(level.inputs):
+        G_model = sampled_model(model, fs).frequency_response(frequency, fs=fs)
+        name = "no level" if value is None else f"level {value:g}"
+        for i, output in enumerate(outputs):
+            for a, source in enumerate(inputs):
                 r = radius[:, i, a]
                 known = np.isfinite(r)
-                outside = np.abs(result.G[:, i, a] - G_model[:, i, a])[known] > r[known]
+                outside = np.abs(G[:, i, a] - G_model[:, i, a])[known] > r[known]
                 out.append({"level": name, "output": output, "input": source, "lines": int(known.sum()),
                             "outside": float(outside.mean()) if known.any() else math.nan})
     return out, ""

@@ -165,3 +165,35 @@ def test_a_continuous_model_is_compared_with_the_frm_through_its_zero_order_hold
     entries, note = frm_comparison(model, runs, "rec.h5")
     # a right model leaves 5 % of 127 lines outside (binomial std 2 %): below 15 %
     assert note == "" and len(entries) == 4 and all(e["outside"] < 0.15 for e in entries), entries
+
+
+def test_arbitrary_records_compare_the_lpm_frm_with_the_model():
+    """Three arbitrary records of 1500 samples (white inputs): the FRM by the LPM for several inputs.
+    A right model leaves about 5 % of the band's 749 lines outside the 95 % circles; the lines are
+    correlated over the LPM's windows (about 11 lines: some 70 independent, a std of 2.6 %), so below
+    15 %. The saturation of y2 leaves far more outside on y2's entries, its distortion beside the
+    noise in the LPM's variance notwithstanding."""
+    from nlsid.diagnose.mimo import frm_comparison
+    from nlsid.io.model_config import validate_simulate_config
+    from nlsid.models.from_config import model as build
+
+    model = build(validate_simulate_config(CONFIG, None, {}))
+    for saturation in (None, LEVEL):
+        rng = np.random.default_rng(7)
+        runs = []
+        for r in range(3):
+            U = rng.standard_normal((2, 1500))
+            Y = loop(U)
+            if saturation is not None:
+                Y[1] = np.clip(Y[1], -saturation, saturation)
+            Y += np.array(SIGMA)[:, None] * rng.standard_normal(Y.shape)
+            runs.append(Run(f"a{r}", 100.0, "arbitrary", U[0], Y[0], channels={"u2": U[1], "y2": Y[1]},
+                            inputs=("u", "u2"), outputs=("y", "y2")))
+        entries, note = frm_comparison(model, runs, "rec.h5")
+        outside = {(e["output"], e["input"]): e["outside"] for e in entries}
+        assert note == "" and all(e["lines"] == 749 for e in entries)
+        assert outside[("y", "u")] < 0.15 and outside[("y", "u2")] < 0.15
+        if saturation is None:
+            assert outside[("y2", "u")] < 0.15 and outside[("y2", "u2")] < 0.15
+        else:
+            assert outside[("y2", "u2")] > 0.3
