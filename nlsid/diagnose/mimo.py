@@ -18,9 +18,10 @@ periodic runs in their steady state) and each output i is judged on its own:
    The F law assumes white noise; coloured noise makes it optimistic.
 
 2. **The frequency response matrix of the data against the model's**, where the runs are orthogonal
-   multisines (:class:`nlsid.analysis.frm_levels.MimoRuns`): per entry (i, a) and level, the share of
-   excited lines whose measured G_ia lies outside the 95 % circle (of the total variance: noise and
-   stochastic nonlinear distortion) around the model's G_ia (a continuous model's through the
+   multisines or arbitrary records (:class:`nlsid.analysis.frm_levels.MimoRuns`: the FRM, or the
+   LPM for several inputs): per entry (i, a) and level, the share of lines where the model's G_ia
+   lies outside the 95 % circle (of the total variance: noise and stochastic nonlinear distortion)
+   around the measured G_ia (a continuous model's through the
    zero-order hold: :func:`sampled_model`). A right model leaves about 5 %.
 
 3. **Static output hypotheses, one output at a time**. Each maps the model's simulated output x_i
