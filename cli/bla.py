@@ -165,7 +165,7 @@ def _print_frm_table(output: str, summaries: list[dict]) -> None:
 def _print_frm_lpm_table(output: str, summaries: list[dict], first: int) -> None:
     """The frequency response matrix of arbitrary runs by the LPM, numbered after the ``first``
     multisine FRM levels: one row per level and entry, band means in dB; the variance is noise and
-    nonlinear distortion together."""
+    nonlinear distortion together; then a line per level taken from the references."""
     rows = []
     for index, row in enumerate(summaries, start=first):
         level = "-" if row["level"] is None else f"{row['level']:.3g}"
@@ -178,6 +178,10 @@ def _print_frm_lpm_table(output: str, summaries: list[dict], first: int) -> None
                                         "to |G|^2)",
                                         ("FRM level", "level", "records", "band Hz", "entry", "|G| dB",
                                          "noise+NL var (upper bound)", "dof"), rows))
+    for index, row in enumerate(summaries, start=first):
+        if row["method"] == "lpm_reference":
+            settings().console.print(f"FRM level {index}: from the references {', '.join(row['references'])} "
+                                     "(the LPM with references: unbiased in a closed loop)", markup=False)
 
 
 def _print_lpm_table(output: str, summaries: list[dict], rms: str, first: int) -> None:

@@ -40,8 +40,12 @@ def recording(r, u, y, second_reference: bool = True) -> Recording:
     return Recording(runs, {}, None)
 
 
-def test_runs_with_their_references_give_the_indirect_frm(loop, tmp_path):
+def test_runs_with_their_references_give_the_indirect_frm(loop, tmp_path, run_cli):
     r, u, y = loop
+    path = recording(r, u, y).write(tmp_path / "rec.h5")
+    printed = run_cli("bla", path, "-o", tmp_path / "cli.h5")
+    assert printed.exit_code == 0, printed.stderr
+    assert "FRM level 0: from the references r, r2 (the LPM with references" in " ".join(printed.stderr.split())
     result = nlsid.bla(recording(r, u, y))
     (level,) = result.frm_lpm_levels
     assert level.result.method == "lpm_reference" and level.references == ("r", "r2")
