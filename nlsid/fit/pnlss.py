@@ -56,6 +56,7 @@ from nlsid.models.pnlss import Pnlss
 from nlsid.simulate.pnlss_runs import Record, driven_input, estimate_x0, jacobian_blocks, records, rms_on, simulate_record
 
 S_FLOOR = 1e-12          # eigenvalues of the normalised J'J below this share of the largest are left out
+JACOBIAN_DIVERGED = "jacobian diverged"  # a status: no step could be formed at the last iterate
 BOUND_FACTOR = 1e3       # a simulated state beyond this times the start's largest |x| counts as diverged
 MU_START = 1e-3
 MU_MAX = 1e12
@@ -98,7 +99,9 @@ class PnlssFit:
     reason : why it was chosen (a sentence).
     status : how the fit ended: ``converged``, ``stopped early`` (validation error no longer
         falling), ``iteration limit``, ``no decrease`` (no trial step lowered the cost), or
-        ``failed`` (the start diverges even without nonlinear terms: model is the start, errors inf).
+        ``failed`` (the start diverges even without nonlinear terms: model is the start, errors inf),
+        or ``jacobian diverged`` (the sensitivity simulation of an iterate whose cost was finite left
+        the state bound, so no further step could be formed: the iterates before it stand).
     notes : further statements (shrunk start, realisation, lead-in periods).
     initial_states : the fitted initial state of each estimation run (None for a periodic run).
     seconds : the wall time of the fit; jacobian_rate : samples x parameters per second of the
@@ -384,7 +387,10 @@ def _iterate(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterati
     mu = MU_START
     stage_start = len(history)
     theta0 = global_vector(model)
-    H, g, cost = problem.normal_equations(model, x0s)
+    try:
+        H, g, cost = problem.normal_equations(model, x0s)
+    except FloatingPointError:
+        return model, x0s, JACOBIAN_DIVERGED
     n_samples = sum(r.samples for r in problem.records)
     for number in range(1, max_iterations + 1):
         decomposed = _Decomposed.of(H, g)
@@ -409,7 +415,12 @@ def _iterate(problem: _Problem, model: Pnlss, x0s: list, stage: str, max_iterati
             return model, x0s, AT_FLOOR
         if _overfitting(history, patience, stage_start):
             return model, x0s, "stopped early"
-        H, g, cost = problem.normal_equations(model, x0s)
+        try:
+            H, g, cost = problem.normal_equations(model, x0s)
+        except FloatingPointError:
+            # The state and its sensitivities are bounded together (jacobian_blocks): a model on
+            # the edge of stability can pass the cost's simulation and fail this one.
+            return model, x0s, JACOBIAN_DIVERGED
     return model, x0s, "iteration limit"
 
 

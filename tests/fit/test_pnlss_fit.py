@@ -112,3 +112,30 @@ def test_divergent_start_ends_in_a_stated_result():
     failed = fit_pnlss(unstable, [run], [run], max_iterations=5)
     assert failed.status == "failed" and "diverges" in failed.reason
     assert failed.estimation_rms == math.inf
+
+
+def test_a_jacobian_that_diverges_after_an_accepted_step_ends_the_fit_with_its_status(monkeypatch):
+    """The sensitivity simulation bounds the state and its derivatives together, so a model on the
+    edge of stability can pass the cost's simulation and fail the next Jacobian's. The fit then
+    stops with the iterates it has (status ``jacobian diverged``) instead of raising."""
+    import nlsid.fit.pnlss as pnlss_fit
+
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal(600)
+    run = _noisy("j", u, _wiener_hammerstein(u), 0.01, 32)
+    linear = from_transfer_function(list(np.polymul(B1, B2)), list(np.polymul(A1, A2)), True, 0.0, "linear")
+    start, _ = from_linear(linear, 1.0, (2, 3), (2, 3))
+    calls = {"n": 0}
+    original = pnlss_fit.jacobian_blocks
+
+    def diverging_from_the_third(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] >= 3:
+            raise FloatingPointError("diverged at sample 102")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pnlss_fit, "jacobian_blocks", diverging_from_the_third)
+    fit = fit_pnlss(start, [run], [], max_iterations=10, linear_iterations=0)
+    assert fit.status == "jacobian diverged"
+    assert len(fit.iterations) == 3  # the start and the two steps whose Jacobians were formed
+    assert math.isfinite(fit.estimation_rms) and fit.estimation_rms < fit.iterations[0].estimation_rms
