@@ -6,9 +6,9 @@ stage itself gives for a model of the runs' inputs. Each verdict is checked by r
 
 from __future__ import annotations
 
-import nlsid
 import yaml
 
+import nlsid
 from nlsid.stages.recording import Recording
 
 MODEL = {"model": {"type": "mimo_state_space", "A": [[-20.0, 5.0], [-5.0, -30.0]], "B": [[1.0, 0.0], [0.5, 2.0]],
