@@ -8,12 +8,8 @@ distortion is largest:
   ``odd_above_noise_db`` and ``even_above_noise_db`` compare the band-mean power at the odd and at
   the even detection lines with the band-mean noise variance of the P-averaged output spectrum,
   on the same scale. A class of distortion is *detected* when it is more than
-  :data:`DETECTED_DB` = 3 dB above the noise. Justification: without distortion a detection line
-  holds only noise, ``|Y(k)|^2`` is exponentially distributed around the noise variance, so the
-  band mean over L lines and M realizations has a relative standard deviation ``1/sqrt(L M)``,
-  and the noise estimate (P - 1 degrees of freedom per line) ``1/sqrt(L M (P - 1))``; with the
-  smallest useful experiment (L >= 10 lines, M = 2, P = 2) the ratio scatters by about 0.27 in
-  linear terms (about 1 dB), so 3 dB (a factor 2) is more than three standard deviations.
+  :data:`~nlsid.report.detection.DETECTED_DB` = 3 dB above the noise (justified in
+  :mod:`nlsid.report.detection`).
 - On an odd grid the odd and even detection lines separate odd from even distortion (book Section
   6.1.2, Ex. 89.c): the headline gives ``odd_above_even_db``. On a full grid both classes of
   detection line carry odd and even contributions, so only their maximum above the noise is given.
@@ -59,10 +55,9 @@ from nlsid.analysis.output_spectrum import OutputSpectrum
 from nlsid.analysis.precision import PRECISION_DB
 from nlsid.errors import InputError
 from nlsid.citations import BOOK, MOTION_STAGES
+from nlsid.report.detection import DETECTED_DB
 from nlsid.report.html import Figure, Page, Table, number
 from nlsid.report.units import Units, units_of
-
-DETECTED_DB = 3.0
 
 
 def _finite(value) -> bool:

@@ -14,13 +14,13 @@ level's ``summary``:
   (``total_var_db``, ``noise_var_db``): their difference is the stochastic nonlinear distortion
   of that entry over the noise (Schoukens, Pintelon and Rolain 2012, Section 6.1.1; the total
   variance holds both). An entry shows nonlinear distortion when the difference exceeds
-  :data:`~nlsid.report.render_bla.DETECTED_DB` = 3 dB, the threshold of the single-input page:
+  :data:`~nlsid.report.detection.DETECTED_DB` = 3 dB, the threshold of the single-input page:
   the band mean over L lines of a variance estimated with 2 (M - 1) degrees of freedom per line
   has a relative standard deviation ``1/sqrt(L (M - 1))``, below 0.3 (about 1 dB) for the
   smallest useful design (L >= 10 lines, M = 2), so 3 dB is three standard deviations.
 - Where only odd harmonics are excited, per output the band-mean power at the odd and at the even
   detection lines against the noise (``detection``: ``odd_db``, ``even_db``, ``noise_db``), odd
-  and even distortion detected above :data:`~nlsid.report.render_bla.DETECTED_DB` as on the
+  and even distortion detected above :data:`~nlsid.report.detection.DETECTED_DB` as on the
   single-input page (book Eq. 5-9).
 - Without a noise variance (P = 1) or a total variance (M = 1) nothing is compared, and the page
   says so.
@@ -38,9 +38,9 @@ import math
 from pathlib import Path
 
 from nlsid.citations import BOOK
+from nlsid.report.detection import DETECTED_DB
 from nlsid.report.frm_plots import frm_figure
 from nlsid.report.html import Figure, Page, Table, number
-from nlsid.report.render_bla import DETECTED_DB
 from nlsid.report.units import Units, units_of
 
 
