@@ -138,6 +138,9 @@ class MimoStateSpaceConfig(_LTIBase):
     D: Optional[list[list[float]]] = None
     inputs: Optional[list[str]] = None
     outputs: Optional[list[str]] = None
+    # static blocks per signal: input name -> f_a on that input before B, output name -> f_i after C x + D u
+    input_nonlinearity: dict[str, BlockConfig] = {}
+    output_nonlinearity: dict[str, BlockConfig] = {}
 
     @field_validator("A")
     @classmethod
@@ -186,6 +189,22 @@ class MimoStateSpaceConfig(_LTIBase):
             if both:
                 raise ValueError(f"{both[0]!r} is an input too; give each signal one name")
         return names
+
+    @field_validator("input_nonlinearity", "output_nonlinearity")
+    @classmethod
+    def _signal_blocks(cls, blocks, info):
+        kind, first, rows = (("input", "u", "B") if info.field_name == "input_nonlinearity" else ("output", "y", "C"))
+        names = info.data.get(kind + "s")
+        if names is None and rows in info.data:
+            count = len(info.data["B"][0]) if rows == "B" else len(info.data["C"])
+            names = default_names(first, count)
+        for name, block in blocks.items():
+            if names is not None and name not in names:
+                raise ValueError(f"{name!r} is not an {kind} of the model (its {kind}s: {', '.join(names)})")
+            if block.type == "backlash":
+                raise ValueError(f"{name}: a backlash has memory; a mimo_state_space model takes static blocks "
+                                 "(polynomial, saturation, deadzone, piecewise_linear)")
+        return blocks
 
     @property
     def n_inputs(self) -> int:

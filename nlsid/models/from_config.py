@@ -287,7 +287,9 @@ def mimo_state_space(config: mc.MimoStateSpaceConfig, where: str = "model") -> M
     A, B, C = (np.asarray(getattr(config, name), dtype=float) for name in ("A", "B", "C"))
     D = np.zeros((C.shape[0], B.shape[1])) if config.D is None else np.asarray(config.D, dtype=float)
     out = MimoStateSpace(A, B, C, D, config.domain, config.fs, tuple(config.input_names),
-                         tuple(config.output_names), config.delay)
+                         tuple(config.output_names), config.delay,
+                         {name: static_block(c) for name, c in config.input_nonlinearity.items()},
+                         {name: static_block(c) for name, c in config.output_nonlinearity.items()})
     check_stable(out, where)
     return out
 

@@ -21,11 +21,12 @@ its response and stability are those of that state space.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from nlsid.errors import InputError
+from nlsid.models.blocks import StaticBlock
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,11 @@ class MimoStateSpace:
         x' = A x + B u  (continuous)  or  x[k+1] = A x[k] + B u[k]  (discrete),   y = C x + D u,
 
     u = (u_1 .. u_{n_u}) the signals ``inputs`` of a run, y = (y_1 .. y_{n_y}) its ``outputs``.
+    With static blocks per signal (``input_nonlinearity``, ``output_nonlinearity``) the model is
+
+        x' = A x + B p,   p_a = f_a(u_a),   y_i = g_i(C_i x + D_i p),
+
+    f_a and g_i the identity for a signal without a block (:mod:`nlsid.models.blocks`).
 
     Attributes
     ----------
@@ -83,6 +89,9 @@ class MimoStateSpace:
         The names of the inputs (``u`` first) and outputs (``y`` first) in a recording's run.
     delay : float
         A dead time in seconds on every input (a whole number of samples at the run's rate).
+    input_blocks, output_blocks : dict of str to StaticBlock
+        The static block of an input (before B) or output (after C x + D p) by its name; a signal
+        not named has none. Static only: a block with memory (backlash) is refused by the config.
     """
 
     A: np.ndarray
@@ -94,6 +103,8 @@ class MimoStateSpace:
     inputs: tuple[str, ...] = ("u",)
     outputs: tuple[str, ...] = ("y",)
     delay: float = 0.0
+    input_blocks: dict[str, StaticBlock] = field(default_factory=dict)
+    output_blocks: dict[str, StaticBlock] = field(default_factory=dict)
 
     @property
     def discrete(self) -> bool:
@@ -154,7 +165,24 @@ class MimoStateSpace:
             out["delay"] = float(self.delay)
         if self.fs is not None:
             out["fs"] = float(self.fs)
+        for key, named in (("input_nonlinearity", self.input_blocks), ("output_nonlinearity", self.output_blocks)):
+            if named:
+                out[key] = {name: block_config(block) for name, block in named.items()}
         return out
+
+
+def block_config(block: StaticBlock) -> dict:
+    """The config mapping of a static block (the inverse of :func:`nlsid.models.blocks.encode`)."""
+    from nlsid.models import blocks
+
+    p = [float(v) for v in block.params]
+    if block.kind == blocks.POLYNOMIAL:
+        return {"type": "polynomial", "coefficients": p}
+    if block.kind in (blocks.SATURATION, blocks.DEADZONE):
+        return {"type": "saturation" if block.kind == blocks.SATURATION else "deadzone", "lower": p[0], "upper": p[1]}
+    if block.kind == blocks.PIECEWISE_LINEAR:
+        return {"type": "piecewise_linear", "x": p[:len(p) // 2], "y": p[len(p) // 2:]}
+    raise ValueError(f"no config of a block of kind {block.kind} in a model of several inputs and outputs")
 
 
 @dataclass(frozen=True)

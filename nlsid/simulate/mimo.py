@@ -10,7 +10,10 @@ as a DAC holds it; :func:`nlsid.models.lti.zoh`), a discrete one as it is, one s
 
     x[k+1] = Phi x[k] + Gamma p[k],   y[k] = C x[k] + D p[k],
 
-p[k] the plant input: the inputs plus process noise, ``delay`` samples late. Where it starts:
+p[k] the plant input: the inputs plus process noise, ``delay`` samples late, each through its
+static block where the model gives it one (``input_nonlinearity``: p_a = f_a(u_a[k - d] + w_a[k])),
+and each output through its block (``output_nonlinearity``: y_i = g_i(C_i x + D_i p)) before its
+measurement noise is added. Where it starts:
 
 * from rest, by default;
 * ``steady`` on a periodic run without transient periods: in its periodic steady state, exactly.
@@ -23,7 +26,9 @@ p[k] the plant input: the inputs plus process noise, ``delay`` samples late. Whe
   x0 = argmin sum_k || y[k] - y_rest[k] - C Phi^k x0 ||^2, k < L, L the samples in which the
   slowest mode decays to :data:`~nlsid.simulate.engine.STEADY_TOLERANCE` (as
   :mod:`nlsid.simulate.initial_state` for one output); from rest where L exceeds a quarter of the
-  record or the run lacks a measured output.
+  record or the run lacks a measured output. With output blocks this x0 is the linear least-squares
+  one of the error the blocks leave (exact for blocks of slope one near the outputs' start, a
+  first-order estimate otherwise), and the run is simulated from it through the blocks.
 """
 
 from __future__ import annotations
@@ -35,8 +40,10 @@ import numpy as np
 
 from nlsid.errors import InputError
 from nlsid.io.run import Run
+from nlsid.models.blocks import StaticBlock
 from nlsid.models.lti import MimoStateSpace, check_rate, delay_samples, stability
 from nlsid.simulate.jit import njit  # numba, its cache outside the package (not `from numba`)
+from nlsid.simulate.kernels import apply_block
 from nlsid.simulate.noise import Noise
 
 STEADY_TOLERANCE = 1e-6  # a free response below this fraction of its start counts as decayed
@@ -93,6 +100,18 @@ def check_run(inputs: tuple[str, ...], outputs: tuple[str, ...], run: Run, where
         if name in run.channels and name not in run.outputs:
             raise InputError(where, f"has a channel {name!r} that is not one of its outputs "
                                     f"({', '.join(run.outputs)}): the model's output {name!r} would overwrite it")
+
+
+def signal_blocks(blocks: dict[str, StaticBlock], names: tuple[str, ...], X: np.ndarray) -> np.ndarray:
+    """X (signals x samples) with row i passed through the static block of signal ``names[i]``
+    (:mod:`nlsid.models.blocks`), rows without one as they are; X itself where no row has one."""
+    if not blocks:
+        return X
+    out = np.array(X, dtype=np.float64)
+    for i, name in enumerate(names):
+        if name in blocks:
+            out[i] = apply_block(blocks[name].kind, blocks[name].params, np.ascontiguousarray(out[i]))
+    return out
 
 
 def _delayed(P: np.ndarray, d: int, periodic: bool) -> np.ndarray:
@@ -158,13 +177,15 @@ def simulate_mimo(model: MimoStateSpace, run: Run, noise: Noise | None = None, s
     Phi, Gamma = model.stepped(1.0 / run.fs)
     periodic = steady and run.period is not None and run.transient_periods == 0 and model.order > 0 \
         and stability(model.poles(), model.discrete) == "stable"
-    P = _delayed(U, d, periodic) + _delayed(noise.process, d, False)
+    P = signal_blocks(model.input_blocks, model.inputs, _delayed(U, d, periodic) + _delayed(noise.process, d, False))
     x0 = np.zeros(model.order)
     if periodic:
-        x0 = periodic_state(Phi, Gamma, _delayed(U, d, True)[:, :run.period])
+        x0 = periodic_state(Phi, Gamma, signal_blocks(model.input_blocks, model.inputs,
+                                                      _delayed(U, d, True)[:, :run.period]))
     Y = np.empty((model.n_outputs, n))
     args = (_f64(Phi), _f64(Gamma), _f64(model.C), _f64(model.D), _f64(P))
     state_loop(*args, _f64(x0), Y)
+    Y = signal_blocks(model.output_blocks, model.outputs, Y)
     measured = run.y is not None and all(name in run.channels for name in model.outputs[1:])
     if steady and run.period is None and measured and model.order:
         length = _decay_samples(model, run.fs)
@@ -172,6 +193,7 @@ def simulate_mimo(model: MimoStateSpace, run: Run, noise: Noise | None = None, s
             outputs = np.stack([run.named_signal(name) for name in model.outputs])
             x0 = fitted_state(np.asarray(Phi), model.C, outputs - Y, max(math.ceil(length), 1))
             state_loop(*args, _f64(x0), Y)
+            Y = signal_blocks(model.output_blocks, model.outputs, Y)
     if not np.all(np.isfinite(Y)):
         raise InputError("model", f"run {run.run_id}: the simulation diverged (an unstable model?)")
     U_rec, Y_rec = U + noise.u, Y + noise.y
