@@ -1,8 +1,9 @@
 """Free parameters of a ``mimo_state_space`` model fitted by output error on every output at once.
 
-A linear model of n_u inputs and n_y outputs (:class:`nlsid.models.lti.MimoStateSpace`) with free
-matrix entries named by key paths (``model.A[0][1]``, ``model.B[1][0]``: :mod:`nlsid.models.key_paths`)
-is fitted to measured runs by
+A model of n_u inputs and n_y outputs (:class:`nlsid.models.lti.MimoStateSpace`) with free matrix
+entries and numbers of its static blocks per signal named by key paths (``model.A[0][1]``,
+``model.B[1][0]``, ``model.output_nonlinearity.y2.upper``: :mod:`nlsid.models.key_paths`) is
+fitted to measured runs by
 
     theta_hat = argmin_theta  sum_{runs r in E} sum_{i = 1..n_y} sum_n ((y_sim,ri(n; theta) - y_ri(n)) / sigma_i)^2
 
@@ -221,15 +222,17 @@ def fit_mimo_free_parameters(config_data: dict, free: dict[str, FreeParameter], 
                              where: str = "",
                              diff_step: float = 1e-3, max_evaluations: int = 100,
                              tolerance: float = 1e-8) -> MimoExtensionFit:
-    """Fit the free entries of a ``mimo_state_space`` config by the weighted output error of every
-    output (module docstring).
+    """Fit the free entries (matrix entries, block numbers) of a ``mimo_state_space`` config by the
+    weighted output error of every output (module docstring).
 
     Parameters
     ----------
     config_data : dict
         The model config as loaded YAML, of ``model.type: mimo_state_space``.
     free : dict
-        Key path -> :class:`~nlsid.fit.free_parameters.FreeParameter`.
+        Key path (``model.A[0][1]``, ``model.output_nonlinearity.y2.upper``) ->
+        :class:`~nlsid.fit.free_parameters.FreeParameter`. A trial value the config refuses (a
+        saturation's lower level above its upper) is a rejected step.
     estimation, validation : sequence of Run
         Runs with every output of the model measured; the optimiser sees the estimation runs only.
     source, lines, where : str, dict, str
