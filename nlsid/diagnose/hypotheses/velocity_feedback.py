@@ -12,9 +12,13 @@ Which signal is the velocity depends on what G is, which a fitted transfer funct
   degree >= 2 (a force accelerates: :func:`nlsid.models.mechanical.force_feedback` reads v as a
   state). A discrete G (as ``nlsid fit`` writes it) is extended as its continuous equivalent
   (:mod:`nlsid.diagnose.hypotheses.feedback`'s reasons: a force acts within the sample), its b0
-  set to 0; where that has relative degree 1 (a fitted numerator's small leading term), around
-  G(z) itself, the velocity the backward difference of the position (the force held over the
-  sample, :func:`nlsid.models.mechanical.force_feedback`).
+  set to 0; where that has relative degree 1 (a fitted numerator's leading term), that term is
+  dropped (:func:`degree_two`, relative degree 2: a force accelerates, the refinement of the
+  linear part takes what the term did in the band). Around G(z) itself, the velocity the
+  backward difference of the position and the force held over the sample
+  (:func:`nlsid.models.mechanical.force_feedback`), Coulomb friction stopped 3.4 dB above the
+  noise floor on tests/diagnose/test_friction_feedback_start.py's G(z) with a zero at 318 Hz,
+  read so at it; that route is left for an equivalent of relative degree 0.
 
 The velocity reading is not offered for a G with a static gain: read as a velocity, y fed back
 through a force of it is a static feedback of the output, y = G (u - F(y)), the model of a spring
@@ -191,25 +195,47 @@ def degree_two(linear: dict) -> tuple[float, dict]:
 def estimate(ctx: Context, laws: list[Callable[[np.ndarray], np.ndarray]], names: list[str],
              valid: Callable[[Estimate], str | None]) -> Estimate | str:
     """Start values of the forces sum_i theta_i law_i(v): the residual regressed on the model's
-    responses to the input errors -law_i(v), v along the nominal trajectory of the model's reading
-    (:func:`reading`); not fitted where the estimate is not ``valid`` (the reason: e.g. a negative
-    friction level). The estimate's ``lti`` is the reading's linear part with its ``output``
-    (consumed by :func:`extender`)."""
-    found = reading(ctx)
+    responses to the input errors -law_i(v) and -v (a linear damper d), v along the nominal
+    trajectory of the model's reading (:func:`reading`, a discrete G of relative degree 1 read as
+    the position with its leading term dropped, :func:`degree_two`); not fitted where the estimate
+    is not ``valid`` (the reason: e.g. a negative friction level). The linear part starts at
+    G / (1 + d s G) (:func:`with_spring`; G itself where d would change a sign, or G is discrete).
+    The estimate's ``lti`` is that linear part with the reading's ``output`` (consumed by
+    :func:`extender`).
+
+    Why the damper: a G fitted to the data is the loop's BLA G_0 / (1 + c_e s G_0), c_e the
+    force's equivalent damper at the record's velocities (Bussgang: sqrt(2 / pi) fc / sigma_v for
+    Coulomb friction of a Gaussian velocity; a force of v alone has no equivalent spring on a
+    symmetric motion), so the residual is the force less its linear part, which correlates with
+    sign(v) less than the force does, or negatively (docs/feedback_start.md): regressed on
+    sign(v) alone, a Coulomb record's G(z) fitted to its BLA gave a negative friction level and was
+    not fitted; with d, d = -c_e takes the equivalent damper out of G."""
+    found = reading(ctx, accelerates=True)
     if isinstance(found, str):
         return found
     chosen, notes = found
     columns = [ctx.response([-law(v) for v in chosen.velocity], "process") for law in laws]
-    est = regress(ctx.target(), columns, names)
+    damped = chosen.linear.get("domain") != "discrete"
+    if damped:
+        columns.append(ctx.response([-v for v in chosen.velocity], "process"))
+    est = regress(ctx.target(), columns, [*names, "d"] if damped else names)
     reason = valid(est)
     if reason is not None:
         return reason
-    coefficients = {name: float(chosen.linear[name[:3]][int(name[4:-1])])
-                    for name in paths(())({"model": chosen.linear})}
+    linear = chosen.linear
+    if damped:
+        moved = with_spring(linear, 0.0, est.values["d"])
+        if moved is not None:
+            linear = moved
+            notes = [f"the linear part started at G / (1 + d s G), d = {est.values['d']:.4g} (a linear damper "
+                     "regressed with the force: a G fitted to the data holds the force's equivalent damper)", *notes]
+    values = {k: v for k, v in est.values.items() if k != "d"}
+    std = {k: v for k, v in est.std.items() if k != "d"}
+    coefficients = {name: float(linear[name[:3]][int(name[4:-1])]) for name in paths(())({"model": linear})}
     note = f"the model's output read as the {chosen.output}"
-    return Estimate({**est.values, **coefficients}, {**est.std, **{k: math.nan for k in coefficients}},
+    return Estimate({**values, **coefficients}, {**std, **{k: math.nan for k in coefficients}},
                     est.explained_db, "; ".join([note, *notes]),
-                    lti={"type": "transfer_function", **chosen.linear, "output": chosen.output})
+                    lti={"type": "transfer_function", **linear, "output": chosen.output})
 
 
 def positions(ctx: Context, chosen: Reading) -> list[np.ndarray] | str:
