@@ -46,11 +46,25 @@ periodic runs in their steady state) and each output i is judged on its own:
    ((SSE_1 - SSE_best) / (SSE_best / n) below the F(1, n) quantile at 1 - ALPHA): the simplest
    explanation the data cannot tell from the best.
 
+4. **The extended model** (:func:`extended_config`): the user's config with each named cause as a
+   static block of its output (``output_nonlinearity``, ``docs/configs.md``): an offset c as the
+   polynomial [c, 1], a gain g as [0, g], the cubic as [c, g, a2, a3], a saturation of two finite
+   levels as a ``saturation``, of one (the other side clips nothing) as the ``piecewise_linear``
+   through (l - 1, l), (l, l), (l + 1, l + 1) (upper level l: slope 1 below it, 0 above; the lower
+   side mirrored). Where the output already has a block f, the cause h acts after it and the
+   block is h o f where that is one block of the config: a polynomial after a polynomial (the
+   composed polynomial), an offset or gain after a saturation, deadzone or piecewise-linear
+   block (the piecewise-linear block through f's corners with h applied to its values); for
+   other pairs that output's cause is not added and the summary says why. The output blocks do
+   not act on the state, so the extended model reproduces the hypothesis' fitted outputs h(x_i)
+   exactly on periodic runs (in their steady state); an arbitrary run's start state is fitted
+   again through the block (first order). Its validation error is reported per output.
+
 The SISO hypotheses that act inside a mechanical, tank or transfer-function model (friction,
 stiffness, hysteresis, feedback around a transfer function, input blocks, missing resonance,
-wrong mechanics or dynamics, a delay) are not tested: a ``mimo_state_space`` model has no such
-blocks (:data:`NOT_TESTED`). The SISO output blocks (quadratic output, output saturation) are
-tested here, per output. No extended model is written: the type has no output blocks to add.
+wrong mechanics or dynamics, a delay) are not tested: they act inside a model of one input and
+one output (:data:`NOT_TESTED`). The SISO output blocks (quadratic output, output saturation) are
+tested here, per output.
 """
 
 from __future__ import annotations
@@ -274,6 +288,7 @@ class MimoDiagnosis:
     not_tested: list[dict]
     estimation: list[str]
     validation: list[str]
+    extended: "ExtendedModel | None" = None
 
     @property
     def status(self) -> str:
@@ -296,6 +311,8 @@ class MimoDiagnosis:
                 f"{e['lines']} lines outside the data's 95 % circles" for e in self.frm]
         if self.frm_note:
             out.append(f"FRM: {self.frm_note}")
+        if self.extended is not None:
+            out += self.extended.lines()
         tested = ", ".join(f"{siso} as {mine}" for siso, mine in TESTED_PER_OUTPUT.items())
         out.append(f"tested on each output: {tested}, with output_offset and output_gain")
         for reason in dict.fromkeys(item["reason"] for item in self.not_tested):
@@ -315,7 +332,113 @@ class MimoDiagnosis:
                     "output": worst.name, "above_noise_db": worst.above_noise_db, "p_value": worst.p_value,
                     "significant": any(o.significant for o in self.outputs),
                     "noise_known": all(math.isfinite(o.noise) for o in self.outputs)}, "lines": []},
-                "extended_model": None}
+                "extended_model": None if self.extended is None else self.extended.summary(),
+                "models": [] if self.extended is None or self.extended.config is None else [
+                    {"file": EXTENDED, "kind": "extended",
+                     "outputs": [o["name"] for o in self.extended.outputs if o["block"] is not None]}]}
+
+
+EXTENDED = "extended_model.yaml"  # the file of the extended model in the diagnosis folder
+
+
+def cause_block(score: HypothesisScore) -> dict | None:
+    """The output block config of a named cause h (module docstring, 4.); None for a saturation
+    that clips nothing on either side."""
+    v = score.values
+    name = score.hypothesis.name
+    if name == "output_offset":
+        return {"type": "polynomial", "coefficients": [v["offset"], 1.0]}
+    if name == "output_gain":
+        return {"type": "polynomial", "coefficients": [0.0, v["gain"]]}
+    if name == "output_polynomial":
+        return {"type": "polynomial", "coefficients": [v["offset"], v["gain"], v["a2"], v["a3"]]}
+    lower, upper = v["lower"], v["upper"]
+    if math.isfinite(lower) and math.isfinite(upper):
+        return {"type": "saturation", "lower": lower, "upper": upper}
+    if math.isfinite(upper):  # slope 1 below the level, 0 above: the end segments continue the line
+        return {"type": "piecewise_linear", "x": [upper - 1.0, upper, upper + 1.0], "y": [upper - 1.0, upper, upper]}
+    if math.isfinite(lower):
+        return {"type": "piecewise_linear", "x": [lower - 1.0, lower, lower + 1.0], "y": [lower, lower, lower + 1.0]}
+    return None
+
+
+def _corners(block: dict) -> tuple[list[float], list[float]]:
+    """(x, y) of a saturation, deadzone or piecewise-linear block as the piecewise-linear block's
+    points (the end segments continued), each x once."""
+    if block["type"] == "piecewise_linear":
+        return list(block["x"]), list(block["y"])
+    lo, hi = float(block["lower"]), float(block["upper"])
+    x = [lo - 1.0, lo, hi, hi + 1.0] if hi > lo else [lo - 1.0, lo, lo + 1.0]
+    if block["type"] == "saturation":
+        y = [min(max(t, lo), hi) for t in x]
+    else:  # deadzone: x - upper above, x - lower below, 0 between
+        y = [t - hi if t > hi else (t - lo if t < lo else 0.0) for t in x]
+    return x, y
+
+
+def composed(cause: dict, existing: dict | None) -> tuple[dict | None, str]:
+    """The block h o f of a cause h (:func:`cause_block`) after the output's block f (None: h
+    itself), or None and why where h o f is not one block of the config."""
+    from numpy.polynomial import Polynomial
+
+    if existing is None:
+        return cause, ""
+    if cause["type"] == "polynomial" and existing["type"] == "polynomial":
+        h, f = Polynomial(cause["coefficients"]), Polynomial(existing["coefficients"])
+        return {"type": "polynomial", "coefficients": [float(c) for c in h(f).coef]}, ""
+    affine = cause["type"] == "polynomial" and len(cause["coefficients"]) == 2
+    if affine and existing["type"] in ("saturation", "deadzone", "piecewise_linear"):
+        x, y = _corners(existing)
+        c, g = cause["coefficients"]
+        return {"type": "piecewise_linear", "x": x, "y": [c + g * t for t in y]}, ""
+    return None, (f"the output already has a {existing['type']} block, and a {cause['type']} after it is not one "
+                  "block of the config: fit the block's numbers by fit --model")
+
+
+@dataclass
+class ExtendedModel:
+    """The user's config with each named cause as its output's block (:func:`extended_config`):
+    ``config`` (None where no cause could be added), per output its ``block`` (the added one,
+    None), ``reason`` (why not, or "") and ``error_rms`` (the extended model's validation error)."""
+
+    config: dict | None
+    outputs: list[dict]
+
+    def header(self, source: str, statements: Sequence[str]) -> list[str]:
+        """The YAML's header comment: what it extends and the named causes."""
+        return [f"Extended model of {source}: each named cause added as its output's block", *statements]
+
+    def lines(self) -> list[str]:
+        """The terminal's line naming the file and the causes left out, with why."""
+        added = [o["name"] for o in self.outputs if o["block"] is not None]
+        out = [f"extended model: {EXTENDED} (output_nonlinearity of {', '.join(added)})"] if added else []
+        out += [f"output {o['name']}: cause not added to the extended model: {o['reason']}"
+                for o in self.outputs if o["reason"]]
+        return out
+
+    def summary(self) -> dict:
+        return {"file": EXTENDED if self.config is not None else None, "outputs": [dict(o) for o in self.outputs]}
+
+
+def extended_config(config_data: dict, outputs: Sequence[OutputDiagnosis]) -> tuple[dict | None, list[dict]]:
+    """The config with each output's named cause as its ``output_nonlinearity`` block (module
+    docstring, 4.), without ``free``; None where no cause was added. Also, per output with a
+    cause: ``name``, ``block`` (None where not added) and ``reason``."""
+    from nlsid.models.key_paths import deep_copy
+
+    data = {key: deep_copy(value) for key, value in config_data.items() if key != "free"}
+    blocks = data["model"].setdefault("output_nonlinearity", {}) or {}
+    data["model"]["output_nonlinearity"] = blocks
+    added = []
+    for o in outputs:
+        if o.cause is None:
+            continue
+        cause = cause_block(o.cause)
+        block, why = (None, "the saturation clips nothing") if cause is None else composed(cause, blocks.get(o.name))
+        if block is not None:
+            blocks[o.name] = block
+        added.append({"name": o.name, "block": block, "reason": why})
+    return (data if any(a["block"] is not None for a in added) else None), added
 
 
 def compared(model, runs: Sequence[Run]) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -495,6 +618,15 @@ def diagnose_mimo(config_data: dict, source: str, estimation: Sequence[Run], val
             diagnosis.remainder_above_noise_db = 10 * math.log10(left) if left > 0 else -math.inf
             diagnosis.remainder_significant = bool(stats.f.sf(left, n, dof) < ALPHA)
         outputs.append(diagnosis)
+    extended = None
+    if any(o.cause is not None for o in outputs):
+        data, added = extended_config(config_data, outputs)
+        if data is not None:  # its validation error per output: the named causes' fitted level
+            pairs = compared(build(validate_simulate_config(data, source, {})), validation)
+            for entry in added:
+                s_i = samples_of(pairs, list(model.outputs).index(entry["name"]))
+                entry["error_rms"] = math.sqrt(s_i.sse() / float(np.sum(s_i.w))) if s_i.x.size else math.nan
+        extended = ExtendedModel(data, added)
     frm, note = frm_comparison(model, runs, where)
     from nlsid.diagnose.hypotheses import LIBRARY
 
@@ -502,4 +634,4 @@ def diagnose_mimo(config_data: dict, source: str, estimation: Sequence[Run], val
                   for h in LIBRARY if h.name not in TESTED_PER_OUTPUT]
     not_tested.append({"hypothesis": "yardstick", "title": "The black-box yardstick", "reason": NO_YARDSTICK})
     return MimoDiagnosis(source, tuple(model.inputs), outputs, frm, note, not_tested,
-                         [run.run_id for run in estimation], [run.run_id for run in validation])
+                         [run.run_id for run in estimation], [run.run_id for run in validation], extended)

@@ -3,9 +3,10 @@
 :func:`nlsid.stages.diagnose.diagnosis_inputs` gives a :class:`MimoDiagnosisInputs` for such a
 model; its :meth:`~MimoDiagnosisInputs.run` diagnoses one output at a time
 (:func:`nlsid.diagnose.mimo.diagnose_mimo`) and gives a :class:`MimoDiagnosisResult`, whose
-:meth:`~MimoDiagnosisResult.write` writes the diagnosis folder: ``summary.json`` alone (no
-``results.h5``, no page arrays, no extended model: ``docs/formats.md``, "The diagnosis of a
-model of several outputs").
+:meth:`~MimoDiagnosisResult.write` writes the diagnosis folder: ``summary.json`` and, where a cause
+is named and added, ``extended_model.yaml`` (the user's config with each cause as its output's
+block, :func:`nlsid.diagnose.mimo.extended_config`); no ``results.h5`` and no page arrays
+(``docs/formats.md``, "The diagnosis of a model of several outputs").
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from nlsid.diagnose.mimo import MimoDiagnosis
+from nlsid.diagnose.mimo import EXTENDED, MimoDiagnosis
 
 SUMMARY = "summary.json"
 
@@ -61,12 +62,34 @@ class MimoDiagnosisResult:
         """The lines printed under the headline: each output, the FRM entries, what is not tested."""
         return self.diagnosis.lines()
 
+    @property
+    def extended_text(self) -> str | None:
+        """``extended_model.yaml``: the extended config with a header comment naming the causes;
+        None where no cause was added."""
+        from nlsid.io.diagnosis_file import extended_yaml
+
+        extended = self.diagnosis.extended
+        if extended is None or extended.config is None:
+            return None
+        statements = [o.statement() for o in self.diagnosis.outputs if o.cause is not None]
+        return extended_yaml(extended.config, extended.header(self.diagnosis.model_source, statements))
+
+    @property
+    def extended_model(self):
+        """The extended model (a :class:`nlsid.Model`: the config with each named cause as its
+        output's block), or None where no cause was added."""
+        from nlsid.stages.model import Model
+
+        extended = self.diagnosis.extended
+        return None if extended is None or extended.config is None else Model.from_dict(extended.config)
+
     def summary(self) -> dict:
         """``summary.json`` without its format, provenance and file list (``nlsid diagnose --json``)."""
         return {**self.diagnosis.summary(), "units": dict(self.units), "allow_overlap": bool(self.allow_overlap)}
 
     def write(self, folder: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
-        """Write the folder (``summary.json``) atomically; an existing folder only with ``force``."""
+        """Write the folder (``summary.json``, ``extended_model.yaml`` where a cause was added)
+        atomically; an existing folder only with ``force``."""
         from nlsid.io.atomic import check_output_folder
         from nlsid.io.diagnosis_file import FORMAT, FORMAT_VERSION
         from nlsid.io.provenance import provenance as make_provenance
@@ -80,8 +103,11 @@ class MimoDiagnosisResult:
         parent = target.absolute().parent
         tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
         try:
+            extended = self.extended_text
+            if extended is not None:
+                (tmp / EXTENDED).write_text(extended, encoding="utf-8")
             document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": record,
-                        **self.summary(), "files": [SUMMARY]}
+                        **self.summary(), "files": [SUMMARY, *([EXTENDED] if extended is not None else [])]}
             (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n",
                                        encoding="utf-8")
             os.chmod(tmp, 0o755)

@@ -107,7 +107,8 @@ def test_the_cli_writes_the_per_output_summary_and_lists_what_is_not_tested(run_
     text = result.stdout + result.stderr
     assert "output y2: sensor saturation" in text and "not tested: coulomb" in text
     summary = json.loads((tmp_path / "d" / "summary.json").read_text())
-    assert summary["nlsid_format"] == "diagnosis" and summary["kind"] == "mimo" and summary["files"] == ["summary.json"]
+    assert summary["nlsid_format"] == "diagnosis" and summary["kind"] == "mimo"
+    assert summary["files"] == ["summary.json", "extended_model.yaml"]  # the saturation added as y2's block
     assert [o["name"] for o in summary["outputs"]] == ["y", "y2"]
     assert summary["outputs"][1]["cause"]["hypothesis"] == "output_saturation"
     reasons = {item["hypothesis"]: item["reason"] for item in summary["not_tested"]}
