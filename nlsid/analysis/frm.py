@@ -40,6 +40,22 @@ output noise of variance s_i^2 per sample the noise variance of entry (i, a) of 
 bounds use ``F(2, 2 M E (P-1))``, exact there (a Satterthwaite upper count of the degrees of freedom
 where the weights differ); the total bounds use ``F(2, 2M-2)`` (Table 6-1, R = M; (6-88)).
 
+From the references (:func:`frm_reference`; a closed loop, or inputs measured with noise): where
+each experiment also records the n_u references r that excite the loop (the designed orthogonal
+multisines, which the loop does not feed back), their period-averaged spectra form R(k) (n_u x E)
+and the indirect estimate of the realization is ``G^[m] = (Y R^+) (U R^+)^-1 = Y_r U_r^-1``, with
+``Y_r = Y R^+`` and ``U_r = U R^+`` the FRMs from the references (the indirect method, as
+:func:`nlsid.analysis.lpm_mimo.lpm_mimo_reference` for arbitrary records). It is ``Y W`` with ``W = R^+ U_r^-1`` (E x n_u), and to first order
+``dG = (dY - G^[m] dU) W`` (reference noise enters at second order only: ``Y - G U`` is itself
+noise), so the noise covariance is the formula above with this W. For E = n_u, R cancels:
+``W = R^-1 R U^-1 = U^-1`` and the estimate, its covariances and bounds are exactly those of
+``Y U^-1``. The direct estimate of a square design is already the indirect one (and, the spectra
+being circular, ``Y U^-1`` has no bias at any order of the noise of U). They differ for E > n_u:
+``Y U^+ = Y U^H (U U^H)^-1`` correlates the output noise with the input noise the loop feeds back
+(``E[V N_u^H] != 0``), a bias of order ``sigma^2 / (P |U|^2)`` that averaging realizations does not
+remove; ``Y R^H (U R^H)^-1`` (the same as above when R R^H is invertible) correlates it with R, which
+is exact.
+
 Odd/even per output (book Section 5.1, (5-9)): where only odd harmonics are excited, every
 experiment's P-averaged output at the in-band odd and even detection lines is averaged in power over
 experiments and realizations (the phase there is random) and set beside the noise variance of the
@@ -135,6 +151,9 @@ class FrequencyResponseMatrix:
         Odd/even levels per output; None unless only odd harmonics are excited.
     warnings : list of str
         What the estimate doubts (ill-conditioned lines, too few realizations or periods).
+    method : str
+        ``"frm"`` (``Y U^-1``, :func:`frm`) or ``"frm_reference"`` (``Y_r U_r^-1`` from the
+        references, :func:`frm_reference`).
     """
 
     bins: np.ndarray
@@ -152,6 +171,7 @@ class FrequencyResponseMatrix:
     noise_bounds: Bounds
     detection: DetectionLevels | None = None
     warnings: list[str] = field(default_factory=list)
+    method: str = "frm"
 
     @property
     def cov_nonlinear(self) -> np.ndarray:
@@ -196,6 +216,19 @@ def realization_frm(U: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """
     W = np.linalg.inv(U) if U.shape[-1] == U.shape[-2] else np.linalg.pinv(U)
     return Y @ W, W
+
+
+def reference_frm(R: np.ndarray, U: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``G = (Y R^+) (U R^+)^-1`` for stacks of matrices R, U (..., n_u, E) and Y (..., n_y, E).
+
+    Returns G (..., n_y, n_u), ``W = R^+ (U R^+)^-1`` (..., E, n_u), so that ``G = Y W`` and
+    ``dG = (dY - G dU) W`` to first order, and ``U_r = U R^+`` (..., n_u, n_u), the inputs' FRM
+    from the references. For E = n_u, W is ``U^-1``.
+    """
+    R_plus = np.linalg.inv(R) if R.shape[-1] == R.shape[-2] else np.linalg.pinv(R)
+    U_r = U @ R_plus
+    W = R_plus @ np.linalg.inv(U_r)
+    return Y @ W, W, U_r
 
 
 def residual_covariance(dU: np.ndarray, dY: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -273,12 +306,14 @@ def _check_data(u: np.ndarray, y: np.ndarray) -> None:
                               f"({BOOK}, Eq. 6-116), got {n_experiments}")
 
 
-def _check_independent(condition: np.ndarray, frequency: np.ndarray) -> None:
-    """Refuse lines where the experiments' inputs are dependent: Y = G U has no unique solution there."""
+def _check_independent(condition: np.ndarray, frequency: np.ndarray, where: str = "u",
+                       what: str = "the experiments' input vectors", matrix: str = "U") -> None:
+    """Refuse lines where the experiments' inputs (or references) are dependent: Y = G U has no
+    unique solution there."""
     bad = np.flatnonzero(~(condition < DEPENDENT))
     if bad.size:
-        raise InputError("u", f"the experiments' input vectors are linearly dependent at {bad.size} excited line(s) "
-                              f"(from {frequency[bad[0]]:g} Hz; cond(U) >= {DEPENDENT:.0e}): G cannot be separated "
+        raise InputError(where, f"{what} are linearly dependent at {bad.size} excited line(s) "
+                              f"(from {frequency[bad[0]]:g} Hz; cond({matrix}) >= {DEPENDENT:.0e}): G cannot be separated "
                               f"({BOOK}, Eq. 6-116); excite with orthogonal multisines")
 
 
@@ -336,6 +371,64 @@ def frm(u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0, confidence:
     """
     u, y = _numeric("u", u), _numeric("y", y)
     _check_data(u, y)
+    return _estimate(u, y, None, excited_bins, fs, confidence)
+
+
+def frm_reference(r: np.ndarray, u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0,
+                  confidence: float = 0.95) -> FrequencyResponseMatrix:
+    """The MIMO BLA from the references: per realization ``G^[m] = (Y R^+) (U R^+)^-1``.
+
+    The indirect estimate of a closed loop or of noisy inputs (module docstring): R holds the
+    period-averaged spectra of the n_u references (the designed orthogonal multisines) that
+    excite each experiment. The noise covariance is that of :func:`frm` with ``W = R^+ U_r^-1``;
+    the total covariance, bounds, detection levels and warnings are formed as there. For E = n_u
+    the result equals :func:`frm`'s (to rounding): ``W = U^-1``.
+
+    Parameters
+    ----------
+    r : numpy.ndarray
+        The references, shape (M, E, n_u, P, N), one per input (reference a drives input a's
+        loop), as u.
+    u, y, excited_bins, fs, confidence
+        As :func:`frm`.
+
+    Returns
+    -------
+    FrequencyResponseMatrix
+        With ``method`` ``"frm_reference"``.
+
+    Raises
+    ------
+    nlsid.InputError
+        As :func:`frm`, and naming ``r``: references of another shape than u, non-finite, or whose
+        experiments are linearly dependent, or that do not move the inputs independently
+        (``U R^+`` singular) at an excited line.
+
+    Examples
+    --------
+    In a loop u = r - 0.5 y around y = u1 + 2 u2 (so y = (r1 + 2 r2) / 2): the inputs follow the
+    output, yet the FRM from the references is the plant's.
+
+    >>> from nlsid.signals.orthogonal_multisine import orthogonal_multisine
+    >>> design = orthogonal_multisine(32, [1, 3, 5], 2, rng=0)
+    >>> r = design.signals()[None, :, :, None, :]
+    >>> y = (r[:, :, :1] + 2 * r[:, :, 1:]) / 2.5
+    >>> u = r - 0.5 * y
+    >>> np.round(frm_reference(r, u, y, design.bins).G[0].real, 12)
+    array([[1., 2.]])
+    """
+    r, u, y = _numeric("r", r), _numeric("u", u), _numeric("y", y)
+    _check_data(u, y)
+    if r.shape != u.shape:
+        raise InputError("r", f"expected one reference per input, shaped as u {u.shape}, got {r.shape}")
+    if not np.all(np.isfinite(r)):
+        raise InputError("r", "holds NaN or infinite samples")
+    return _estimate(u, y, r, excited_bins, fs, confidence)
+
+
+def _estimate(u: np.ndarray, y: np.ndarray, r: np.ndarray | None, excited_bins, fs, confidence
+              ) -> FrequencyResponseMatrix:
+    """The FRM of checked data: from the inputs (``r`` None) or from the references."""
     confidence, fs = _number("confidence", confidence), _number("fs", fs)
     if not 0 < confidence < 1:
         raise InputError("confidence", f"expected a probability in (0, 1), got {confidence:g}")
@@ -350,7 +443,14 @@ def frm(u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0, confidence:
     Y, dY = line_spectra(spectra_y, bins)
     condition = np.linalg.cond(U).max(axis=0)                        # worst realization per line
     _check_independent(condition, frequency)
-    G_m, W = realization_frm(U, Y)                                   # (M, F, n_y, n_u), (M, F, E, n_u)
+    if r is None:
+        G_m, W = realization_frm(U, Y)                               # (M, F, n_y, n_u), (M, F, E, n_u)
+    else:
+        R = line_spectra(period_spectra(r), bins)[0]                 # (M, F, n_u, E)
+        _check_independent(np.linalg.cond(R).max(axis=0), frequency, "r", "the experiments' reference vectors", "R")
+        G_m, W, U_r = reference_frm(R, U, Y)
+        _check_independent(np.linalg.cond(U_r).max(axis=0), frequency, "r",
+                           "the inputs' responses to the references", "U R^+")
     C = residual_covariance(dU, dY, G_m)                             # (M, F, E, n_y, n_y)
     cov_noise = frm_noise_covariance(W, C).sum(axis=0) / M**2
     cov_total = scatter_covariance(np.swapaxes(G_m, -1, -2).reshape(M, bins.size, n_u * n_y))
@@ -365,6 +465,7 @@ def frm(u: np.ndarray, y: np.ndarray, excited_bins, fs: float = 1.0, confidence:
         noise_bounds=circle_bounds(G, var_noise, confidence, M * E * (P - 1) + 1),
         detection=_detection_levels(spectra_y, N, fs, bins),
         warnings=_warnings(condition, frequency, M, P),
+        method="frm" if r is None else "frm_reference",
     )
 
 
