@@ -136,7 +136,7 @@ def read_diagnosis(folder: str | os.PathLike) -> tuple[dict, dict]:
     if summary.get("nlsid_format_version") != FORMAT_VERSION:
         raise InputError(f"{summary_path}: nlsid_format_version",
                          f"expected {FORMAT_VERSION}, got {summary.get('nlsid_format_version')!r}")
-    if summary.get("kind") == "mimo":  # summary.json alone (nlsid.stages.mimo_diagnosis): nothing to draw
+    if summary.get("kind") == "mimo":  # no results.h5 (nlsid.stages.mimo_diagnosis): nothing to draw
         raise InputError(f"{summary_path}: kind", "a diagnosis of a model of several outputs has no page or result "
                                                   "arrays yet: its summary.json holds the diagnosis (docs/mimo.md)")
     results = folder / RESULTS
