@@ -342,7 +342,11 @@ def _mimo_page(path: Path, config, data: dict) -> Page:
     frequency = frequency_axis([element])
     G = mimo.frequency_response(frequency, fs=1.0 if mimo.discrete and mimo.fs is None else None)
     shape = f"{mimo.n_outputs} outputs ({', '.join(mimo.outputs)}) x {mimo.n_inputs} inputs ({', '.join(mimo.inputs)})"
-    headline = f"{_TITLES[config.model.type]} in open loop, {shape}: {describe_modes(mimo)}; linear"
+    nonlinear = [(f"{key}.{name}", block.model_dump()) for key in ("input_nonlinearity", "output_nonlinearity")
+                 for name, block in getattr(config.model, key).items()]  # static blocks per signal
+    headline = (f"{_TITLES[config.model.type]} in open loop, {shape}: {describe_modes(mimo)}; "
+                + (", ".join(f"{values['type'].replace('_', ' ')} ({name})" for name, values in nonlinear)
+                   + " (the figure: the linear part A, B, C, D)" if nonlinear else "linear"))
     findings = [f"{mimo.order} states" + (f", dead time {mimo.delay:g} s on every input" if mimo.delay else "")]
     d = config.disturbances
     levels = {"u": d.u_noise, "y": d.y_noise, "process": d.process_noise}
@@ -356,7 +360,7 @@ def _mimo_page(path: Path, config, data: dict) -> Page:
                "magnitude in dB re 1 output/input (a model config records no units). "
                + ("Discrete, up to half its sample rate." if mimo.discrete else "Continuous, with its dead time."))
     numbers = {"model": config.model.type, "closed_loop": False, "inputs": list(mimo.inputs),
-               "outputs": list(mimo.outputs), "nonlinear": [],
+               "outputs": list(mimo.outputs), "nonlinear": [{"name": name, **values} for name, values in nonlinear],
                "elements": [{"name": element.name, "discrete": mimo.discrete, "delay": mimo.delay, "fs": mimo.fs,
                              "modes": [{"frequency": m.frequency, "damping": m.damping, "poles": m.count}
                                        for m in found]}]}
