@@ -83,8 +83,9 @@ from nlsid.io.run import Run
 TESTED_PER_OUTPUT = {"quadratic_output": "output_polynomial", "output_saturation": "output_saturation"}
 #: Why the library's other hypotheses are not tested on a mimo_state_space model.
 NOT_TESTED = ("a single-input single-output hypothesis: it acts inside a mechanical, tank or transfer-function "
-              "model (a force, the input u, the dynamics between one input and one output), blocks a "
-              "mimo_state_space model does not have; its dynamics are refitted by fit --model of its matrices")
+              "model (a force, the input u, the dynamics between one input and one output), which a "
+              "mimo_state_space model is not; its dynamics are refitted by fit --model of its matrices, a block "
+              "given in its input_nonlinearity by fit --model of the block's numbers")
 
 #: Why the black-box yardstick is not fitted.
 NO_YARDSTICK = ("the yardstick's black box (a PNLSS model) is fitted to one input and one output; without it the "
