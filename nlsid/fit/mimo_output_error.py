@@ -41,7 +41,7 @@ from typing import Sequence
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.fit.extension import ExtensionFit, RunError
+from nlsid.fit.extension_result import ExtensionFit, RunError
 from nlsid.fit.free_parameters import FreeParameter, value_at
 from nlsid.fit.simulation_cost import steady
 from nlsid.fit.uncertainty import sandwich_covariance
