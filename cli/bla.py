@@ -149,7 +149,8 @@ def _print_modes_table(output: str, modes: list[dict]) -> None:
 
 def _print_frm_table(output: str, summaries: list[dict]) -> None:
     """The frequency response matrix of runs with several inputs or outputs: one row per level and
-    entry (output <- input), band means in dB (variances relative to |G|^2)."""
+    entry (output <- input), band means in dB (variances relative to |G|^2); then a line per level
+    taken from the references."""
     rows = []
     for index, row in enumerate(summaries):
         counts = f"{row['realizations']} x {row['experiments']} x {row['periods']}"
@@ -160,6 +161,10 @@ def _print_frm_table(output: str, summaries: list[dict]) -> None:
     settings().console.print(text_table(f"{output}: frequency response matrix per level (dB; variances relative to "
                                         "|G|^2)", ("FRM level", "level", "M x E x P", "entry", "|G| dB", "noise var",
                                                    "total var"), rows))
+    for index, row in enumerate(summaries):
+        if row.get("references"):
+            settings().console.print(f"FRM level {index}: from the references {', '.join(row['references'])} "
+                                     "(G = Y R^+ (U R^+)^-1 per realization: unbiased in a closed loop)", markup=False)
 
 
 def _print_frm_lpm_table(output: str, summaries: list[dict], first: int) -> None:

@@ -34,7 +34,7 @@ import numpy as np
 
 from nlsid.citations import MOTION_STAGES
 from nlsid.errors import InputError
-from nlsid.io.run import MISSING_Y, Run
+from nlsid.io.run import MISSING_Y, Run, missing_references, reference_names
 
 STAGES = ("bla", "hosidf", "diagnose", "fit --model", "simulate --excitation")
 
@@ -141,6 +141,8 @@ class BlaRuns:
         self.arbitrary: list[str] = []
         self.skipped: list[str] = []
         self.mimo: list[str] = []
+        # per (kind, level) of the runs with several inputs or outputs: their inputs' references
+        self.mimo_references: dict[tuple[str, float | None], MimoReferences] = {}
 
     def add(self, run: Run, where: str) -> LevelShape | None:
         """Check one run; return its level's shape, or None for a run that is not a multisine
@@ -149,6 +151,8 @@ class BlaRuns:
         if run.is_mimo:
             check_mimo_run(run, where)
             self.mimo.append(run.run_id)
+            key = (run.kind, run.level)
+            self.mimo_references.setdefault(key, MimoReferences(reference_names(len(run.inputs)))).add(run)
             return None
         if run.kind == "arbitrary":
             check_arbitrary_run(run, where, self.method)
@@ -169,6 +173,34 @@ class BlaRuns:
         if not self.levels and not self.arbitrary and not self.mimo:
             raise InputError(source, "holds no multisine or arbitrary runs; the BLA needs random-phase multisines "
                                      "or arbitrarily excited records (sines are for `nlsid hosidf`)")
+
+
+@dataclass
+class MimoReferences:
+    """Whether ``bla --method auto`` takes the frequency response matrix of one level of runs with
+    several inputs or outputs from the references (:func:`nlsid.io.run.reference_names`): where
+    every run carries them all (:mod:`nlsid.analysis.frm_levels`)."""
+
+    names: tuple[str, ...]
+    carried: bool = False
+    lacking: tuple[str, list[str]] | None = None
+
+    def add(self, run: Run) -> None:
+        self.carried = self.carried or run.r is not None
+        missing = missing_references(run)
+        if missing and self.lacking is None:
+            self.lacking = (run.run_id, missing)
+
+    def note(self, kind: str, level: float | None) -> str | None:
+        """What ``nlsid info`` says of the level; None where no run carries a reference."""
+        if not self.carried:
+            return None
+        what = f"the frequency response matrix of the {kind} runs of level {level}"
+        if self.lacking is None:
+            return f"--method auto takes {what} from the references {', '.join(self.names)}"
+        run_id, missing = self.lacking
+        return (f"--method auto takes {what} not from the references ({', '.join(self.names)}): run {run_id} "
+                f"lacks {', '.join(missing)}")
 
 
 def several_inputs_outputs(run: Run, where: str, reader: str = "a model of one input u and one output y"
@@ -512,6 +544,10 @@ class Survey:
         if self.bla.mimo:
             verdict.notes.append(f"{len(self.bla.mimo)} runs with several inputs or outputs: the frequency "
                                  "response matrix per level")
+        for (kind, level), references in self.bla.mimo_references.items():
+            note = references.note(kind, level)
+            if note is not None:
+                verdict.notes.append(note)
 
     def _finish_hosidf(self) -> None:
         verdict = self.verdict["hosidf"]

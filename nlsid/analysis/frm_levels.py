@@ -36,13 +36,13 @@ import numpy as np
 
 from nlsid.analysis.arbitrary import BAND_DB
 from nlsid.analysis.confidence import Bounds
-from nlsid.analysis.frm import FrequencyResponseMatrix, frm
+from nlsid.analysis.frm import FrequencyResponseMatrix, frm, frm_reference
 from nlsid.analysis.lpm import DEFAULT_DEGREE, DEFAULT_HALF_WIDTH
 from nlsid.analysis.lpm_mimo import (MimoLPMResult, degrees_of_freedom, lpm_mimo, lpm_mimo_reference,
                                      narrowest_half_width)
 from nlsid.errors import InputError
 from nlsid.feeds import check_mimo_run
-from nlsid.io.run import Run
+from nlsid.io.run import Run, missing_references, reference_names
 
 
 @dataclass
@@ -65,6 +65,9 @@ class FrmLevel:
         The unit of each input and output the runs record alike.
     frm : FrequencyResponseMatrix
         G (F, n_y, n_u), its standard deviations, covariances and bounds.
+    references : tuple of str
+        The references G is taken from (``r``, ``r2``, ...; ``frm.method`` is ``"frm_reference"``),
+        empty where it is from the inputs.
     """
 
     level: float | None
@@ -75,6 +78,7 @@ class FrmLevel:
     run_ids: list[list[str]]
     units: dict[str, str]
     frm: FrequencyResponseMatrix
+    references: tuple[str, ...] = ()
 
     @property
     def warnings(self) -> list[str]:
@@ -84,7 +88,8 @@ class FrmLevel:
         """The level's scalars (``nlsid bla --json``, ``frm_levels``): counts, band, and per entry
         (output i, input a) the band means ``bla_db`` = mean 20 log10 |G_ia| and
         ``noise_var_db``, ``total_var_db`` = 10 log10 of the mean of var / |G_ia|^2 (NaN where a
-        variance cannot be estimated)."""
+        variance cannot be estimated). A level taken from the references adds ``method``
+        (``frm_reference``) and ``references``; one from the inputs has neither key."""
         result = self.frm
         with np.errstate(divide="ignore", invalid="ignore"):
             magnitude2 = np.abs(result.G) ** 2
@@ -97,7 +102,7 @@ class FrmLevel:
                         "noise_var_db": _db10(np.mean(result.std_noise[:, i, a] ** 2 / magnitude2[:, i, a])),
                         "total_var_db": _db10(np.mean(result.std_total[:, i, a] ** 2 / magnitude2[:, i, a])),
                     })
-        return {
+        out = {
             "level": self.level, "inputs": list(self.inputs), "outputs": list(self.outputs),
             "realizations": result.n_realizations, "experiments": result.n_experiments,
             "periods": result.n_periods, "excited_lines": int(result.bins.size),
@@ -105,6 +110,9 @@ class FrmLevel:
             "entries": rows, "detection": None if result.detection is None else result.detection.summary(),
             "warnings": list(result.warnings),
         }
+        if self.references:
+            out.update(method=result.method, references=list(self.references))
+        return out
 
 
 def _db(value: float) -> float:
@@ -151,10 +159,11 @@ class MimoRuns:
         there was at least one)."""
         return self.exhausted and bool(self.runs) and self.others == 0
 
-    def levels(self, confidence: float = 0.95, source: str = "recording") -> list[FrmLevel]:
-        """The FRM of each level of the multisine runs set aside, sorted by level (a level of None first)."""
+    def levels(self, confidence: float = 0.95, source: str = "recording", method: str = "auto") -> list[FrmLevel]:
+        """The FRM of each level of the multisine runs set aside, sorted by level (a level of None first;
+        ``method`` as ``bla --method``: the references' use, :func:`level_frm`)."""
         by_level = self._by_level("multisine")
-        return [level_frm(pairs, confidence, f"{source}: level {key}") for key, pairs in by_level.items()]
+        return [level_frm(pairs, confidence, f"{source}: level {key}", method) for key, pairs in by_level.items()]
 
     def lpm_levels(self, confidence: float = 0.95, source: str = "recording", half_width: int = DEFAULT_HALF_WIDTH,
                    degree: int = DEFAULT_DEGREE, method: str = "auto") -> list["LpmFrmLevel"]:
@@ -173,23 +182,39 @@ class MimoRuns:
         return {key: by_level[key] for key in sorted(by_level, key=lambda level: (level is not None, level or 0.0))}
 
 
-def level_frm(pairs: list[tuple[Run, str]], confidence: float, label: str) -> FrmLevel:
-    """The FRM of the runs of one level (``label`` names the level in messages)."""
+def level_frm(pairs: list[tuple[Run, str]], confidence: float, label: str, method: str = "auto") -> FrmLevel:
+    """The FRM of the runs of one level (``label`` names the level in messages).
+
+    With ``method`` ``auto`` or ``reference`` and one reference per input in every run
+    (:func:`nlsid.io.run.reference_names`), G is that of
+    :func:`nlsid.analysis.frm.frm_reference`, from the references' period-averaged spectra;
+    ``reference`` refuses a run without them; otherwise (and with ``frf``, ``io``) it is
+    :func:`nlsid.analysis.frm.frm`'s, and references that are not used are named in the warnings.
+    """
     first = pairs[0][0]
     for run, where in pairs[1:]:
         _check_alike(first, run, where)
+    warnings: list[str] = []
+    use_references = _use_references(pairs, method, warnings, FROM_INPUTS_FRM)
+    references = reference_names(len(first.inputs)) if use_references else ()
     realizations = _realizations([run for run, _ in pairs], label, len(first.inputs))
     u = np.stack([[_steady(run.input_matrix(), run) for run in experiments] for experiments in realizations])
     y = np.stack([[_steady(run.output_matrix(), run) for run in experiments] for experiments in realizations])
     try:
-        result = frm(u, y, first.excited_bins, first.fs, confidence)
+        if use_references:
+            r = np.stack([[_steady(np.stack([run.named_signal(name) for name in references]), run)
+                           for run in experiments] for experiments in realizations])
+            result = frm_reference(r, u, y, first.excited_bins, first.fs, confidence)
+        else:
+            result = frm(u, y, first.excited_bins, first.fs, confidence)
     except InputError as error:
         raise InputError(label, f"{error.where}: {error.what}") from None
+    result.warnings.extend(warnings)
     units = {name: first.units[name] for name in (*first.inputs, *first.outputs)
              if name in first.units and all(run.units.get(name) == first.units[name] for run, _ in pairs)}
     return FrmLevel(level=first.level, fs=first.fs, period=int(first.period), inputs=tuple(first.inputs),
                     outputs=tuple(first.outputs), run_ids=[[run.run_id for run in e] for e in realizations],
-                    units=units, frm=result)
+                    units=units, frm=result, references=references)
 
 
 def _steady(x: np.ndarray, run: Run) -> np.ndarray:
@@ -354,22 +379,21 @@ class LpmFrmLevel:
         }
 
 
-def reference_names(n_inputs: int) -> tuple[str, ...]:
-    """The references of a run with ``n_inputs`` inputs, one per input: ``r``, then the channels
-    ``r2`` .. ``r<n_u>`` (as the inputs are ``u``, ``u2``, ...)."""
-    return ("r",) + tuple(f"r{index}" for index in range(2, n_inputs + 1))
+#: What a level of arbitrary runs whose references are not used takes instead, and (for ``frf`` and
+#: ``io``) what that costs.
+FROM_INPUTS_LPM = ("the FRM is taken from the inputs as if they were noise-free",
+                   " (in a closed loop the output noise then biases it)")
+#: The same for a level of orthogonal multisines.
+FROM_INPUTS_FRM = ("the FRM is Y U^+ from the inputs: the same as from the references where a realization holds as "
+                   "many experiments as inputs, biased in a closed loop where it holds more", "")
 
 
-def missing_references(run: Run) -> list[str]:
-    """The references of :func:`reference_names` that ``run`` does not carry."""
-    return [name for name in reference_names(len(run.inputs))
-            if (run.r if name == "r" else run.channels.get(name)) is None]
-
-
-def _use_references(pairs: list[tuple[Run, str]], method: str, warnings: list[str]) -> bool:
+def _use_references(pairs: list[tuple[Run, str]], method: str, warnings: list[str],
+                    instead: tuple[str, str] = FROM_INPUTS_LPM) -> bool:
     """Whether the level's FRM is the indirect one from the references: ``auto`` where every run
     carries them all, ``reference`` always (InputError naming a run without them); ``frf`` and
-    ``io`` never. A reference that is then not used is said in ``warnings``."""
+    ``io`` never. A reference that is then not used is said in ``warnings``, with what the FRM is
+    taken from ``instead`` (:data:`FROM_INPUTS_LPM`, :data:`FROM_INPUTS_FRM`)."""
     names = reference_names(len(pairs[0][0].inputs))
     lacking = [(run, where, missing_references(run)) for run, where in pairs]
     lacking = [(run, where, missing) for run, where, missing in lacking if missing]
@@ -381,13 +405,11 @@ def _use_references(pairs: list[tuple[Run, str]], method: str, warnings: list[st
     if method in ("auto", "reference") and not lacking:
         return True
     if carried and method in ("frf", "io"):
-        warnings.append(f"the runs' references are not used (--method {method}): the FRM is taken from the inputs as "
-                        "if they were noise-free (in a closed loop the output noise then biases it)")
+        warnings.append(f"the runs' references are not used (--method {method}): {instead[0]}{instead[1]}")
     elif carried:
         run, _, missing = lacking[0]
         warnings.append(f"the runs' reference r is not used: {len(names)} inputs need the references "
-                        f"{', '.join(names)}, and run {run.run_id} lacks {', '.join(missing)}; the FRM is taken from "
-                        "the inputs as if they were noise-free")
+                        f"{', '.join(names)}, and run {run.run_id} lacks {', '.join(missing)}; {instead[0]}")
     return False
 
 

@@ -134,6 +134,18 @@ class Run:
         return out
 
 
+def reference_names(n_inputs: int) -> tuple[str, ...]:
+    """The references of a run with ``n_inputs`` inputs, one per input: ``r``, then the channels
+    ``r2`` .. ``r<n_u>`` (as the inputs are ``u``, ``u2``, ...)."""
+    return ("r",) + tuple(f"r{index}" for index in range(2, n_inputs + 1))
+
+
+def missing_references(run: Run) -> list[str]:
+    """The references of :func:`reference_names` that ``run`` does not carry."""
+    return [name for name in reference_names(len(run.inputs))
+            if (run.r if name == "r" else run.channels.get(name)) is None]
+
+
 def _scalar(value: Any) -> Any:
     """Unwrap numpy scalars, 0-d and 1-element arrays and bytes as plain Python values."""
     if isinstance(value, bytes):

@@ -277,7 +277,9 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
     recording : Recording, path, or a recording open for reading (``nlsid.io.recording.open_recording``)
         The measured runs (u, y, and r for closed loops); a file is read run by run.
     method : {"auto", "frf", "io", "reference"}
-        Robust-method variant: known input, noisy input, or projected on the reference r.
+        Robust-method variant: known input, noisy input, or projected on the reference r. For runs
+        with several inputs, ``auto`` and ``reference`` take the FRM from the references (``r``,
+        ``r2``, ...) where every run of a level carries them (``docs/mimo.md``).
     confidence : float
         Probability of the confidence bounds on |G_BLA| and its phase, in (0, 1).
     lpm_lines, lpm_degree : int
@@ -369,5 +371,5 @@ def bla(recording: Recording | str | os.PathLike, method: str = "auto", confiden
         with open_recording(recording, require_y=True, mapping=dict(mapping) if mapping else None) as rec:
             return bla(rec, method, confidence, lpm_lines, lpm_degree, on_run=on_run)
     return BlaResult(levels, lpm_levels, warnings, across_levels(levels), common_units(units_seen), confidence,
-                     source, inputs, mimo.levels(confidence, source),
+                     source, inputs, mimo.levels(confidence, source, method),
                      mimo.lpm_levels(confidence, source, lpm_lines // 2, lpm_degree, method))

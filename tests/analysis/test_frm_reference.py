@@ -1,11 +1,8 @@
 """The FRM of orthogonal multisines from the references, for a 2x2 plant in a closed loop.
 
-The loop is tests/generators/mimo_loop.py's plant (order 3, truth C (zI - A)^-1 B) under its
-diagonal proportional controller u = r - K y, run here sample by sample from rest over transient
-periods into the periodic steady state (closed-loop poles of modulus <= 0.58: after two periods of
-64 samples the transient is below 1e-30). The references r are orthogonal random multisines
-(nlsid's design, Hadamard pairs); the output noise v, coloured by a first-order filter, enters the
-loop, so the controller feeds it into u. The measured u and y carry offsets (DC, not an excited line).
+The data are ``generators.mimo_periodic_loop``: the plant of ``generators.mimo_loop`` (truth
+C (zI - A)^-1 B) under its diagonal controller, driven by orthogonal multisine references, run
+sample by sample into the periodic steady state, coloured output noise fed back, offsets added.
 
 With E = n_u experiments the estimate from the references equals Y U^-1 identically
 (``W = R^-1 (U R^-1)^-1 = U^-1``). With E = 2 n_u the least-squares ``Y U^+`` correlates the output
@@ -17,44 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import signal, stats
+from scipy import stats
 
-from generators.mimo_loop import A, B, C, K, truth
+from generators.mimo_loop import truth
+from generators.mimo_periodic_loop import BINS, N, closed_loop, periods, references
 from nlsid.analysis.frm import frm, frm_reference
 from nlsid.errors import InputError
-from nlsid.signals.orthogonal_multisine import orthogonal_multisine
-
-N, BINS, P, TRANSIENT = 64, np.arange(1, 32), 2, 2
-
-
-def closed_loop(r: np.ndarray, sigma: float, rng) -> tuple[np.ndarray, np.ndarray]:
-    """u, y (..., 2, P, N) of the loop driven by the periods r (..., 2, N), from rest, with
-    TRANSIENT periods dropped; output noise std about ``sigma`` (coloured), offsets added."""
-    drive = np.tile(r, TRANSIENT + P)
-    v = sigma * signal.lfilter([0.8], [1.0, -0.5], rng.standard_normal(drive.shape), axis=-1)
-    x = np.zeros(drive.shape[:-2] + (3,))
-    u, y = np.empty_like(drive), np.empty_like(drive)
-    for k in range(drive.shape[-1]):
-        y[..., k] = x @ C.T + v[..., k]
-        u[..., k] = drive[..., k] - y[..., k] @ K.T
-        x = x @ A.T + u[..., k] @ B.T
-
-    def steady(signal_):
-        return signal_[..., TRANSIENT * N:].reshape(signal_.shape[:-1] + (P, N))
-
-    return steady(u) + 0.3, steady(y) - 0.2
-
-
-def references(rng, shape: tuple[int, ...], designs: int) -> np.ndarray:
-    """``shape`` x realizations of ``designs`` orthogonal pairs as experiments: (..., 2 designs, 2, N)."""
-    count = int(np.prod(shape))
-    r = np.array([np.concatenate([orthogonal_multisine(N, BINS, 2, rng=rng).signals() for _ in range(designs)])
-                  for _ in range(count)])
-    return r.reshape(shape + r.shape[1:])
-
-
-def periods(r: np.ndarray) -> np.ndarray:
-    return np.broadcast_to(r[..., None, :], r.shape[:-1] + (P, N))
 
 
 def test_noise_free_equals_the_truth():
