@@ -12,6 +12,12 @@ The runs of a level must share their inputs and outputs (names, in order), sampl
 excited bins and number of steady-state periods, and every realization must hold as many
 experiments: anything else is one InputError naming the run and what differs.
 
+Where every multisine run of a level carries one reference per input
+(:func:`nlsid.io.run.reference_names`), ``bla --method auto`` and ``reference`` take its FRM from
+the references (:func:`nlsid.analysis.frm.frm_reference`, per realization ``(Y R^+) (U R^+)^-1``):
+the same numbers where a realization holds n_u experiments, unbiased in a closed loop where it
+holds more (``docs/mimo.md``).
+
 Arbitrary runs (kind ``arbitrary``: noise, sweeps, trajectories) with several inputs or outputs
 give the FRM by the Local Polynomial Method for several inputs instead
 (:func:`nlsid.analysis.lpm_mimo.lpm_mimo`, book Section 7.2; :class:`LpmFrmLevel`): the runs of a
