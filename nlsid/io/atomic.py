@@ -104,6 +104,32 @@ def atomic_path(path: str | os.PathLike, force: bool = False) -> Iterator[Path]:
             tmp_path.unlink()
 
 
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike, force: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder beside ``path`` (checked by :func:`check_output_folder`); on success
+    it replaces ``path`` by renames (an existing folder is moved aside first and removed after), so
+    a reader sees the old folder or the new one, never a half-written one. On any exception the
+    temporary folder is removed and the target is left untouched."""
+    import shutil
+
+    target = check_output_folder(path, force)
+    parent = target.absolute().parent
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o755)  # mkdtemp makes 0700; a result folder is readable by all
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
 def write_text_atomic(path: str | os.PathLike, text: str, force: bool = False) -> Path:
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path, force) as tmp:

@@ -31,14 +31,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from nlsid.errors import InputError
-from nlsid.io.atomic import check_output_folder
+from nlsid.io.atomic import atomic_folder
 from nlsid.io.result_file import datasets, json_safe, put
 
 FORMAT = "diagnosis"
@@ -87,10 +85,7 @@ def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, exte
                     provenance: dict, force: bool = False, others: dict[str, str] | None = None) -> Path:
     """Write the folder of the module docstring atomically; refuse an existing one unless ``force``.
     ``others``: further model files (file name -> YAML text) beside ``extended_model.yaml``."""
-    target = check_output_folder(folder, force)
-    parent = target.absolute().parent
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
-    try:
+    with atomic_folder(folder, force) as tmp:
         models = {**({EXTENDED: extended} if extended is not None else {}), **(others or {})}
         files = [SUMMARY, RESULTS, *models]
         _write_results(tmp / RESULTS, arrays)
@@ -99,18 +94,7 @@ def write_diagnosis(folder: str | os.PathLike, summary: dict, arrays: dict, exte
         document = {"nlsid_format": FORMAT, "nlsid_format_version": FORMAT_VERSION, "provenance": provenance,
                     **summary, "files": files}
         (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n", encoding="utf-8")
-        os.chmod(tmp, 0o755)
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
-            os.replace(target, old / target.name)
-            os.replace(tmp, target)
-            shutil.rmtree(old)
-        else:
-            os.replace(tmp, target)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-    return target
+    return Path(folder)
 
 
 def _read_group(group) -> dict:

@@ -14,8 +14,6 @@ from __future__ import annotations
 import inspect
 import json
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -90,7 +88,7 @@ class MimoDiagnosisResult:
     def write(self, folder: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
         """Write the folder (``summary.json``, ``extended_model.yaml`` where a cause was added)
         atomically; an existing folder only with ``force``."""
-        from nlsid.io.atomic import check_output_folder
+        from nlsid.io.atomic import atomic_folder
         from nlsid.io.diagnosis_file import FORMAT, FORMAT_VERSION
         from nlsid.io.provenance import provenance as make_provenance
         from nlsid.io.result_file import json_safe
@@ -99,10 +97,7 @@ class MimoDiagnosisResult:
                   else make_provenance(config_paths=self.configs, input_paths=self.inputs))
         if self.allow_overlap:
             record = {**record, "allow_overlap": True}
-        target = check_output_folder(folder, force)
-        parent = target.absolute().parent
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=parent))
-        try:
+        with atomic_folder(folder, force) as tmp:
             extended = self.extended_text
             if extended is not None:
                 (tmp / EXTENDED).write_text(extended, encoding="utf-8")
@@ -110,18 +105,7 @@ class MimoDiagnosisResult:
                         **self.summary(), "files": [SUMMARY, *([EXTENDED] if extended is not None else [])]}
             (tmp / SUMMARY).write_text(json.dumps(json_safe(document), indent=2, sort_keys=True) + "\n",
                                        encoding="utf-8")
-            os.chmod(tmp, 0o755)
-            if target.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=parent))
-                os.replace(target, old / target.name)
-                os.replace(tmp, target)
-                shutil.rmtree(old)
-            else:
-                os.replace(tmp, target)
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp)
-        return target
+        return Path(folder)
 
     def __repr__(self) -> str:
         return f"MimoDiagnosisResult(status={self.status!r})"
