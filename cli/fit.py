@@ -193,23 +193,23 @@ def _fit_frm(bla_file, order, domain, delay, max_order, levels, plot, output, fo
     if str(delay) != "0":
         raise InputError("--delay", "a state-space model of several inputs or outputs has no dead time here: leave "
                                     "--delay at 0")
-    if plot:
-        raise InputError("--plot", "no figure of a fit of several inputs or outputs yet: leave --plot out")
     paths = level_paths(output, levels)
-    for path in paths:
-        check_writable(path, force)
-        check_writable(report_path(path), force)
+    plots = level_paths(plot, levels) if plot else [None] * len(paths)
+    for path, figure in zip(paths, plots):
+        for target in (path, report_path(path)) + ((figure,) if figure else ()):
+            check_writable(target, force)
     results = [fit_frm_level(bla_file, order, domain, index, max_order, names=FLAGS) for index in levels]
-    for path, result in zip(paths, results):
-        result.write(path, force=force, provenance=provenance(input_paths=[bla_file]))
+    for path, figure, result in zip(paths, plots, results):
+        result.write(path, force=force, provenance=provenance(input_paths=[bla_file]), plot=figure)
     console = settings().console
     for result in results:
         for warning in result.warnings:
             console.print(f"warning: level {result.level['index']}: {warning}" if len(results) > 1
                           else f"warning: {warning}", markup=False)
     if as_json:
-        entries = [{"output": str(path), "report": str(report_path(path)), **result.summary()}
-                   for path, result in zip(paths, results)]
+        entries = [{"output": str(path), "report": str(report_path(path)),
+                    "plot": None if figure is None else str(figure), **result.summary()}
+                   for path, figure, result in zip(paths, plots, results)]
         emit_json(entries[0] if len(entries) == 1 else {"levels": entries})
         return
     for path, result in zip(paths, results):

@@ -42,9 +42,14 @@ def std_curves(stored: dict) -> list[tuple[np.ndarray, str, str, str]]:
             (stored["std_noise"], ":", "tab:green", "std noise")]
 
 
-def frm_figure(stored: dict, units: Units, name: str):
+def frm_figure(stored: dict, units: Units, name: str, model: np.ndarray | None = None):
     """The n_y x n_u Bode plots of one FRM level, of multisine or of arbitrary runs (module
-    docstring); ``name`` titles the figure."""
+    docstring); ``name`` titles the figure.
+
+    ``model`` (F, n_y, n_u), a fitted model's FRM at the level's lines (``nlsid fit --plot``), adds
+    per entry the model's magnitude and phase and the residual ``|G_model - G|`` in the magnitude
+    panel, where it stands against the standard deviations: a model within its cost bound leaves a
+    residual at or below the standard deviation of the estimate."""
     attrs = stored["attrs"]
     inputs, outputs = list(attrs["inputs"]), list(attrs["outputs"])
     n_y, n_u = len(outputs), len(inputs)
@@ -56,6 +61,10 @@ def frm_figure(stored: dict, units: Units, name: str):
         for a in range(n_u):
             magnitude, phase = axes[2 * i * n_u + a], axes[(2 * i + 1) * n_u + a]
             magnitude.plot(f, power_db(np.abs(G[:, i, a]) ** 2), color="k", label="|G|")
+            if model is not None:
+                magnitude.plot(f, power_db(np.abs(model[:, i, a]) ** 2), color="tab:blue", label="|G model|")
+                magnitude.plot(f, power_db(np.abs(model[:, i, a] - G[:, i, a]) ** 2), "-.", color="tab:orange",
+                               label="|G model - G|")
             band(magnitude, f, power_db(bounds["mag_lo"][:, i, a] ** 2), power_db(bounds["mag_hi"][:, i, a] ** 2),
                  f"{probability:.0%} bounds", color="k", alpha=0.15)
             for std, style, colour, label in std_curves(stored):
@@ -65,6 +74,8 @@ def frm_figure(stored: dict, units: Units, name: str):
             magnitude.set_ylabel(f"{entry}: |G|, std ({units.ratio_db(outputs[i], inputs[a])})")
             magnitude.set_title(entry_title(inputs, outputs, i, a), fontsize=9)
             phase.plot(*wrapped_phase(f, G[:, i, a]), color="k", label="phase of G")
+            if model is not None:
+                phase.plot(*wrapped_phase(f, model[:, i, a]), color="tab:blue", label="phase of G model")
             band(phase, *wrapped_band(f, G[:, i, a], bounds["phase_lo"][:, i, a], bounds["phase_hi"][:, i, a]),
                  f"{probability:.0%} bounds", color="k", alpha=0.15)
             phase_axis(phase)

@@ -197,6 +197,8 @@ class MimoStateSpaceFit:
         Complex degrees of freedom of the weights' covariance (None: unit weights).
     lines : int
         F, the lines fitted.
+    stored : dict or None
+        The level as :func:`nlsid.io.bla_file.read_bla` returns it (what :meth:`png` draws).
     """
 
     fitted: MimoFit
@@ -208,6 +210,7 @@ class MimoStateSpaceFit:
     warnings: list[str] = field(default_factory=list)
     covariance_dof: float | None = None
     lines: int = 0
+    stored: dict | None = None
 
     @property
     def order(self) -> int:
@@ -254,12 +257,45 @@ class MimoStateSpaceFit:
                 f"order: {self.fitted.reason}",
                 f"report: {report_name}"]
 
-    def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None) -> Path:
-        """Write the model config ``path`` (YAML) and the fit report ``<name>.fit.json`` beside it, as
-        ``nlsid fit`` does; existing files only with ``force``. Returns ``path``."""
+    def figure(self):
+        """The figure of ``nlsid fit --plot`` (a matplotlib Figure): the level's n_y x n_u Bode plots
+        with their bounds and standard deviations (:func:`nlsid.report.frm_plots.frm_figure`), the
+        model's FRM over them and the residual |G_model - G| per entry."""
+        from nlsid.report.frm_plots import frm_figure
+        from nlsid.report.units import units_of
+        from nlsid.report.vector import fit_labels
+
+        if self.stored is None:
+            raise InputError("plot", "the fit holds no level to draw (it was not made by fit_frm_level)")
+        model = self.fitted.frequency_response(np.asarray(self.stored["frequency"], dtype=float))
+        name = (f"{self.source}, level {self.level['index']}, {self.order}-state "
+                f"{'continuous' if self.fitted.domain == 's' else 'discrete'} model")
+        figure = frm_figure(self.stored, units_of(self.stored["attrs"].get("units")), name, model=model)
+        fit_labels(figure)
+        return figure
+
+    def png(self) -> bytes:
+        """The figure of :meth:`figure` as PNG bytes (what ``nlsid fit --plot`` writes)."""
+        import io
+
+        buffer = io.BytesIO()
+        self.figure().savefig(buffer, format="png", dpi=110)  # the resolution of the single-input figures
+        return buffer.getvalue()
+
+    def write(self, path: str | os.PathLike, force: bool = False, provenance: dict | None = None,
+              plot: str | os.PathLike | None = None) -> Path:
+        """Write the model config ``path`` (YAML) and the fit report ``<name>.fit.json`` beside it, and
+        with ``plot`` the figure of :meth:`png` (PNG), as ``nlsid fit`` does; existing files only
+        with ``force``. Returns ``path``."""
+        from nlsid.io.atomic import atomic_path, check_writable
         from nlsid.io.fit_file import report_path, write_fit
         from nlsid.io.provenance import provenance as make_provenance
 
+        if plot:
+            check_writable(str(plot), force)
+            png = self.png()
+            with atomic_path(plot, force) as tmp:
+                tmp.write_bytes(png)
         record = provenance if provenance is not None else make_provenance(input_paths=self.files)
         write_fit(path, self.config(), self.header(report_path(path).name), self.report(), record, force=force)
         return Path(path)
@@ -330,4 +366,4 @@ def fit_frm_level(b: str | os.PathLike, order="auto", domain: str = "z", level: 
     level_value = None if value is None or not math.isfinite(float(value)) else float(value)
     return MimoStateSpaceFit(fitted, str(b), list(attrs["inputs"]), list(attrs["outputs"]),
                              {"index": index, "level": level_value}, [str(b)], warnings + fitted.warnings,
-                             covariance_dof=data.dof if data.dof else None, lines=data.lines)
+                             covariance_dof=data.dof if data.dof else None, lines=data.lines, stored=chosen)

@@ -109,7 +109,9 @@ def test_fit_of_an_frm_level_refuses_what_it_cannot_do(tmp_path, run_cli):
     out = tmp_path / "model.yaml"
     run_cli("fit", bla, "--order", "2/2", "-o", out).assert_one_line_error("--order", "number of states")
     run_cli("fit", bla, "--order", "2", "--delay", "3", "-o", out).assert_one_line_error("--delay")
-    run_cli("fit", bla, "--order", "2", "--plot", tmp_path / "f.png", "-o", out).assert_one_line_error("--plot")
+    (tmp_path / "f.png").write_bytes(b"kept")
+    run_cli("fit", bla, "--order", "2", "--plot", tmp_path / "f.png", "-o", out).assert_one_line_error("f.png", "--force")
+    assert (tmp_path / "f.png").read_bytes() == b"kept"
     run_cli("fit", bla, "--order", "2", "--level", "1", "-o", out).assert_one_line_error("--level", "0..0")
     assert not out.exists() and not (tmp_path / "model.fit.json").exists()
 
@@ -206,3 +208,30 @@ def test_every_level_fitted_where_the_file_holds_several(tmp_path, run_cli):
     # --level names one of them: that one alone, at -o
     result = run_cli("fit", bla, "--order", "2", "--level", "1", "-o", tmp_path / "one.yaml", "--json")
     assert result.exit_code == 0 and result.json()["level"]["index"] == 1 and (tmp_path / "one.yaml").exists()
+
+
+def test_fit_plot_draws_the_model_over_the_frm(tmp_path, run_cli):
+    """``--plot``: the PNG beside the model, its model curves those of the written config sampled by
+    scipy's ZOH (independent of the fit's resolvent), its residual |G_model - G| per entry."""
+    from nlsid.report.vector import columns
+    from nlsid.stages.frm_fit import fit_frm_level
+
+    bla = tmp_path / "bla.h5"
+    write_frm_file(bla, np.random.default_rng(9))
+    out, png = tmp_path / "model.yaml", tmp_path / "fit.png"
+    result = run_cli("fit", bla, "--order", "2", "--domain", "s", "--plot", png, "-o", out, "--json")
+    assert result.exit_code == 0, result.stderr
+    assert result.json()["plot"] == str(png) and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    model = yaml.safe_load(out.read_text())["model"]
+    f = BINS * FS / PERIOD
+    G_model = zoh_frm(*(np.array(model[k], dtype=float) for k in "ABCD"), f)
+    fitted = fit_frm_level(bla, 2, "s")
+    G = np.asarray(fitted.stored["G"])
+    drawn = dict(columns(fitted.figure()))
+    for i, output in enumerate(["y", "acc"]):
+        for a, input_ in enumerate(["u", "u2"]):
+            head = f"{input_} to {output}: |G|, std"
+            model_db = next(v for k, v in drawn.items() if k.startswith("|G model|: ") and head in k)
+            residual_db = next(v for k, v in drawn.items() if k.startswith("|G model - G|: ") and head in k)
+            assert np.allclose(model_db, 20 * np.log10(np.abs(G_model[:, i, a])), atol=1e-6)
+            assert np.allclose(residual_db, 20 * np.log10(np.abs(G_model[:, i, a] - G[:, i, a])), atol=1e-6)
