@@ -1,4 +1,5 @@
-"""The diagnosis of a linear model of several inputs and outputs (``mimo_state_space``), one output at a time.
+"""The diagnosis of a linear model of several inputs and outputs (``mimo_state_space``), one output at a time,
+then one input at a time.
 
 The model is simulated on the measured inputs of every run (:func:`nlsid.simulate.mimo.simulate_mimo`,
 periodic runs in their steady state) and each output i is judged on its own:
@@ -60,11 +61,35 @@ periodic runs in their steady state) and each output i is judged on its own:
    exactly on periodic runs (in their steady state); an arbitrary run's start state is fitted
    again through the block (first order). Its validation error is reported per output.
 
+5. **Static input hypotheses, one input at a time, on every output at once**
+   (:func:`score_input`), where some output's error is significant or has a cause (or the noise
+   is unknown), on each input j without a block: an actuator saturation p_j = min(max(u_j, lower),
+   upper) (``input_saturation``) and the input polynomial p_j = u_j + a2 u_j^2 + a3 u_j^3 (the
+   quadratic and odd cubic terms, ``input_polynomial``) before B. An input block moves every output
+   u_j drives through the dynamics, so it is fitted by output error on all outputs together
+   (:func:`fit_input`: the model simulated with the block, the matrices and other blocks held),
+   minimising the noise-weighted cost
+
+       S = sum_i sum_runs sum_n w (x_i - z_i)^2 / sigma_i^2,
+
+   the Gaussian negative log-likelihood up to constants (sigma_i the output's noise, else its error
+   rms). It is scored on the validation runs by the same F test as an output hypothesis, over all
+   outputs (``gain_db``) and on each output alone (the outputs it is ``gained_on``).
+   **Input or outputs** (:func:`choose_side`): an input saturation distorts every output its input
+   drives, a sensor saturation one. The outputs' named causes together (their parameters summed,
+   S with each output's cause) and each significant input hypothesis are compared on S as the
+   per-output verdict compares its hypotheses: of those whose S is not significantly above the
+   best's (F test of (S - S_best) / dp against S_best / (n - p_best), dp = max(p_best - p, 1),
+   n the validation samples of all outputs) the one of fewest parameters is named. A named input
+   cause replaces the outputs' causes (each output's remainder is what it leaves), and the extended
+   model carries it as the input's ``input_nonlinearity`` block (a saturation, or the piecewise-linear
+   block of one level; the polynomial [0, 1, a2, a3]).
+
 The SISO hypotheses that act inside a mechanical, tank or transfer-function model (friction,
-stiffness, hysteresis, feedback around a transfer function, input blocks, missing resonance,
-wrong mechanics or dynamics, a delay) are not tested: they act inside a model of one input and
-one output (:data:`NOT_TESTED`). The SISO output blocks (quadratic output, output saturation) are
-tested here, per output.
+stiffness, hysteresis, feedback around a transfer function, a deadzone or backlash at the input,
+missing resonance, wrong mechanics or dynamics, a delay) are not tested: they act inside a model of
+one input and one output (:data:`NOT_TESTED`). The SISO output blocks (quadratic output, output
+saturation) are tested here, per output; the input saturation and actuator polynomial per input.
 """
 
 from __future__ import annotations
@@ -81,6 +106,8 @@ from nlsid.io.run import Run
 
 #: The SISO hypotheses tested here on each output, under the per-output names.
 TESTED_PER_OUTPUT = {"quadratic_output": "output_polynomial", "output_saturation": "output_saturation"}
+#: The SISO hypotheses tested here on each input, fitted on every output at once, under their names here.
+TESTED_PER_INPUT = {"input_saturation": "input_saturation", "actuator_polynomial": "input_polynomial"}
 #: Why the library's other hypotheses are not tested on a mimo_state_space model.
 NOT_TESTED = ("a single-input single-output hypothesis: it acts inside a mechanical, tank or transfer-function "
               "model (a force, the input u, the dynamics between one input and one output), which a "
@@ -235,10 +262,11 @@ class OutputDiagnosis:
     remainder_above_noise_db: float = math.nan
     remainder_significant: bool = False
     unit: str = ""
+    input_cause: "InputScore | None" = None
 
     @property
     def status(self) -> str:
-        if self.cause is not None:
+        if self.cause is not None or self.input_cause is not None:
             return "partly_explained" if self.remainder_significant else "explained"
         if not math.isfinite(self.noise):
             return "undetermined"
@@ -250,6 +278,12 @@ class OutputDiagnosis:
             rest = (f"; {self.remainder_above_noise_db:.1f} dB above the noise left"
                     if self.remainder_significant else "")
             return f"output {self.name}: {self.cause.describe(self.unit)}, {self.cause.gain_db:.1f} dB gained{rest}"
+        if self.input_cause is not None:
+            rest = (f"; {self.remainder_above_noise_db:.1f} dB above the noise left"
+                    if self.remainder_significant else "")
+            gained = self.input_cause.outputs[self.name]["gain_db"]
+            return (f"output {self.name}: the input {self.input_cause.input}'s {self.input_cause.describe()}, "
+                    f"{gained:.1f} dB gained{rest}")
         if not math.isfinite(self.noise):
             return f"output {self.name}: noise unknown (no run of two periods), no hypothesis significant"
         size = f"{self.above_noise_db:+.1f} dB against the noise (p = {self.p_value:.2g})"
@@ -264,6 +298,7 @@ class OutputDiagnosis:
                           else {**self.cause.summary(), "description": self.cause.describe(self.unit)}),
                 "remainder_above_noise_db": self.remainder_above_noise_db,
                 "remainder_significant": self.remainder_significant,
+                "input_cause": None if self.input_cause is None else self.input_cause.input,
                 "hypotheses": [s.summary() for s in self.scores]}
 
 
@@ -290,6 +325,10 @@ class MimoDiagnosis:
     estimation: list[str]
     validation: list[str]
     extended: "ExtendedModel | None" = None
+    input_scores: list[InputScore] = field(default_factory=list)
+    input_cause: InputScore | None = None
+    side: dict = field(default_factory=dict)
+    input_notes: list[str] = field(default_factory=list)
 
     @property
     def status(self) -> str:
@@ -298,16 +337,27 @@ class MimoDiagnosis:
     def headline(self) -> str:
         """Each output with a named cause or a significant error (:meth:`OutputDiagnosis.statement`),
         else the verdict in words."""
-        named = [o for o in self.outputs if o.cause is not None or o.significant]
-        if named:  # each output with a cause or a significant error, in the model's order
-            return "; ".join(o.statement() for o in named)
+        named = [o for o in self.outputs if o.cause is not None or o.significant and o.input_cause is None
+                 or o.remainder_significant]
+        first = [] if self.input_cause is None else [self.input_cause.statement()]
+        if named or first:  # the input cause, then each output with a cause or a significant error
+            return "; ".join([*first, *(o.statement() for o in named)])
         if self.status == "undetermined":
             return "No noise level to judge the error by (no run of two periods), and no output hypothesis significant"
         return "No significant discrepancy on any output"
 
     def lines(self) -> list[str]:
         """What the terminal shows under the headline: each output, the FRM, what is not tested."""
-        out = [o.statement() for o in self.outputs]
+        out = [] if self.input_cause is None else [self.input_cause.statement()]
+        out += [o.statement() for o in self.outputs]
+        out += [f"input {s.input}: {s.describe()}: {s.gain_db:.1f} dB over all outputs (p = {s.p_value:.2g}"
+                f"{', significant' if s.significant else ''})" for s in self.input_scores]
+        out += self.input_notes
+        if self.side.get("candidates"):
+            words = ", ".join(f"{c['name']} ({c['parameters']} parameters, weighted error {c['weighted_sse']:.4g})"
+                              for c in self.side["candidates"])
+            out.append(f"input or output causes: compared {words} on {self.side['samples']} samples: "
+                       f"{self.side['chosen']} chosen")
         out += [f"FRM entry {e['output']} <- {e['input']} ({e['level']}): {100 * e['outside']:.0f} % of "
                 f"{e['lines']} lines outside the data's 95 % circles" for e in self.frm]
         if self.frm_note:
@@ -316,6 +366,8 @@ class MimoDiagnosis:
             out += self.extended.lines()
         tested = ", ".join(f"{siso} as {mine}" for siso, mine in TESTED_PER_OUTPUT.items())
         out.append(f"tested on each output: {tested}, with output_offset and output_gain")
+        out.append("tested on each input without a block, on all outputs at once: "
+                   + ", ".join(f"{siso} as {mine}" for siso, mine in TESTED_PER_INPUT.items()))
         for reason in dict.fromkeys(item["reason"] for item in self.not_tested):
             names = ", ".join(item["hypothesis"] for item in self.not_tested if item["reason"] == reason)
             out.append(f"not tested: {names}: {reason}")
@@ -327,6 +379,9 @@ class MimoDiagnosis:
         return {"kind": "mimo", "headline": self.headline(), "findings": self.lines(),
                 "verdict": {"status": self.status}, "model_source": self.model_source,
                 "inputs": list(self.inputs), "outputs": [o.summary() for o in self.outputs],
+                "input_hypotheses": [s.summary() for s in self.input_scores],
+                "input_cause": None if self.input_cause is None else self.input_cause.summary(),
+                "cause_comparison": dict(self.side), "input_notes": list(self.input_notes),
                 "frm": list(self.frm), "frm_note": self.frm_note, "not_tested": list(self.not_tested),
                 "split": {"estimation": list(self.estimation), "validation": list(self.validation)},
                 "evidence": {"error_above_noise": {
@@ -336,7 +391,8 @@ class MimoDiagnosis:
                 "extended_model": None if self.extended is None else self.extended.summary(),
                 "models": [] if self.extended is None or self.extended.config is None else [
                     {"file": EXTENDED, "kind": "extended",
-                     "outputs": [o["name"] for o in self.extended.outputs if o["block"] is not None]}]}
+                     "outputs": [o["name"] for o in self.extended.outputs if o["block"] is not None],
+                     **({"inputs": [o["name"] for o in self.extended.inputs]} if self.extended.inputs else {})}]}
 
 
 EXTENDED = "extended_model.yaml"  # the file of the extended model in the diagnosis folder
@@ -353,7 +409,12 @@ def cause_block(score: HypothesisScore) -> dict | None:
         return {"type": "polynomial", "coefficients": [0.0, v["gain"]]}
     if name == "output_polynomial":
         return {"type": "polynomial", "coefficients": [v["offset"], v["gain"], v["a2"], v["a3"]]}
-    lower, upper = v["lower"], v["upper"]
+    return saturation_block(v["lower"], v["upper"])
+
+
+def saturation_block(lower: float, upper: float) -> dict | None:
+    """The block of z = min(max(x, lower), upper) (module docstring, 4.): a saturation of two
+    finite levels, a piecewise-linear block of one, None of none."""
     if math.isfinite(lower) and math.isfinite(upper):
         return {"type": "saturation", "lower": lower, "upper": upper}
     if math.isfinite(upper):  # slope 1 below the level, 0 above: the end segments continue the line
@@ -404,6 +465,7 @@ class ExtendedModel:
 
     config: dict | None
     outputs: list[dict]
+    inputs: list[dict] = field(default_factory=list)
 
     def header(self, source: str, statements: Sequence[str]) -> list[str]:
         """The YAML's header comment: what it extends and the named causes."""
@@ -411,20 +473,24 @@ class ExtendedModel:
 
     def lines(self) -> list[str]:
         """The terminal's line naming the file and the causes left out, with why."""
-        added = [o["name"] for o in self.outputs if o["block"] is not None]
-        out = [f"extended model: {EXTENDED} (output_nonlinearity of {', '.join(added)})"] if added else []
+        added = [f"output_nonlinearity of {o['name']}" for o in self.outputs if o["block"] is not None]
+        added += [f"input_nonlinearity of {o['name']}" for o in self.inputs]
+        out = [f"extended model: {EXTENDED} ({', '.join(added)})"] if added else []
         out += [f"output {o['name']}: cause not added to the extended model: {o['reason']}"
                 for o in self.outputs if o["reason"]]
         return out
 
     def summary(self) -> dict:
-        return {"file": EXTENDED if self.config is not None else None, "outputs": [dict(o) for o in self.outputs]}
+        return {"file": EXTENDED if self.config is not None else None, "outputs": [dict(o) for o in self.outputs],
+                "inputs": [dict(o) for o in self.inputs]}
 
 
-def extended_config(config_data: dict, outputs: Sequence[OutputDiagnosis]) -> tuple[dict | None, list[dict]]:
+def extended_config(config_data: dict, outputs: Sequence[OutputDiagnosis],
+                    input_cause: "InputScore | None" = None) -> tuple[dict | None, list[dict], list[dict]]:
     """The config with each output's named cause as its ``output_nonlinearity`` block (module
-    docstring, 4.), without ``free``; None where no cause was added. Also, per output with a
-    cause: ``name``, ``block`` (None where not added) and ``reason``."""
+    docstring, 4.) and an input cause as its input's ``input_nonlinearity`` block (5.), without
+    ``free``; None where no cause was added. Also, per output with a cause: ``name``, ``block``
+    (None where not added) and ``reason``; per input cause: ``name`` and ``block``."""
     from nlsid.models.key_paths import deep_copy
 
     data = {key: deep_copy(value) for key, value in config_data.items() if key != "free"}
@@ -439,7 +505,18 @@ def extended_config(config_data: dict, outputs: Sequence[OutputDiagnosis]) -> tu
         if block is not None:
             blocks[o.name] = block
         added.append({"name": o.name, "block": block, "reason": why})
-    return (data if any(a["block"] is not None for a in added) else None), added
+    inputs = []
+    if input_cause is not None:
+        v = input_cause.values
+        block = (saturation_block(v["lower"], v["upper"]) if input_cause.hypothesis == "input_saturation"
+                 else {"type": "polynomial", "coefficients": [0.0, 1.0, v["a2"], v["a3"]]})
+        if block is not None:  # the input had no block: its hypotheses are tested only there
+            data["model"]["input_nonlinearity"] = {**(data["model"].get("input_nonlinearity") or {}),
+                                                   input_cause.input: block}
+            inputs.append({"name": input_cause.input, "block": block})
+    if not blocks:
+        del data["model"]["output_nonlinearity"]
+    return (data if inputs or any(a["block"] is not None for a in added) else None), added, inputs
 
 
 def compared(model, runs: Sequence[Run]) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -563,6 +640,183 @@ def frm_comparison(model, runs: Sequence[Run], where: str) -> tuple[list[dict], 
     return out, ""
 
 
+INPUT_HYPOTHESES = {
+    "input_saturation": ("Actuator saturation (input range)", ("lower", "upper")),
+    "input_polynomial": ("Input polynomial (quadratic and odd cubic)", ("a2", "a3")),
+}
+
+
+@dataclass
+class InputScore:
+    """A static block h on one input, fitted on every output at once (module docstring, 5.): its
+    values, its noise-weighted validation errors over all outputs (``sse_before``, ``sse_after``,
+    sum_i SSE_i / sigma_i^2), per output the dB gained, the F test of the reduction."""
+
+    input: str
+    hypothesis: str
+    values: dict
+    sse_before: float
+    sse_after: float
+    samples: int
+    gain_db: float
+    p_value: float
+    significant: bool
+    outputs: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return INPUT_HYPOTHESES[self.hypothesis][1]
+
+    def gained_on(self) -> list[str]:
+        """The outputs whose own error it lowers significantly (F test of its parameters, p < ALPHA)."""
+        return [name for name, o in self.outputs.items() if o["significant"]]
+
+    def describe(self) -> str:
+        """E.g. ``actuator saturation at -0.8 and 0.8``."""
+        v = self.values
+        if self.hypothesis == "input_saturation":
+            sides = [f"{v[side]:.4g}" for side in ("lower", "upper") if math.isfinite(v[side])]
+            return f"actuator saturation at {' and '.join(sides) or 'no level (nothing clipped)'}"
+        return f"input polynomial u + {v['a2']:.3g} u^2 + {v['a3']:.3g} u^3"
+
+    def statement(self) -> str:
+        """``input u2: actuator saturation at -0.8 and 0.8, 15.0 dB gained on y, y2``."""
+        on = ", ".join(self.gained_on()) or "no output alone"
+        return f"input {self.input}: {self.describe()}, {self.gain_db:.1f} dB gained on {on}"
+
+    def summary(self) -> dict:
+        return {"input": self.input, "hypothesis": self.hypothesis, "title": INPUT_HYPOTHESES[self.hypothesis][0],
+                "values": dict(self.values), "validation_weighted_sse_before": self.sse_before,
+                "validation_weighted_sse_after": self.sse_after, "samples": self.samples, "gain_db": self.gain_db,
+                "p_value": self.p_value, "significant": self.significant, "description": self.describe(),
+                "outputs": {name: dict(o) for name, o in self.outputs.items()}}
+
+
+def input_block(hypothesis: str, values: dict):
+    """The :class:`~nlsid.models.blocks.StaticBlock` of an input hypothesis: the saturation
+    p = min(max(u, lower), upper), or the polynomial p = u + a2 u^2 + a3 u^3."""
+    from nlsid.models.blocks import POLYNOMIAL, SATURATION, StaticBlock
+
+    if hypothesis == "input_saturation":
+        return StaticBlock(SATURATION, np.array([values["lower"], values["upper"]], dtype=float))
+    return StaticBlock(POLYNOMIAL, np.array([0.0, 1.0, values["a2"], values["a3"]]))
+
+
+def with_input_block(model, name: str, hypothesis: str, values: dict):
+    """The model with the block of an input hypothesis on input ``name``."""
+    import dataclasses
+
+    return dataclasses.replace(model, input_blocks={**model.input_blocks, name: input_block(hypothesis, values)})
+
+
+def _weighted_errors(pairs, scales: np.ndarray) -> np.ndarray:
+    """The residuals sqrt(w) (x_i - z_i) / sigma_i of every run and output, stacked."""
+    return np.concatenate([(np.sqrt(w) * (x - z) / scales[:, None]).ravel() for x, z, w in pairs])
+
+
+def _steady_input(model, runs: Sequence[Run], j: int) -> np.ndarray:
+    from nlsid.io.ranges import record
+
+    return np.concatenate([record(run).named_signal(model.inputs[j]) for run in runs])
+
+
+def fit_input(model, j: int, hypothesis: str, estimation: Sequence[Run], scales: np.ndarray) -> dict:
+    """Fit an input hypothesis on input j by output error on every output at once, the matrices and
+    other blocks held: least squares of the noise-weighted residuals (trust region within bounds).
+    The saturation starts from the best of the symmetric quantile levels of the input (60 % to
+    99 %), as its cost is flat where nothing is clipped; the polynomial from zero."""
+    from scipy.optimize import least_squares
+
+    name = model.inputs[j]
+    keys = INPUT_HYPOTHESES[hypothesis][1]
+
+    def residuals(theta):
+        values = dict(zip(keys, (float(t) for t in theta)))
+        if hypothesis == "input_saturation" and values["lower"] >= values["upper"]:
+            values["lower"] = values["upper"] - 1e-9  # the cost stays defined at the bound
+        return _weighted_errors(compared(with_input_block(model, name, hypothesis, values), estimation), scales)
+
+    u = _steady_input(model, estimation, j)
+    if hypothesis == "input_polynomial":
+        span = float(np.max(np.abs(u))) or 1.0
+        fit = least_squares(residuals, np.zeros(2), x_scale=np.array([1 / span, 1 / span ** 2]))
+        return dict(zip(keys, (float(t) for t in fit.x)))
+    starts = [np.array([np.quantile(u, 1 - q), np.quantile(u, q)]) for q in (0.6, 0.75, 0.9, 0.99)]
+    start = min(starts, key=lambda t: float(np.sum(residuals(t) ** 2)))
+    span = float(np.ptp(u)) or 1.0
+    fit = least_squares(residuals, start, bounds=([u.min() - span, u.min()], [u.max(), u.max() + span]),
+                        x_scale=span / 10, diff_step=1e-4)
+    lower, upper = (float(t) for t in fit.x)
+    return {"lower": lower if lower > u.min() else -math.inf, "upper": upper if upper < u.max() else math.inf}
+
+
+def score_input(model, j: int, hypothesis: str, estimation: Sequence[Run], validation: Sequence[Run],
+                before: Sequence[tuple[np.ndarray, np.ndarray, float]], scales: np.ndarray) -> InputScore:
+    """Fit an input hypothesis on the estimation runs, score it on the validation ones over all
+    outputs (module docstring, 5.) and on each output alone."""
+    from scipy import stats
+
+    values = fit_input(model, j, hypothesis, estimation, scales)
+    after = compared(with_input_block(model, model.inputs[j], hypothesis, values), validation)
+    p = len(INPUT_HYPOTHESES[hypothesis][1])
+
+    def test(s0: float, s1: float, n: int) -> tuple[float, float]:
+        gain = 10 * math.log10(s0 / s1) if s0 > 0 and s1 > 0 else 0.0
+        if s1 > 0 and n > p and s0 > s1:
+            return gain, float(stats.f.sf(((s0 - s1) / p) / (s1 / (n - p)), p, n - p))
+        return gain, 1.0
+
+    per_output = {}
+    for i, name in enumerate(model.outputs):
+        s0, s1 = samples_of(before, i).sse(), samples_of(after, i).sse()
+        n_i = samples_of(before, i).x.size
+        gain, p_value = test(s0, s1, n_i)
+        per_output[name] = {"gain_db": gain, "p_value": p_value, "significant": p_value < ALPHA,
+                            "sse_after": s1}
+    s0 = float(np.sum(_weighted_errors(before, scales) ** 2))
+    s1 = float(np.sum(_weighted_errors(after, scales) ** 2))
+    n = sum(x.size for x, _, _ in before)
+    gain, p_value = test(s0, s1, n)
+    return InputScore(model.inputs[j], hypothesis, values, s0, s1, n, gain, p_value, p_value < ALPHA, per_output)
+
+
+def choose_side(outputs: Sequence[OutputDiagnosis], inputs: Sequence[InputScore], scales: np.ndarray,
+                samples: int) -> tuple[InputScore | None, dict]:
+    """Whether an input cause or the outputs' causes explain the data (module docstring, 5.).
+
+    The candidates are each significant input hypothesis (p parameters, its weighted validation
+    error S over all outputs) and the outputs' named causes together (the sum of their parameters,
+    S = sum_i SSE_i / sigma_i^2 with each output's cause, or its error where it has none). Of the
+    candidates not significantly worse than the best (F test of (S - S_best) / dp against
+    S_best / (n - p_best), dp = max(p_best - p, 1)), the one of fewest parameters is chosen.
+    Returns the input cause (None: the outputs' side) and what was compared."""
+    from scipy import stats
+
+    causes = [o for o in outputs if o.cause is not None]
+    candidates: list[tuple[str, int, float, InputScore | None]] = []
+    if causes:
+        s_out = sum((o.cause.sse_after if o.cause is not None else o.scores[0].sse_before) / scales[k] ** 2
+                    for k, o in enumerate(outputs))
+        candidates.append(("outputs " + ", ".join(o.name for o in causes),
+                           sum(len(o.cause.hypothesis.parameters) for o in causes), s_out, None))
+    candidates += [(f"input {s.input} {s.hypothesis}", len(s.parameters), s.sse_after, s)
+                   for s in inputs if s.significant]
+    comparison = {"candidates": [{"name": c[0], "parameters": c[1], "weighted_sse": c[2]} for c in candidates],
+                 "samples": samples, "chosen": None}
+    if not candidates:
+        return None, comparison
+    best = min(candidates, key=lambda c: c[2])
+    close = []
+    for c in candidates:
+        dp = max(best[1] - c[1], 1)
+        dof = max(samples - best[1], 1)
+        if best[2] <= 0 or (c[2] - best[2]) / dp / (best[2] / dof) < float(stats.f.ppf(1 - ALPHA, dp, dof)):
+            close.append(c)
+    chosen = min(close, key=lambda c: (c[1], c[2]))
+    comparison["chosen"] = chosen[0]
+    return chosen[3], comparison
+
+
 def diagnose_mimo(config_data: dict, source: str, estimation: Sequence[Run], validation: Sequence[Run],
                   where: str = "recording", units: dict | None = None) -> MimoDiagnosis:
     """Diagnose a ``mimo_state_space`` model on measured runs, one output at a time (module docstring).
@@ -619,20 +873,41 @@ def diagnose_mimo(config_data: dict, source: str, estimation: Sequence[Run], val
             diagnosis.remainder_above_noise_db = 10 * math.log10(left) if left > 0 else -math.inf
             diagnosis.remainder_significant = bool(stats.f.sf(left, n, dof) < ALPHA)
         outputs.append(diagnosis)
+    scales = np.array([o.noise if math.isfinite(o.noise) and o.noise > 0 else (o.error_rms or 1.0) for o in outputs])
+    input_scores, notes = [], []
+    # an input block moves the outputs: it is sought only where an output's error calls for a cause
+    wanted = any(o.significant or o.cause is not None or not math.isfinite(o.noise) for o in outputs)
+    for j, name in enumerate(model.inputs if wanted else ()):
+        if name in model.input_blocks:
+            notes.append(f"input {name}: its hypotheses not tested: it has a block already (fit --model refits "
+                         "the block's numbers)")
+            continue
+        input_scores += [score_input(model, j, h, estimation, validation, val, scales) for h in INPUT_HYPOTHESES]
+    n_all = sum(x.size for x, _, _ in val)
+    input_cause, side = choose_side(outputs, input_scores, scales, n_all)
+    if input_cause is not None:  # it replaces the outputs' causes, against which it was chosen
+        for k, o in enumerate(outputs):
+            o.cause, o.input_cause = None, input_cause
+            o.remainder_above_noise_db, o.remainder_significant = math.nan, False
+            if o.noise_dof and math.isfinite(o.noise) and o.noise > 0:
+                left = input_cause.outputs[o.name]["sse_after"] / (o.samples * o.noise ** 2)
+                o.remainder_above_noise_db = 10 * math.log10(left) if left > 0 else -math.inf
+                o.remainder_significant = bool(stats.f.sf(left, o.samples, o.noise_dof) < ALPHA)
     extended = None
-    if any(o.cause is not None for o in outputs):
-        data, added = extended_config(config_data, outputs)
+    if input_cause is not None or any(o.cause is not None for o in outputs):
+        data, added, added_inputs = extended_config(config_data, outputs, input_cause)
         if data is not None:  # its validation error per output: the named causes' fitted level
             pairs = compared(build(validate_simulate_config(data, source, {})), validation)
             for entry in added:
                 s_i = samples_of(pairs, list(model.outputs).index(entry["name"]))
                 entry["error_rms"] = math.sqrt(s_i.sse() / float(np.sum(s_i.w))) if s_i.x.size else math.nan
-        extended = ExtendedModel(data, added)
+        extended = ExtendedModel(data, added, added_inputs)
     frm, note = frm_comparison(model, runs, where)
     from nlsid.diagnose.hypotheses import LIBRARY
 
     not_tested = [{"hypothesis": h.name, "title": h.title, "reason": NOT_TESTED}
-                  for h in LIBRARY if h.name not in TESTED_PER_OUTPUT]
+                  for h in LIBRARY if h.name not in TESTED_PER_OUTPUT and h.name not in TESTED_PER_INPUT]
     not_tested.append({"hypothesis": "yardstick", "title": "The black-box yardstick", "reason": NO_YARDSTICK})
     return MimoDiagnosis(source, tuple(model.inputs), outputs, frm, note, not_tested,
-                         [run.run_id for run in estimation], [run.run_id for run in validation], extended)
+                         [run.run_id for run in estimation], [run.run_id for run in validation], extended,
+                         input_scores, input_cause, side, notes)

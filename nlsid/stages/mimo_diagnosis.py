@@ -4,8 +4,8 @@
 model; its :meth:`~MimoDiagnosisInputs.run` diagnoses one output at a time
 (:func:`nlsid.diagnose.mimo.diagnose_mimo`) and gives a :class:`MimoDiagnosisResult`, whose
 :meth:`~MimoDiagnosisResult.write` writes the diagnosis folder: ``summary.json`` and, where a cause
-is named and added, ``extended_model.yaml`` (the user's config with each cause as its output's
-block, :func:`nlsid.diagnose.mimo.extended_config`); no ``results.h5`` and no page arrays
+is named and added, ``extended_model.yaml`` (the user's config with each output cause as its output's
+block, an input cause as its input's, :func:`nlsid.diagnose.mimo.extended_config`); no ``results.h5`` and no page arrays
 (``docs/formats.md``, "The diagnosis of a model of several outputs").
 """
 
@@ -69,7 +69,9 @@ class MimoDiagnosisResult:
         extended = self.diagnosis.extended
         if extended is None or extended.config is None:
             return None
-        statements = [o.statement() for o in self.diagnosis.outputs if o.cause is not None]
+        cause = self.diagnosis.input_cause
+        statements = [*([] if cause is None else [cause.statement()]),
+                      *(o.statement() for o in self.diagnosis.outputs if o.cause is not None)]
         return extended_yaml(extended.config, extended.header(self.diagnosis.model_source, statements))
 
     @property

@@ -112,8 +112,8 @@ def test_the_cli_writes_the_per_output_summary_and_lists_what_is_not_tested(run_
     assert [o["name"] for o in summary["outputs"]] == ["y", "y2"]
     assert summary["outputs"][1]["cause"]["hypothesis"] == "output_saturation"
     reasons = {item["hypothesis"]: item["reason"] for item in summary["not_tested"]}
-    assert "input_saturation" in reasons and "single-input single-output" in reasons["input_saturation"]
-    assert "output_saturation" not in reasons  # tested, on each output
+    assert "backlash" in reasons and "single-input single-output" in reasons["backlash"]
+    assert "output_saturation" not in reasons and "input_saturation" not in reasons  # tested, per output and input
     run_cli("report", tmp_path / "d", "-o", tmp_path / "page.html").assert_one_line_error(
         "summary.json: kind: a diagnosis of a model of several outputs has no page")
     failed = run_cli("diagnose", "--model", tmp_path / "m.yaml", "--data", tmp_path / "rec.h5", "-o", tmp_path / "e",
