@@ -27,6 +27,7 @@ N, P, T = 256, 2, 1
 SIGMA = np.array([0.02, 0.05])
 OFFSET = np.array([0.1, -0.05])
 LEVEL = 0.8
+A2, A3 = 0.1, -0.15  # the actuator polynomial p = u + A2 u^2 + A3 u^3 of u2
 CONFIG = {"model": {"type": "mimo_state_space", "domain": "discrete", "fs": 100.0, "A": A.tolist(),
                     "B": B.tolist(), "C": C.tolist()}}
 
@@ -40,8 +41,8 @@ def loop(U: np.ndarray) -> np.ndarray:
 
 
 def records(where: str | None, seed: int = 2, realizations: int = 3) -> list[Run]:
-    """``where``: None (linear), "u2" (actuator saturation of u2 at +-LEVEL) or "y2" (sensor
-    saturation of y2 at +-1.2, before the noise)."""
+    """``where``: None (linear), "u2" (actuator saturation of u2 at +-LEVEL), "cubic" (the actuator
+    polynomial of u2) or "y2" (sensor saturation of y2 at +-1.2, before the noise)."""
     rng = np.random.default_rng(seed)
     out = []
     for r in range(realizations):
@@ -51,6 +52,8 @@ def records(where: str | None, seed: int = 2, realizations: int = 3) -> list[Run
             plant = U.copy()
             if where == "u2":
                 plant[1] = np.clip(plant[1], -LEVEL, LEVEL)
+            if where == "cubic":
+                plant[1] = U[1] + A2 * U[1] ** 2 + A3 * U[1] ** 3
             Y = loop(plant)
             if where == "y2":
                 Y[1] = np.clip(Y[1], -1.2, 1.2)
@@ -106,3 +109,28 @@ def test_a_linear_record_gives_no_cause():
     result = diagnosis(None)
     assert result.status == "no_discrepancy" and result.input_cause is None
     assert all(o.cause is None for o in result.outputs) and result.extended is None
+
+
+def test_an_actuator_polynomial_of_u2_is_named_within_its_cramer_rao_std():
+    runs = records("cubic")
+    estimation, validation = split_runs(runs)
+    result = diagnose_mimo(CONFIG, "model", estimation, validation)
+    cause = result.input_cause
+    assert cause is not None and cause.input == "u2" and cause.hypothesis == "input_polynomial"
+    assert cause.gained_on() == ["y", "y2"] and all(o.cause is None for o in result.outputs)
+    # the outputs are linear in (a2, a3): their sensitivities are the loop's responses to u2^2 and u2^3
+    # fed in at u2. The fit sees each estimation run's mean period (noise variance sigma_i^2 / P), so
+    # the Cramer-Rao covariance is (sum J^T diag(P / sigma_i^2) J)^-1 over those periods
+    information = np.zeros((2, 2))
+    for run in estimation:
+        u2 = run.channels["u2"]
+        J = []
+        for power in (2, 3):
+            feed = np.zeros((2, u2.size))
+            feed[1] = u2 ** power
+            J.append(loop(feed)[:, -N:].ravel())  # the last (steady) period
+        J = np.array(J).T
+        weight = np.repeat(P / SIGMA ** 2, N)
+        information += J.T @ (weight[:, None] * J)
+    std = np.sqrt(np.diag(np.linalg.inv(information)))
+    assert abs(cause.values["a2"] - A2) < 4 * std[0] and abs(cause.values["a3"] - A3) < 4 * std[1]
