@@ -75,7 +75,40 @@ def refine(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Ru
     not the cause can wander into parameters the simulator is slow on (a Stribeck curve steeper
     than the mass can follow), and is then scored where the budget stopped it, with the optimiser's warning.
     ``fit_on``: the judged signal whose simulation error is minimised (``y``, or in closed loop ``u``).
+
+    An estimate with ``alternatives`` (starts it cannot tell apart, e.g. the two signs of a shape
+    parameter) is refined from each in turn and the fit of the least simulation error kept (the sum
+    of squares of measured minus simulated mean steady-state periods of the judged signal of
+    ``runs``, :meth:`Context.simulation_rss`, the same measure for every start: the fit engine's own
+    error is over mean periods or whole runs as each start's model settles), its note naming the
+    start that won and the others' errors (a fit whose error is not finite loses); an alternative
+    whose fit fails is passed over (said in the note).
     """
+    first = _refine_start(hypothesis, data, dataclasses.replace(estimate, alternatives=()), runs, source, nominal,
+                          carried, fit_on)
+    if not estimate.alternatives:
+        return first
+    tried, failed = [first], []
+    for alternative in estimate.alternatives:
+        try:
+            tried.append(_refine_start(hypothesis, data, alternative, runs, source, nominal, carried, fit_on))
+        except InputError as exc:
+            failed.append(f"alternative start {len(tried) + len(failed)} not refined ({exc})")
+    costs = [Context(ModelRunner.from_data(fit[1], source), runs, [], [], signal=fit_on).simulation_rss(fit[1])
+             for fit in tried]
+    best = min(range(len(tried)), key=lambda i: costs[i] if math.isfinite(costs[i]) else math.inf)
+    others = ", ".join(f"start {i + 1} {costs[i]:.4g}" for i in range(len(tried)) if i != best)
+    won = (f"of {len(estimate.alternatives) + 1} starts refined in turn, start {best + 1} (the "
+           f"{'estimate' if best == 0 else 'alternative'} above) kept: simulation error (sum of squares) "
+           f"{costs[best]:.4g} against {others or 'none'}")
+    refined, *rest = tried[best]
+    return (dataclasses.replace(refined, note="; ".join([refined.note, won, *failed])), *rest)
+
+
+def _refine_start(hypothesis: Hypothesis, data: dict, estimate: Estimate, runs: list[Run], source: str,
+                  nominal: dict, carried: dict[str, str] | None = None, fit_on: str = "y"
+                  ) -> tuple[Estimate, dict, dict, dict, nuisances.Nuisances]:
+    """:func:`refine` from one start (``estimate``'s alternatives not looked at)."""
     from nlsid.fit.extension import fit_free_parameters
     from nlsid.fit.free_parameters import FreeParameter, value_at
 

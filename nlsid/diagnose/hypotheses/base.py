@@ -83,7 +83,11 @@ class Estimate:
     continuous equivalent, :mod:`nlsid.diagnose.hypotheses.feedback`; :data:`LTI_KEYS`);
     ``starts`` (model key -> value) starts the linear mechanics refined with a force or block
     (:func:`nlsid.diagnose.hypotheses.mechanics.linear_paths`) and the nuisances re-fitted with it
-    elsewhere than at the model's values (a richer friction law at the simpler one's fit)."""
+    elsewhere than at the model's values (a richer friction law at the simpler one's fit).
+    ``alternatives`` are other starts the estimate cannot tell from this one (each an Estimate
+    without alternatives of its own): :func:`nlsid.diagnose.diagnosis.refine` refines each in turn
+    and keeps the fit of the lowest estimation error (the refinement keeps each parameter's sign,
+    so a start on the wrong side of zero cannot cross over)."""
 
     values: dict[str, float]
     std: dict[str, float]
@@ -92,6 +96,7 @@ class Estimate:
     paths: dict[str, str] | None = None
     lti: dict | None = None
     starts: dict[str, float] | None = None
+    alternatives: tuple["Estimate", ...] = ()
 
 
 LTI_KEYS = ("type", "domain", "num", "den", "zeros", "poles", "gain", "A", "B", "C", "D")

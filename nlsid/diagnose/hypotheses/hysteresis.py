@@ -85,6 +85,7 @@ BOUND_SHARES = (0.3, 0.6, 1.2, 2.4)  # zmax over the model's rms position, on th
 GAMMA_SHARES = (-0.5, 0.5)           # gamma / beta (the loop's unloading slope)
 SPLITS = (0.25, 0.5)                 # k over the model's stiffness
 FEEDBACK_SPLITS = (0.3, 0.6)         # k over G's static stiffness, the force's equivalent spring taken out of G
+SIGN_AMBIGUITY = 1.25                # the other sign of gamma refined too where its best start's error is within this factor
 
 
 def _applies(runner: ModelRunner) -> str | None:
@@ -235,7 +236,15 @@ def _estimate_feedback(ctx: Context) -> Estimate | str:
     plant's mechanics, and every grid point takes k / 2 times the numerator out of G's denominator
     (k SPLITS of K). On a G(z) fitted to the lower level's BLA of
     tests/diagnose/test_hysteresis_feedback_bla.py's record (its damping 45 where the plant's is
-    20) that start stopped 53 times above the noise, this one at it."""
+    20) that start stopped 53 times above the noise, this one at it.
+
+    The refinement keeps gamma's sign, and the grid's best points of the two signs can err alike
+    (within 2 % on five of six records, the wrong sign the lower on one of them): the best point of
+    each sign is found on that sign's grid (G read as the loop's BLA or the plant's mechanics per
+    sign), and the other sign's is offered as an alternative start (:attr:`Estimate.alternatives`,
+    refined too and the better fit kept) where its error is within :data:`SIGN_AMBIGUITY` of the
+    best one's or G is read otherwise under it (docs/feedback_start.md: the two records that ended
+    2.5 times above the noise then reach it)."""
     found = velocity_feedback.reading(ctx, accelerates=True)
     if isinstance(found, str):
         return found
@@ -265,6 +274,33 @@ def _estimate_feedback(ctx: Context) -> Estimate | str:
                 k_e, c_e = split * stiffness * unit[0], split * stiffness * unit[1]
                 under = velocity_feedback.with_spring(lti, -k_e, -c_e)
                 grid.append((bound, beta, gamma, split, plain, under, k_e, c_e))
+    starts = []  # the best start of each sign of gamma, each sign's grid read as a whole
+    for sign in (1.0, -1.0):
+        start = _best_of(ctx, [point for point in grid if np.sign(point[2]) == sign], lti, base, stiffness)
+        if start is not None:
+            starts.append(start)
+    if not starts:
+        return "every start's linear part under the force changes the sign of a coefficient of G's denominator"
+    starts.sort(key=lambda start: start[0])
+    (cost, values, note, held), others = starts[0], starts[1:]
+    before = float(np.sum(ctx.target() ** 2))
+    alternatives = tuple(Estimate(v, {n: float("nan") for n in v}, explained_db(before, c),
+                                  "; ".join([f"the other sign of gamma: {n}", *notes]), lti=lti)
+                         for c, v, n, h in others if c <= SIGN_AMBIGUITY * cost or h != held)
+    if alternatives:
+        note += (f"; the best start of the other sign of gamma (simulation error {others[0][0]:.4g} against "
+                 f"{cost:.4g}, within {SIGN_AMBIGUITY:g} times, or G read otherwise under it) refined too, the lower "
+                 "refined error kept")
+    return Estimate(values, {n: float("nan") for n in values}, explained_db(before, cost),
+                    "; ".join([note, *notes]), lti=lti, alternatives=alternatives)
+
+
+def _best_of(ctx: Context, grid: list, lti: dict, base: dict, stiffness: float) -> tuple[float, dict, str, bool] | None:
+    """The grid point of least simulation error among ``grid`` (points of one sign of gamma), its
+    values, its note and whether G was read as the loop's BLA; None where no point has a linear
+    part (every one would change a sign of G's denominator). Where some point's linear part under its force's equivalent spring and damper
+    would change a sign, G is read as the plant's mechanics for all of them (k / 2 taken out)."""
+    num = np.asarray(lti["num"], float)
     held = all(point[5] is not None for point in grid)  # G holds every grid force's equivalent spring and damper
     candidates = []
     for bound, beta, gamma, split, plain, under, k_e, c_e in grid:
@@ -280,18 +316,17 @@ def _estimate_feedback(ctx: Context) -> Estimate | str:
         cost = ctx.simulation_rss(HYSTERESIS_FEEDBACK.extend(base, values))
         candidates.append((cost, values, bound, split, k_e, c_e))
     if not candidates:
-        return "every start's linear part under the force changes the sign of a coefficient of G's denominator"
+        return None
     cost, values, bound, split, k_e, c_e = min(candidates, key=lambda c: c[0])
     linear = (f"the linear part G / (1 - (k_e + c_e s) G) with the force's equivalent spring k_e = {k_e:.4g} and "
               f"damper c_e = {c_e:.4g} along the model's motion taken out (G read as the loop's BLA)" if held else
               f"the linear part G / (1 - k_e G) with k_e = k / 2 = {k_e:.4g} (G read as the plant's mechanics with a "
               "spring between the small- and large-stroke ones: it holds less than some grid force's equivalent "
               "damper, so it is not that loop's BLA)")
-    note = (f"the least simulation error of a grid of {len(candidates)} starts: zmax = {bound:.3g}, gamma / beta = "
-            f"{values['gamma'] / values['beta']:.2g}, k = {split:g} of the model's static stiffness {stiffness:.4g}, "
-            f"{linear} (no standard errors)")
-    return Estimate(values, {n: float("nan") for n in values}, explained_db(float(np.sum(ctx.target() ** 2)), cost),
-                    "; ".join([note, *notes]), lti=lti)
+    note = (f"the least simulation error of a grid of {len(candidates)} starts with gamma of this sign: zmax = "
+            f"{bound:.3g}, gamma / beta = {values['gamma'] / values['beta']:.2g}, k = {split:g} of the model's "
+            f"static stiffness {stiffness:.4g}, {linear} (no standard errors)")
+    return cost, values, note, held
 
 
 HYSTERESIS_FEEDBACK = Hypothesis(
