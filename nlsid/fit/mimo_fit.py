@@ -50,7 +50,14 @@ Cost statistics. With the covariances known, a correct model's cost at its minim
 freedom (n = M - 1 for the total covariance over M realizations), each line's term is a complex
 Hotelling T^2, T^2 (n - m + 1)/(m n) ~ F(2m, 2(n - m + 1)): mean m n/(n - m) (the SISO (M-1)/(M-2)
 for m = 1), so the expected cost is n/(n - m) (F m - n_theta/2) with the spread of F - n_theta/(2m)
-such terms. The bound of the cost check is the chi^2 quantile at probability 0.99865 for known
+such terms. An FRM by the Local Polynomial Method has cov_G = P kron C with P exact and C, the
+outputs' n_y x n_y disturbance covariance, estimated with q degrees of freedom (``FrmData.block``):
+each line's term is then n_u Hotelling T^2 of dimension n_y sharing C, mean q/(q - n_y) per entry,
+their spread from the inverse complex Wishart's moments (:func:`cost_statistics`). Its windows of
+2n+1 lines make the errors of lines up to 2n apart correlated (``FrmData.shared_lags``): the
+parameters then lower the cost by kappa n_theta/2 and the terms' variances add up with the factor
+kappa_2 (:func:`line_correlation`, as the SISO fit's :func:`nlsid.fit.order.line_correlation`).
+The bound of the cost check is the chi^2 quantile at probability 0.99865 for known
 covariances, else the mean plus 3 std.
 
 Order choice (as the SISO fit's, :mod:`nlsid.fit.order`): the orders 1, 2, ... are fitted; the
@@ -103,6 +110,14 @@ class FrmData:
         What the covariance is, in words (for the report).
     diagonal : bool
         The covariance is diagonal, each entry's variance estimated on its own (:attr:`dimension`).
+    block : int or None
+        d where the full covariance is the Kronecker product of an exact n_u x n_u factor and an
+        estimated d x d one (d = n_y for the LPM's cov_G = [A^-1]_00 kron C, C of the outputs'
+        disturbances): each line's term is then a sum of n_u Hotelling T^2 sharing that estimate
+        (:func:`cost_statistics`). None: the covariance of vec(G) is estimated as a whole (or diagonal).
+    shared_lags : int
+        Lines this many apart or closer have correlated errors (the LPM's windows of 2n+1 lines
+        overlap for lags up to 2n); 0 for independent lines.
     """
 
     frequency: np.ndarray
@@ -112,13 +127,25 @@ class FrmData:
     dof: float | None = None
     weights: str = "covariance"
     diagonal: bool = False
+    block: int | None = None
+    shared_lags: int = 0
 
     @property
     def dimension(self) -> int:
         """d, the size of the blocks the covariance is estimated in: m for a full covariance of
-        vec(G_k), 1 for a diagonal one (each entry's variance estimated on its own)."""
+        vec(G_k), 1 for a diagonal one (each entry's variance estimated on its own), :attr:`block`
+        for a Kronecker product of an exact factor and an estimated d x d one."""
         n_y, n_u = self.shape
-        return 1 if self.diagonal else n_y * n_u
+        if self.diagonal:
+            return 1
+        return int(self.block) if self.block else n_y * n_u
+
+    @property
+    def sharing(self) -> int:
+        """s, the Hotelling terms of dimension d that share one covariance estimate: m/d for a
+        Kronecker-product covariance (:attr:`block`), else 1."""
+        n_y, n_u = self.shape
+        return (n_y * n_u) // int(self.block) if self.block and not self.diagonal else 1
 
     @property
     def lines(self) -> int:
@@ -494,6 +521,9 @@ class OrderFit:
     pole_std : numpy.ndarray
         Per pole, the standard deviations of its real and imaginary parts as std_re + j std_im
         (:func:`modal_poles`).
+    line_correlation : float
+        kappa of the residuals (:func:`line_correlation`; 1 for independent lines), counted in the
+        cost's expected value and spread and in the likelihood-ratio step of the order choice.
     """
 
     order: int
@@ -511,6 +541,7 @@ class OrderFit:
     start_cost: float
     iterations: int
     pole_std: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    line_correlation: float = 1.0
 
     @property
     def accepted(self) -> bool:
@@ -523,38 +554,74 @@ class OrderFit:
                 "accepted": bool(self.accepted), "stable": self.stable, "start_cost": self.start_cost}
 
 
-def cost_statistics(lines: int, m: int, n_theta: int, dof: float | None,
-                    dimension: int | None = None) -> tuple[float, float, float]:
-    """E{V}, its std and the bound of a correct model's cost (module docstring); ``dimension`` d:
-    the covariance is estimated in blocks of d entries (m, the default: full; 1: diagonal), each
-    block's term a Hotelling T^2 of dimension d."""
-    from scipy.stats import chi2
-    from scipy.stats import f as fisher
+def cost_statistics(lines: int, m: int, n_theta: int, dof: float | None, dimension: int | None = None,
+                    sharing: int = 1, correlation: tuple[float, float] = (1.0, 1.0)) -> tuple[float, float, float]:
+    """E{V}, its std and the bound of a correct model's cost (module docstring).
 
-    base = lines * m - n_theta / 2
+    ``dimension`` d: the covariance is estimated in blocks of d entries (m, the default: full; 1:
+    diagonal); ``sharing`` s: that many blocks of a line share one estimate (the n_u columns of an
+    LPM FRM share the outputs' disturbance covariance, d = n_y, s = n_u). With W = n C^-1/2 C_hat
+    C^-1/2 a complex Wishart of n degrees of freedom and dimension d, and X (d x s) of independent
+    CN(0, 1) entries, the s terms are T = n tr(X^H W^-1 X); the inverse complex Wishart's moments
+    (k = n - d: E W^-1 = I/k, E W^-2 = n/(k (k^2 - 1)) I, E (tr W^-1)^2 = d (k d + 1)/(k (k^2 - 1)))
+    give
+
+        E T = s d n / k,   var T = n^2 [s d n/(k (k^2 - 1)) + s^2 (d (k d + 1)/(k (k^2 - 1)) - d^2/k^2)]
+
+    (for s = 1 the scaled F(2d, 2(k + 1)) of the Hotelling T^2). ``correlation`` (kappa,
+    kappa_2) of lines with correlated errors (:func:`line_correlation`): the n_theta parameters
+    lower the cost by kappa n_theta/2 (times n/k), and the terms' variances add up with the factor
+    kappa_2. The cost has (F m - kappa n_theta/2)/(d s) such groups."""
+    from scipy.stats import chi2
+
+    kappa, kappa_2 = correlation
+    base = lines * m - kappa * n_theta / 2
     if base <= 0:
         return math.nan, math.nan, math.nan
     if dof is None:
-        return base, math.sqrt(base), float(chi2.ppf(ACCEPT_PROBABILITY, 2 * base) / 2)
-    n, d = float(dof), int(dimension or m)
-    if n - d <= 0:
+        std = math.sqrt(base * kappa_2)
+        bound = float(chi2.ppf(ACCEPT_PROBABILITY, 2 * base) / 2) if kappa_2 == 1.0 else base + 3 * std
+        return base, std, bound
+    n, d, s = float(dof), int(dimension or m), int(sharing)
+    k = n - d
+    if k <= 0:
         return math.inf, math.inf, math.inf
-    factor = d * n / (n - d + 1)
-    d1, d2 = 2 * d, 2 * (n - d + 1)
-    block_var = factor ** 2 * float(fisher.var(d1, d2)) if d2 > 4 else math.inf
-    mean = base * n / (n - d)
-    std = math.sqrt(base / d * block_var)
+    group_var = (n**2 * (s * d * n / (k * (k * k - 1)) + s * s * (d * (k * d + 1) / (k * (k * k - 1)) - d * d / k**2))
+                 if k > 1 else math.inf)
+    mean = base * n / k
+    std = math.sqrt(base / (d * s) * group_var * kappa_2)
     return mean, std, mean + 3 * std
 
 
-def likelihood_ratio_bound(extra: int, dimension: int, dof: float | None) -> float:
+def line_correlation(e: np.ndarray, lags: int) -> tuple[float, float]:
+    """(kappa, kappa_2) of whitened residuals ``e`` (F, m) whose lines up to ``lags`` apart are
+    correlated: kappa = 1 + 2 sum_{d=1..lags} rho(d) and kappa_2 = 1 + 2 sum rho(d)^2, each at
+    least 1, with rho(d) = Re sum_k e_k^H e_{k+d} / ((F - d) mean_k |e_k|^2) the correlation of
+    lines d apart. As the SISO fit's (:func:`nlsid.fit.order.line_correlation`): the cost drop of
+    the n_theta parameters is (1/2) e^T P e, P the projection on their whitened directions, of mean
+    (1/2) tr(P R) = kappa n_theta/2 for directions smooth over ``lags`` lines; a sum of quadratic
+    terms of Gaussian errors with correlation rho has the variance of the independent sum times
+    1 + 2 sum rho^2. (1, 1) for independent lines (``lags`` 0). From the residuals of a model
+    within its bound, which are mostly the data's errors."""
+    if lags <= 0 or e.shape[0] < 2:
+        return 1.0, 1.0
+    power = float(np.mean(np.sum(np.abs(e) ** 2, axis=1)))
+    if not power > 0:
+        return 1.0, 1.0
+    rho = [float(np.real(np.mean(np.sum(np.conj(e[:-d]) * e[d:], axis=1)))) / power
+           for d in range(1, min(lags, e.shape[0] - 1) + 1)]
+    return max(1.0, 1.0 + 2.0 * sum(rho)), 1.0 + 2.0 * sum(r * r for r in rho)
+
+
+def likelihood_ratio_bound(extra: int, dimension: int, dof: float | None, correlation: float = 1.0) -> float:
     """How much ``extra`` parameters fitting noise lower a correct model's cost, at most (probability
     ACCEPT_PROBABILITY): (1/2) chi^2(extra), times n/(n - d) for covariances of n degrees of freedom
-    estimated in blocks of d entries."""
+    estimated in blocks of d entries, times kappa (``correlation``, :func:`line_correlation`) for
+    lines with correlated errors."""
     from scipy.stats import chi2
 
     scale = 1.0 if dof is None else (dof / (dof - dimension) if dof > dimension else math.inf)
-    return float(chi2.ppf(ACCEPT_PROBABILITY, extra) / 2 * scale)
+    return float(chi2.ppf(ACCEPT_PROBABILITY, extra) / 2 * scale * correlation)
 
 
 def fit_order(data: FrmData, order: int, domain: str = "z", hold: bool = True,
@@ -617,9 +684,11 @@ def fit_order(data: FrmData, order: int, domain: str = "z", hold: bool = True,
     r = residual(theta)
     A, B, C, D = shape.unpack(theta)
     poles, pole_std = modal_poles(shape, theta, jacobian(theta))
-    mean, std, bound = cost_statistics(data.lines, m, n_theta, data.dof, data.dimension)
+    half = r.size // 2
+    correlation = line_correlation((r[:half] + 1j * r[half:]).reshape(x.size, m), data.shared_lags)
+    mean, std, bound = cost_statistics(data.lines, m, n_theta, data.dof, data.dimension, data.sharing, correlation)
     return OrderFit(order, A, B, C, D, float(r @ r), mean, std, bound, n_theta, poles_stable(poles, domain), poles,
-                    start_cost, int(solution.nfev), pole_std)
+                    start_cost, int(solution.nfev), pole_std, correlation[0])
 
 
 def modal_poles(shape: ModalForm, theta: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -682,6 +751,12 @@ class MimoFit:
         return response(fit.A, fit.B, fit.C, fit.D, x, self.domain, self.hold, self.fs)
 
 
+def noise_drop(best: OrderFit, larger: OrderFit, dimension: int, dof: float | None) -> float:
+    """The :func:`likelihood_ratio_bound` of ``larger``'s extra parameters over ``best``, with the
+    line correlation of ``best``'s residuals (a model within its bound: mostly the data's errors)."""
+    return likelihood_ratio_bound(larger.parameters - best.parameters, dimension, dof, best.line_correlation)
+
+
 def choose(scan: list[OrderFit], dimension: int, dof: float | None) -> tuple[OrderFit, str]:
     """The order of the scan to take, and why (module docstring); ``dimension`` and ``dof`` of the
     covariance (:func:`likelihood_ratio_bound`)."""
@@ -697,14 +772,15 @@ def choose(scan: list[OrderFit], dimension: int, dof: float | None) -> tuple[Ord
                        f"{min(r.cost / r.cost_bound for r in lower):.3g} times its bound, or unstable")
         while True:
             better = [r for r in stable if r.order > best.order and best.cost - r.cost >
-                      likelihood_ratio_bound(r.parameters - best.parameters, dimension, dof)]
+                      noise_drop(best, r, dimension, dof)]
             if not better:
                 break
             step = better[0]
             reason += (f"; order {step.order} instead: its cost {step.cost:.4g} is {best.cost - step.cost:.4g} lower, "
                        f"more than its {step.parameters - best.parameters} extra parameters fitting noise would "
-                       f"lower it ({likelihood_ratio_bound(step.parameters - best.parameters, dimension, dof):.3g}, "
-                       f"likelihood ratio at probability {ACCEPT_PROBABILITY})")
+                       f"lower it ({noise_drop(best, step, dimension, dof):.3g}, likelihood ratio at probability "
+                       f"{ACCEPT_PROBABILITY}" + (f", times {best.line_correlation:.3g} for the lines' correlated errors"
+                                                  if best.line_correlation > 1 else "") + ")")
             best = step
         return best, reason
     if stable:

@@ -137,28 +137,37 @@ def frm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
 def lpm_data(chosen: dict, where: str) -> tuple[FrmData, list[str]]:
     """The FRM of a level of arbitrary runs (``frm_lpm_levels``, the LPM for several inputs) with
     its weights: ``cov_G`` (noise and stochastic nonlinear distortion, q = ``dof`` complex degrees
-    of freedom) where n >= m + 2 and it is positive definite, else its diagonal ``var_G``. The
-    LPM's neighbouring lines share their windows, so their errors are correlated and the cost
-    check is approximate (a warning)."""
+    of freedom) where q >= n_y + FULL_MARGIN and it is positive definite, else its diagonal
+    ``var_G``. ``cov_G = [A^-1]_00 kron C`` with the outputs' disturbance covariance C estimated
+    with q degrees of freedom (``docs/mimo.md``, "The LPM for several inputs"): each line's cost
+    term is n_u Hotelling T^2 of dimension n_y sharing that C (``FrmData.block`` = n_y). The
+    LPM's windows of 2n+1 lines overlap up to 2n lines apart (``FrmData.shared_lags``): the
+    cost's expected value and spread count the correlation of those lines' errors
+    (:func:`nlsid.fit.mimo_fit.line_correlation`)."""
     attrs = chosen["attrs"]
     G = np.asarray(chosen["G"], dtype=complex)
     f = np.asarray(chosen["frequency"], dtype=float)
-    m = G.shape[1] * G.shape[2]
+    n_y = G.shape[1]
+    m = n_y * G.shape[2]
     dof = float(attrs["dof"])
+    lags = 2 * int(attrs.get("half_width", 0))
     cov = np.asarray(chosen["cov_G"], dtype=complex)
-    words = f"the Local Polynomial Method's covariance (noise and nonlinear distortions, q = {dof:g})"
-    warnings = ["weights from the Local Polynomial Method: neighbouring lines share their windows, so their errors "
-                "are correlated and the cost check is approximate"]
-    if np.all(np.isfinite(cov)) and dof - m >= FULL_MARGIN and _definite(cov):
-        return FrmData(f, G, cov, float(attrs["fs"]), dof, f"{words}, full ({m} x {m} per line)"), warnings
+    words = (f"the Local Polynomial Method's covariance (noise and nonlinear distortions, q = {dof:g}; the "
+             f"correlation of lines up to {lags} apart, whose windows overlap, counted in the cost check)")
+    warnings = []
+    if np.all(np.isfinite(cov)) and dof - n_y >= FULL_MARGIN and _definite(cov):
+        return FrmData(f, G, cov, float(attrs["fs"]), dof, f"{words}, full ({m} x {m} per line)", block=n_y,
+                       shared_lags=lags), warnings
     variance = np.swapaxes(np.asarray(chosen["var_G"], dtype=float), 1, 2).reshape(f.size, m)
     if not (np.all(np.isfinite(variance)) and np.all(variance > 0)):
         raise InputError(f"{where}/var_G", "not finite and > 0 at every line: no weights to fit with")
-    warnings.append(f"weights: cov_G has {dof:g} degrees of freedom for {m} entries (a full covariance needs "
-                    f"{m + FULL_MARGIN} and must be positive definite): each entry weighted by its own variance, "
-                    "correlations left out")
+    warnings.append(f"weights: cov_G has {dof:g} degrees of freedom for {n_y} outputs (a full covariance needs "
+                    f"{n_y + FULL_MARGIN} and must be positive definite): each entry weighted by its own variance, "
+                    "correlations left out; the cost's spread then treats the entries as independent and is "
+                    "approximate")
     diagonal = np.einsum("fi,ij->fij", variance, np.eye(m)).astype(complex)
-    return FrmData(f, G, diagonal, float(attrs["fs"]), dof, f"{words}, its diagonal", diagonal=True), warnings
+    return (FrmData(f, G, diagonal, float(attrs["fs"]), dof, f"{words}, its diagonal", diagonal=True,
+                    shared_lags=lags), warnings)
 
 
 def parse_order(order, option: str = "order") -> int | None:

@@ -175,19 +175,21 @@ def test_levels_of_arbitrary_runs_are_numbered_after_and_fitted():
     rng = np.random.default_rng(4)
     cov = np.broadcast_to(np.eye(4) * (0.02 * np.mean(np.abs(G0))) ** 2, (f.size, 4, 4)).astype(complex)
     noise = 0.02 * np.mean(np.abs(G0)) * (rng.standard_normal(G0.shape) + 1j * rng.standard_normal(G0.shape))
-    lpm = {"name": "level_00", "attrs": {"dof": 30, "fs": FS}, "frequency": f, "G": G0 + noise / np.sqrt(2),
+    lpm = {"name": "level_00", "attrs": {"dof": 30, "fs": FS, "half_width": 3}, "frequency": f, "G": G0 + noise / np.sqrt(2),
            "cov_G": cov, "var_G": np.full((f.size, 2, 2), cov[0, 0, 0].real)}
     content = {"levels": [{}], "lpm_levels": [], "frm_levels": [{"name": "level_00"}], "frm_lpm_levels": [lpm]}
     assert frm_level(content, 1, "b.h5")[1]["name"] == "level_00" and frm_level(content, 0, "b.h5") is None
     index, chosen = frm_level(content, 2, "b.h5")
     assert index == 2 and chosen is lpm
     data, notes = frm_data(chosen, "b.h5")
-    assert data.dof == 30 and data.dimension == 4 and "approximate" in notes[0]
+    # cov_G = [A^-1]_00 kron C: n_u = 2 Hotelling terms of the n_y = 2 outputs' C per line; windows
+    # of 2 n + 1 = 7 lines overlap up to 6 lines apart
+    assert data.dof == 30 and data.dimension == 2 and data.sharing == 2 and data.shared_lags == 6 and not notes
     result = fit_frm(data, None, "s", hold=True, max_order=3)
     assert result.fit.order == 2 and result.fit.stable, result.reason
-    lpm["attrs"]["dof"] = 5
+    lpm["attrs"]["dof"] = 3                     # q - n_y = 1: the Hotelling terms have no finite variance
     data, notes = frm_data(lpm, "b.h5")
-    assert data.diagonal and "each entry weighted by its own variance" in notes[1]
+    assert data.diagonal and data.dimension == 1 and "each entry weighted by its own variance" in notes[0]
 
 
 def test_every_level_fitted_where_the_file_holds_several(tmp_path, run_cli):
