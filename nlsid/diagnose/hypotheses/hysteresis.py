@@ -85,7 +85,7 @@ BOUND_SHARES = (0.3, 0.6, 1.2, 2.4)  # zmax over the model's rms position, on th
 GAMMA_SHARES = (-0.5, 0.5)           # gamma / beta (the loop's unloading slope)
 SPLITS = (0.25, 0.5)                 # k over the model's stiffness
 FEEDBACK_SPLITS = (0.3, 0.6)         # k over G's static stiffness, the force's equivalent spring taken out of G
-SIGN_AMBIGUITY = 1.25                # the other sign of gamma refined too where its best start's error is within this factor
+SIGN_AMBIGUITY = 1.05                # the other sign of gamma refined too where its best start's error is within this factor
 
 
 def _applies(runner: ModelRunner) -> str | None:
