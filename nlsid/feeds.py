@@ -458,10 +458,7 @@ class Survey:
             self.fit_y = no_y
         self.simulate_runs.append((where, tuple(run.inputs), frozenset(run.channels)))
         several = several_inputs_outputs(run, where)
-        if several is not None:  # the stages of one input and one output stop at the first such run
-            measured = ("diagnose", "fit --model") if no_y is None else ()  # they refuse a missing y first
-            for stage in measured:
-                self.verdict[stage].fail(several)
+        if several is not None:  # a model of one input and one output stops at the first such run (a note)
             self.several = self.several or several
 
     def _bla(self, run: Run, where: str, no_y: InputError | None) -> None:
@@ -598,6 +595,7 @@ class Survey:
             verdict.notes.append(_closed_loop_note(self.periodic_without_r))
         if self.arbitrary:
             verdict.notes.append(f"does not use the {len(self.arbitrary)} arbitrary (non-periodic) runs")
+        self._mimo_model_note(verdict)
 
     def _finish_fit(self) -> None:
         verdict = self.verdict["fit --model"]
@@ -613,6 +611,15 @@ class Survey:
         if self.arbitrary:
             verdict.notes.append(f"--start-estimate needs periodic runs with excited bins; {self.arbitrary[0]} "
                                  "is arbitrary")
+        self._mimo_model_note(verdict)
+
+    def _mimo_model_note(self, verdict: Verdict) -> None:
+        """Runs with several inputs or outputs feed ``diagnose`` and ``fit --model`` of a
+        ``mimo_state_space`` model (docs/mimo.md); a model of one input and one output refuses the
+        first such run, which the note quotes."""
+        if self.several is not None and verdict.feeds:
+            verdict.notes.append(f"needs a mimo_state_space model of the runs' inputs and outputs (docs/mimo.md); a "
+                                 f"model of one input and one output stops: {self.several}")
 
     def _finish_simulate(self) -> None:
         if self.mapping:
