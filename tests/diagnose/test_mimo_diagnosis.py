@@ -19,22 +19,11 @@ from nlsid.fit.run_split import split_runs
 from nlsid.io.recording import write_recording
 from nlsid.io.run import Run
 
-A = np.array([[0.6, 0.2], [-0.3, 0.5]])
-B = np.array([[1.0, 0.3], [0.2, 0.8]])
-C = np.array([[1.0, 0.0], [0.4, 1.0]])
+from generators.mimo_state_loop import CONFIG, loop
+
 N, P, T = 256, 2, 1
 SIGMA = (0.02, 0.05)
 LEVEL = 1.2
-CONFIG = {"model": {"type": "mimo_state_space", "domain": "discrete", "fs": 100.0, "A": A.tolist(),
-                    "B": B.tolist(), "C": C.tolist()}}
-
-
-def loop(U: np.ndarray) -> np.ndarray:
-    x, Y = np.zeros(2), np.empty((2, U.shape[1]))
-    for k in range(U.shape[1]):
-        Y[:, k] = C @ x
-        x = A @ x + B @ U[:, k]
-    return Y
 
 
 def records(saturation: float | None, seed: int = 1, realizations: int = 4) -> list[Run]:

@@ -20,24 +20,13 @@ from nlsid.io.run import Run
 from nlsid.stages.mimo_diagnosis import MimoDiagnosisResult
 from nlsid import Model
 
-A = np.array([[0.6, 0.2], [-0.3, 0.5]])
-B = np.array([[1.0, 0.3], [0.2, 0.8]])
-C = np.array([[1.0, 0.0], [0.4, 1.0]])
+from generators.mimo_state_loop import CONFIG, loop
+
 N, P, T = 256, 2, 1
 SIGMA = np.array([0.02, 0.05])
 OFFSET = np.array([0.1, -0.05])
 LEVEL = 0.8
 A2, A3 = 0.1, -0.15  # the actuator polynomial p = u + A2 u^2 + A3 u^3 of u2
-CONFIG = {"model": {"type": "mimo_state_space", "domain": "discrete", "fs": 100.0, "A": A.tolist(),
-                    "B": B.tolist(), "C": C.tolist()}}
-
-
-def loop(U: np.ndarray) -> np.ndarray:
-    x, Y = np.zeros(2), np.empty((2, U.shape[1]))
-    for k in range(U.shape[1]):
-        Y[:, k] = C @ x
-        x = A @ x + B @ U[:, k]
-    return Y
 
 
 def records(where: str | None, seed: int = 2, realizations: int = 3) -> list[Run]:
