@@ -32,8 +32,6 @@ from nlsid.diagnose.diagnosis import refine
 from nlsid.diagnose.hypotheses import by_name
 from nlsid.diagnose.hypotheses.base import Context
 from nlsid.diagnose.simulation import ModelRunner, steady_mean
-from nlsid.fit.frf_data import FRFData
-from nlsid.fit.tf_fit import fit_transfer_function
 from nlsid.models.continuous_equivalent import continuous_transfer_function
 
 FC = 150.0
@@ -44,20 +42,6 @@ LEAD = 5.0  # the s coefficient of the second model's numerator: a zero at 1e4 /
 def record():
     return cases.recording(3, lambda U: cases.coulomb(U, FC))
 
-
-def _bla_fit(runs) -> dict:
-    """A 2/2 G(z) fitted to the BLA of ``runs`` (mean steady-state period, Y / U at the excited
-    bins, averaged over the runs, the variance of that mean its weight)."""
-    ratios = []
-    for run in runs:
-        steady = slice(run.period * run.transient_periods, None)
-        U, Y = (np.fft.fft(x[steady].reshape(-1, run.period).mean(axis=0)) for x in (run.u, run.y))
-        ratios.append(Y[run.excited_bins] / U[run.excited_bins])
-    ratios = np.array(ratios)
-    data = FRFData(runs[0].excited_bins, ratios.mean(axis=0), ratios.var(axis=0, ddof=1) / len(runs), cases.FS,
-                   cases.N, len(runs))
-    model = fit_transfer_function(data, 2, 2, "z").model.config()
-    return {"model": {k: model[k] for k in ("type", "domain", "num", "den")}}
 
 
 def _leading_model() -> dict:
@@ -89,7 +73,7 @@ def test_coulomb_friction_around_a_biased_z_domain_model_reaches_the_noise_floor
     """fc within 4 standard errors and 10 % of 150 / gain, and the error within 3 dB of the noise
     after the transient (the noise alone gives its std within about 2 % there)."""
     if source == "bla":
-        data = _bla_fit(record[:2])
+        data = cases.bla_fit(record[:2])
         equivalent = continuous_transfer_function([0.0, *data["model"]["num"][1:]], data["model"]["den"], cases.FS)
         assert equivalent["den"][1] / equivalent["den"][0] > 1.05 * cases.DAMPING  # the BLA holds a damper
     else:

@@ -29,8 +29,6 @@ from nlsid.diagnose.hypotheses import by_name
 from nlsid.diagnose.hypotheses.base import Context
 from nlsid.diagnose.hypotheses.hysteresis import equivalent_spring, state_along
 from nlsid.diagnose.simulation import ModelRunner, steady_mean
-from nlsid.fit.frf_data import FRFData
-from nlsid.fit.tf_fit import fit_transfer_function
 from nlsid.models.continuous_equivalent import continuous_transfer_function
 
 LINEAR = 3.0e4
@@ -96,20 +94,6 @@ def _response(U: np.ndarray) -> np.ndarray:
     return finer
 
 
-def _bla_fit(runs) -> dict:
-    """A 2/2 G(z) fitted to the BLA of ``runs`` (mean steady-state period, Y / U at the excited
-    bins, averaged over the runs, the variance of that mean its weight)."""
-    ratios = []
-    for run in runs:
-        steady = slice(run.period * run.transient_periods, None)
-        U, Y = (np.fft.fft(x[steady].reshape(-1, run.period).mean(axis=0)) for x in (run.u, run.y))
-        ratios.append(Y[run.excited_bins] / U[run.excited_bins])
-    ratios = np.array(ratios)
-    data = FRFData(runs[0].excited_bins, ratios.mean(axis=0), ratios.var(axis=0, ddof=1) / len(runs), cases.FS,
-                   cases.N, len(runs))
-    model = fit_transfer_function(data, 2, 2, "z").model.config()
-    return {"model": {k: model[k] for k in ("type", "domain", "num", "den")}}
-
 
 def test_hysteresis_around_a_g_fitted_to_the_loop_s_bla_reaches_the_noise_floor():
     """From a G(z) fitted to the lower level's BLA the start takes the force's equivalent spring
@@ -118,7 +102,7 @@ def test_hysteresis_around_a_g_fitted_to_the_loop_s_bla_reaches_the_noise_floor(
     within 3 dB of the noise after the transient (the noise alone gives its std within about 2 %
     there: thousands of effectively independent samples)."""
     runs = cases.recording(21, _response)
-    data = _bla_fit(runs[:2])
+    data = cases.bla_fit(runs[:2])
     equivalent = continuous_transfer_function([0.0, *data["model"]["num"][1:]], data["model"]["den"], cases.FS)
     assert equivalent["den"][1] / equivalent["den"][0] > 1.5 * cases.DAMPING  # the BLA holds the loop's damping
     runs = runs[1::2]

@@ -23,7 +23,7 @@ import re
 import numpy as np
 import pytest
 
-from diagnose.test_hysteresis_feedback_bla import BOUC_WEN, _bla_fit, _response
+from diagnose.test_hysteresis_feedback_bla import BOUC_WEN, _response
 from generators import effect_cases as cases
 from nlsid.diagnose.diagnosis import refine
 from nlsid.diagnose.hypotheses import by_name
@@ -68,7 +68,7 @@ def test_hysteresis_around_a_bla_fit_tries_both_signs_of_gamma_where_the_grid_ca
     its std within about 2 % there) with gamma > 0 within 10 % of the truth: the start grid's two
     signs were both refined and the better fit kept."""
     runs = cases.recording(seed, _response)
-    data = _bla_fit(runs[2:4] if level == "higher" else runs[:2])
+    data = cases.bla_fit(runs[2:4] if level == "higher" else runs[:2])
     runs = runs[1::2]
     runner = ModelRunner.from_data(data, "model.yaml")
     residuals = [steady_mean(r, r.y) - steady_mean(r, y) for r, y in zip(runs, runner.simulate_each(runs))]

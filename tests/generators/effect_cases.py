@@ -78,3 +78,22 @@ def coulomb(U: np.ndarray, fc: float) -> np.ndarray:
 def within(value: float, truth: float, std: float, k: float = 4.0) -> bool:
     """|value - truth| within k standard errors (k = 4: two-sided p about 6e-5 for a Gaussian estimate)."""
     return abs(value - truth) <= k * std
+
+
+def bla_fit(runs: list[Run]) -> dict:
+    """A 2/2 G(z) fitted to the BLA of ``runs``, as a user fits the model a diagnosis starts from:
+    the mean steady-state period, Y / U at the excited bins averaged over the runs, the variance of
+    that mean its weight (nlsid's transfer-function fit, the user's step, not the truth)."""
+    from nlsid.fit.frf_data import FRFData
+    from nlsid.fit.tf_fit import fit_transfer_function
+
+    ratios = []
+    for run in runs:
+        steady = slice(run.period * run.transient_periods, None)
+        U, Y = (np.fft.fft(x[steady].reshape(-1, run.period).mean(axis=0)) for x in (run.u, run.y))
+        ratios.append(Y[run.excited_bins] / U[run.excited_bins])
+    ratios = np.array(ratios)
+    data = FRFData(runs[0].excited_bins, ratios.mean(axis=0), ratios.var(axis=0, ddof=1) / len(runs), FS, N,
+                   len(runs))
+    model = fit_transfer_function(data, 2, 2, "z").model.config()
+    return {"model": {k: model[k] for k in ("type", "domain", "num", "den")}}
